@@ -1,0 +1,1 @@
+"""Model-based controllers (PFL, energy swing-up, LQR) designed from any Lagrangian-system model."""

@@ -1,0 +1,1 @@
+"""Gymnasium envs over interchangeable dynamics backends."""

@@ -1,0 +1,294 @@
+"""The Lagrangian-system protocol and everything derived from it, once, by autodiff.
+
+A Lagrangian system is four functions (Laiche et al. 2026, eq. 2):
+
+* the mass matrix ``M(q)`` (symmetric positive definite), so that ``T = ½ q̇ᵀ M(q) q̇``;
+* the potential energy ``V(q)``; the Lagrangian is ``L = T − V``;
+* the non-conservative generalized force ``τ_NC(q, q̇)`` (friction, drag, ...);
+* the generalized input force ``τ_u(q, q̇, u)`` (e.g. a DC motor with back-EMF).
+
+The Euler–Lagrange equation with external forces reads
+
+    (∂²L/∂q̇²) q̈ + (∂²L/∂q∂q̇) q̇ − ∂L/∂q = τ_u + τ_NC,
+
+whose three left-hand terms are the *inertial*, *Coriolis* and *potential-derived* parts of the
+inverse dynamics. This module derives from the four protocol functions: forward and inverse
+dynamics, the three parts, energy, momentum ``∂L/∂q̇``, linearisation, and the integral inverse
+residual ``Z̄ − Ā`` of the paper (eq. 8-10). Every function takes a single sample; batch with
+``jax.vmap``. Nothing here knows a concrete model: analytic models, DeLaN, APHYNITY and augmented
+DeLaN all subclass :class:`AbstractLagrangianSystem` and get the rest for free.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+from typing import Literal, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+__all__ = [
+    "SystemSpec",
+    "AbstractLagrangianSystem",
+    "InverseDynamicsTerms",
+    "kinetic_energy",
+    "lagrangian",
+    "energy",
+    "momentum",
+    "coriolis_force",
+    "potential_derived_force",
+    "inverse_dynamics_terms",
+    "inverse_dynamics",
+    "forward_dynamics",
+    "vector_field",
+    "linearize",
+    "interval_integral",
+    "interval_difference",
+    "IntegralTerms",
+    "integral_terms",
+    "integral_residual",
+    "QuadratureRule",
+]
+
+QuadratureRule = Literal["trapezoid", "simpson"]
+
+
+@dataclasses.dataclass(frozen=True)
+class SystemSpec:
+    """What a system *is*, independent of any model of it: names, units, which joints are angles.
+
+    Used to check that data, checkpoints and envs belong together, and to name columns.
+    """
+
+    name: str
+    joint_names: tuple[str, ...]
+    angular: tuple[bool, ...]
+    input_names: tuple[str, ...]
+    joint_units: tuple[str, ...]
+    input_units: tuple[str, ...]
+
+    @property
+    def n_dof(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.input_names)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return self.joint_names + tuple(f"{j}_dot" for j in self.joint_names)
+
+
+class AbstractLagrangianSystem(eqx.Module):
+    """The protocol: M(q), V(q), τ_NC(q, q̇), τ_u(q, q̇, u). Subclass and implement the four.
+
+    Shapes: ``q``, ``q̇`` are ``(n_dof,)``; ``u`` is ``(n_inputs,)``. Derived quantities are
+    available both as module-level functions (``forward_dynamics(system, q, qd, u)``) and as
+    methods of the same name that delegate to them.
+    """
+
+    spec: eqx.AbstractVar[SystemSpec]
+
+    @abc.abstractmethod
+    def mass_matrix(self, q: Float[Array, " n"]) -> Float[Array, "n n"]:
+        """Symmetric positive-definite mass matrix M(q)."""
+
+    @abc.abstractmethod
+    def potential(self, q: Float[Array, " n"]) -> Float[Array, ""]:
+        """Potential energy V(q), a scalar."""
+
+    @abc.abstractmethod
+    def nonconservative_force(
+        self, q: Float[Array, " n"], qd: Float[Array, " n"]
+    ) -> Float[Array, " n"]:
+        """Generalized non-conservative force τ_NC(q, q̇)."""
+
+    @abc.abstractmethod
+    def input_force(
+        self, q: Float[Array, " n"], qd: Float[Array, " n"], u: Float[Array, " m"]
+    ) -> Float[Array, " n"]:
+        """Generalized input force τ_u(q, q̇, u)."""
+
+    # -- derived quantities, delegating to the module functions (the one place they live) --
+    def energy(self, q, qd):
+        return energy(self, q, qd)
+
+    def momentum(self, q, qd):
+        return momentum(self, q, qd)
+
+    def forward_dynamics(self, q, qd, u):
+        return forward_dynamics(self, q, qd, u)
+
+    def inverse_dynamics_terms(self, q, qd, qdd):
+        return inverse_dynamics_terms(self, q, qd, qdd)
+
+    def vector_field(self, x, u):
+        return vector_field(self, x, u)
+
+    def linearize(self, x, u):
+        return linearize(self, x, u)
+
+
+class InverseDynamicsTerms(NamedTuple):
+    """The three parts of the Euler–Lagrange left-hand side (paper, eq. 3)."""
+
+    inertial: Float[Array, " n"]  # (∂²L/∂q̇²) q̈ = M(q) q̈
+    coriolis: Float[Array, " n"]  # (∂²L/∂q∂q̇) q̇
+    potential: Float[Array, " n"]  # ∂L/∂q  (potential-derived; includes ∂T/∂q)
+
+
+def kinetic_energy(system: AbstractLagrangianSystem, q, qd) -> Float[Array, ""]:
+    """T = ½ q̇ᵀ M(q) q̇."""
+    return 0.5 * qd @ system.mass_matrix(q) @ qd
+
+
+def lagrangian(system: AbstractLagrangianSystem, q, qd) -> Float[Array, ""]:
+    """L = T − V."""
+    return kinetic_energy(system, q, qd) - system.potential(q)
+
+
+def energy(system: AbstractLagrangianSystem, q, qd) -> Float[Array, ""]:
+    """Total mechanical energy E = T + V."""
+    return kinetic_energy(system, q, qd) + system.potential(q)
+
+
+def momentum(system: AbstractLagrangianSystem, q, qd) -> Float[Array, " n"]:
+    """Generalized momentum ∂L/∂q̇ = M(q) q̇ (exact for L = ½q̇ᵀMq̇ − V)."""
+    return system.mass_matrix(q) @ qd
+
+
+def coriolis_force(system: AbstractLagrangianSystem, q, qd) -> Float[Array, " n"]:
+    """(∂²L/∂q∂q̇) q̇: the directional derivative of the momentum M(q)q̇ along q̇."""
+    return jax.jvp(lambda q_: system.mass_matrix(q_) @ qd, (q,), (qd,))[1]
+
+
+def potential_derived_force(system: AbstractLagrangianSystem, q, qd) -> Float[Array, " n"]:
+    """∂L/∂q = ∂T/∂q − ∂V/∂q."""
+    return jax.grad(lagrangian, argnums=1)(system, q, qd)
+
+
+def inverse_dynamics_terms(
+    system: AbstractLagrangianSystem, q, qd, qdd
+) -> InverseDynamicsTerms:
+    """Inertial, Coriolis and potential-derived parts at (q, q̇, q̈)."""
+    return InverseDynamicsTerms(
+        inertial=system.mass_matrix(q) @ qdd,
+        coriolis=coriolis_force(system, q, qd),
+        potential=potential_derived_force(system, q, qd),
+    )
+
+
+def inverse_dynamics(system: AbstractLagrangianSystem, q, qd, qdd) -> Float[Array, " n"]:
+    """The input force τ_u needed for acceleration q̈: inertial + Coriolis − ∂L/∂q − τ_NC."""
+    terms = inverse_dynamics_terms(system, q, qd, qdd)
+    return (
+        terms.inertial
+        + terms.coriolis
+        - terms.potential
+        - system.nonconservative_force(q, qd)
+    )
+
+
+def forward_dynamics(system: AbstractLagrangianSystem, q, qd, u) -> Float[Array, " n"]:
+    """q̈ = M(q)⁻¹ (τ_u + τ_NC + ∂L/∂q − (∂²L/∂q∂q̇) q̇)."""
+    rhs = (
+        system.input_force(q, qd, u)
+        + system.nonconservative_force(q, qd)
+        + potential_derived_force(system, q, qd)
+        - coriolis_force(system, q, qd)
+    )
+    return jnp.linalg.solve(system.mass_matrix(q), rhs)
+
+
+def vector_field(system: AbstractLagrangianSystem, x, u) -> Float[Array, " 2n"]:
+    """ẋ for the state x = (q, q̇)."""
+    n = system.spec.n_dof
+    q, qd = x[:n], x[n:]
+    return jnp.concatenate([qd, forward_dynamics(system, q, qd, u)])
+
+
+def linearize(system: AbstractLagrangianSystem, x, u):
+    """(A, B) = (∂ẋ/∂x, ∂ẋ/∂u) at (x, u), continuous time."""
+    A = jax.jacfwd(lambda x_: vector_field(system, x_, u))(x)
+    B = jax.jacfwd(lambda u_: vector_field(system, x, u_))(u)
+    return A, B
+
+
+def interval_integral(
+    f: Float[Array, "T *rest"], dt: float, rule: QuadratureRule = "trapezoid"
+) -> Float[Array, "K *rest"]:
+    """∫ f dt over consecutive intervals of uniformly sampled ``f``.
+
+    ``"trapezoid"``: K = T − 1 intervals [t_{j−1}, t_j] (the paper's eq. 9-10).
+    ``"simpson"``: K = (T − 1) // 2 intervals [t_{2k}, t_{2k+2}] (a trailing sample is dropped
+    when T is even); fourth order, so its quadrature floor on smooth data is far lower.
+    Any quantity integrated over the same intervals (a candidate effect, an input) is comparable
+    to the residual term by term.
+    """
+    if rule == "trapezoid":
+        return 0.5 * dt * (f[1:] + f[:-1])
+    if rule == "simpson":
+        k = (f.shape[0] - 1) // 2
+        a, m, b = f[0 : 2 * k : 2], f[1 : 2 * k : 2], f[2 : 2 * k + 1 : 2]
+        return dt / 3.0 * (a + 4.0 * m + b)
+    raise ValueError(f"rule must be 'trapezoid' or 'simpson', got {rule!r}")
+
+
+def interval_difference(
+    p: Float[Array, "T *rest"], rule: QuadratureRule = "trapezoid"
+) -> Float[Array, "K *rest"]:
+    """p(end) − p(start) over the same intervals as :func:`interval_integral`."""
+    if rule == "trapezoid":
+        return p[1:] - p[:-1]
+    if rule == "simpson":
+        k = (p.shape[0] - 1) // 2
+        return p[2 : 2 * k + 1 : 2] - p[0 : 2 * k : 2]
+    raise ValueError(f"rule must be 'trapezoid' or 'simpson', got {rule!r}")
+
+
+class IntegralTerms(NamedTuple):
+    """Per-interval generalized impulses of a trajectory (paper eq. 8-10)."""
+
+    A: Float[Array, "K n"]  # Ā: Δ(∂L/∂q̇) − ∫(∂L/∂q + τ_NC) dt
+    Z: Float[Array, "K n"]  # Z̄: ∫ τ_u dt
+
+
+def integral_terms(
+    system: AbstractLagrangianSystem,
+    q: Float[Array, "T n"],
+    qd: Float[Array, "T n"],
+    u: Float[Array, "T m"],
+    dt: float,
+    rule: QuadratureRule = "trapezoid",
+) -> IntegralTerms:
+    """Ā and Z̄ of one uniformly sampled trajectory; no accelerations needed."""
+    p = jax.vmap(lambda q_, qd_: momentum(system, q_, qd_))(q, qd)
+    f = jax.vmap(
+        lambda q_, qd_: potential_derived_force(system, q_, qd_)
+        + system.nonconservative_force(q_, qd_)
+    )(q, qd)
+    tau_u = jax.vmap(system.input_force)(q, qd, u)
+    A = interval_difference(p, rule) - interval_integral(f, dt, rule)
+    Z = interval_integral(tau_u, dt, rule)
+    return IntegralTerms(A=A, Z=Z)
+
+
+def integral_residual(
+    system: AbstractLagrangianSystem,
+    q: Float[Array, "T n"],
+    qd: Float[Array, "T n"],
+    u: Float[Array, "T m"],
+    dt: float,
+    rule: QuadratureRule = "trapezoid",
+) -> Float[Array, "K n"]:
+    """The integral inverse-model residual Z̄ − Ā per interval and joint (paper eq. 10).
+
+    Zero for the true model up to the quadrature floor (O(dt²) per unit time for the trapezoid
+    rule, O(dt⁴) for Simpson's); L_Iτ is its sum of squares.
+    """
+    terms = integral_terms(system, q, qd, u, dt, rule)
+    return terms.Z - terms.A

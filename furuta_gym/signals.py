@@ -1,0 +1,103 @@
+"""Input signals and sensor models shared by data generation, the envs and diagnosis.
+
+Inputs: :func:`chirp` (linear frequency sweep, the paper's training and test inputs) and
+:func:`square_pulse`. Sensors: :func:`quantize_encoder` (2048 counts/rev on the QUBE-Servo 2),
+:func:`derivative_filter` (the paper's causal velocity estimate F(s) = ω0²s/(s²+2ξω0s+ω0²),
+ω0 = 100 rad/s, ξ = 0.8) and :func:`zero_phase_velocity` (offline, no lag).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+__all__ = [
+    "ENCODER_COUNTS_PER_REV",
+    "chirp",
+    "square_pulse",
+    "quantize_encoder",
+    "derivative_filter",
+    "DerivativeFilter",
+    "zero_phase_velocity",
+]
+
+ENCODER_COUNTS_PER_REV = 2048
+
+
+def chirp(t, f0: float, f1: float, t1: float, amplitude: float = 1.0, phase: float = 0.0):
+    """Linear chirp amplitude·sin(2π(f0 t + (f1 − f0) t²/(2 t1)) + phase); f0 Hz at 0, f1 Hz at t1."""
+    t = np.asarray(t, dtype=float)
+    return amplitude * np.sin(2.0 * np.pi * (f0 * t + 0.5 * (f1 - f0) / t1 * t**2) + phase)
+
+
+def square_pulse(t, start: float, width: float, amplitude: float = 1.0):
+    """amplitude on [start, start + width), 0 elsewhere (the paper's N-MSD "square" test input)."""
+    t = np.asarray(t, dtype=float)
+    return np.where((t >= start) & (t < start + width), amplitude, 0.0)
+
+
+def quantize_encoder(angle, counts_per_rev: int = ENCODER_COUNTS_PER_REV):
+    """Round an angle to the encoder's resolution 2π/counts_per_rev."""
+    step = 2.0 * np.pi / counts_per_rev
+    return np.round(np.asarray(angle, dtype=float) / step) * step
+
+
+def _derivative_filter_coefficients(dt: float, omega0: float, xi: float):
+    num = [omega0**2, 0.0]
+    den = [1.0, 2.0 * xi * omega0, omega0**2]
+    b, a, _ = signal.cont2discrete((num, den), dt, method="bilinear")
+    return np.ravel(b), np.ravel(a)
+
+
+class DerivativeFilter:
+    """Streaming form of :func:`derivative_filter`, one sample at a time (for envs/controllers).
+
+    The first sample initialises the filter at rest at that position (velocity estimate 0).
+    """
+
+    def __init__(self, dt: float, n_channels: int, omega0: float = 100.0, xi: float = 0.8):
+        self.b, self.a = _derivative_filter_coefficients(dt, omega0, xi)
+        self._zi_unit = signal.lfilter_zi(self.b, self.a)
+        self.n_channels = n_channels
+        self._z = None
+
+    def reset(self, y0) -> None:
+        y0 = np.asarray(y0, dtype=float).reshape(self.n_channels)
+        # steady state for a constant input y0: derivative 0
+        self._z = np.outer(self._zi_unit, y0)
+
+    def __call__(self, y):
+        y = np.asarray(y, dtype=float).reshape(self.n_channels)
+        if self._z is None:
+            self.reset(y)
+        out = np.empty(self.n_channels)
+        for c in range(self.n_channels):
+            o, self._z[:, c] = signal.lfilter(self.b, self.a, [y[c]], zi=self._z[:, c])
+            out[c] = o[0]
+        return out
+
+
+def derivative_filter(y, dt: float, omega0: float = 100.0, xi: float = 0.8):
+    """Causal velocity estimate of ``y`` (samples along axis 0), the paper's derivative filter.
+
+    Discretised with the bilinear transform; starts at rest at ``y[0]``. Lags by ≈ 2ξ/ω0 = 16 ms.
+    """
+    y = np.asarray(y, dtype=float)
+    b, a = _derivative_filter_coefficients(dt, omega0, xi)
+    zi = signal.lfilter_zi(b, a)
+    zi = zi.reshape((-1,) + (1,) * (y.ndim - 1)) * y[:1]
+    out, _ = signal.lfilter(b, a, y, axis=0, zi=zi)
+    return out
+
+
+def zero_phase_velocity(y, dt: float, cutoff_hz: float | None = None, order: int = 4):
+    """Offline velocity estimate without lag: Butterworth low-pass run forwards and backwards
+    (filtfilt), then central differences. ``cutoff_hz`` defaults to min(25 Hz, 0.4·Nyquist)."""
+    y = np.asarray(y, dtype=float)
+    fs = 1.0 / dt
+    if cutoff_hz is None:
+        cutoff_hz = min(25.0, 0.2 * fs)
+    b, a = signal.butter(order, cutoff_hz, fs=fs)
+    padlen = min(3 * max(len(a), len(b)), y.shape[0] - 1)
+    smooth = signal.filtfilt(b, a, y, axis=0, padlen=padlen)
+    return np.gradient(smooth, dt, axis=0)

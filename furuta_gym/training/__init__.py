@@ -1,0 +1,1 @@
+"""Training learned Lagrangian models: data generation, losses, the training loop, checkpoints, metrics."""

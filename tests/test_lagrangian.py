@@ -1,0 +1,155 @@
+"""The spine: autodiff-derived dynamics against hand-derived Euler–Lagrange, residual properties."""
+
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from furuta_gym import lagrangian as lg
+from furuta_gym.models import NMSD, Furuta
+from furuta_gym.simulate import rk4_zoh_step, simulate
+
+
+def hand_derived_furuta(params, q, qd, u):
+    """Euler–Lagrange for the Furuta worked out on paper (not by autodiff)."""
+    p = params
+    a = 0.25 * p.mp * p.Lp**2
+    b = 0.5 * p.mp * p.Lr * p.Lp
+    s, c = np.sin(q[1]), np.cos(q[1])
+    ad, bd = qd
+    M = np.array([[p.J1 + a * s**2, b * c], [b * c, p.J2]])
+    coriolis = np.array([2 * a * s * c * ad * bd - b * s * bd**2, -b * s * ad * bd])
+    dL_dq = np.array([0.0, a * s * c * ad**2 - b * s * ad * bd - 0.5 * p.mp * p.g * p.Lp * s])
+    tau = np.array([p.kt / p.Rm * (u[0] - p.km * ad) - p.c_r * ad, -p.c_p * bd])
+    qdd = np.linalg.solve(M, tau + dL_dq - coriolis)
+    return M, coriolis, dL_dq, qdd
+
+
+def test_furuta_autodiff_matches_hand_derived_euler_lagrange():
+    model = Furuta()
+    pf = jax.tree_util.tree_map(float, model.params)
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for _ in range(200):
+        q = rng.uniform(-np.pi, np.pi, 2)
+        qd = rng.uniform(-20, 20, 2)
+        u = rng.uniform(-10, 10, 1)
+        M, cor, dLdq, qdd = hand_derived_furuta(pf, q, qd, u)
+        terms = lg.inverse_dynamics_terms(model, q, qd, qdd)
+        got_qdd = lg.forward_dynamics(model, q, qd, u)
+        for ref, got in [
+            (M, model.mass_matrix(q)),
+            (cor, terms.coriolis),
+            (dLdq, terms.potential),
+            (qdd, got_qdd),
+            (M @ qdd, terms.inertial),
+        ]:
+            scale = np.max(np.abs(ref)) + 1e-300
+            worst = max(worst, float(np.max(np.abs(np.asarray(got) - ref)) / scale))
+        # inverse dynamics closes the loop: τ_u needed for q̈ equals the applied τ_u
+        tau_u = lg.inverse_dynamics(model, q, qd, got_qdd)
+        np.testing.assert_allclose(tau_u, model.input_force(q, qd, u), rtol=1e-10, atol=1e-14)
+    assert worst <= 1e-12, worst
+
+
+def test_energy_balance_is_the_work_of_external_forces():
+    """dE/dt = q̇ᵀ(τ_u + τ_NC): the derived dynamics conserve what they should."""
+    model = Furuta()
+    q, qd, u = jnp.array([0.4, 2.0]), jnp.array([3.0, -7.0]), jnp.array([2.0])
+    qdd = lg.forward_dynamics(model, q, qd, u)
+    dE = jax.jvp(lambda q_, qd_: lg.energy(model, q_, qd_), (q, qd), (qd, qdd))[1]
+    power = qd @ (model.input_force(q, qd, u) + model.nonconservative_force(q, qd))
+    np.testing.assert_allclose(dE, power, rtol=1e-12)
+
+
+def test_linearisation_of_upright_furuta_is_unstable_and_controllable():
+    model = Furuta()
+    A, B = lg.linearize(model, jnp.array([0.0, np.pi, 0.0, 0.0]), jnp.array([0.0]))
+    eig = np.linalg.eigvals(np.asarray(A))
+    assert eig.real.max() > 1.0  # the upright pendulum falls
+    ctrb = np.hstack([np.linalg.matrix_power(np.asarray(A), k) @ np.asarray(B) for k in range(4)])
+    assert np.linalg.matrix_rank(ctrb) == 4
+
+
+def test_vmap_batches_every_derived_quantity():
+    model = Furuta()
+    q = jnp.array(np.random.default_rng(1).normal(size=(7, 2)))
+    qd = jnp.array(np.random.default_rng(2).normal(size=(7, 2)))
+    u = jnp.zeros((7, 1))
+    batched = jax.vmap(lambda a, b, c: lg.forward_dynamics(model, a, b, c))(q, qd, u)
+    single = np.stack([lg.forward_dynamics(model, q[i], qd[i], u[i]) for i in range(7)])
+    np.testing.assert_allclose(batched, single, rtol=1e-13)
+
+
+def _true_trajectory(model, x0, dt, T, u_fn):
+    ts = jnp.arange(T) * dt
+    us = jnp.asarray(u_fn(ts))[:, None]
+    xs = simulate(model, x0, ts, lambda t: u_fn(t)[None], rtol=1e-11, atol=1e-13, dt0=dt / 10)
+    return ts, xs, us
+
+
+@pytest.mark.parametrize("rule", ["trapezoid", "simpson"])
+def test_integral_residual_is_at_the_quadrature_floor_and_scales_with_dt(rule):
+    model = NMSD()
+    x0 = jnp.array([0.8, -2.0])
+    u_fn = lambda t: 3 * jnp.sin(2 * jnp.pi * 0.7 * t)  # noqa: E731
+    rms = []
+    for dt in (0.02, 0.01):
+        ts, xs, us = _true_trajectory(model, x0, dt, int(round(4.0 / dt)) + 1, u_fn)
+        r = lg.integral_residual(model, xs[:, :1], xs[:, 1:], us, dt, rule)
+        terms = lg.integral_terms(model, xs[:, :1], xs[:, 1:], us, dt, rule)
+        dp = jnp.sqrt(jnp.mean((terms.A + lg.interval_integral(
+            jax.vmap(lambda a, b: lg.potential_derived_force(model, a, b)
+                     + model.nonconservative_force(a, b))(xs[:, :1], xs[:, 1:]), dt, rule)) ** 2))
+        rms.append(float(jnp.sqrt(jnp.mean(r**2)) / dp))
+    order = np.log2(rms[0] / rms[1])
+    expected = 2 if rule == "trapezoid" else 4
+    assert order == pytest.approx(expected, abs=0.35), (rms, order)
+    # a wrong model is far above the floor: V × 1.1 and a sign-flipped input
+    wrong_v = NMSD(params=type(model.params)(k1=11.0, k2=5.5))
+    r_wrong = lg.integral_residual(wrong_v, xs[:, :1], xs[:, 1:], us, dt, rule)
+    assert float(jnp.sqrt(jnp.mean(r_wrong**2))) > 20 * rms[1] * float(dp)
+    r_flip = lg.integral_residual(model, xs[:, :1], xs[:, 1:], -us, dt, rule)
+    assert float(jnp.sqrt(jnp.mean(r_flip**2))) > 20 * rms[1] * float(dp)
+
+
+def test_rk4_zoh_matches_tight_diffrax_with_held_input():
+    model = Furuta()
+    x0 = jnp.array([0.1, 2.5, 1.0, -3.0])
+    u = jnp.array([1.5])
+    x_rk4 = rk4_zoh_step(model, x0, u, 0.02, substeps=20)
+    x_ref = simulate(model, x0, jnp.array([0.0, 0.02]), jnp.stack([u, u]), rtol=1e-12, atol=1e-14)[-1]
+    np.testing.assert_allclose(x_rk4, x_ref, atol=1e-10)
+
+
+def test_import_does_not_touch_jax_x64_flag():
+    code = (
+        "import jax, furuta_gym, furuta_gym.models, furuta_gym.lagrangian;"
+        "print(jax.config.read('jax_enable_x64'))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={"PATH": "/usr/bin:/bin", "HOME": "/tmp"} | _pyenv())
+    assert out.stdout.strip() == "False", out.stderr
+
+
+def test_first_model_construction_switches_x64_on_with_one_warning():
+    code = (
+        "import warnings, jax, furuta_gym\n"
+        "from furuta_gym.models import Furuta\n"
+        "with warnings.catch_warnings(record=True) as w:\n"
+        "    warnings.simplefilter('always')\n"
+        "    m = Furuta(); m2 = Furuta()\n"
+        "print(jax.config.read('jax_enable_x64'), sum(issubclass(x.category, furuta_gym.Float64Warning) for x in w), m.params.mr.dtype)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={"PATH": "/usr/bin:/bin", "HOME": "/tmp"} | _pyenv())
+    assert out.stdout.split() == ["True", "1", "float64"], out.stderr
+
+
+def _pyenv():
+    import os
+
+    return {k: v for k, v in os.environ.items() if k.startswith(("PYTHON", "VIRTUAL_ENV", "PYENV"))}
