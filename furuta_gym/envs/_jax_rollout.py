@@ -1,0 +1,245 @@
+"""The pure-JAX control step and rollout behind the batched env (issue 4, item 3).
+
+One *controlled step* is what a model-backed env does between two ``env.step`` calls, written as a
+pure function of JAX arrays so it can be ``vmap``-ed over copies and ``scan``-ned over time:
+
+1. clip the action to the actuator limit (the env's documented clipping);
+2. integrate one control period with the input held (zero-order hold, fixed-step RK4 — the scheme
+   of :func:`furuta_gym.simulate.rk4_zoh_step`, which is MuJoCo's RK4);
+3. flag *divergence*: a next state that is non-finite or whose magnitude exceeds ``state_bound``
+   (a learned model can blow up). A diverged copy keeps its last good state — it is *frozen* — so
+   no NaN ever leaves this module, and the episode ends (``terminated``);
+4. score the transition with the task's pure reward/termination functions.
+
+:func:`rollout` runs a jittable policy through that step inside ``jax.lax.scan``, vmapped over a
+batch of initial states, with no Python in the loop. Episodes do not restart inside a rollout: once
+a copy's episode ends (task termination or divergence) it stays frozen and later steps are no-ops
+(``done`` tells which steps were live).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from ..lagrangian import AbstractLagrangianSystem
+from ..simulate import rk4_zoh_step
+
+__all__ = [
+    "DEFAULT_STATE_BOUND",
+    "StepOutput",
+    "Rollout",
+    "is_diverged",
+    "controlled_step",
+    "rollout",
+]
+
+#: Magnitude beyond which a state counts as "absurd" (diverged) when the caller gives no bound.
+DEFAULT_STATE_BOUND = 1e6
+
+RewardFn = Callable[[Array, Array, Array], Array]  # (x, u, x_next) -> scalar
+TerminatedFn = Callable[[Array], Array]  # x_next -> bool
+
+
+class StepOutput(NamedTuple):
+    """One controlled step of one copy (leading batch axis when vmapped)."""
+
+    state: Float[Array, " 2n"]  # next state; the previous one if the step diverged
+    action: Float[Array, " m"]  # the action actually applied (after clipping)
+    reward: Float[Array, ""]
+    terminated: Bool[Array, ""]  # the task's termination or divergence
+    diverged: Bool[Array, ""]
+
+
+class Rollout(NamedTuple):
+    """Trajectories of a batch of copies; ``N`` copies, ``T`` steps.
+
+    ``states[:, t]`` is the state before step ``t`` (``states[:, 0] = x0s``). ``terminated[:, t]``
+    and ``diverged[:, t]`` are True only at the step that ended the episode; ``done[:, t]`` is True
+    from that step on. After the end a copy is frozen: its state is held, its action and reward are
+    zero (no step is taken).
+    """
+
+    states: Float[Array, "N T+1 2n"]
+    actions: Float[Array, "N T m"]
+    rewards: Float[Array, "N T"]
+    terminated: Bool[Array, "N T"]
+    diverged: Bool[Array, "N T"]
+    done: Bool[Array, "N T"]
+
+
+def is_diverged(x: Float[Array, " 2n"], state_bound: float = DEFAULT_STATE_BOUND) -> Bool[Array, ""]:
+    """True when the state is non-finite or any component exceeds ``state_bound`` in magnitude."""
+    return jnp.logical_not(jnp.all(jnp.isfinite(x))) | jnp.any(jnp.abs(x) > state_bound)
+
+
+def _zero_reward(x, u, x_next):
+    return jnp.zeros((), dtype=x.dtype)
+
+
+def _never_terminated(x_next):
+    return jnp.zeros((), dtype=bool)
+
+
+def controlled_step(
+    system: AbstractLagrangianSystem,
+    x: Float[Array, " 2n"],
+    u: Float[Array, " m"],
+    *,
+    dt: float,
+    substeps: int = 1,
+    action_limit: float | None = None,
+    state_bound: float = DEFAULT_STATE_BOUND,
+    reward_fn: RewardFn | None = None,
+    terminated_fn: TerminatedFn | None = None,
+) -> StepOutput:
+    """One env step of one copy as a pure JAX function (see the module docstring).
+
+    A non-finite action counts as a divergence (the env itself raises on one; a jitted policy
+    cannot, so its copy is frozen and flagged instead). The reward of a diverged step is computed
+    at the frozen state, so it is finite.
+    """
+    reward_fn = _zero_reward if reward_fn is None else reward_fn
+    terminated_fn = _never_terminated if terminated_fn is None else terminated_fn
+    u = jnp.reshape(jnp.asarray(u, dtype=x.dtype), (system.spec.n_inputs,))
+    bad_action = jnp.logical_not(jnp.all(jnp.isfinite(u)))
+    if action_limit is not None:
+        u = jnp.clip(u, -action_limit, action_limit)
+    u = jnp.where(bad_action, jnp.zeros_like(u), u)
+    x_new = rk4_zoh_step(system, x, u, dt, substeps)
+    diverged = bad_action | is_diverged(x_new, state_bound)
+    x_next = jnp.where(diverged, x, x_new)
+    reward = jnp.asarray(reward_fn(x, u, x_next), dtype=x.dtype)
+    terminated = jnp.asarray(terminated_fn(x_next), dtype=bool) | diverged
+    return StepOutput(x_next, u, reward, terminated, diverged)
+
+
+def rollout(
+    system: AbstractLagrangianSystem,
+    policy: Callable,
+    x0s: Float[Array, "N 2n"] | Float[Array, " 2n"],
+    steps: int,
+    *,
+    dt: float,
+    substeps: int = 1,
+    action_limit: float | None = None,
+    state_bound: float = DEFAULT_STATE_BOUND,
+    reward_fn: RewardFn | None = None,
+    terminated_fn: TerminatedFn | None = None,
+    observation_fn: Callable[[Array], Array] | None = None,
+    policy_state: Any = None,
+) -> Rollout:
+    """Run ``policy`` in closed loop from every initial state, entirely inside ``lax.scan``.
+
+    ``policy`` is a jittable callable (a function, an Equinox module, a controller): stateless
+    ``policy(obs) -> action`` or, when ``policy_state`` is given, stateful
+    ``policy(policy_state, obs) -> (action, new_policy_state)`` (every copy starts from the same
+    ``policy_state``). ``obs = observation_fn(x)`` (default: the raw state, as the envs observe).
+    Actions are clipped to ``±action_limit`` as the env does. ``x0s`` of shape ``(N, 2n)`` gives a
+    batch (vmapped); a single state ``(2n,)`` gives unbatched outputs.
+
+    Compiled once per (structure of system and policy, ``steps``, options); new weights of the same
+    model reuse the compilation. Pass module-level functions for ``reward_fn`` / ``terminated_fn`` /
+    ``observation_fn`` (a new lambda each call recompiles).
+
+    Returns a :class:`Rollout` (states, actions, rewards, terminated/diverged/done flags).
+    """
+    steps = int(steps)
+    if steps < 1:
+        raise ValueError(f"steps must be a positive integer, got {steps}")
+    if int(substeps) < 1:
+        raise ValueError(f"substeps must be a positive integer, got {substeps}")
+    if not dt > 0:
+        raise ValueError(f"dt must be a positive control period in seconds, got {dt}")
+    x0s = jnp.asarray(x0s, dtype=float)
+    n_state = 2 * system.spec.n_dof
+    if x0s.ndim not in (1, 2) or x0s.shape[-1] != n_state:
+        raise ValueError(
+            f"x0s must have shape (N, {n_state}) or ({n_state},) for {system.spec.name!r} "
+            f"(state {system.spec.state_names}), got {tuple(x0s.shape)}"
+        )
+    single = x0s.ndim == 1
+    out = _rollout_batch(
+        system,
+        policy,
+        x0s[None] if single else x0s,
+        policy_state,
+        steps=steps,
+        dt=float(dt),
+        substeps=int(substeps),
+        action_limit=None if action_limit is None else float(action_limit),
+        state_bound=float(state_bound),
+        reward_fn=reward_fn,
+        terminated_fn=terminated_fn,
+        observation_fn=observation_fn,
+        stateful=policy_state is not None,
+    )
+    if single:
+        out = Rollout(*(a[0] for a in out))
+    return out
+
+
+@eqx.filter_jit
+def _rollout_batch(
+    system,
+    policy,
+    x0s,
+    policy_state,
+    *,
+    steps,
+    dt,
+    substeps,
+    action_limit,
+    state_bound,
+    reward_fn,
+    terminated_fn,
+    observation_fn,
+    stateful,
+):
+    observe = (lambda x: x) if observation_fn is None else observation_fn
+
+    def one_copy(x0):
+        def body(carry, _):
+            x, done, pstate = carry
+            obs = observe(x)
+            if stateful:
+                action, new_pstate = policy(pstate, obs)
+            else:
+                action, new_pstate = policy(obs), pstate
+            out = controlled_step(
+                system,
+                x,
+                action,
+                dt=dt,
+                substeps=substeps,
+                action_limit=action_limit,
+                state_bound=state_bound,
+                reward_fn=reward_fn,
+                terminated_fn=terminated_fn,
+            )
+            live = jnp.logical_not(done)
+            x_next = jnp.where(live, out.state, x)
+            # a frozen copy keeps its policy state too, so nothing it carries can drift to NaN
+            new_pstate = jax.tree_util.tree_map(
+                lambda a, b: jnp.where(live, a, b), new_pstate, pstate
+            )
+            record = (
+                x_next,
+                jnp.where(live, out.action, jnp.zeros_like(out.action)),
+                jnp.where(live, out.reward, jnp.zeros_like(out.reward)),
+                live & out.terminated,
+                live & out.diverged,
+                done | out.terminated,
+            )
+            return (x_next, done | out.terminated, new_pstate), record
+
+        init = (x0, jnp.zeros((), dtype=bool), policy_state)
+        _, (xs, us, rs, term, div, done) = jax.lax.scan(body, init, None, length=steps)
+        states = jnp.concatenate([x0[None], xs], axis=0)
+        return Rollout(states, us, rs, term, div, done)
+
+    return jax.vmap(one_copy)(x0s)
