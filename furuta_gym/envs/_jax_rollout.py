@@ -138,7 +138,8 @@ def rollout(
     ``policy`` is a jittable callable (a function, an Equinox module, a controller): stateless
     ``policy(obs) -> action`` or, when ``policy_state`` is given, stateful
     ``policy(policy_state, obs) -> (action, new_policy_state)`` (every copy starts from the same
-    ``policy_state``). ``obs = observation_fn(x)`` (default: the raw state, as the envs observe).
+    ``policy_state``). A controller from :mod:`furuta_gym.controllers` (``step`` + ``init_state``)
+    is accepted as is. ``obs = observation_fn(x)`` (default: the raw state, as the envs observe).
     Actions are clipped to ``±action_limit`` as the env does. ``x0s`` of shape ``(N, 2n)`` gives a
     batch (vmapped); a single state ``(2n,)`` gives unbatched outputs.
 
@@ -163,9 +164,10 @@ def rollout(
             f"(state {system.spec.state_names}), got {tuple(x0s.shape)}"
         )
     single = x0s.ndim == 1
+    step_fn, policy_state, stateful = _as_policy(policy, policy_state)
     out = _rollout_batch(
         system,
-        policy,
+        step_fn,
         x0s[None] if single else x0s,
         policy_state,
         steps=steps,
@@ -176,11 +178,33 @@ def rollout(
         reward_fn=reward_fn,
         terminated_fn=terminated_fn,
         observation_fn=observation_fn,
-        stateful=policy_state is not None,
+        stateful=stateful,
     )
     if single:
         out = Rollout(*(a[0] for a in out))
     return out
+
+
+def _as_policy(policy, policy_state):
+    """(callable, initial policy state, stateful?) for a function, module or controller.
+
+    A controller (``furuta_gym.controllers``: ``step(state, obs) -> (action, state)`` and
+    ``init_state()``) runs through its pure ``step``; its ``__call__`` is the NumPy-side policy and
+    cannot be traced.
+    """
+    step = getattr(policy, "step", None)
+    init_state = getattr(policy, "init_state", None)
+    if callable(step) and callable(init_state):
+        if policy_state is None:
+            policy_state = init_state()
+        # a bound method of an Equinox module is itself a pytree, so weights stay traced arguments
+        return step, policy_state, True
+    if not callable(policy):
+        raise ValueError(
+            f"policy must be a jittable callable obs -> action, (state, obs) -> (action, state) "
+            f"with policy_state=..., or a controller with step/init_state; got {type(policy).__name__}"
+        )
+    return policy, policy_state, policy_state is not None
 
 
 @eqx.filter_jit
