@@ -1,0 +1,534 @@
+"""Dynamics backends: what advances the state of an env by one control period.
+
+An env never talks to MuJoCo or JAX directly; it holds an :class:`AbstractBackend`:
+
+* :class:`MujocoBackend` — the ground truth: ``assets/<system>.xml`` stepped by MuJoCo (RK4), with
+  optional extra physical effects (plant variants) and per-reset physical parameters.
+* :class:`ModelBackend` — any :class:`~furuta_gym.lagrangian.AbstractLagrangianSystem` (the
+  analytic model, a learned DeLaN/APHYNITY checkpoint, a user's model), integrated with the same
+  fixed-step RK4 and the input held over the period (:func:`furuta_gym.simulate.rk4_zoh_step`),
+  jit-compiled, float64.
+
+Both integrate the period in ``substeps`` RK4 steps of the MJCF ``timestep``, so the analytic
+backend reproduces the MuJoCo backend to round-off (~1e-12). Both render through the MuJoCo scene
+(a model backend poses the MJCF bodies at its state). :func:`make_backend` turns the envs'
+``dynamics=`` keyword into a backend.
+"""
+
+from __future__ import annotations
+
+import abc
+import contextlib
+import os
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import mujoco
+import numpy as np
+
+from ..assets import asset_path
+from ..effects import Effect
+from ..lagrangian import AbstractLagrangianSystem
+from ..systems import get_spec
+from ._parameters import default_parameters
+
+__all__ = [
+    "AbstractBackend",
+    "MujocoBackend",
+    "ModelBackend",
+    "make_backend",
+    "load_checkpoint",
+    "DYNAMICS_NAMES",
+]
+
+DYNAMICS_NAMES = ("mujoco", "analytic")
+_ACCEPTED = (
+    "'mujoco' (MuJoCo ground truth), 'analytic' (closed-form model in JAX), a checkpoint path "
+    "written by `furuta-gym train`, or an AbstractLagrangianSystem object"
+)
+
+# MuJoCo refuses a zero inertia on a moving body: the Furuta pendulum's point mass carries this
+# much about each axis, and the hinge armature is reduced by the same amount so M22 stays exact.
+_POINT_MASS_INERTIA = 1e-14
+
+
+class AbstractBackend(abc.ABC):
+    """Advance a system's state (q, q̇) one control period at a time, input held (zero-order hold).
+
+    The period is ``substeps`` RK4 steps of ``timestep`` seconds. Concrete backends implement
+    :meth:`reset`, :meth:`step`, :meth:`step_split` and :meth:`_scene_data`.
+    """
+
+    system: str  # "furuta" or "nmsd"
+    timestep: float  # seconds per RK4 step
+    substeps: int  # RK4 steps per control period
+
+    @property
+    def spec(self):
+        return get_spec(self.system)
+
+    @property
+    def control_dt(self) -> float:
+        """Control period in seconds."""
+        return self.timestep * self.substeps
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Physical parameters in use (the pinned ones unless :meth:`set_parameters` changed them)."""
+        return dict(self._parameters)
+
+    @abc.abstractmethod
+    def reset(self, x: np.ndarray) -> None:
+        """Put the system at state ``x`` = (q, q̇), time 0."""
+
+    @abc.abstractmethod
+    def step(self, u: np.ndarray) -> np.ndarray:
+        """Advance one control period with ``u`` held; return the new state (a fresh float64 array)."""
+
+    @abc.abstractmethod
+    def step_split(self, u_first: np.ndarray, n_first: int, u: np.ndarray) -> np.ndarray:
+        """Advance one period applying ``u_first`` for the first ``n_first`` substeps, then ``u``
+        (an actuation delay that is not a whole number of periods)."""
+
+    @property
+    @abc.abstractmethod
+    def state(self) -> np.ndarray:
+        """Current state (a copy)."""
+
+    def set_parameters(self, values: Mapping[str, float]) -> None:
+        """Use these physical parameters from now on (domain randomisation)."""
+        raise ValueError(
+            f"{type(self).__name__} has no physical parameters to change; domain randomisation "
+            "needs dynamics='mujoco' or 'analytic'"
+        )
+
+    # -- rendering through the MuJoCo scene --------------------------------------------------
+    @abc.abstractmethod
+    def _scene_data(self) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """(model, data) whose qpos is the current configuration."""
+
+    def scene(self) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """The MuJoCo (model, data) posed at the current configuration, kinematics computed."""
+        model, data = self._scene_data()
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        mujoco.mj_tendon(model, data)  # the N-MSD spring is drawn as a tendon
+        return model, data
+
+
+# ---------------------------------------------------------------------------------------------
+# MuJoCo ground truth
+# ---------------------------------------------------------------------------------------------
+
+
+def load_mjcf(system: str) -> mujoco.MjModel:
+    """The shipped MJCF model of ``"furuta"`` or ``"nmsd"``."""
+    return mujoco.MjModel.from_xml_path(str(asset_path(f"{get_spec(system).name}.xml")))
+
+
+def apply_parameters(
+    model: mujoco.MjModel, system: str, p: Mapping[str, float], effects: Sequence[Effect] = ()
+) -> dict[int, list[float]]:
+    """Write physical parameters (and the natively expressible effects) into ``model``.
+
+    Returns the per-dof coefficients of the forces MuJoCo cannot express, which the passive
+    callback applies: ``{dof: [cubic_stiffness, cubic_damping, coulomb, quadratic_drag,
+    constant]}``. Springs, viscous friction and the input gain are native (joint stiffness with
+    a combined rest position, joint damping, actuator gain and bias).
+    """
+    spec = get_spec(system)
+    n = spec.n_dof
+    stiffness = np.zeros(n)
+    stiff_ref = np.zeros(n)  # Σ k·q_ref
+    damping = np.zeros(n)
+    gain = 1.0
+    extra: dict[int, list[float]] = {}
+    if system == "furuta":
+        rotor, pend = model.body("rotor").id, model.body("pendulum").id
+        model.body_mass[rotor] = p["mr"]
+        model.body_inertia[rotor] = p["mr"] * p["Lr"] ** 2 / 12.0
+        model.body_pos[pend] = (p["Lr"], 0.0, 0.0)
+        model.body_mass[pend] = p["mp"]
+        model.body_ipos[pend] = (0.0, 0.0, -0.5 * p["Lp"])
+        model.body_inertia[pend] = _POINT_MASS_INERTIA
+        model.dof_armature[:] = (0.0, p["mp"] * p["Lp"] ** 2 / 12.0 - _POINT_MASS_INERTIA)
+        model.opt.gravity[:] = (0.0, 0.0, -p["g"])
+        damping[:] = (p["c_r"], p["c_p"])
+        motor_gain, motor_bias = p["kt"] / p["Rm"], -p["kt"] * p["km"] / p["Rm"]
+    else:
+        model.body_mass[model.body("mass").id] = p["m"]
+        stiffness[0] = p["k1"]
+        damping[0] = p["b1"]
+        motor_gain, motor_bias = 1.0, 0.0
+        if p["k2"] != 0.0 or p["b2"] != 0.0:
+            extra[0] = [p["k2"], p["b2"], 0.0, 0.0, 0.0]
+    for e in effects:
+        if e.name == "input_gain":
+            gain += e.coefficient
+            continue
+        if e.name == "input_delay":
+            continue  # lives in the env's input buffer
+        j = e.joint_index(spec)
+        if e.name == "spring":
+            stiffness[j] += e.coefficient
+            stiff_ref[j] += e.coefficient * e.reference
+        elif e.name == "viscous_friction":
+            damping[j] += e.coefficient
+        else:
+            slot = {"coulomb_friction": 2, "quadratic_drag": 3, "constant_torque": 4}[e.name]
+            extra.setdefault(j, [0.0] * 5)[slot] += e.coefficient
+    model.jnt_stiffness[:] = stiffness
+    model.qpos_spring[:] = np.divide(stiff_ref, stiffness, out=np.zeros(n), where=stiffness != 0)
+    model.dof_damping[:] = damping
+    model.actuator_gainprm[0, 0] = gain * motor_gain
+    model.actuator_biasprm[0, :3] = (0.0, 0.0, gain * motor_bias)
+    return extra
+
+
+def _passive_callback(extra: dict[int, list[float]]):
+    """MuJoCo passive-force callback adding the non-native forces (evaluated at every RK4 stage).
+
+    Per dof: −k3·q³ − b3·q̇³ − F·sgn(q̇) − c·q̇|q̇| + τ0. Coulomb friction is the honest
+    discontinuous sgn law (sgn(0) = 0), the same as :class:`furuta_gym.effects.WithEffects` with
+    no smoothing, so the model backend with the same effects matches it.
+    """
+    terms = tuple((dof, *coefs) for dof, coefs in sorted(extra.items()))
+
+    def callback(model, data):
+        qpos, qvel, qfrc = data.qpos, data.qvel, data.qfrc_passive
+        for dof, k3, b3, coulomb, drag, const in terms:
+            q = qpos[dof]
+            v = qvel[dof]
+            f = const - k3 * q * q * q - b3 * v * v * v - drag * v * abs(v)
+            if coulomb and v != 0.0:
+                f -= coulomb if v > 0.0 else -coulomb
+            qfrc[dof] += f
+
+    return callback
+
+
+class MujocoBackend(AbstractBackend):
+    """Ground truth: the shipped MJCF model stepped by MuJoCo's RK4, ``substeps`` per period.
+
+    ``effects`` (:class:`~furuta_gym.effects.Effect`) make a plant variant: springs, viscous
+    friction and an input gain are written into the model; Coulomb friction (sgn law), quadratic
+    drag and constant torques — and the N-MSD's cubic spring and damper, which MJCF lacks — are
+    added by a MuJoCo passive-force callback that is installed only around this backend's own
+    ``mj_step`` calls and restored afterwards, so other MuJoCo models in the process are untouched.
+    ``input_delay`` effects are ignored here (the env's input buffer applies them).
+    """
+
+    def __init__(
+        self,
+        system: str,
+        substeps: int = 1,
+        effects: Sequence[Effect] = (),
+        parameters: Mapping[str, float] | None = None,
+    ):
+        self.system = get_spec(system).name
+        self.model = load_mjcf(self.system)
+        self.data = mujoco.MjData(self.model)
+        self.timestep = float(self.model.opt.timestep)
+        self.substeps = int(substeps)
+        self.effects = tuple(effects)
+        self._n = self.spec.n_dof
+        self._callback = None
+        self.set_parameters(parameters or default_parameters(self.system))
+
+    def set_parameters(self, values: Mapping[str, float]) -> None:
+        nominal = default_parameters(self.system)
+        unknown = sorted(set(values) - set(nominal))
+        if unknown:
+            raise ValueError(f"unknown {self.system} parameter(s) {unknown}; expected {list(nominal)}")
+        self._parameters = {**nominal, **{k: float(v) for k, v in values.items()}}
+        extra = apply_parameters(self.model, self.system, self._parameters, self.effects)
+        self._callback = _passive_callback(extra) if extra else None
+
+    def reset(self, x) -> None:
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[:] = x[: self._n]
+        self.data.qvel[:] = x[self._n :]
+
+    @contextlib.contextmanager
+    def passive_forces(self):
+        """Context in which MuJoCo computes this plant's full passive force (callback installed);
+        the previous global callback is restored on exit. Use around your own ``mj_forward``."""
+        if self._callback is None:
+            yield
+            return
+        previous = mujoco.get_mjcb_passive()
+        mujoco.set_mjcb_passive(self._callback)
+        try:
+            yield
+        finally:
+            mujoco.set_mjcb_passive(previous)
+
+    def _mj_step(self, nstep: int) -> None:
+        if self._callback is None:
+            mujoco.mj_step(self.model, self.data, nstep)
+            return
+        previous = mujoco.get_mjcb_passive()
+        mujoco.set_mjcb_passive(self._callback)
+        try:
+            mujoco.mj_step(self.model, self.data, nstep)
+        finally:
+            mujoco.set_mjcb_passive(previous)
+
+    def step(self, u) -> np.ndarray:
+        self.data.ctrl[:] = u
+        self._mj_step(self.substeps)
+        return np.concatenate((self.data.qpos, self.data.qvel))
+
+    def step_split(self, u_first, n_first: int, u) -> np.ndarray:
+        if n_first > 0:
+            self.data.ctrl[:] = u_first
+            self._mj_step(n_first)
+        self.data.ctrl[:] = u
+        if self.substeps - n_first > 0:
+            self._mj_step(self.substeps - n_first)
+        return np.concatenate((self.data.qpos, self.data.qvel))
+
+    @property
+    def state(self) -> np.ndarray:
+        return np.concatenate((self.data.qpos, self.data.qvel))
+
+    def _scene_data(self):
+        return self.model, self.data
+
+    def __getstate__(self):
+        # MjModel/MjData pickle, but the callback closure does not: rebuild it on unpickling
+        state = self.__dict__.copy()
+        state["_callback"] = None
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        extra = apply_parameters(self.model, self.system, self._parameters, self.effects)
+        self._callback = _passive_callback(extra) if extra else None
+
+
+# ---------------------------------------------------------------------------------------------
+# Any Lagrangian model, in JAX
+# ---------------------------------------------------------------------------------------------
+
+_STEP_CACHE: dict = {}
+
+
+def _compiled_steps(static, treedef_key, timestep: float, substeps: int):
+    """Jitted (full period, split period) steps for one model structure; cached across envs so
+    a second env of the same model (or new parameters / weights) does not recompile."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from ..simulate import rk4_step
+
+    key = (treedef_key, timestep, substeps)
+    try:
+        return _STEP_CACHE[key]
+    except (KeyError, TypeError):
+        pass
+
+    def period(dynamic, x, u):
+        system = eqx.combine(dynamic, static)
+        return jax.lax.fori_loop(0, substeps, lambda _, x_: rk4_step(system, x_, u, timestep), x)
+
+    def split(dynamic, x, u_first, n_first, u):
+        system = eqx.combine(dynamic, static)
+
+        def body(i, x_):
+            return rk4_step(system, x_, jnp.where(i < n_first, u_first, u), timestep)
+
+        return jax.lax.fori_loop(0, substeps, body, x)
+
+    fns = (jax.jit(period), jax.jit(split))
+    try:
+        _STEP_CACHE[key] = fns
+    except TypeError:  # unhashable static structure: no sharing, still correct
+        pass
+    return fns
+
+
+class ModelBackend(AbstractBackend):
+    """Any Lagrangian system in JAX: ``substeps`` RK4 steps of ``timestep`` per period, input held.
+
+    ``effects`` (joint effects and ``input_gain``) are added with
+    :class:`furuta_gym.effects.WithEffects` (Coulomb as the exact sgn law, like the MuJoCo
+    backend). :meth:`set_parameters` works for the analytic models (their ``params`` pytree).
+    Rendering poses the system's MJCF scene at the model's state.
+    """
+
+    def __init__(
+        self,
+        model: AbstractLagrangianSystem,
+        timestep: float,
+        substeps: int = 1,
+        effects: Sequence[Effect] = (),
+        parameters: Mapping[str, float] | None = None,
+    ):
+        from .._x64 import ensure_x64
+
+        ensure_x64()
+        self.system = model.spec.name
+        self.base_model = model
+        self.timestep = float(timestep)
+        self.substeps = int(substeps)
+        self.effects = tuple(e for e in effects if e.name != "input_delay")
+        self._n = self.spec.n_dof
+        self._scene = None
+        self._x = None
+        self._parameters = default_parameters(self.system) if self._has_parameters() else {}
+        if parameters:
+            self.set_parameters(parameters)
+        else:
+            self._set_model(model)
+
+    def _has_parameters(self) -> bool:
+        from ._parameters import PARAMETER_CLASSES
+
+        return isinstance(getattr(self.base_model, "params", None), PARAMETER_CLASSES[self.system])
+
+    def _set_model(self, model: AbstractLagrangianSystem) -> None:
+        import equinox as eqx
+        import jax
+
+        from ..effects import WithEffects
+
+        self.model = WithEffects(model, self.effects) if self.effects else model
+        dynamic, static = eqx.partition(self.model, eqx.is_array)
+        self._dynamic = dynamic
+        treedef_key = (jax.tree_util.tree_structure(dynamic), static)
+        self._period, self._split = _compiled_steps(static, treedef_key, self.timestep, self.substeps)
+
+    def set_parameters(self, values: Mapping[str, float]) -> None:
+        if not self._has_parameters():
+            super().set_parameters(values)
+        import equinox as eqx
+
+        from ._parameters import PARAMETER_CLASSES
+
+        nominal = default_parameters(self.system)
+        unknown = sorted(set(values) - set(nominal))
+        if unknown:
+            raise ValueError(f"unknown {self.system} parameter(s) {unknown}; expected {list(nominal)}")
+        merged = {**{k: float(v) for k, v in _params_as_floats(self.base_model.params).items()}}
+        merged.update({k: float(v) for k, v in values.items()})
+        self._parameters = merged
+        params = PARAMETER_CLASSES[self.system](**merged)
+        self._set_model(eqx.tree_at(lambda m: m.params, self.base_model, params))
+
+    def reset(self, x) -> None:
+        import jax.numpy as jnp
+
+        self._x = jnp.asarray(np.asarray(x, dtype=np.float64))
+
+    def step(self, u) -> np.ndarray:
+        self._x = self._period(self._dynamic, self._x, u)
+        return np.array(self._x)
+
+    def step_split(self, u_first, n_first: int, u) -> np.ndarray:
+        self._x = self._split(self._dynamic, self._x, u_first, n_first, u)
+        return np.array(self._x)
+
+    @property
+    def state(self) -> np.ndarray:
+        return np.array(self._x)
+
+    def _scene_data(self):
+        if self._scene is None:
+            model = load_mjcf(self.system)
+            self._scene = (model, mujoco.MjData(model))
+        model, data = self._scene
+        data.qpos[:] = np.asarray(self._x)[: self._n]
+        return model, data
+
+    def __getstate__(self):
+        # jitted functions do not pickle; the model (an Equinox pytree) and the state do
+        state = self.__dict__.copy()
+        for k in ("_period", "_split", "_dynamic", "model"):
+            state.pop(k, None)
+        state["_x"] = None if self._x is None else np.asarray(self._x)
+        state["_scene"] = None
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        if self._parameters and self._has_parameters():
+            self.set_parameters(self._parameters)
+        else:
+            self._set_model(self.base_model)
+        if self._x is not None:
+            self.reset(self._x)
+
+
+def _params_as_floats(params) -> dict[str, float]:
+    import dataclasses
+
+    return {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
+
+
+# ---------------------------------------------------------------------------------------------
+# dynamics= keyword
+# ---------------------------------------------------------------------------------------------
+
+
+def load_checkpoint(path: str | os.PathLike) -> AbstractLagrangianSystem:
+    """Load a model written by ``furuta-gym train`` (via ``furuta_gym.training.checkpoint``)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"dynamics: checkpoint file {str(path)!r} not found; accepted: {_ACCEPTED}")
+    try:
+        from ..training.checkpoint import load_model
+    except ImportError as exc:
+        raise ValueError(
+            f"dynamics: cannot load checkpoint {str(path)!r}: the checkpoint loader "
+            f"furuta_gym.training.checkpoint.load_model is not available ({exc})"
+        ) from exc
+    return load_model(path)
+
+
+def make_backend(
+    system: str,
+    dynamics="mujoco",
+    *,
+    substeps: int = 1,
+    effects: Sequence[Effect] = (),
+    parameters: Mapping[str, float] | None = None,
+) -> AbstractBackend:
+    """The backend the envs' ``dynamics=`` keyword names, for ``system`` ("furuta"/"nmsd").
+
+    Model backends use the MJCF model's ``timestep`` so they integrate exactly as MuJoCo does.
+    """
+    system = get_spec(system).name
+    if isinstance(dynamics, AbstractLagrangianSystem):
+        model = dynamics
+    elif isinstance(dynamics, (str, os.PathLike)):
+        name = os.fspath(dynamics)
+        if name == "mujoco":
+            return MujocoBackend(system, substeps, effects, parameters)
+        if name == "analytic":
+            from ..models import analytic_model
+
+            model = analytic_model(system)
+        elif Path(name).exists() or os.sep in name or Path(name).suffix:
+            model = load_checkpoint(name)
+            if not isinstance(model, AbstractLagrangianSystem):
+                raise ValueError(
+                    f"dynamics: checkpoint {name!r} did not load as an AbstractLagrangianSystem "
+                    f"(got {type(model).__name__})"
+                )
+        else:
+            raise ValueError(f"dynamics: unknown backend {name!r}; accepted: {_ACCEPTED}")
+    else:
+        raise ValueError(
+            f"dynamics: expected {_ACCEPTED}; got an object of type {type(dynamics).__name__}"
+        )
+    model_system = getattr(getattr(model, "spec", None), "name", None)
+    if model_system != system:
+        raise ValueError(
+            f"dynamics: the model is a {model_system!r} model but this env simulates {system!r}; "
+            f"load a {system} checkpoint"
+        )
+    timestep = float(load_mjcf(system).opt.timestep)
+    return ModelBackend(model, timestep, substeps, effects, parameters)
+
