@@ -1,0 +1,113 @@
+"""Energy-based swing-up through partial feedback linearisation (paper appendix, eq. 19).
+
+    ū = k_e · (V(β) − V(π)) · sgn(s · cos β · β̇)  −  k_α · α − d_α · α̇,
+
+with V the *design model's* potential (the paper's variant of Åström & Furuta 2000: the
+potential, not the total energy, because V(π) singles out the upright configuration), s the sign
+of the model's coupling M_αβ at the hanging rest (+1 with the pinned convention, read from the
+model so that a model with the other β sign still pumps), and u = PFL⁻¹(ū) clipped at the voltage
+limit. Why it pumps: with α̈ = ū the pendulum's energy changes as dE_β/dt ≈ −M_βα β̇ ū, and
+V(β) − V(π) ≤ 0 below the upright, so ū always opposes sgn(M_βα β̇) and fades out as β → π.
+
+Two additions the paper leaves implicit (known_pitfalls.md, "Swing-up and LQR"):
+
+* **First push.** At exact rest sgn(cos β · β̇) = 0 and nothing would move; we define
+  sgn(0) := ``push`` (+1 by default), i.e. at rest the rotor is pushed with the full energy-law
+  magnitude k_e·(V(π) − V(0)) in the −push·α direction. Quantised encoders at rest read β̇ = 0
+  exactly, so this is also what starts a real unit.
+* **Centring.** A PD term −k_α α − d_α α̇ on the rotor acceleration keeps the arm from running
+  away (without it the rotor drifts by several radians during the pump). It is small against the
+  pumping term (which saturates the 5 V limit) and its peak travel is reported by the benchmark.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ..lagrangian import AbstractLagrangianSystem
+from ._base import AbstractController
+from ._pfl import pfl_voltage
+
+__all__ = ["EnergySwingUp", "model_state", "upright_potential"]
+
+UPRIGHT = jnp.pi
+
+
+def model_state(obs: Float[Array, " 4"]) -> Float[Array, " 4"]:
+    """The state fed to the design model: β wrapped to [−π/2, 3π/2) so that both the hanging
+    (0) and the upright (π) configurations are interior — a learned model is then always queried
+    where it was trained, whatever the unwrapped β the env reports. α is never wrapped."""
+    beta = jnp.mod(obs[1] + 0.5 * jnp.pi, 2.0 * jnp.pi) - 0.5 * jnp.pi
+    return obs.at[1].set(beta)
+
+
+def upright_potential(model: AbstractLagrangianSystem) -> Float[Array, ""]:
+    """V(α = 0, β = π) of the model."""
+    return model.potential(jnp.array([0.0, UPRIGHT]))
+
+
+def sign_with_push(x, push):
+    """sgn(x) with sgn(0) := push (the defined first push at exact rest)."""
+    return jnp.where(x > 0, 1.0, jnp.where(x < 0, -1.0, push))
+
+
+class EnergySwingUp(AbstractController):
+    """Energy swing-up ū = k_e (V(β) − V(π)) sgn(cos β β̇) − k_α α − d_α α̇, through PFL.
+
+    ``k_e`` is in rad/s² per joule of the design model's potential (see docs/control.md for
+    how defaults are picked; the paper's values are tied to its units and don't carry over).
+    """
+
+    model: AbstractLagrangianSystem
+    k_e: Float[Array, ""]
+    k_alpha: Float[Array, ""]
+    d_alpha: Float[Array, ""]
+    V_up: Float[Array, ""]
+    coupling_sign: Float[Array, ""]
+    push: float = eqx.field(static=True)
+    voltage_limit: float = eqx.field(static=True)
+
+    def __init__(
+        self,
+        model: AbstractLagrangianSystem,
+        k_e: float = 5000.0,
+        k_alpha: float = 10.0,
+        d_alpha: float = 2.0,
+        voltage_limit: float = 5.0,
+        push: float = 1.0,
+    ):
+        if model.spec.n_dof != 2 or model.spec.n_inputs != 1:
+            raise ValueError(
+                f"model must be a Furuta-like system (2 joints, 1 input), got {model.spec.name} "
+                f"with {model.spec.n_dof} joints and {model.spec.n_inputs} inputs"
+            )
+        if not voltage_limit > 0:
+            raise ValueError(f"voltage_limit must be > 0 V, got {voltage_limit}")
+        if push not in (1.0, -1.0):
+            raise ValueError(f"push must be +1 or -1, got {push}")
+        self.model = model
+        self.k_e = jnp.asarray(k_e, dtype=float)
+        self.k_alpha = jnp.asarray(k_alpha, dtype=float)
+        self.d_alpha = jnp.asarray(d_alpha, dtype=float)
+        self.V_up = upright_potential(model)
+        m_ab = model.mass_matrix(jnp.zeros(2))[0, 1]
+        self.coupling_sign = jnp.where(m_ab >= 0, 1.0, -1.0)
+        self.push = float(push)
+        self.voltage_limit = float(voltage_limit)
+
+    def desired_acceleration(self, obs: Float[Array, " 4"]) -> Float[Array, ""]:
+        """ū, the rotor acceleration the energy law asks for (before PFL and saturation)."""
+        x = model_state(obs)
+        beta, betad = x[1], x[3]
+        dV = self.model.potential(x[:2]) - self.V_up
+        s = sign_with_push(self.coupling_sign * jnp.cos(beta) * betad, self.push)
+        return self.k_e * dV * s - self.k_alpha * obs[0] - self.d_alpha * obs[2]
+
+    def step(self, state, obs):
+        obs = jnp.asarray(obs, dtype=float)
+        ubar = self.desired_acceleration(obs)
+        u = pfl_voltage(self.model, model_state(obs), ubar)
+        u = jnp.clip(u, -self.voltage_limit, self.voltage_limit)
+        return jnp.reshape(u, (1,)), state
