@@ -1,0 +1,531 @@
+"""Batched model-backed envs: N copies stepped by one jitted, vmapped JAX call (issue 4, item 3).
+
+:class:`FurutaVectorEnv` and :class:`NMSDVectorEnv` are :class:`gymnasium.vector.VectorEnv`\\ s
+over a *model* backend (``dynamics="analytic"``, a checkpoint path, or any
+:class:`~furuta_gym.lagrangian.AbstractLagrangianSystem`). Each step integrates all copies at once
+with the single env's scheme (RK4 with the input held over the control period) and scores them
+with the single env's pure task functions, so copy ``k`` behaves exactly like
+``gymnasium.make("furuta_gym/Furuta-v0", dynamics=...)`` reset with ``seed + k`` and given the same
+actions — including Gymnasium's next-step autoreset (:class:`gymnasium.vector.AutoresetMode`
+``NEXT_STEP``, what :class:`~gymnasium.vector.SyncVectorEnv` does), truncation after
+``episode_seconds`` and divergence (``terminated`` with ``info["diverged"]``, last good
+observation, never NaN).
+
+:meth:`LagrangianVectorEnv.rollout` runs a jittable policy for many steps with no Python in the
+loop (:func:`rollout`, re-exported here from the private ``_jax_rollout``). The MuJoCo backend is not a JAX function: vectorise it with
+Gymnasium's Sync/Async vector envs — :func:`make_vector_env` (the registered
+``vector_entry_point``) does that for ``dynamics="mujoco"``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, ClassVar, Sequence
+
+import equinox as eqx
+import gymnasium
+import jax
+import jax.numpy as jnp
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from ..lagrangian import AbstractLagrangianSystem, energy
+from ._backends import ModelBackend
+from ._base import EnvArgumentError, LagrangianEnv
+from ._jax_rollout import Rollout, controlled_step, rollout
+from ._parameters import PARAMETER_CLASSES, default_parameters
+from .furuta import FurutaEnv
+from .nmsd import NMSDEnv
+
+__all__ = [
+    "LagrangianVectorEnv",
+    "FurutaVectorEnv",
+    "NMSDVectorEnv",
+    "make_vector_env",
+    "furuta_vector_entry_point",
+    "nmsd_vector_entry_point",
+    "rollout",
+    "Rollout",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Quantizer:
+    """The env's encoder model as a hashable, jittable observation function (exact when 0)."""
+
+    steps: tuple[float, ...]  # quantisation step per joint, 0 = exact
+
+    def __call__(self, x):
+        n = len(self.steps)
+        q = x[..., :n]
+        step = jnp.asarray(self.steps, dtype=x.dtype)
+        safe = jnp.where(step > 0, step, 1.0)
+        q = jnp.where(step > 0, jnp.round(q / safe) * step, q)
+        return jnp.concatenate([q, x[..., n:]], axis=-1)
+
+
+_STEP_CACHE: dict = {}
+
+
+def _batched_step(static, treedef_key, *, dt, substeps, action_limit, task, quantizer):
+    """One jitted ``(dynamic, energy_model, xs, us) -> outputs`` for a model structure and task;
+    cached so a second vector env of the same model and settings does not recompile."""
+    key = (treedef_key, dt, substeps, action_limit, task, quantizer)
+    try:
+        return _STEP_CACHE[key]
+    except (KeyError, TypeError):
+        pass
+    n_dof = len(quantizer.steps)
+
+    def one(system, energy_model, x, u):
+        out = controlled_step(
+            system,
+            x,
+            u,
+            dt=dt,
+            substeps=substeps,
+            action_limit=action_limit,
+            state_bound=task.state_bound,
+            reward_fn=task.reward,
+            terminated_fn=task.terminated,
+        )
+        e = energy(energy_model, out.state[:n_dof], out.state[n_dof:])
+        return out.state, quantizer(out.state), out.action, out.reward, out.terminated, out.diverged, e
+
+    def step(dynamic, energy_model, xs, us):
+        system = eqx.combine(dynamic, static)
+        return jax.vmap(one, in_axes=(None, None, 0, 0))(system, energy_model, xs, us)
+
+    fn = jax.jit(step)
+    try:
+        _STEP_CACHE[key] = fn
+    except TypeError:  # unhashable static structure: no sharing, still correct
+        pass
+    return fn
+
+
+class LagrangianVectorEnv(VectorEnv):
+    """N copies of a model-backed :class:`~furuta_gym.envs.LagrangianEnv`, stepped with ``jax.vmap``.
+
+    Constructor: ``num_envs`` and the single env's keywords (``dynamics`` defaults to
+    ``"analytic"`` here; ``max_voltage``/``max_force``, ``frame_skip``, ``episode_seconds``,
+    ``reset_noise_scale``, ``plant``/``effects`` without delay, ``encoder_counts`` /
+    ``position_resolution``, task keywords). Options that need per-copy Python state in the single
+    env — ``measurement_noise``, ``velocity="filter"``, actuation delays, ``randomize`` — and
+    rendering are rejected with a clear error: use ``gymnasium.make_vec(...,
+    vectorization_mode="sync")`` for those.
+
+    Semantics (the same as a :class:`~gymnasium.vector.SyncVectorEnv` of single envs):
+
+    * ``reset(seed=s)`` seeds copy ``k`` with ``s + k`` (or a list of seeds), so its initial state
+      is the single env's ``reset(seed=s + k)``; ``options={"state": x}`` starts every copy at ``x``
+      (shape ``(2n,)``) or copy ``k`` at ``x[k]`` (shape ``(N, 2n)``); ``options={"reset_mask":
+      mask}`` resets only the masked copies.
+    * ``step(actions)``: actions of shape ``(N, 1)`` (or ``(N,)``), clipped to the limit; NaN/inf
+      raises ``ValueError``. Next-step autoreset: a copy whose episode ended at the previous step
+      is reset instead of stepped (reward 0, ``terminated``/``truncated`` False, its reset info).
+    * ``info``: ``time``, ``energy``, ``diverged``, ``state``, ``action`` (and ``target`` for
+      N-MSD) as arrays over copies, each with its Gymnasium ``_key`` mask.
+    """
+
+    env_class: ClassVar[type[LagrangianEnv]]
+    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int, dynamics: Any = "analytic", **env_kwargs):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if isinstance(dynamics, str) and dynamics == "mujoco":
+            raise ValueError(
+                f"{type(self).__name__} batches model backends with jax.vmap; dynamics='mujoco' is "
+                f"not a JAX function. Use gymnasium.make_vec({self._env_id()!r}, num_envs=N, "
+                "vectorization_mode='sync' or 'async') for the MuJoCo ground truth, or "
+                "dynamics='analytic', a checkpoint path or an AbstractLagrangianSystem here."
+            )
+        if env_kwargs.get("render_mode") is not None:
+            raise ValueError(
+                f"{type(self).__name__} does not render; render a single env "
+                f"(gymnasium.make({self._env_id()!r}, render_mode=...)) or use "
+                "gymnasium.make_vec(..., vectorization_mode='sync')"
+            )
+        # The single env is the specification: its validated settings, spaces, task and initial-
+        # state distribution are what every copy uses.
+        self._template = template = self.env_class(dynamics=dynamics, **env_kwargs)
+        self._check_supported(template)
+        backend = template.backend
+        assert isinstance(backend, ModelBackend)
+        self.num_envs = int(num_envs)
+        self.spec_system = template._spec
+        self._n = template._spec.n_dof
+        self.dt = template.dt
+        self.frame_skip = template.frame_skip
+        self.max_action = template.max_action
+        self._max_steps = template._max_steps
+        self.system: AbstractLagrangianSystem = backend.model
+        self._dynamic, self._static = eqx.partition(self.system, eqx.is_array)
+        self._treedef_key = (jax.tree_util.tree_structure(self._dynamic), self._static)
+        parameters = backend.parameters or default_parameters(backend.system)
+        analytic_params = PARAMETER_CLASSES[backend.system](**parameters)
+        from ..models import analytic_model
+
+        # energy in info is the paper's model at the plant's parameters, as the single env reports
+        self._energy_model = eqx.tree_at(
+            lambda m: m.params, analytic_model(backend.system), analytic_params
+        )
+        self._quantizer = _Quantizer(tuple(float(s) for s in template._quant))
+        self._set_task(template.task)
+
+        self.single_observation_space = template.observation_space
+        self.single_action_space = template.action_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.metadata = {**type(self).metadata, "render_fps": template.metadata["render_fps"]}
+        self.render_mode = None
+
+        n_state = 2 * self._n
+        self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
+        self._x = np.zeros((self.num_envs, n_state))
+        self._obs = np.zeros((self.num_envs, n_state))
+        self._steps = np.zeros(self.num_envs, dtype=np.int64)
+        self._last_u = np.zeros(self.num_envs)
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        self._needs_reset = True
+
+    # ------------------------------------------------------------------ set-up helpers
+    @classmethod
+    def _env_id(cls) -> str:
+        from . import ENV_IDS
+
+        return ENV_IDS[cls.env_class.system]
+
+    def _check_supported(self, env: LagrangianEnv) -> None:
+        unsupported = []
+        if np.any(env._noise):
+            unsupported.append("measurement_noise")
+        if env._filter is not None:
+            unsupported.append("velocity='filter'")
+        if env._has_delay:
+            unsupported.append("actuation delay (actuation_delay, actuation_delay_steps, "
+                               "plant='delay' or an input_delay effect)")
+        if env._randomize:
+            unsupported.append("randomize")
+        if not isinstance(env.backend, ModelBackend):
+            unsupported.append(f"backend {type(env.backend).__name__}")
+        if unsupported:
+            raise EnvArgumentError(
+                f"{type(self).__name__} does not support {', '.join(unsupported)}; these need "
+                f"per-copy state of the single env: use gymnasium.make_vec({self._env_id()!r}, "
+                "num_envs=N, vectorization_mode='sync', ...) instead"
+            )
+
+    def _set_task(self, task) -> None:
+        self.task = task
+        self._step_fn = _batched_step(
+            self._static,
+            self._treedef_key,
+            dt=self.dt,
+            substeps=self.frame_skip,
+            action_limit=self.max_action,
+            task=task,
+            quantizer=self._quantizer,
+        )
+
+    # ------------------------------------------------------------------ initial states
+    def _seeded_rngs(self, seed) -> list[np.random.Generator]:
+        if seed is None:
+            seeds = [None] * self.num_envs
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seeds = [int(seed) + k for k in range(self.num_envs)]
+        elif isinstance(seed, Sequence) and not isinstance(seed, str):
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(
+                    f"seed: a list of seeds must have num_envs={self.num_envs} entries, got {len(seeds)}"
+                )
+        else:
+            raise ValueError(f"seed must be None, an int or a list of num_envs ints, got {seed!r}")
+        return [seeding.np_random(s)[0] for s in seeds]
+
+    def _initial_states(self, idx: np.ndarray) -> np.ndarray:
+        """Initial states of copies ``idx`` drawn from their own generators, as the single env."""
+        out = np.empty((len(idx), 2 * self._n))
+        for i, k in enumerate(idx):
+            rng = self._rngs[k]
+            if rng is None:  # never seeded: what the single env does on its first reset()
+                rng = self._rngs[k] = seeding.np_random(None)[0]
+            out[i] = self._template._initial_state(rng)
+        return out
+
+    def _observe(self, xs: np.ndarray) -> np.ndarray:
+        if not any(self._quantizer.steps):
+            return xs.copy()
+        return np.asarray(self._quantizer(jnp.asarray(xs)))
+
+    def _energies(self, xs: np.ndarray) -> np.ndarray:
+        n = self._n
+        fn = _batched_energy(self._energy_model)
+        return np.asarray(fn(self._energy_model, jnp.asarray(xs[:, :n]), jnp.asarray(xs[:, n:])))
+
+    def _reset_info(self, idx: np.ndarray, xs: np.ndarray) -> dict[str, Any]:
+        mask = np.zeros(self.num_envs, dtype=bool)
+        mask[idx] = True
+        full = lambda values, dtype: _scatter(self.num_envs, idx, values, dtype)  # noqa: E731
+        info = {
+            "time": full(np.zeros(len(idx)), np.float64),
+            "energy": full(self._energies(xs), np.float64),
+            "diverged": full(np.zeros(len(idx), dtype=bool), np.bool_),
+            "state": _scatter(self.num_envs, idx, xs, np.float64),
+            "action": full(np.zeros(len(idx)), np.float64),
+        }
+        info.update(self._extra_info(len(idx)))
+        return _with_masks(info, mask)
+
+    def _extra_info(self, count: int) -> dict[str, Any]:
+        """System-specific constant info entries (N-MSD: the target)."""
+        return {}
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed=None, options: dict | None = None):
+        """Reset all copies (or ``options["reset_mask"]``); see the class docstring."""
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        if mask is None:
+            mask = np.ones(self.num_envs, dtype=bool)
+        else:
+            mask = np.asarray(mask)
+            if mask.shape != (self.num_envs,) or mask.dtype != np.bool_ or not mask.any():
+                raise ValueError(
+                    f"options['reset_mask'] must be a bool array of shape ({self.num_envs},) with "
+                    f"at least one True, got {mask!r}"
+                )
+        allowed = set(self._template.reset_option_names)
+        unknown = sorted(set(options) - allowed)
+        if unknown:
+            raise EnvArgumentError(
+                f"reset: unknown option(s) {unknown}; expected any of "
+                f"{sorted(allowed | {'reset_mask'})}"
+            )
+        idx = np.flatnonzero(mask)
+        if seed is not None or self._needs_reset:
+            rngs = self._seeded_rngs(seed) if seed is not None else self._rngs
+            for k in idx:
+                self._rngs[k] = rngs[k]
+        self._reset_options(options, partial=len(idx) < self.num_envs)
+        state = options.get("state")
+        n_state = 2 * self._n
+        if state is not None:
+            x0 = np.asarray(state, dtype=np.float64)
+            if x0.shape == (n_state,):
+                x0 = np.broadcast_to(x0, (len(idx), n_state)).copy()
+            elif x0.shape == (self.num_envs, n_state):
+                x0 = x0[idx].copy()
+            else:
+                raise EnvArgumentError(
+                    f"options['state'] must have shape ({n_state},) or ({self.num_envs}, {n_state}) "
+                    f"= {self.spec_system.state_names} per copy, got shape {x0.shape}"
+                )
+            if not np.all(np.isfinite(x0)):
+                raise EnvArgumentError("options['state'] must be finite")
+        else:
+            x0 = self._initial_states(idx)
+        if self._needs_reset and len(idx) < self.num_envs:
+            raise ValueError("reset: the first reset must reset every copy (no reset_mask)")
+        self._needs_reset = False
+        self._x[idx] = x0
+        obs = self._observe(x0)
+        self._obs[idx] = obs
+        self._steps[idx] = 0
+        self._last_u[idx] = 0.0
+        self._autoreset[idx] = False
+        return self._obs.copy(), self._reset_info(idx, x0)
+
+    def _reset_options(self, options: dict, partial: bool) -> None:
+        """System-specific reset options (N-MSD: ``target``)."""
+
+    def step(self, actions):
+        """Step every copy once (next-step autoreset); returns batched (obs, reward, terminated,
+        truncated, info)."""
+        if self._needs_reset:
+            raise gymnasium.error.ResetNeeded("call reset() before step()")
+        us = np.asarray(actions, dtype=np.float64)
+        if us.shape == (self.num_envs,):
+            us = us[:, None]
+        if us.shape != (self.num_envs, 1):
+            raise ValueError(
+                f"actions must have shape ({self.num_envs}, 1) (one "
+                f"{self.spec_system.input_names[0]} per copy), got shape {us.shape}"
+            )
+        bad = ~np.isfinite(us[:, 0])
+        if bad.any():
+            raise ValueError(
+                f"actions must be finite (NaN/inf actions are rejected); copies "
+                f"{np.flatnonzero(bad)[:10].tolist()} are not"
+            )
+        x_next, obs, u, reward, terminated, diverged, e = (
+            np.asarray(a) for a in self._step_fn(self._dynamic, self._energy_model, self._x, us)
+        )
+        x_next, obs = x_next.copy(), obs.copy()
+        reward, terminated, diverged, e = (
+            reward.astype(np.float64), terminated.copy(), diverged.copy(), e.copy()
+        )
+        resetting = self._autoreset
+        stepped = ~resetting
+        steps = self._steps + stepped
+        truncated = stepped & (self._max_steps is not None) & (steps >= (self._max_steps or 0))
+        # a diverged copy keeps its last observation (already the frozen state's observation)
+        action = u[:, 0].copy()
+        if resetting.any():
+            idx = np.flatnonzero(resetting)
+            x0 = self._initial_states(idx)
+            x_next[idx] = x0
+            obs[idx] = self._observe(x0)
+            reward[idx] = 0.0
+            terminated[idx] = False
+            diverged[idx] = False
+            truncated[idx] = False
+            steps[idx] = 0
+            action[idx] = 0.0
+            e[idx] = self._energies(x0)
+        self._x, self._obs, self._steps = x_next, obs, steps
+        self._autoreset = terminated | truncated
+        info = {
+            "time": steps * self.dt,
+            "energy": e,
+            "diverged": diverged,
+            "state": x_next.copy(),
+            "action": action,
+        }
+        info.update(self._extra_info(self.num_envs))
+        info = _with_masks(info, np.ones(self.num_envs, dtype=bool))
+        return obs.copy(), reward, terminated, truncated, info
+
+    # ------------------------------------------------------------------ pure-JAX rollouts
+    def rollout(
+        self,
+        policy,
+        steps: int,
+        *,
+        x0s=None,
+        policy_state: Any = None,
+        chunk_size: int | None = None,
+    ) -> Rollout:
+        """Run a jittable ``policy`` for ``steps`` control periods from ``x0s`` (default: the
+        copies' current states) entirely in JAX, with this env's integration, clipping, task,
+        encoder model and divergence handling; no autoreset, no truncation (see
+          :func:`rollout`). Does not change the env's state."""
+        if x0s is None:
+            if self._needs_reset:
+                raise gymnasium.error.ResetNeeded("call reset() before rollout() or pass x0s")
+            x0s = self._x
+        return rollout(
+            self.system,
+            policy,
+            x0s,
+            steps,
+            dt=self.dt,
+            substeps=self.frame_skip,
+            action_limit=self.max_action,
+            state_bound=self.task.state_bound,
+            reward_fn=self.task.reward,
+            terminated_fn=self.task.terminated,
+            observation_fn=self._quantizer if any(self._quantizer.steps) else None,
+            policy_state=policy_state,
+            chunk_size=chunk_size,
+        )
+
+    @property
+    def states(self) -> np.ndarray:
+        """True states of all copies, shape (N, 2n) (a copy)."""
+        return self._x.copy()
+
+    def render(self):
+        raise ValueError(f"{type(self).__name__} does not render; render a single env instead")
+
+    def close_extras(self, **kwargs):
+        self._template.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(num_envs={self.num_envs}, dynamics={type(self.system).__name__})"
+
+
+_ENERGY_CACHE: dict = {}
+
+
+def _batched_energy(model):
+    key = jax.tree_util.tree_structure(model)
+    fn = _ENERGY_CACHE.get(key)
+    if fn is None:
+        fn = _ENERGY_CACHE[key] = jax.jit(jax.vmap(energy, in_axes=(None, 0, 0)))
+    return fn
+
+
+def _scatter(n: int, idx: np.ndarray, values, dtype) -> np.ndarray:
+    values = np.asarray(values, dtype=dtype)
+    out = np.zeros((n,) + values.shape[1:], dtype=dtype)
+    out[idx] = values
+    return out
+
+
+def _with_masks(info: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
+    out = {}
+    for key, value in info.items():
+        out[key] = value
+        out[f"_{key}"] = mask.copy()
+    return out
+
+
+class FurutaVectorEnv(LagrangianVectorEnv):
+    """Batched ``furuta_gym/Furuta-v0`` over a model backend (see :class:`LagrangianVectorEnv`)."""
+
+    env_class: ClassVar[type[LagrangianEnv]] = FurutaEnv
+
+
+class NMSDVectorEnv(LagrangianVectorEnv):
+    """Batched ``furuta_gym/NMSD-v0`` over a model backend; one ``target`` for all copies
+    (``target=`` keyword, or ``reset(options={"target": ...})`` of every copy)."""
+
+    env_class: ClassVar[type[LagrangianEnv]] = NMSDEnv
+
+    def _reset_options(self, options, partial):
+        if options.get("target") is not None:
+            if partial:
+                raise EnvArgumentError(
+                    "options['target'] changes the task of every copy: pass it to a full reset "
+                    "(no reset_mask)"
+                )
+            self._template._options(options)
+            self._set_task(self._template.task)
+
+    def _extra_info(self, count):
+        return {"target": np.full(self.num_envs, float(self.task.target))}
+
+
+def make_vector_env(env_id: str, num_envs: int, dynamics: Any = "mujoco", **kwargs) -> VectorEnv:
+    """A vector env for ``env_id``: batched JAX (:class:`FurutaVectorEnv` / :class:`NMSDVectorEnv`)
+    for a model backend, a :class:`~gymnasium.vector.SyncVectorEnv` of single envs for
+    ``dynamics="mujoco"`` (or for options the batched env does not support)."""
+    from . import ENV_IDS
+
+    classes = {ENV_IDS["furuta"]: FurutaVectorEnv, ENV_IDS["nmsd"]: NMSDVectorEnv}
+    if env_id not in classes:
+        raise ValueError(f"env_id must be one of {sorted(classes)}, got {env_id!r}")
+    if isinstance(dynamics, str) and dynamics == "mujoco":
+        return gymnasium.vector.SyncVectorEnv(
+            [lambda: gymnasium.make(env_id, dynamics=dynamics, **kwargs)] * int(num_envs)
+        )
+    return classes[env_id](num_envs, dynamics=dynamics, **kwargs)
+
+
+def furuta_vector_entry_point(num_envs: int = 1, **kwargs) -> VectorEnv:
+    """``vector_entry_point`` of ``furuta_gym/Furuta-v0`` (see :func:`make_vector_env`)."""
+    from . import ENV_IDS
+
+    return make_vector_env(ENV_IDS["furuta"], num_envs, **kwargs)
+
+
+def nmsd_vector_entry_point(num_envs: int = 1, **kwargs) -> VectorEnv:
+    """``vector_entry_point`` of ``furuta_gym/NMSD-v0`` (see :func:`make_vector_env`)."""
+    from . import ENV_IDS
+
+    return make_vector_env(ENV_IDS["nmsd"], num_envs, **kwargs)
