@@ -314,9 +314,13 @@ class MujocoBackend(AbstractBackend):
 _STEP_CACHE: dict = {}
 
 
-def _compiled_steps(static, treedef_key, timestep: float, substeps: int):
+def _compiled_steps(static, unravel, treedef_key, timestep: float, substeps: int):
     """Jitted (full period, split period) steps for one model structure; cached across envs so
-    a second env of the same model (or new parameters / weights) does not recompile."""
+    a second env of the same model (or new parameters / weights) does not recompile.
+
+    The model's arrays travel as ONE flat float64 vector (``ravel_pytree``): a call then flattens
+    three arrays instead of a pytree of many leaves, which is most of JAX's per-call overhead.
+    """
     import equinox as eqx
     import jax
     import jax.numpy as jnp
@@ -329,12 +333,12 @@ def _compiled_steps(static, treedef_key, timestep: float, substeps: int):
     except (KeyError, TypeError):
         pass
 
-    def period(dynamic, x, u):
-        system = eqx.combine(dynamic, static)
+    def period(flat, x, u):
+        system = eqx.combine(unravel(flat), static)
         return jax.lax.fori_loop(0, substeps, lambda _, x_: rk4_step(system, x_, u, timestep), x)
 
-    def split(dynamic, x, u_first, n_first, u):
-        system = eqx.combine(dynamic, static)
+    def split(flat, x, u_first, n_first, u):
+        system = eqx.combine(unravel(flat), static)
 
         def body(i, x_):
             return rk4_step(system, x_, jnp.where(i < n_first, u_first, u), timestep)
@@ -394,11 +398,16 @@ class ModelBackend(AbstractBackend):
 
         from ..effects import WithEffects
 
+        from jax.flatten_util import ravel_pytree
+
         self.model = WithEffects(model, self.effects) if self.effects else model
         dynamic, static = eqx.partition(self.model, eqx.is_array)
-        self._dynamic = dynamic
-        treedef_key = (jax.tree_util.tree_structure(dynamic), static)
-        self._period, self._split = _compiled_steps(static, treedef_key, self.timestep, self.substeps)
+        self._dynamic, unravel = ravel_pytree(dynamic)
+        shapes = tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(dynamic))
+        treedef_key = (jax.tree_util.tree_structure(dynamic), shapes, static)
+        self._period, self._split = _compiled_steps(
+            static, unravel, treedef_key, self.timestep, self.substeps
+        )
 
     def set_parameters(self, values: Mapping[str, float]) -> None:
         if not self._has_parameters():
@@ -423,8 +432,9 @@ class ModelBackend(AbstractBackend):
         self._x = jnp.asarray(np.asarray(x, dtype=np.float64))
 
     def step(self, u) -> np.ndarray:
-        self._x = self._period(self._dynamic, self._x, u)
-        return np.array(self._x)
+        x = self._period(self._dynamic, self._x, u)
+        self._x = x
+        return np.array(x)
 
     def step_split(self, u_first, n_first: int, u) -> np.ndarray:
         self._x = self._split(self._dynamic, self._x, u_first, n_first, u)

@@ -1,0 +1,427 @@
+"""The env algorithm shared by every system: a task over a dynamics backend, plus sensors.
+
+:class:`LagrangianEnv` holds no physics and no MuJoCo: it validates the action, applies the
+actuation delay, asks its :class:`~furuta_gym.envs._backends.AbstractBackend` for the next state,
+checks for divergence, scores the transition with its task's pure reward, and turns the true state
+into an observation through the sensor model (encoder quantisation, noise, derivative-filter
+velocity). Concrete envs (:mod:`furuta_gym.envs.furuta`, :mod:`furuta_gym.envs.nmsd`) only declare
+the system, the task, the defaults and the camera.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from typing import Any, ClassVar, Mapping, Sequence
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from ..effects import Effect
+from ..signals import DerivativeFilter
+from ..systems import get_spec
+from ._backends import AbstractBackend, make_backend
+from ._parameters import parse_randomization, randomize_parameters, resolve_effects
+
+__all__ = ["LagrangianEnv", "EnvArgumentError"]
+
+
+class EnvArgumentError(ValueError, TypeError):
+    """A bad constructor keyword or reset option (a ValueError and, like Python's own unknown-
+    keyword error, a TypeError)."""
+
+
+def _check_delay(seconds: float, timestep: float, what: str) -> int:
+    """Delay in seconds → whole RK4 substeps (it must be a multiple of the timestep)."""
+    if not (np.isfinite(seconds) and seconds >= 0):
+        raise EnvArgumentError(f"{what} must be a delay in seconds >= 0, got {seconds!r}")
+    n = round(seconds / timestep)
+    if abs(n * timestep - seconds) > 1e-9:
+        raise EnvArgumentError(
+            f"{what} = {seconds} s is not a multiple of the simulation timestep {timestep} s"
+        )
+    return int(n)
+
+
+class LagrangianEnv(gymnasium.Env):
+    """Base of the furuta_gym envs (see :class:`furuta_gym.envs.FurutaEnv` for the user docs).
+
+    Subclasses set :attr:`system`, :attr:`defaults` (constructor keyword → default value, the
+    whole accepted set besides the common ones) and implement :meth:`_make_task`,
+    :meth:`_initial_state`, :meth:`_energy` and optionally :meth:`_update_scene`.
+    """
+
+    metadata: ClassVar[dict] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
+
+    system: ClassVar[str]
+    #: default frame_skip (RK4 timesteps per control period)
+    default_frame_skip: ClassVar[int] = 1
+    #: default episode length in seconds
+    default_episode_seconds: ClassVar[float] = 10.0
+    default_reset_noise_scale: ClassVar[float] = 0.01
+    #: action limit (volts or newtons) and the keyword that sets it
+    action_limit_name: ClassVar[str]
+    default_action_limit: ClassVar[float]
+    #: task-specific keywords → defaults
+    task_defaults: ClassVar[dict[str, Any]] = {}
+    default_camera_config: ClassVar[dict[str, Any]] = {}
+
+    def __init__(self, **kwargs):
+        common = dict(
+            dynamics="mujoco",
+            frame_skip=self.default_frame_skip,
+            reset_noise_scale=self.default_reset_noise_scale,
+            episode_seconds=self.default_episode_seconds,
+            render_mode=None,
+            width=480,
+            height=480,
+            plant=None,
+            effects=None,
+            randomize=None,
+            encoder_counts=None,
+            position_resolution=None,
+            measurement_noise=0.0,
+            velocity="exact",
+            actuation_delay=0.0,
+            actuation_delay_steps=0,
+            **{self.action_limit_name: self.default_action_limit},
+            **self.task_defaults,
+        )
+        unknown = sorted(set(kwargs) - set(common))
+        if unknown:
+            raise EnvArgumentError(
+                f"{type(self).__name__}: unknown keyword argument(s) {unknown}; expected any of "
+                f"{sorted(common)}"
+            )
+        cfg = {**common, **kwargs}
+        self._init_kwargs = dict(kwargs)  # for pickling: rebuilt from the constructor keywords
+        self._spec = get_spec(self.system)
+        n = self._spec.n_dof
+        self._n = n
+
+        # -- control rate and limits --
+        frame_skip = cfg["frame_skip"]
+        if isinstance(frame_skip, bool) or not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
+            raise EnvArgumentError(f"frame_skip must be a positive integer, got {frame_skip!r}")
+        self.frame_skip = int(frame_skip)
+        self.max_action = float(cfg[self.action_limit_name])
+        if not (np.isfinite(self.max_action) and self.max_action > 0):
+            raise EnvArgumentError(
+                f"{self.action_limit_name} must be a positive finite number, got {self.max_action!r}"
+            )
+        self.reset_noise_scale = float(cfg["reset_noise_scale"])
+        if not (np.isfinite(self.reset_noise_scale) and self.reset_noise_scale >= 0):
+            raise EnvArgumentError(
+                f"reset_noise_scale must be >= 0, got {cfg['reset_noise_scale']!r}"
+            )
+
+        # -- physics --
+        self.effects: tuple[Effect, ...] = resolve_effects(self.system, cfg["plant"], cfg["effects"])
+        self._randomize = parse_randomization(self.system, cfg["randomize"])
+        self.backend: AbstractBackend = make_backend(
+            self.system, cfg["dynamics"], substeps=self.frame_skip, effects=self.effects
+        )
+        if self._randomize:
+            self.backend.set_parameters(self.backend.parameters)  # fail now, not at reset
+        self._nominal_parameters = self.backend.parameters
+        self.dt = self.backend.control_dt
+        self.timestep = self.backend.timestep
+
+        # -- actuation delay (whole RK4 substeps) --
+        steps = cfg["actuation_delay_steps"]
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+            raise EnvArgumentError(f"actuation_delay_steps must be an integer >= 0, got {steps!r}")
+        delay = _check_delay(float(cfg["actuation_delay"]), self.timestep, "actuation_delay")
+        delay += int(steps) * self.frame_skip
+        for e in self.effects:
+            if e.name == "input_delay":
+                delay += _check_delay(e.coefficient, self.timestep, "effect input_delay")
+        self._delay_periods, self._delay_substeps = divmod(delay, self.frame_skip)
+        self._has_delay = delay > 0
+
+        # -- sensors --
+        self._quant = np.zeros(n)  # quantisation step per joint (0: exact)
+        if cfg["encoder_counts"] is not None:
+            counts = cfg["encoder_counts"]
+            if not isinstance(counts, (int, np.integer)) or counts < 1:
+                raise EnvArgumentError(f"encoder_counts must be a positive integer, got {counts!r}")
+            if not any(self._spec.angular):
+                raise EnvArgumentError(
+                    f"encoder_counts quantises angles, but {self.system} has no angular joint; "
+                    "use position_resolution (in joint units)"
+                )
+            self._quant[list(self._spec.angular)] = 2.0 * math.pi / counts
+        if cfg["position_resolution"] is not None:
+            res = float(cfg["position_resolution"])
+            if not (np.isfinite(res) and res > 0):
+                raise EnvArgumentError(f"position_resolution must be > 0, got {res!r}")
+            self._quant[[not a for a in self._spec.angular]] = res
+        noise = np.broadcast_to(np.asarray(cfg["measurement_noise"], dtype=float), (2 * n,)) \
+            if np.ndim(cfg["measurement_noise"]) in (0, 1) and np.size(cfg["measurement_noise"]) in (1, 2 * n) \
+            else None
+        if noise is None or not np.all(np.isfinite(noise)) or np.any(noise < 0):
+            raise EnvArgumentError(
+                f"measurement_noise must be a standard deviation >= 0, scalar or one per observation "
+                f"component {self._spec.state_names}; got {cfg['measurement_noise']!r}"
+            )
+        self._noise = noise.copy()
+        if cfg["velocity"] not in ("exact", "filter"):
+            raise EnvArgumentError(
+                f"velocity must be 'exact' (true velocity) or 'filter' (the paper's derivative "
+                f"filter on the measured positions); got {cfg['velocity']!r}"
+            )
+        self.velocity = cfg["velocity"]
+        self._filter = DerivativeFilter(self.dt, n) if self.velocity == "filter" else None
+        self._exact_observation = (
+            not self._quant.any() and not self._noise.any() and self._filter is None
+        )
+
+        # -- task --
+        self._task_kwargs = {k: cfg[k] for k in self.task_defaults}
+        self.task = self._make_task(**self._task_kwargs)
+
+        # -- spaces --
+        self.action_space = spaces.Box(-self.max_action, self.max_action, (1,), dtype=np.float64)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (2 * n,), dtype=np.float64)
+
+        # -- episode --
+        seconds = cfg["episode_seconds"]
+        if seconds is not None and not (np.isfinite(seconds) and seconds > 0):
+            raise EnvArgumentError(f"episode_seconds must be > 0 or None, got {seconds!r}")
+        self.episode_seconds = seconds
+        self._max_steps = None if seconds is None else int(round(seconds / self.dt))
+
+        # -- rendering --
+        render_mode = cfg["render_mode"]
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise EnvArgumentError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self.render_mode = render_mode
+        self.width, self.height = int(cfg["width"]), int(cfg["height"])
+        self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.dt))}
+        self._renderer = None
+
+        self._zero_action = np.zeros(1)
+        self._reset_episode(self._initial_state(None))
+
+    # ------------------------------------------------------------------ subclass hooks
+    def _make_task(self, **task_kwargs):
+        raise NotImplementedError
+
+    def _initial_state(self, rng: np.random.Generator | None) -> np.ndarray:
+        """Nominal start plus uniform noise of ``reset_noise_scale`` (no noise without rng)."""
+        x0 = np.zeros(2 * self._n)
+        if rng is not None and self.reset_noise_scale > 0:
+            x0 += rng.uniform(-self.reset_noise_scale, self.reset_noise_scale, x0.shape)
+        return x0
+
+    def _energy(self, x: Sequence[float]) -> float:
+        raise NotImplementedError
+
+    def _update_scene(self, model, data) -> None:
+        """Move purely visual elements (e.g. a target marker) before rendering."""
+
+    def _options(self, options: Mapping[str, Any]) -> None:
+        """Handle system-specific reset options (keys already validated)."""
+
+    reset_option_names: ClassVar[tuple[str, ...]] = ("state",)
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode: near rest with ``reset_noise_scale`` noise, or at ``options["state"]``.
+
+        Draws new physical parameters when ``randomize`` is set (seeded by ``seed``).
+        """
+        super().reset(seed=seed)
+        options = {} if options is None else options
+        if not isinstance(options, Mapping):
+            raise EnvArgumentError(f"options must be a dict, got {type(options).__name__}")
+        unknown = sorted(set(options) - set(self.reset_option_names))
+        if unknown:
+            raise EnvArgumentError(
+                f"reset: unknown option(s) {unknown}; expected any of {list(self.reset_option_names)}"
+            )
+        self._options(options)
+        if self._randomize:
+            self.backend.set_parameters(
+                randomize_parameters(self._nominal_parameters, self._randomize, self.np_random)
+            )
+            self._on_parameters(self.backend.parameters)
+        if "state" in options and options["state"] is not None:
+            x0 = np.asarray(options["state"], dtype=np.float64)
+            if x0.shape != (2 * self._n,):
+                raise EnvArgumentError(
+                    f"options['state'] must have shape ({2 * self._n},) = {self._spec.state_names}, "
+                    f"got shape {x0.shape}"
+                )
+            if not np.all(np.isfinite(x0)):
+                raise EnvArgumentError(f"options['state'] must be finite, got {x0}")
+        else:
+            x0 = self._initial_state(self.np_random)
+        self._reset_episode(x0)
+        obs = self._observe(self._x)
+        self._last_obs = obs
+        if self.render_mode == "human":
+            self.render()
+        return obs.copy(), self._info(False)
+
+    def _on_parameters(self, parameters: Mapping[str, float]) -> None:
+        """Hook: physical parameters changed (domain randomisation)."""
+
+    def _reset_episode(self, x0: np.ndarray) -> None:
+        self.backend.reset(x0)
+        self._x = np.array(x0, dtype=np.float64)
+        self._xl = self._x.tolist()
+        self._steps = 0
+        self._diverged = False
+        self._u = 0.0
+        if self._has_delay:
+            self._buffer = collections.deque(
+                [self._zero_action] * (self._delay_periods + 2), maxlen=self._delay_periods + 2
+            )
+        if self._filter is not None:
+            self._filter.reset(self._measure_positions(self._x))
+        self._last_obs = self._x.copy()
+
+    def step(self, action):
+        """Apply ``action`` (clipped to the limit) for one control period; see the class docs."""
+        u = np.asarray(action, dtype=np.float64)
+        if u.size != 1:
+            raise ValueError(
+                f"action must be a single {self._spec.input_names[0]} value (shape (1,)), "
+                f"got shape {u.shape}"
+            )
+        u = u.reshape(1)
+        value = float(u[0])
+        if not math.isfinite(value):
+            raise ValueError(f"action must be finite, got {value} (NaN/inf actions are rejected)")
+        if value > self.max_action or value < -self.max_action:
+            value = self.max_action if value > 0 else -self.max_action
+            u = np.array([value])
+        self._u = value
+
+        x_prev = self._xl
+        if self._diverged:
+            # stepping past a divergence: nothing moves, the episode stays terminated
+            reward = float(self.task.reward(x_prev, [value], x_prev))
+            return self._last_obs.copy(), reward, True, self._truncated(), self._info(True)
+
+        if self._has_delay:
+            self._buffer.append(u)
+            u_now = self._buffer[-1 - self._delay_periods]
+            if self._delay_substeps:
+                x = self.backend.step_split(
+                    self._buffer[-2 - self._delay_periods], self._delay_substeps, u_now
+                )
+            else:
+                x = self.backend.step(u_now)
+        else:
+            x = self.backend.step(u)
+        self._steps += 1
+        xl = x.tolist()
+        bound = self.task.state_bound
+        if not all(math.isfinite(v) and -bound <= v <= bound for v in xl):
+            # a blown-up model: end the episode at the last good state, never leak NaN
+            self._diverged = True
+            self.backend.reset(self._x)
+            reward = float(self.task.reward(x_prev, [value], x_prev))
+            return self._last_obs.copy(), reward, True, self._truncated(), self._info(True)
+
+        self._x, self._xl = x, xl
+        obs = x if self._exact_observation else self._observe(x)
+        self._last_obs = obs
+        reward = float(self.task.reward(x_prev, [value], xl))
+        terminated = bool(self.task.terminated(xl))
+        if self.render_mode == "human":
+            self.render()
+        return obs.copy(), reward, terminated, self._truncated(), self._info(False)
+
+    def _truncated(self) -> bool:
+        return self._max_steps is not None and self._steps >= self._max_steps
+
+    def _info(self, diverged: bool) -> dict[str, Any]:
+        return {
+            "time": self._steps * self.dt,
+            "energy": self._energy(self._xl),
+            "diverged": diverged,
+            "state": self._x.copy(),
+            "action": self._u,
+        }
+
+    # ------------------------------------------------------------------ sensors
+    def _measure_positions(self, x: np.ndarray) -> np.ndarray:
+        q = x[: self._n].copy()
+        quant = self._quant
+        if quant.any():
+            q = np.where(quant > 0, np.round(q / np.where(quant > 0, quant, 1.0)) * quant, q)
+        if self._noise[: self._n].any():
+            q = q + self._noise[: self._n] * self.np_random.standard_normal(self._n)
+        return q
+
+    def _observe(self, x: np.ndarray) -> np.ndarray:
+        if self._exact_observation:
+            return x.copy()
+        q = self._measure_positions(x)
+        if self._filter is not None:
+            qd = self._filter(q)
+        else:
+            qd = x[self._n :].copy()
+        if self._noise[self._n :].any() and self._filter is None:
+            qd = qd + self._noise[self._n :] * self.np_random.standard_normal(self._n)
+        elif self._noise[self._n :].any():
+            qd = qd + self._noise[self._n :] * self.np_random.standard_normal(self._n)
+        return np.concatenate((q, qd))
+
+    # ------------------------------------------------------------------ rendering
+    def render(self):
+        """An (height, width, 3) uint8 frame ("rgb_array") or a window ("human"); the scene is the
+        system's MJCF model posed at the backend's state, whatever the backend."""
+        if self.render_mode is None:
+            gymnasium.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
+                "to gymnasium.make"
+            )
+            return None
+        model, data = self.backend.scene()
+        self._update_scene(model, data)
+        if self._renderer is None or self._renderer.model is not model:
+            from gymnasium.envs.mujoco.mujoco_rendering import MujocoRenderer
+
+            if self._renderer is not None:
+                self._renderer.close()
+            self._renderer = MujocoRenderer(
+                model, data, dict(self.default_camera_config), self.width, self.height
+            )
+        return self._renderer.render(self.render_mode)
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # ------------------------------------------------------------------ pickling
+    def __getstate__(self):
+        # rebuild from the constructor keywords, then restore the episode (state, RNG, params)
+        return {
+            "kwargs": self._init_kwargs,
+            "x": self._x,
+            "steps": self._steps,
+            "diverged": self._diverged,
+            "parameters": self.backend.parameters,
+            "np_random": self._np_random,
+            "task_kwargs": self._task_kwargs,
+        }
+
+    def __setstate__(self, state):
+        self.__init__(**state["kwargs"])
+        self._task_kwargs = state["task_kwargs"]
+        self.task = self._make_task(**self._task_kwargs)
+        if state["parameters"] != self.backend.parameters:
+            self.backend.set_parameters(state["parameters"])
+            self._on_parameters(self.backend.parameters)
+        self._np_random = state["np_random"]
+        self._reset_episode(state["x"])
+        self._steps = state["steps"]
+        self._diverged = state["diverged"]

@@ -1,0 +1,126 @@
+"""``furuta_gym/Furuta-v0``: swing up and balance the Quanser QUBE-Servo 2 rotary pendulum."""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+from ._base import LagrangianEnv
+from ._tasks import FurutaSwingUp
+
+__all__ = ["FurutaEnv"]
+
+
+class FurutaEnv(LagrangianEnv):
+    r"""Swing-up and balance of a Furuta pendulum (Quanser QUBE-Servo 2; Laiche et al. 2026, §5).
+
+    ## Description
+    A DC motor turns a horizontal rotor arm (angle α about the vertical); a pendulum hangs from the
+    arm's tip (angle β about the arm's axis, β = 0 hanging down, β = π upright, positive β moves
+    the tip the way positive α moves the arm). The agent applies a motor voltage at 500 Hz to
+    swing the pendulum up and balance it with the rotor near its start. The world is chosen by
+    ``dynamics=``: the MuJoCo ground truth (default), the analytic model in JAX, a learned
+    checkpoint, or any Lagrangian model — spaces, reward, ``info`` and rendering are the same.
+
+    ## Action Space
+    ``Box(-max_voltage, max_voltage, (1,), float64)``
+
+    | Num | Action        | Min          | Max         | Joint | Unit        |
+    |-----|---------------|--------------|-------------|-------|-------------|
+    | 0   | motor voltage | −max_voltage | max_voltage | alpha | voltage (V) |
+
+    Out-of-range actions are **clipped** to ±``max_voltage`` (default 5 V, the paper's limit;
+    the hardware takes 10 V). A NaN or infinite action raises ``ValueError`` (a policy bug should
+    not silently become a voltage). Positive voltage drives positive α.
+
+    ## Observation Space
+    ``Box(-inf, inf, (4,), float64)``: the raw state (no angle wrapping), unless sensor options
+    are set (then the measured state, see Arguments).
+
+    | Num | Observation                 | Min  | Max | Joint | Unit                     |
+    |-----|-----------------------------|------|-----|-------|--------------------------|
+    | 0   | rotor angle α               | -Inf | Inf | alpha | angle (rad)              |
+    | 1   | pendulum angle β (0 = down) | -Inf | Inf | beta  | angle (rad)              |
+    | 2   | rotor velocity α̇            | -Inf | Inf | alpha | angular velocity (rad/s) |
+    | 3   | pendulum velocity β̇         | -Inf | Inf | beta  | angular velocity (rad/s) |
+
+    ## Rewards
+    dm_control style, a product of smooth factors in [0, 1] on the true next state
+    (:class:`furuta_gym.envs.FurutaSwingUp`): upright (1 − cos β)/2 × centred
+    (1 + tol(α, margin π/2))/2 × small control (4 + tol(u/max_voltage))/5 × small velocity
+    (1 + tol(β̇, margin 5 rad/s))/2. 1 only upright, at rest, centred, with no voltage; 0 hanging.
+
+    ## Starting State
+    Hanging at rest plus uniform noise in [−reset_noise_scale, reset_noise_scale] on all four
+    components (default 0.01), or exactly ``reset(options={"state": [α, β, α̇, β̇]})``.
+
+    ## Episode End
+    * Termination: only on **divergence** — a non-finite state or a component beyond
+      ``task.state_bound`` = 1e4 (rad, rad/s): ``terminated=True``, ``info["diverged"]=True``,
+      and the observation is the last good one (no NaN ever leaves the env; stepping further
+      keeps returning it).
+    * Truncation: after ``episode_seconds`` (default 10 s = 5 000 steps at 500 Hz).
+
+    ## Info
+    ``time`` (s), ``energy`` (J, T + V of the paper's model at the plant's parameters),
+    ``diverged`` (bool), ``state`` (true (α, β, α̇, β̇), useful with sensor options),
+    ``action`` (the clipped voltage commanded this step).
+
+    ## Arguments (``gymnasium.make("furuta_gym/Furuta-v0", **kwargs)``)
+
+    | Parameter               | Type          | Default     | Description |
+    |-------------------------|---------------|-------------|-------------|
+    | `dynamics`              | str / model   | `"mujoco"`  | `"mujoco"`, `"analytic"`, a checkpoint path, or an `AbstractLagrangianSystem` |
+    | `max_voltage`           | float         | `5.0`       | action limit (V); actions are clipped to it |
+    | `frame_skip`            | int           | `1`         | 2 ms RK4 steps per action: control period = 2 ms × frame_skip (500 Hz) |
+    | `episode_seconds`       | float / None  | `10.0`      | truncation time (None: never) |
+    | `reset_noise_scale`     | float         | `0.01`      | uniform start noise (rad, rad/s) |
+    | `plant`                 | str / list    | `None`      | plant variant preset(s): `"cable_spring"`, `"coulomb"`, `"quadratic_drag"`, `"weak_motor"`, `"delay"` |
+    | `effects`               | list[Effect]  | `None`      | extra `furuta_gym.effects.Effect`s on the plant (any backend) |
+    | `randomize`             | float / dict  | `None`      | domain randomisation per reset: relative spread for all parameters (not g) or `{name: spread}` |
+    | `encoder_counts`        | int / None    | `None`      | quantise observed angles to 2π/counts (hardware: 2048) |
+    | `measurement_noise`     | float / (4,)  | `0.0`       | Gaussian std added to each observed component |
+    | `velocity`              | str           | `"exact"`   | `"filter"`: velocities from the paper's derivative filter on measured angles |
+    | `actuation_delay`       | float         | `0.0`       | input delay in s (a multiple of 2 ms) |
+    | `actuation_delay_steps` | int           | `0`         | input delay in control periods |
+    | `render_mode`           | str / None    | `None`      | `"rgb_array"` or `"human"` |
+    | `width`, `height`       | int           | `480`       | frame size |
+
+    Documented warnings of ``gymnasium.utils.env_checker.check_env``: none expected beyond the
+    infinite observation bounds (the raw state is unbounded).
+    """
+
+    system: ClassVar[str] = "furuta"
+    default_frame_skip: ClassVar[int] = 1
+    default_episode_seconds: ClassVar[float] = 10.0
+    action_limit_name: ClassVar[str] = "max_voltage"
+    default_action_limit: ClassVar[float] = 5.0
+    default_camera_config: ClassVar[dict] = {
+        "distance": 0.55,
+        "elevation": -20.0,
+        "azimuth": 135.0,
+        "lookat": (0.0, 0.0, 0.09),
+    }
+
+    def _make_task(self):
+        return FurutaSwingUp(max_voltage=self.max_action)
+
+    def _on_parameters(self, p):
+        self._energy_constants(p)
+
+    def _energy_constants(self, p):
+        mp, Lp, Lr = p["mp"], p["Lp"], p["Lr"]
+        self._J1 = p["mr"] * Lr**2 / 12.0 + mp * Lr**2
+        self._K = 0.25 * mp * Lp**2
+        self._M12 = 0.5 * mp * Lr * Lp
+        self._J2 = mp * Lp**2 / 3.0
+        self._V = 0.5 * mp * p["g"] * Lp
+
+    def _energy(self, x):
+        if not hasattr(self, "_J1"):
+            self._energy_constants(self.backend.parameters)
+        _, b, ad, bd = x
+        sb, cb = math.sin(b), math.cos(b)
+        m11 = self._J1 + self._K * sb * sb
+        kinetic = 0.5 * (m11 * ad * ad + 2.0 * self._M12 * cb * ad * bd + self._J2 * bd * bd)
+        return kinetic + self._V * (1.0 - cb)
