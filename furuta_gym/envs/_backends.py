@@ -127,7 +127,11 @@ def load_mjcf(system: str) -> mujoco.MjModel:
 
 
 def apply_parameters(
-    model: mujoco.MjModel, system: str, p: Mapping[str, float], effects: Sequence[Effect] = ()
+    model: mujoco.MjModel,
+    system: str,
+    p: Mapping[str, float],
+    effects: Sequence[Effect] = (),
+    data: mujoco.MjData | None = None,
 ) -> dict[int, list[float]]:
     """Write physical parameters (and the natively expressible effects) into ``model``.
 
@@ -177,6 +181,9 @@ def apply_parameters(
         else:
             slot = {"coulomb_friction": 2, "quadratic_drag": 3, "constant_torque": 4}[e.name]
             extra.setdefault(j, [0.0] * 5)[slot] += e.coefficient
+    # masses changed: refresh MuJoCo's derived constants (e.g. the constant mass of a body that
+    # only slides, dof_M0, which the N-MSD uses instead of body_mass)
+    mujoco.mj_setConst(model, mujoco.MjData(model) if data is None else data)
     model.jnt_stiffness[:] = stiffness
     model.qpos_spring[:] = np.divide(stiff_ref, stiffness, out=np.zeros(n), where=stiffness != 0)
     model.dof_damping[:] = damping
@@ -241,7 +248,7 @@ class MujocoBackend(AbstractBackend):
         if unknown:
             raise ValueError(f"unknown {self.system} parameter(s) {unknown}; expected {list(nominal)}")
         self._parameters = {**nominal, **{k: float(v) for k, v in values.items()}}
-        extra = apply_parameters(self.model, self.system, self._parameters, self.effects)
+        extra = apply_parameters(self.model, self.system, self._parameters, self.effects, self.data)
         self._callback = _passive_callback(extra) if extra else None
 
     def reset(self, x) -> None:
@@ -303,7 +310,7 @@ class MujocoBackend(AbstractBackend):
 
     def __setstate__(self, state):
         self.__dict__.update(state)
-        extra = apply_parameters(self.model, self.system, self._parameters, self.effects)
+        extra = apply_parameters(self.model, self.system, self._parameters, self.effects, self.data)
         self._callback = _passive_callback(extra) if extra else None
 
 

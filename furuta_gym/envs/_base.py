@@ -22,7 +22,12 @@ from ..effects import Effect
 from ..signals import DerivativeFilter
 from ..systems import get_spec
 from ._backends import AbstractBackend, make_backend
-from ._parameters import parse_randomization, randomize_parameters, resolve_effects
+from ._parameters import (
+    default_parameters,
+    parse_randomization,
+    randomize_parameters,
+    resolve_effects,
+)
 
 __all__ = ["LagrangianEnv", "EnvArgumentError"]
 
@@ -248,7 +253,7 @@ class LagrangianEnv(gymnasium.Env):
             self.backend.set_parameters(
                 randomize_parameters(self._nominal_parameters, self._randomize, self.np_random)
             )
-            self._on_parameters(self.backend.parameters)
+            self._on_parameters(self.physical_parameters())
         if "state" in options and options["state"] is not None:
             x0 = np.asarray(options["state"], dtype=np.float64)
             if x0.shape != (2 * self._n,):
@@ -269,6 +274,11 @@ class LagrangianEnv(gymnasium.Env):
 
     def _on_parameters(self, parameters: Mapping[str, float]) -> None:
         """Hook: physical parameters changed (domain randomisation)."""
+
+    def physical_parameters(self) -> dict[str, float]:
+        """The plant's physical parameters (for a learned model: the pinned nominal ones, which
+        ``info["energy"]`` then uses)."""
+        return self.backend.parameters or default_parameters(self.system)
 
     def _reset_episode(self, x0: np.ndarray) -> None:
         self.backend.reset(x0)
@@ -420,7 +430,7 @@ class LagrangianEnv(gymnasium.Env):
         self.task = self._make_task(**self._task_kwargs)
         if state["parameters"] != self.backend.parameters:
             self.backend.set_parameters(state["parameters"])
-            self._on_parameters(self.backend.parameters)
+            self._on_parameters(self.physical_parameters())
         self._np_random = state["np_random"]
         self._reset_episode(state["x"])
         self._steps = state["steps"]

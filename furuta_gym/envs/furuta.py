@@ -118,7 +118,7 @@ class FurutaEnv(LagrangianEnv):
 
     def _energy(self, x):
         if not hasattr(self, "_J1"):
-            self._energy_constants(self.backend.parameters)
+            self._energy_constants(self.physical_parameters())
         _, b, ad, bd = x
         sb, cb = math.sin(b), math.cos(b)
         m11 = self._J1 + self._K * sb * sb

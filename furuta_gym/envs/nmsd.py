@@ -89,8 +89,9 @@ class NMSDEnv(LagrangianEnv):
             self.task = self._make_task(**self._task_kwargs)
 
     def _energy(self, x):
-        p = self.backend.parameters if not hasattr(self, "_p") else self._p
-        self._p = p
+        if not hasattr(self, "_p"):
+            self._p = self.physical_parameters()
+        p = self._p
         pos, vel = x
         return 0.5 * p["m"] * vel * vel + 0.5 * p["k1"] * pos * pos + 0.25 * p["k2"] * pos**4
 
