@@ -100,3 +100,204 @@ def test_diverging_copy_is_frozen_flagged_and_isolated():
     # the step function alone, on a NaN action, also freezes instead of propagating it
     step = controlled_step(NMSD(), jnp.array([0.1, 0.0]), jnp.array([jnp.nan]), dt=0.01)
     assert bool(step.diverged) and np.all(np.isfinite(step.state))
+
+
+# ---------------------------------------------------------------------------------------------
+# the batched env against single envs
+# ---------------------------------------------------------------------------------------------
+
+FURUTA_ID = "furuta_gym/Furuta-v0"
+NMSD_ID = "furuta_gym/NMSD-v0"
+
+
+def _max_diff(a, b) -> float:
+    return float(np.max(np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float))))
+
+
+def _assert_same_step(batched, reference, atol=1e-12, rtol=1e-12):
+    """obs, reward, terminated, truncated and every info entry agree (to round-off: a vmapped
+    kernel may fuse differently from the single env's, so 1e-12 absolute or relative — a
+    blowing-up copy reaches 1e3)."""
+    obs, rew, term, trunc, info = batched
+    obs_r, rew_r, term_r, trunc_r, info_r = reference
+    np.testing.assert_allclose(obs, obs_r, rtol=rtol, atol=atol)
+    np.testing.assert_allclose(rew, rew_r, rtol=rtol, atol=atol)
+    np.testing.assert_array_equal(term, term_r)
+    np.testing.assert_array_equal(trunc, trunc_r)
+    assert set(info) == set(info_r)
+    for key in info_r:
+        np.testing.assert_allclose(
+            np.asarray(info[key], dtype=float), np.asarray(info_r[key], dtype=float),
+            rtol=rtol, atol=atol, err_msg=key,
+        )
+
+
+@pytest.fixture(scope="module")
+def furuta_pair():
+    """A batched env and Gymnasium's SyncVectorEnv of single envs, same settings (25-step episodes)."""
+    import gymnasium as gym
+
+    from furuta_gym.envs.vector import FurutaVectorEnv
+
+    kwargs = dict(dynamics="analytic", episode_seconds=0.05, reset_noise_scale=0.3)
+    batched = FurutaVectorEnv(4, **kwargs)
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make(FURUTA_ID, **kwargs)] * 4)
+    return batched, sync, kwargs
+
+
+def test_batched_env_equals_sync_vector_env_with_autoreset(furuta_pair):
+    """Step i of copy k is the single env's, through two truncations and next-step autoresets."""
+    batched, sync, _ = furuta_pair
+    seed = 11
+    out, ref = batched.reset(seed=seed), sync.reset(seed=seed)
+    assert _max_diff(out[0], ref[0]) == 0.0 and set(out[1]) == set(ref[1])
+    rng = np.random.default_rng(0)
+    saw_reset_step = 0
+    for i in range(60):
+        actions = rng.uniform(-8.0, 8.0, size=(4, 1))  # beyond ±5 V: clipping is compared too
+        out, ref = batched.step(actions), sync.step(actions)
+        _assert_same_step(out, ref)
+        if i in (25, 51):  # the step after a truncation is a reset: Gymnasium's NEXT_STEP mode
+            saw_reset_step += 1
+            np.testing.assert_array_equal(out[1], 0.0)
+            assert not out[2].any() and not out[3].any() and np.all(out[4]["time"] == 0.0)
+        assert out[3].all() == (i in (24, 50))
+    assert saw_reset_step == 2
+    assert batched.metadata["autoreset_mode"] == sync.metadata["autoreset_mode"]
+
+
+def test_copy_k_is_the_single_env_reset_with_seed_plus_k(furuta_pair):
+    import gymnasium as gym
+
+    batched, _, kwargs = furuta_pair
+    batched.reset(seed=100)
+    single = gym.make(FURUTA_ID, **kwargs)
+    obs_k, _ = single.reset(seed=102)
+    rng = np.random.default_rng(1)
+    states = []
+    for _ in range(20):
+        actions = rng.uniform(-5.0, 5.0, size=(4, 1))
+        obs, *_ = batched.step(actions)
+        obs_k, *_ = single.step(actions[2])
+        states.append((obs[2], obs_k))
+    assert max(_max_diff(a, b) for a, b in states) <= 1e-12
+    assert _max_diff(states[0][0], states[-1][0]) > 1e-3  # it moved
+
+
+def test_partial_reset_and_state_option(furuta_pair):
+    batched, _, _ = furuta_pair
+    x = np.array([0.1, 3.0, 0.0, 0.0])
+    obs, info = batched.reset(options={"state": x})
+    np.testing.assert_array_equal(obs, np.tile(x, (4, 1)))
+    batched.step(np.ones((4, 1)))
+    mask = np.array([False, True, False, False])
+    obs, info = batched.reset(seed=5, options={"reset_mask": mask})
+    assert np.any(obs[1] != x) and np.all(obs[[0, 2, 3]] != x)  # copy 1 re-drawn, others moved on
+    np.testing.assert_array_equal(info["_time"], mask)
+    with pytest.raises(ValueError, match="shape"):
+        batched.reset(options={"state": np.zeros(3)})
+
+
+def test_rollout_method_equals_stepping_the_env():
+    """A jittable policy run inside lax.scan gives the env's own trajectory, encoder model included."""
+    from furuta_gym.envs.vector import FurutaVectorEnv
+
+    env = FurutaVectorEnv(3, dynamics="analytic", encoder_counts=2048, reset_noise_scale=0.5)
+    obs, _ = env.reset(seed=3)
+    out = jax.tree_util.tree_map(np.asarray, env.rollout(lqr_like, 40))
+    seen = []
+    for t in range(40):
+        seen.append(obs)
+        obs, reward, term, trunc, info = env.step(out.actions[:, t])
+        assert _max_diff(info["state"], out.states[:, t + 1]) <= 1e-12
+        assert _max_diff(reward, out.rewards[:, t]) <= 1e-12
+        assert not term.any() and not trunc.any()
+    # the policy acted on the env's observations, clipped to the limit
+    policy_u = jax.vmap(jax.vmap(lqr_like))(jnp.asarray(np.stack(seen, axis=1)))
+    np.testing.assert_allclose(out.actions, np.clip(policy_u, -5.0, 5.0), rtol=0, atol=1e-12)
+    # observations were quantised to the 2048-count encoder, states were not
+    step = 2 * np.pi / 2048
+    np.testing.assert_allclose(obs[:, :2] / step, np.round(obs[:, :2] / step), atol=1e-9)
+    assert _max_diff(obs[:, :2], info["state"][:, :2]) > 0
+
+
+def test_broken_model_diverges_in_one_copy_only():
+    """A blown-up model ends copy 1's episode (diverged, last good obs, no NaN); copies 0 and 2
+    equal single envs of the same model, and copy 1 is autoreset at the next step."""
+    import gymnasium as gym
+
+    from furuta_gym.envs.vector import NMSDVectorEnv
+
+    # a "fitted" N-MSD whose cubic spring came out softening: beyond |p| ≈ 0.45 m it explodes
+    broken = NMSD(params=NMSDParameters(k2=-50.0))
+    starts = np.array([[0.0, 0.0], [2.0, 0.0], [0.1, 0.0]])
+    batched = NMSDVectorEnv(3, dynamics=broken, reset_noise_scale=0.0)
+    sync = gym.vector.SyncVectorEnv(
+        [lambda: gym.make(NMSD_ID, dynamics=broken, reset_noise_scale=0.0)] * 3
+    )
+    out, ref = batched.reset(options={"state": starts}), sync.reset(options={"state": starts[0]})
+    for k in (1, 2):  # SyncVectorEnv passes one options dict to all; start copies 1, 2 by hand
+        sync.envs[k].reset(options={"state": starts[k]})
+        sync._env_obs[k] = starts[k]
+    div_step = None
+    for i in range(40):
+        actions = np.full((3, 1), 0.1)
+        out, ref = batched.step(actions), sync.step(actions)
+        assert np.all(np.isfinite(out[0])) and np.all(np.isfinite(out[1]))
+        # the exploding copy amplifies round-off (1e-12 relative per step); the others are exact
+        _assert_same_step(out, ref, rtol=1e-8)
+        assert _max_diff(out[0][[0, 2]], ref[0][[0, 2]]) <= 1e-12
+        if out[4]["diverged"][1]:
+            div_step = i
+            assert out[2][1] and not out[2][[0, 2]].any()
+            assert abs(out[0][1, 0]) > 2.0  # the last good observation, not the start
+        if div_step is not None and i == div_step + 1:
+            np.testing.assert_array_equal(out[0][1], [0.0, 0.0])  # autoreset (no noise)
+    assert div_step is not None and not out[4]["diverged"][[0, 2]].any()
+
+
+def test_make_vec_modes():
+    """make_vec: the vector entry point gives the batched env for a model backend and a
+    SyncVectorEnv for MuJoCo; vectorization_mode="sync" works for the MuJoCo ground truth."""
+    import gymnasium as gym
+
+    from furuta_gym.envs.vector import FurutaVectorEnv, furuta_vector_entry_point
+
+    sync = gym.make_vec(FURUTA_ID, num_envs=2, vectorization_mode="sync")
+    obs, _ = sync.reset(seed=0)
+    obs2, rew, term, trunc, info = sync.step(np.full((2, 1), 1.0))
+    assert obs2.shape == (2, 4) and np.all(np.isfinite(obs2)) and np.any(obs2 != obs)
+    sync.close()
+
+    test_id = "furuta_gym_test/FurutaVec-v0"
+    if test_id not in gym.registry:
+        gym.register(
+            test_id,
+            entry_point="furuta_gym.envs.furuta:FurutaEnv",
+            vector_entry_point=furuta_vector_entry_point,
+        )
+    try:
+        env = gym.make_vec(test_id, num_envs=3, dynamics="analytic")
+        assert isinstance(env.unwrapped, FurutaVectorEnv) and env.num_envs == 3
+        default = gym.make_vec(test_id, num_envs=2)  # dynamics="mujoco": Gymnasium's sync env
+        assert isinstance(default, gym.vector.SyncVectorEnv)
+        default.close()
+    finally:
+        gym.registry.pop(test_id, None)
+
+
+def test_bad_input_is_one_clear_error():
+    from furuta_gym.envs.vector import FurutaVectorEnv
+
+    with pytest.raises(ValueError, match="vectorization_mode='sync'"):
+        FurutaVectorEnv(2, dynamics="mujoco")
+    with pytest.raises(ValueError, match="measurement_noise"):
+        FurutaVectorEnv(2, measurement_noise=0.01)
+    with pytest.raises(ValueError, match="num_envs"):
+        FurutaVectorEnv(0)
+    env = FurutaVectorEnv(2, dynamics="analytic")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.array([[0.0], [np.nan]]))
+    with pytest.raises(ValueError, match=r"shape \(2, 1\)"):
+        env.step(np.zeros((3, 1)))

@@ -12,9 +12,9 @@ actions — including Gymnasium's next-step autoreset (:class:`gymnasium.vector.
 observation, never NaN).
 
 :meth:`LagrangianVectorEnv.rollout` runs a jittable policy for many steps with no Python in the
-loop (:func:`rollout`, re-exported here from the private ``_jax_rollout``). The MuJoCo backend is not a JAX function: vectorise it with
-Gymnasium's Sync/Async vector envs — :func:`make_vector_env` (the registered
-``vector_entry_point``) does that for ``dynamics="mujoco"``.
+loop (:func:`rollout`, re-exported here from the private ``_jax_rollout``). The MuJoCo backend is
+not a JAX function: vectorise it with Gymnasium's Sync/Async vector envs — :func:`make_vector_env`
+(the registered ``vector_entry_point``) does that for ``dynamics="mujoco"``.
 """
 
 from __future__ import annotations
@@ -412,8 +412,8 @@ class LagrangianVectorEnv(VectorEnv):
     ) -> Rollout:
         """Run a jittable ``policy`` for ``steps`` control periods from ``x0s`` (default: the
         copies' current states) entirely in JAX, with this env's integration, clipping, task,
-        encoder model and divergence handling; no autoreset, no truncation (see
-          :func:`rollout`). Does not change the env's state."""
+        encoder model and divergence handling; no autoreset, no truncation (see :func:`rollout`).
+        Does not change the env's state."""
         if x0s is None:
             if self._needs_reset:
                 raise gymnasium.error.ResetNeeded("call reset() before rollout() or pass x0s")
