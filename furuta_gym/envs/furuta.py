@@ -96,7 +96,7 @@ class FurutaEnv(LagrangianEnv):
     action_limit_name: ClassVar[str] = "max_voltage"
     default_action_limit: ClassVar[float] = 5.0
     default_camera_config: ClassVar[dict] = {
-        "distance": 0.55,
+        "distance": 0.42,
         "elevation": -20.0,
         "azimuth": 135.0,
         "lookat": (0.0, 0.0, 0.09),
