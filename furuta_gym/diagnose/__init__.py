@@ -1,1 +1,24 @@
-"""Residual diagnosis of measured data: fit, residual, trace the missing effect, refit, report."""
+"""Residual diagnosis of measured data: fit, residual, trace the missing effect, refit, report.
+
+``diagnose(data, system)`` fits the declared analytic model's lumped parameters (equation error on
+the integral inverse residual, refined by output error), tests a library of candidate effects
+(:mod:`furuta_gym.effects`) against the residual on held-out data, adds the significant ones,
+refits and reports the held-out errors before and after. See ``docs/diagnose.md``.
+"""
+
+from ._diagnose import DiagnosisResult, DiagnosisSettings, EffectEvidence, ErrorSummary, diagnose
+from ._library import Candidate, LumpedModel, layout_for, nominal_base
+from ._synthetic import measured_like
+
+__all__ = [
+    "diagnose",
+    "DiagnosisResult",
+    "DiagnosisSettings",
+    "EffectEvidence",
+    "ErrorSummary",
+    "LumpedModel",
+    "Candidate",
+    "layout_for",
+    "nominal_base",
+    "measured_like",
+]

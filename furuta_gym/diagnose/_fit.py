@@ -1,0 +1,315 @@
+"""Equation-error and output-error fits of :class:`~._library.LumpedModel` on measured segments.
+
+* Equation error: the integral inverse residual Z̄ − Ā (paper eq. 8-10) over intervals of
+  ``stride`` samples is ``R θ`` with ``R`` the per-interval Jacobian (exact: the residual is linear
+  in θ). Fixed parameters (the scale anchor) go to the right-hand side; the rest is weighted least
+  squares, one weight per joint.
+* Output error: open-loop windows started from measured states (measured angle, estimated
+  velocity) with the measured input held (RK4, :func:`furuta_gym.simulate.rollout_zoh`), position
+  error only, Gauss-Newton (scipy ``least_squares``) from the equation-error estimate. This removes
+  the errors-in-variables bias the noisy velocity estimates put into the equation-error fit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.linalg import eigh
+from scipy.optimize import least_squares
+
+from ..lagrangian import interval_difference, interval_integral, momentum, potential_derived_force
+from ..simulate import rollout_zoh
+from ._library import LumpedModel, ParameterLayout, layout_for
+
+__all__ = ["Segment", "build_regressors", "ee_fit", "oe_fit", "window_errors", "delay_input"]
+
+_CHUNK = 2048
+
+
+@dataclasses.dataclass
+class Segment:
+    """A contiguous piece of one trajectory with velocities and its equation-error regressors."""
+
+    name: str
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    u: np.ndarray  # (T, m) as measured (the fit may shift it by a delay)
+    dt: float
+    group: int  # cross-validation group (one per segment)
+    held_out: bool
+    # filled by build_regressors
+    A: np.ndarray | None = None  # (N, n, P) Jacobian of Ā w.r.t. θ per interval
+    D: np.ndarray | None = None  # (N, n, P) Jacobian of the momentum change Δ(∂L/∂q̇) per interval
+    Uint: np.ndarray | None = None  # (N,) ∫u over each interval
+    dU: np.ndarray | None = None  # (N,) d/d(delay) of ∫u(t − d) at d = 0
+    block: np.ndarray | None = None  # (N,) block index for paired held-out comparisons
+
+    def residual_jacobian(self, c_input: np.ndarray, u_int: np.ndarray | None = None) -> np.ndarray:
+        """(N, n, P): Z̄ − Ā = R θ, with Z̄ = ∫u · c_input (c_input = ∂τ_u/∂θ at u = 1)."""
+        u_int = self.Uint if u_int is None else u_int
+        return u_int[:, None, None] * c_input[None] - self.A
+
+
+@functools.lru_cache(maxsize=None)
+def _sample_jacobians(system: str):
+    def per_sample(theta, q, qd):
+        def p_of(th):
+            return momentum(LumpedModel(th, system), q, qd)
+
+        def f_of(th):
+            m = LumpedModel(th, system)
+            return potential_derived_force(m, q, qd) + m.nonconservative_force(q, qd)
+
+        return jax.jacfwd(p_of)(theta), jax.jacfwd(f_of)(theta)
+
+    return jax.jit(jax.vmap(per_sample, in_axes=(None, 0, 0)))
+
+
+@functools.lru_cache(maxsize=None)
+def _input_direction(system: str):
+    def c(theta):
+        n_in = 1
+        return jax.jacfwd(
+            lambda th: LumpedModel(th, system).input_force(jnp.zeros(2), jnp.zeros(2), jnp.ones(n_in))
+        )(theta)
+
+    return jax.jit(c)
+
+
+def input_direction(layout: ParameterLayout, theta0: np.ndarray) -> np.ndarray:
+    """∂τ_u/∂θ at u = 1 (n, P), linearised at ``theta0`` (the input gain effect is bilinear)."""
+    n = 2 if layout.system == "furuta" else 1
+    c = np.asarray(_input_direction(layout.system)(jnp.asarray(theta0)))
+    return c[:n]
+
+
+def _per_sample(system: str, theta0: np.ndarray, q: np.ndarray, qd: np.ndarray):
+    fn = _sample_jacobians(system)
+    T = q.shape[0]
+    outs_p, outs_f = [], []
+    for s in range(0, T, _CHUNK):
+        qq, vv = q[s : s + _CHUNK], qd[s : s + _CHUNK]
+        k = qq.shape[0]
+        if k < _CHUNK:  # pad to one compiled shape
+            qq = np.concatenate([qq, np.repeat(qq[-1:], _CHUNK - k, 0)])
+            vv = np.concatenate([vv, np.repeat(vv[-1:], _CHUNK - k, 0)])
+        jp, jf = fn(jnp.asarray(theta0), jnp.asarray(qq), jnp.asarray(vv))
+        outs_p.append(np.asarray(jp)[:k])
+        outs_f.append(np.asarray(jf)[:k])
+    return np.concatenate(outs_p), np.concatenate(outs_f)
+
+
+def input_integral(u: np.ndarray, dt: float, hold: str) -> np.ndarray:
+    """∫u over each sample interval: held input (``"zoh"``) or linear interpolation (trapezoid)."""
+    u = u[:, 0]
+    if hold == "zoh":
+        return dt * u[:-1]
+    return np.asarray(interval_integral(u, dt, "trapezoid"))
+
+
+def delay_input(u: np.ndarray, delay: float, dt: float) -> np.ndarray:
+    """The held input as the plant sees it ``delay`` seconds later (period-averaged; exact ∫)."""
+    if delay <= 0:
+        return u
+    m = int(np.floor(delay / dt))
+    phi = delay / dt - m
+    pad = np.concatenate([np.repeat(u[:1], m + 1, 0), u], axis=0)
+    shifted = pad[1 : 1 + u.shape[0]]  # u[k − m]
+    shifted_more = pad[: u.shape[0]]  # u[k − m − 1]
+    return (1.0 - phi) * shifted + phi * shifted_more
+
+
+def _group(x: np.ndarray, stride: int) -> np.ndarray:
+    n = (x.shape[0] // stride) * stride
+    return x[:n].reshape((n // stride, stride) + x.shape[1:]).sum(axis=1)
+
+
+def build_regressors(
+    segments: list[Segment],
+    layout: ParameterLayout,
+    theta0: np.ndarray,
+    stride: int,
+    hold: str,
+    block_seconds: float = 1.0,
+    delay: float = 0.0,
+) -> None:
+    """Fill each segment's Ā Jacobian, ∫u and delay regressor over intervals of ``stride``."""
+    for seg in segments:
+        jp, jf = _per_sample(layout.system, theta0, seg.q, seg.qd)
+        a = np.asarray(interval_difference(jp)) - np.asarray(interval_integral(jf, seg.dt))
+        u = delay_input(seg.u, delay, seg.dt)
+        ui = input_integral(u, seg.dt, hold)
+        du_s = np.diff(u[:, 0], prepend=u[0, 0])
+        du = -(du_s[:-1] if hold == "zoh" else du_s[1:])
+        seg.A = _group(a, stride)
+        seg.D = _group(np.asarray(interval_difference(jp)), stride)
+        seg.Uint = _group(ui, stride)
+        seg.dU = _group(du, stride)
+        per_block = max(1, int(round(block_seconds / (stride * seg.dt))))
+        seg.block = np.arange(seg.A.shape[0]) // per_block
+
+
+def ee_fit(
+    R: np.ndarray,
+    D: np.ndarray,
+    free: np.ndarray,
+    theta_fixed: np.ndarray,
+    weights: np.ndarray,
+    scale: np.ndarray,
+    extra: np.ndarray | None = None,
+):
+    """Scale-free equation-error fit: min ‖W R θ‖² / ‖W D θ‖², then the anchor fixes the scale.
+
+    The integral residual is homogeneous in θ, so plain least squares with a fixed anchor is
+    pulled towards a smaller overall scale whenever a candidate can mimic the anchor (noise in the
+    estimated velocities scales with θ). Normalising by the momentum changes ``D θ`` (the
+    pitfalls' Σ‖Δp‖²) removes that pull: the minimiser is the smallest generalized eigenvector.
+    The non-free entries of ``theta_fixed`` set one direction ``s·θ_fixed``; ``s = 1`` afterwards.
+    ``R``, ``D`` (N, n, P); ``extra`` (N, n, E) are extra residual columns (an input delay) that
+    scale with the model (their coefficients are returned divided by ``s``).
+    Returns (θ, extra coefficients).
+    """
+    w = weights[None, :, None]
+    fixed_dir = np.where(free, 0.0, theta_fixed)
+    cols_R = [(R @ fixed_dir)[..., None], R[:, :, free] * scale[free]]
+    cols_D = [(D @ fixed_dir)[..., None], D[:, :, free] * scale[free]]
+    if extra is not None:
+        cols_R.append(extra)
+        cols_D.append(np.zeros_like(extra))
+    X = (np.concatenate(cols_R, axis=2) * w).reshape(-1, sum(c.shape[2] for c in cols_R))
+    Y = (np.concatenate(cols_D, axis=2) * w).reshape(X.shape)
+    norms = np.linalg.norm(X, axis=0)
+    norms[norms == 0] = 1.0
+    X, Y = X / norms, Y / norms
+    A, B = X.T @ X, Y.T @ Y
+    B = B + 1e-10 * np.trace(B) / B.shape[0] * np.eye(B.shape[0])
+    vals, vecs = eigh(A, B)
+    v = vecs[:, 0] / norms
+    if abs(v[0]) < 1e-300:
+        v = v + 1e-300
+    v = v / v[0]
+    theta = theta_fixed.copy()
+    nf = int(free.sum())
+    theta[free] = v[1 : 1 + nf] * scale[free]
+    return theta, v[1 + nf :]
+
+
+def residual(R: np.ndarray, theta: np.ndarray, extra=None, extra_coef=None) -> np.ndarray:
+    r = R @ theta
+    if extra is not None and extra_coef is not None and len(extra_coef):
+        r = r + extra @ extra_coef
+    return r
+
+
+# ----------------------------------------------------------------------------- output error
+
+
+@dataclasses.dataclass
+class Windows:
+    """Open-loop windows: start states, held inputs and measured positions after each step."""
+
+    x0: np.ndarray  # (W, 2n)
+    us: np.ndarray  # (W, L, m)
+    q: np.ndarray  # (W, L, n) measured positions at steps 1..L
+    segment: np.ndarray  # (W,) index of the segment each window came from
+    dt: float
+    length: int
+
+
+def make_windows(segments: list[Segment], length: int, delay: float = 0.0, max_windows=None, rng=None):
+    """Non-overlapping windows of ``length`` steps from each segment (start at measured states)."""
+    x0, us, qs, seg_idx = [], [], [], []
+    for i, s in enumerate(segments):
+        u = delay_input(s.u, delay, s.dt)
+        for start in range(0, s.q.shape[0] - length, length):
+            x0.append(np.concatenate([s.q[start], s.qd[start]]))
+            us.append(u[start : start + length])
+            qs.append(s.q[start + 1 : start + length + 1])
+            seg_idx.append(i)
+    if not x0:
+        return None
+    w = Windows(np.array(x0), np.array(us), np.array(qs), np.array(seg_idx), segments[0].dt, length)
+    if max_windows is not None and len(w.x0) > max_windows:
+        rng = rng or np.random.default_rng(0)
+        keep = np.sort(rng.choice(len(w.x0), max_windows, replace=False))
+        w = Windows(w.x0[keep], w.us[keep], w.q[keep], w.segment[keep], w.dt, length)
+    return w
+
+
+@functools.lru_cache(maxsize=None)
+def _predictor(system: str, dt: float, substeps: int, smoothing: float):
+    n = 2 if system == "furuta" else 1
+
+    def predict(theta, x0, us):
+        model = LumpedModel(theta, system, coulomb_smoothing=smoothing)
+        xs = jax.vmap(lambda x, u: rollout_zoh(model, x, u, dt, substeps))(x0, us)
+        return xs[:, 1:, :n]
+
+    def res(theta, x0, us, q):
+        return (predict(theta, x0, us) - q).reshape(-1)
+
+    return jax.jit(predict), jax.jit(res), jax.jit(jax.jacfwd(res))
+
+
+def predict_windows(layout, theta, win: Windows, smoothing: float, substeps: int = 1) -> np.ndarray:
+    predict, _, _ = _predictor(layout.system, win.dt, substeps, smoothing)
+    return np.asarray(predict(jnp.asarray(theta), jnp.asarray(win.x0), jnp.asarray(win.us)))
+
+
+def window_errors(layout, theta, win: Windows, smoothing: float, substeps: int = 1):
+    """Per-joint RMS position error of open-loop window predictions, and the combined RMS."""
+    pred = predict_windows(layout, theta, win, smoothing, substeps)
+    err = pred - win.q
+    if not np.all(np.isfinite(err)):
+        per = np.full(err.shape[-1], np.inf)
+        return per, float("inf")
+    per = np.sqrt(np.mean(err**2, axis=(0, 1)))
+    return per, float(np.sqrt(np.mean(err**2)))
+
+
+def oe_fit(
+    layout: ParameterLayout,
+    theta_start: np.ndarray,
+    free: np.ndarray,
+    win: Windows,
+    smoothing: float,
+    substeps: int = 1,
+    max_nfev: int = 30,
+):
+    """Refine the free entries of θ by output error (Gauss-Newton / trust region).
+
+    Returns (θ, converged flag). If the start does not simulate (a non-physical equation-error
+    estimate), the start is returned unchanged with ``False``.
+    """
+    _, res, jac = _predictor(layout.system, win.dt, substeps, smoothing)
+    x0, us, q = jnp.asarray(win.x0), jnp.asarray(win.us), jnp.asarray(win.q)
+    scale = np.maximum(np.abs(theta_start), layout.typical_scale() * 1e-2)
+    scale = np.where(free, scale, 1.0)
+
+    def full(z):
+        th = theta_start.copy()
+        th[free] = z * scale[free]
+        return th
+
+    def f(z):
+        r = np.asarray(res(jnp.asarray(full(z)), x0, us, q))
+        return np.where(np.isfinite(r), r, 1e3)
+
+    def J(z):
+        j = np.asarray(jac(jnp.asarray(full(z)), x0, us, q))[:, free] * scale[free]
+        return np.where(np.isfinite(j), j, 0.0)
+
+    z0 = theta_start[free] / scale[free]
+    r0 = np.asarray(res(jnp.asarray(theta_start), x0, us, q))
+    if not np.all(np.isfinite(r0)):
+        return theta_start, False
+    sol = least_squares(f, z0, jac=J, method="trf", max_nfev=max_nfev, x_scale="jac")
+    theta = full(sol.x)
+    if sol.cost > 0.5 * float(r0 @ r0):  # never return something worse than the start
+        return theta_start, False
+    return theta, bool(sol.success)
