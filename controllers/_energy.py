@@ -53,6 +53,13 @@ def sign_with_push(x, push):
     return jnp.where(x > 0, 1.0, jnp.where(x < 0, -1.0, push))
 
 
+@eqx.filter_jit
+def _design_constants(model):
+    """V(π) and the sign of the coupling M_αβ at the hanging rest (one compilation)."""
+    m_ab = model.mass_matrix(jnp.zeros(2))[0, 1]
+    return upright_potential(model), jnp.where(m_ab >= 0, 1.0, -1.0)
+
+
 class EnergySwingUp(AbstractController):
     """Energy swing-up ū = k_e (V(β) − V(π)) sgn(cos β β̇) − k_α α − d_α α̇, through PFL.
 
@@ -91,9 +98,7 @@ class EnergySwingUp(AbstractController):
         self.k_e = jnp.asarray(k_e, dtype=float)
         self.k_alpha = jnp.asarray(k_alpha, dtype=float)
         self.d_alpha = jnp.asarray(d_alpha, dtype=float)
-        self.V_up = upright_potential(model)
-        m_ab = model.mass_matrix(jnp.zeros(2))[0, 1]
-        self.coupling_sign = jnp.where(m_ab >= 0, 1.0, -1.0)
+        self.V_up, self.coupling_sign = _design_constants(model)
         self.push = float(push)
         self.voltage_limit = float(voltage_limit)
 

@@ -68,6 +68,17 @@ def _pfl_vector_field(model, x, ubar):
     return vector_field(model, x, jnp.reshape(u, (1,)))
 
 
+@eqx.filter_jit
+def _upright_linearization(model, acts_on: str):
+    # one compilation instead of dozens of op-by-op dispatches (seconds on a busy machine)
+    x_d = jnp.asarray(UPRIGHT_STATE)
+    if acts_on == "voltage":
+        return linearize(model, x_d, jnp.zeros(1))
+    A = jax.jacfwd(lambda x_: _pfl_vector_field(model, x_, jnp.zeros(1)))(x_d)
+    B = jax.jacfwd(lambda v: _pfl_vector_field(model, x_d, v))(jnp.zeros(1))
+    return A, B
+
+
 def lqr_design(
     model: AbstractLagrangianSystem,
     Q: Sequence[float] | np.ndarray = DEFAULT_Q,
@@ -93,12 +104,7 @@ def lqr_design(
     if not float(R) > 0:
         raise ValueError(f"R must be > 0, got {R}")
     R_ = np.array([[float(R)]])
-    x_d = jnp.asarray(UPRIGHT_STATE)
-    if acts_on == "voltage":
-        A, B = linearize(model, x_d, jnp.zeros(1))
-    else:
-        A = jax.jacfwd(lambda x_: _pfl_vector_field(model, x_, jnp.zeros(1)))(x_d)
-        B = jax.jacfwd(lambda v: _pfl_vector_field(model, x_d, v))(jnp.zeros(1))
+    A, B = _upright_linearization(model, acts_on)
     A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
     if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
         raise ValueError("the model's linearisation at the upright is not finite")
