@@ -240,7 +240,13 @@ class MujocoBackend(AbstractBackend):
         self.effects = tuple(effects)
         self._n = self.spec.n_dof
         self._callback = None
+        self._bind_views()
         self.set_parameters(parameters or default_parameters(self.system))
+
+    def _bind_views(self) -> None:
+        # MjData's array attributes build a new NumPy view on every access; the step path reuses
+        # these (they stay valid as long as self.data does)
+        self._ctrl, self._qpos, self._qvel = self.data.ctrl, self.data.qpos, self.data.qvel
 
     def set_parameters(self, values: Mapping[str, float]) -> None:
         nominal = default_parameters(self.system)
@@ -282,9 +288,9 @@ class MujocoBackend(AbstractBackend):
             mujoco.set_mjcb_passive(previous)
 
     def step(self, u) -> np.ndarray:
-        self.data.ctrl[:] = u
+        self._ctrl[:] = u
         self._mj_step(self.substeps)
-        return np.concatenate((self.data.qpos, self.data.qvel))
+        return np.concatenate((self._qpos, self._qvel))
 
     def step_split(self, u_first, n_first: int, u) -> np.ndarray:
         if n_first > 0:
@@ -306,10 +312,13 @@ class MujocoBackend(AbstractBackend):
         # MjModel/MjData pickle, but the callback closure does not: rebuild it on unpickling
         state = self.__dict__.copy()
         state["_callback"] = None
+        for k in ("_ctrl", "_qpos", "_qvel"):
+            state.pop(k, None)
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
+        self._bind_views()
         extra = apply_parameters(self.model, self.system, self._parameters, self.effects, self.data)
         self._callback = _passive_callback(extra) if extra else None
 

@@ -211,6 +211,18 @@ class LagrangianEnv(gymnasium.Env):
         self._zero_action = np.zeros(1)
         self._reset_episode(self._initial_state(None))
 
+    @property
+    def task(self):
+        """The task (reward and termination as pure functions); see :mod:`._tasks`."""
+        return self._task
+
+    @task.setter
+    def task(self, task) -> None:
+        self._task = task
+        # bound once: the step calls them without attribute lookups
+        self._reward, self._terminated = task.reward, task.terminated
+        self._state_bound = float(task.state_bound)
+
     # ------------------------------------------------------------------ subclass hooks
     def _make_task(self, **task_kwargs):
         raise NotImplementedError
@@ -297,25 +309,34 @@ class LagrangianEnv(gymnasium.Env):
 
     def step(self, action):
         """Apply ``action`` (clipped to the limit) for one control period; see the class docs."""
-        u = np.asarray(action, dtype=np.float64)
-        if u.size != 1:
-            raise ValueError(
-                f"action must be a single {self._spec.input_names[0]} value (shape (1,)), "
-                f"got shape {u.shape}"
-            )
-        u = u.reshape(1)
-        value = float(u[0])
-        if not math.isfinite(value):
-            raise ValueError(f"action must be finite, got {value} (NaN/inf actions are rejected)")
-        if value > self.max_action or value < -self.max_action:
-            value = self.max_action if value > 0 else -self.max_action
+        # Lean path: this runs at 500 Hz inside RL loops, so the common case (a float64 array of
+        # shape (1,) within the limits) costs a few attribute reads and no allocation.
+        limit = self.max_action
+        if type(action) is np.ndarray and action.shape == (1,) and action.dtype == np.float64:
+            u = action
+            value = float(action[0])
+        else:
+            u = np.asarray(action, dtype=np.float64)
+            if u.size != 1:
+                raise ValueError(
+                    f"action must be a single {self._spec.input_names[0]} value (shape (1,)), "
+                    f"got shape {u.shape}"
+                )
+            u = u.reshape(1)
+            value = float(u[0])
+        if not -limit <= value <= limit:  # also catches NaN
+            if not math.isfinite(value):
+                raise ValueError(
+                    f"action must be finite, got {value} (NaN/inf actions are rejected)"
+                )
+            value = limit if value > 0 else -limit
             u = np.array([value])
         self._u = value
 
         x_prev = self._xl
         if self._diverged:
             # stepping past a divergence: nothing moves, the episode stays terminated
-            reward = float(self.task.reward(x_prev, [value], x_prev))
+            reward = float(self._reward(x_prev, [value], x_prev))
             return self._last_obs.copy(), reward, True, self._truncated(), self._info(True)
 
         if self._has_delay:
@@ -331,22 +352,26 @@ class LagrangianEnv(gymnasium.Env):
             x = self.backend.step(u)
         self._steps += 1
         xl = x.tolist()
-        bound = self.task.state_bound
-        if not all(math.isfinite(v) and -bound <= v <= bound for v in xl):
+        bound = self._state_bound
+        # fast accept: Σ|x| ≤ bound (False for NaN/inf); otherwise the exact per-component test
+        if not sum(map(abs, xl)) <= bound and not all(
+            math.isfinite(v) and -bound <= v <= bound for v in xl
+        ):
             # a blown-up model: end the episode at the last good state, never leak NaN
             self._diverged = True
             self.backend.reset(self._x)
-            reward = float(self.task.reward(x_prev, [value], x_prev))
+            reward = float(self._reward(x_prev, [value], x_prev))
             return self._last_obs.copy(), reward, True, self._truncated(), self._info(True)
 
         self._x, self._xl = x, xl
+        # the backend returns a fresh array each step: hand it out without another copy
         obs = x if self._exact_observation else self._observe(x)
         self._last_obs = obs
-        reward = float(self.task.reward(x_prev, [value], xl))
-        terminated = bool(self.task.terminated(xl))
+        reward = float(self._reward(x_prev, [value], xl))
+        terminated = bool(self._terminated(xl))
         if self.render_mode == "human":
             self.render()
-        return obs.copy(), reward, terminated, self._truncated(), self._info(False)
+        return obs, reward, terminated, self._truncated(), self._info(False)
 
     def _truncated(self) -> bool:
         return self._max_steps is not None and self._steps >= self._max_steps
@@ -356,7 +381,7 @@ class LagrangianEnv(gymnasium.Env):
             "time": self._steps * self.dt,
             "energy": self._energy(self._xl),
             "diverged": diverged,
-            "state": self._x.copy(),
+            "state": self._x.copy(),  # obs may be this very array: keep the true state apart
             "action": self._u,
         }
 

@@ -1,0 +1,192 @@
+"""Single-env speed: furuta_gym's envs vs Gymnasium's InvertedPendulum-v5 (issues 2 and 4).
+
+Measures in one run, with one harness, side by side:
+
+* Gymnasium ``InvertedPendulum-v5`` ``env.step`` calls per second (the reference);
+* ``furuta_gym/Furuta-v0`` with the MuJoCo backend: env.step/s and its ratio to
+  InvertedPendulum-v5 (target ≥ 1.5);
+* the raw ``mj_step`` rate of ``assets/furuta.xml`` (one RK4 step = one 500 Hz control period),
+  called from Python and in MuJoCo's own loop (``mj_step(m, d, nstep)``): the ceiling;
+* ``Furuta-v0`` with ``dynamics="analytic"`` (the closed-form model in JAX, jitted RK4):
+  env.step/s and its ratio to the MuJoCo-backed env (target ≥ 0.5);
+* for information: a plant variant that needs MuJoCo's passive callback (``plant="coulomb"``),
+  and ``NMSD-v0`` on both backends.
+
+Harness: ``gymnasium.make(id)`` with its default wrappers (the same for every env), pre-drawn
+uniform random actions in each env's action space, timed with ``time.perf_counter`` over runs of
+``--steps`` steps; an episode end is reset *outside* the timed segments. Runs of the envs are
+interleaved and the best of ``--repeats`` is kept (the machine is shared). Writes/refreshes its
+section of BENCHMARKS.md (between markers) unless ``--no-write``.
+
+    python bench/env_speed.py            # ~1 min
+    python bench/env_speed.py --quick    # smoke run
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+ROOT = Path(__file__).resolve().parents[1]
+MARK_START = "<!-- bench/env_speed.py:start -->"
+MARK_END = "<!-- bench/env_speed.py:end -->"
+
+
+def machine() -> str:
+    import jax
+    import mujoco
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return (
+        f"{cpu}, {os.cpu_count()} logical cores (shared; 1-min load average {load:.1f} at start), "
+        f"Python {platform.python_version()}, JAX {jax.__version__} ({jax.default_backend()}), "
+        f"MuJoCo {mujoco.__version__}, Gymnasium {__import__('gymnasium').__version__}"
+    )
+
+
+def env_steps_per_second(env, actions: np.ndarray) -> float:
+    """env.step calls per second over ``actions``; resets happen outside the timed segments."""
+    env.reset(seed=0)
+    elapsed = 0.0
+    start = time.perf_counter()
+    for a in actions:
+        _, _, terminated, truncated, _ = env.step(a)
+        if terminated or truncated:
+            elapsed += time.perf_counter() - start
+            env.reset()
+            start = time.perf_counter()
+    elapsed += time.perf_counter() - start
+    return len(actions) / elapsed
+
+
+def mj_step_rates(steps: int) -> tuple[float, float]:
+    """(Python-loop mj_step/s, MuJoCo-loop mj_step/s) of furuta.xml."""
+    import mujoco
+
+    from furuta_gym.assets import asset_path
+
+    model = mujoco.MjModel.from_xml_path(str(asset_path("furuta.xml")))
+    data = mujoco.MjData(model)
+    data.qpos[1] = 0.5
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        mujoco.mj_step(model, data)
+    python_loop = steps / (time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    mujoco.mj_step(model, data, steps)
+    native_loop = steps / (time.perf_counter() - t0)
+    return python_loop, native_loop
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--steps", type=int, default=4000, help="env steps per timed run")
+    parser.add_argument("--repeats", type=int, default=7, help="interleaved runs; best is kept")
+    parser.add_argument("--quick", action="store_true", help="smoke run: few steps and repeats")
+    parser.add_argument("--no-write", action="store_true", help="print only, do not touch BENCHMARKS.md")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.steps, args.repeats = 500, 2
+
+    import gymnasium as gym
+
+    import furuta_gym
+
+    furuta_gym.enable_x64()
+    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    where = machine()
+
+    cases = {
+        "InvertedPendulum-v5": gym.make("InvertedPendulum-v5"),
+        "Furuta-v0 mujoco": gym.make("furuta_gym/Furuta-v0"),
+        "Furuta-v0 analytic": gym.make("furuta_gym/Furuta-v0", dynamics="analytic"),
+        "Furuta-v0 mujoco plant=coulomb": gym.make("furuta_gym/Furuta-v0", plant="coulomb"),
+        "NMSD-v0 mujoco": gym.make("furuta_gym/NMSD-v0"),
+        "NMSD-v0 analytic": gym.make("furuta_gym/NMSD-v0", dynamics="analytic"),
+    }
+    rng = np.random.default_rng(0)
+    actions = {
+        name: rng.uniform(env.action_space.low, env.action_space.high, (args.steps, 1))
+        for name, env in cases.items()
+    }
+    for name, env in cases.items():  # warm-up: JIT compiles, caches
+        env_steps_per_second(env, actions[name][: min(300, args.steps)])
+    best = {name: 0.0 for name in cases}
+    mj_python = mj_native = 0.0
+    for r in range(args.repeats):
+        for name, env in cases.items():
+            best[name] = max(best[name], env_steps_per_second(env, actions[name]))
+        p, nat = mj_step_rates(args.steps)
+        mj_python, mj_native = max(mj_python, p), max(mj_native, nat)
+        print(f"repeat {r + 1}/{args.repeats}: " + ", ".join(f"{k} {v:,.0f}/s" for k, v in best.items()))
+
+    ip, fu, an = best["InvertedPendulum-v5"], best["Furuta-v0 mujoco"], best["Furuta-v0 analytic"]
+    ratio_ip = fu / ip
+    ratio_an = an / fu
+    lines = [
+        MARK_START,
+        "## Single-env speed (`bench/env_speed.py`)",
+        "",
+        f"Measured {when} on {where}. `gymnasium.make(id)` with its default wrappers for every env, "
+        f"uniform random actions, best of {args.repeats} interleaved runs of {args.steps} steps "
+        "(resets not timed).",
+        "",
+        "| quantity | steps/s | ratio | target |",
+        "|---|---:|---:|---:|",
+        f"| Gymnasium `InvertedPendulum-v5` env.step | {ip:,.0f} | 1 | |",
+        f"| `furuta_gym/Furuta-v0` (MuJoCo) env.step | {fu:,.0f} | **{ratio_ip:.2f}** × InvertedPendulum-v5 | ≥ 1.5 |",
+        f"| raw `mj_step` of `furuta.xml`, Python loop (ceiling) | {mj_python:,.0f} | {mj_python / fu:.2f} × Furuta-v0 | |",
+        f"| raw `mj_step` of `furuta.xml`, MuJoCo's loop | {mj_native:,.0f} | {mj_native / fu:.2f} × Furuta-v0 | |",
+        f"| `Furuta-v0`, `dynamics=\"analytic\"` (JAX) env.step | {an:,.0f} | **{ratio_an:.2f}** × MuJoCo env | ≥ 0.5 |",
+        f"| `Furuta-v0`, `plant=\"coulomb\"` (passive callback) | {best['Furuta-v0 mujoco plant=coulomb']:,.0f} | {best['Furuta-v0 mujoco plant=coulomb'] / fu:.2f} × MuJoCo env | |",
+        f"| `NMSD-v0` (MuJoCo + cubic-term callback) env.step | {best['NMSD-v0 mujoco']:,.0f} | | |",
+        f"| `NMSD-v0`, `dynamics=\"analytic\"` env.step | {best['NMSD-v0 analytic']:,.0f} | {best['NMSD-v0 analytic'] / best['NMSD-v0 mujoco']:.2f} × NMSD MuJoCo | |",
+        "",
+        "One Furuta env.step is one RK4 step of 2 ms (500 Hz control). InvertedPendulum-v5 takes two "
+        "RK4 steps of 20 ms with collision detection per env.step; Furuta-v0 skips MuJoCo's "
+        "constraint pipeline (no contacts) and keeps its Python step lean (no per-step allocation "
+        "beyond the returned arrays). The analytic backend pays one jitted JAX call per step "
+        "(dispatch dominates at this size). The machine is shared, so absolute rates vary between "
+        "runs; the ratios are measured side by side.",
+        MARK_END,
+    ]
+    section = "\n".join(lines)
+    print()
+    print(section)
+    if not args.no_write:
+        write_section(ROOT / "BENCHMARKS.md", section)
+    return 0
+
+
+def write_section(path: Path, section: str) -> None:
+    """Replace this script's section of BENCHMARKS.md (between its markers) or append it."""
+    text = path.read_text() if path.exists() else "# Benchmarks\n"
+    pattern = re.compile(re.escape(MARK_START) + ".*?" + re.escape(MARK_END), re.S)
+    if pattern.search(text):
+        text = pattern.sub(lambda _: section, text)
+    else:
+        text = text.rstrip("\n") + "\n\n" + section + "\n"
+    path.write_text(text)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
