@@ -4,8 +4,27 @@ Analytic: :class:`Furuta`, :class:`NMSD`. Learned (issue 3): DeLaN, APHYNITY, au
 """
 
 from ._analytic import NMSD, Furuta, FurutaParameters, NMSDParameters
+from ._aphynity import Aphynity
+from ._augmented import AugmentedDeLaN
+from ._delan import DeLaN
+from ._factory import MODEL_KINDS, make_model
+from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
 
-__all__ = ["Furuta", "FurutaParameters", "NMSD", "NMSDParameters", "analytic_model"]
+__all__ = [
+    "Furuta",
+    "FurutaParameters",
+    "NMSD",
+    "NMSDParameters",
+    "analytic_model",
+    # learned (issue 3)
+    "AbstractLearnedSystem",
+    "DeLaN",
+    "Aphynity",
+    "AugmentedDeLaN",
+    "MODEL_KINDS",
+    "SYSTEM_DEFAULTS",
+    "make_model",
+]
 
 
 def analytic_model(system: str):

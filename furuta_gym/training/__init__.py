@@ -1,1 +1,32 @@
 """Training learned Lagrangian models: data generation, losses, the training loop, checkpoints, metrics."""
+
+from .checkpoint import CheckpointError, load_model, read_header, save_model
+from .losses import (
+    Windows,
+    aphynity_loss,
+    augmentation_penalty,
+    integral_loss,
+    make_windows,
+    proposed_loss,
+    trajectory_loss,
+)
+from .train import ScaleFit, TrainConfig, data_hash, fit_scale, train
+
+__all__ = [
+    "CheckpointError",
+    "load_model",
+    "read_header",
+    "save_model",
+    "Windows",
+    "aphynity_loss",
+    "augmentation_penalty",
+    "integral_loss",
+    "make_windows",
+    "proposed_loss",
+    "trajectory_loss",
+    "ScaleFit",
+    "TrainConfig",
+    "data_hash",
+    "fit_scale",
+    "train",
+]

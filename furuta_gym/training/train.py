@@ -1,0 +1,510 @@
+"""Training learned Lagrangian models with the paper's curriculum (Laiche et al. 2026, appendix A.2).
+
+:func:`train` runs stages of epochs over trajectory windows — 2-step predictions first, then the
+long horizon (1 s Furuta, 2 s N-MSD) — with optax Adam + weight decay (``adamw``), minibatches of
+trajectory windows, a tqdm bar showing the loss terms, a resumable training state written
+atomically after every finished epoch (so a kill loses no finished epoch), model snapshots every
+``checkpoint_every`` epochs and a NaN guard (a step whose loss or gradient is not finite is
+skipped and counted; a NaN model is never saved).
+
+Losses (``loss=``): ``"traj"`` L_traj; ``"aph"`` ‖F_a‖² + λ·L_traj with APHYNITY's dual ascent on λ;
+``"prop"`` L_Iτ + λ·L_traj (the paper's proposed loss); ``"itau"`` L_Iτ alone (cheap: no ODE
+solve; the training-stage horizon is then irrelevant). L_Iτ is computed on all integral windows
+at every step (it costs a few ms), L_traj on a minibatch of windows.
+
+**Overall scale.** On free (u = 0) data the dynamics, and hence every loss, are invariant to
+multiplying the learned Lagrangian and τ_NC by one constant: the scale is unidentifiable. Pass
+one forced trajectory (``forced_trajs``) and the scale is fitted after training by least squares
+(:func:`fit_scale`; the integral residual Z̄ − s·Ā is linear in s), as the paper does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import signal
+import time
+from pathlib import Path
+from typing import Any, Literal, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .._x64 import ensure_x64
+from ..data import Trajectory
+from ..lagrangian import QuadratureRule, integral_terms
+from ..systems import get_spec
+from . import checkpoint as ckpt
+from .losses import (
+    Windows,
+    augmentation_penalty,
+    integral_loss,
+    make_windows,
+    resolve_normalization,
+    trajectory_loss,
+)
+
+__all__ = ["TrainConfig", "train", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
+
+LOSSES = ("traj", "aph", "prop", "itau")
+STATE_FILE = "train_state.eqx"
+MODEL_FILE = "model.eqx"
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Hyper-parameters of a training run.
+
+    ``epochs[k]`` epochs are run with prediction horizon ``horizons[k]`` (an ``int`` is a number
+    of samples, a ``float`` seconds). The defaults are a short run a 2-core CPU finishes in
+    minutes; :meth:`paper` gives the paper's recipe (50 k + 10 k epochs Furuta, 5 k + 1 k N-MSD,
+    full batch), which costs hours on a CPU (known_pitfalls.md, "Cost").
+
+    ``batch_size`` trajectory windows per step (``None``: all windows, one step per epoch);
+    ``lambda_traj`` λ in L_aph / L_prop; ``lambda_step`` APHYNITY's dual-ascent step τ₂ (λ ← λ +
+    τ₂·L_traj after every epoch; ``None``: 1000 for ``"aph"``, 0 — a fixed λ — otherwise);
+    ``quadrature`` "trapezoid" (paper) | "simpson"; ``normalize`` see
+    :mod:`furuta_gym.training.losses`; ``integral_window`` samples per L_Iτ window
+    (trajectories are tiled into windows overlapping by one sample); ``integral_batch_size``
+    L_Iτ windows per step (``None``: all).
+    """
+
+    epochs: tuple[int, ...] = (100, 20)
+    horizons: tuple[int | float, ...] = (2, 1.0)
+    learning_rate: float = 1e-3
+    weight_decay: float = 1e-5
+    batch_size: int | None = 256
+    lambda_traj: float = 1.0
+    lambda_step: float | None = None
+    quadrature: QuadratureRule = "trapezoid"
+    normalize: str = "auto"
+    integral_window: int = 101
+    integral_batch_size: int | None = None
+    rtol: float = 1e-3
+    atol: float = 1e-6
+    max_steps: int = 4096
+    grad_clip: float | None = 10.0
+    seed: int = 0
+    checkpoint_every: int = 50
+    progress: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "epochs", tuple(int(e) for e in self.epochs))
+        object.__setattr__(self, "horizons", tuple(self.horizons))
+        if len(self.epochs) != len(self.horizons):
+            raise ValueError(
+                f"epochs {self.epochs} and horizons {self.horizons} must have one entry per stage"
+            )
+        if any(e < 0 for e in self.epochs):
+            raise ValueError(f"epochs must be non-negative, got {self.epochs}")
+        if self.quadrature not in ("trapezoid", "simpson"):
+            raise ValueError(f"quadrature must be 'trapezoid' or 'simpson', got {self.quadrature!r}")
+        if self.normalize not in ("auto", "momentum", "momentum_fixed", "none"):
+            raise ValueError(f"normalize must be auto|momentum|momentum_fixed|none, got {self.normalize!r}")
+        if self.batch_size is not None and self.batch_size < 1:
+            raise ValueError(f"batch_size must be positive or None, got {self.batch_size}")
+
+    @property
+    def total_epochs(self) -> int:
+        return sum(self.epochs)
+
+    @classmethod
+    def for_system(cls, system: str, **overrides) -> "TrainConfig":
+        """CPU-friendly defaults with the paper's horizons (1 s Furuta, 2 s N-MSD)."""
+        name = get_spec(system).name
+        base = dict(horizons=(2, 1.0) if name == "furuta" else (2, 2.0))
+        base.update(overrides)
+        return cls(**base)
+
+    @classmethod
+    def paper(cls, system: str, **overrides) -> "TrainConfig":
+        """The paper's recipe: 2-step stage then the long horizon, full batch (appendix A.2)."""
+        name = get_spec(system).name
+        base = dict(
+            epochs=(50_000, 10_000) if name == "furuta" else (5_000, 1_000),
+            horizons=(2, 1.0) if name == "furuta" else (2, 2.0),
+            batch_size=None,
+            checkpoint_every=500,
+        )
+        base.update(overrides)
+        return cls(**base)
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def data_hash(trajs: Sequence[Trajectory]) -> str:
+    """SHA-256 over the trajectories' arrays (t, q, u, q̇): identifies the training data."""
+    h = hashlib.sha256()
+    for tr in trajs:
+        for a in (tr.t, tr.q, tr.u, tr.qd):
+            if a is not None:
+                h.update(np.ascontiguousarray(np.asarray(a, dtype=np.float64)).tobytes())
+    return h.hexdigest()
+
+
+def _horizon_samples(h, dt: float) -> int:
+    if isinstance(h, bool):
+        raise ValueError(f"horizon must be an int (samples) or float (seconds), got {h!r}")
+    if isinstance(h, (int, np.integer)):
+        steps = int(h)
+    else:
+        steps = int(round(float(h) / dt))
+    if steps < 1:
+        raise ValueError(f"horizon {h!r} is shorter than one sample (dt = {dt})")
+    return steps
+
+
+@dataclasses.dataclass
+class ScaleFit:
+    """Result of :func:`fit_scale`: the factor applied and the relative residual before/after."""
+
+    factor: float
+    relative_residual_before: float
+    relative_residual_after: float
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def fit_scale(model, trajs: Sequence[Trajectory], rule: QuadratureRule = "trapezoid"):
+    """Fit the overall scale of a learned model's (L, τ_NC) on forced trajectories.
+
+    The integral residual of the model with its Lagrangian and τ_NC multiplied by s is Z̄ − s·Ā
+    (τ_u is known and not scaled), so s = ⟨Z̄, Ā⟩ / ⟨Ā, Ā⟩ by least squares. Returns
+    ``(model_with_scale, ScaleFit)``. Needs a nonzero input in ``trajs``.
+    """
+    ensure_x64()
+    n = model.spec.n_dof
+    As, Zs = [], []
+    for tr in trajs:
+        if tr.qd is None:
+            raise ValueError(f"trajectory {tr.name!r} has no velocities; the scale fit needs q̇")
+        terms = integral_terms(
+            model, jnp.asarray(tr.q), jnp.asarray(tr.qd), jnp.asarray(tr.u).reshape(len(tr), -1), tr.dt, rule
+        )
+        As.append(np.asarray(terms.A))
+        Zs.append(np.asarray(terms.Z))
+    A = np.concatenate(As).ravel()
+    Z = np.concatenate(Zs).ravel()
+    if not np.any(np.concatenate([np.asarray(tr.u).ravel() for tr in trajs]) != 0):
+        raise ValueError("the scale fit needs a forced trajectory (nonzero input u); got u ≡ 0")
+    denom = float(A @ A)
+    if not np.isfinite(denom) or denom == 0.0:
+        raise ValueError("the scale fit failed: the model's integral terms are zero or not finite")
+    s = float(Z @ A) / denom
+    if not s > 0:
+        raise ValueError(
+            f"the scale fit gave a non-positive scale {s:.3g}: the model does not explain the "
+            "forced trajectory's input (wrong sign convention of u?)"
+        )
+    zn = float(np.sqrt(Z @ Z))
+    before = float(np.linalg.norm(Z - A)) / zn
+    after = float(np.linalg.norm(Z - s * A)) / zn
+    return model.with_scale(model.scale * s), ScaleFit(s, before, after)
+
+
+def _tree_where(ok, new, old):
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, old)
+
+
+def _all_finite(tree) -> jnp.ndarray:
+    leaves = jax.tree_util.tree_leaves(eqx.filter(tree, eqx.is_inexact_array))
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(l)) for l in leaves]))
+
+
+def _build_optimizer(model, config: TrainConfig):
+    trainable = model.trainable()
+    decay_mask = model.decayed()
+    params, _ = eqx.partition(model, trainable)
+    mask = eqx.filter(decay_mask, trainable)  # same structure as params (None where not trainable)
+    adam = optax.adamw(config.learning_rate, weight_decay=config.weight_decay, mask=mask)
+    opt = optax.chain(optax.clip_by_global_norm(config.grad_clip), adam) if config.grad_clip else adam
+    return opt, trainable, params
+
+
+def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization: str):
+    traj_kw = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
+    use_traj = loss in ("traj", "aph", "prop")
+    use_int = loss in ("prop", "itau")
+
+    @eqx.filter_jit
+    def step(params, opt_state, traj_b: Windows | None, int_b: Windows | None, lam):
+        def objective(p):
+            model = eqx.combine(p, static)
+            terms = {}
+            total = 0.0
+            if use_traj:
+                terms["traj"] = trajectory_loss(model, traj_b, **traj_kw)
+            if use_int:
+                terms["itau"] = integral_loss(model, int_b, rule=config.quadrature, normalize=normalization)
+                total = total + terms["itau"]
+            if loss == "aph":
+                terms["penalty"] = augmentation_penalty(model, traj_b)
+                total = total + terms["penalty"]
+            if use_traj:
+                total = total + (1.0 if loss == "traj" else lam) * terms["traj"]
+            terms["total"] = total
+            return total, terms
+
+        (value, terms), grads = eqx.filter_value_and_grad(objective, has_aux=True)(params)
+        ok = jnp.isfinite(value) & _all_finite(grads)
+        updates, new_opt = optimizer.update(grads, opt_state, params)
+        new_params = eqx.apply_updates(params, updates)
+        params = _tree_where(ok, new_params, params)
+        opt_state = _tree_where(ok, new_opt, opt_state)
+        return params, opt_state, terms, ok
+
+    return step
+
+
+class _StopRequested(Exception):
+    pass
+
+
+def train(
+    model_kind: str,
+    system: str,
+    loss: str,
+    train_trajs: Sequence[Trajectory],
+    config: TrainConfig | None = None,
+    out_dir: str | Path | None = None,
+    resume: bool = False,
+    *,
+    forced_trajs: Sequence[Trajectory] | None = None,
+    hparams: dict[str, Any] | None = None,
+    model=None,
+) -> tuple[Any, list[dict]]:
+    """Train a learned model; returns ``(model, history)``.
+
+    ``model_kind`` "dln" | "aph" | "adln"; ``system`` "furuta" | "nmsd"; ``loss`` "traj" | "aph" |
+    "prop" | "itau"; ``train_trajs`` :class:`~furuta_gym.data.Trajectory` list with velocities;
+    ``config`` a :class:`TrainConfig` (default :meth:`TrainConfig.for_system`). ``hparams``
+    override the model's defaults (``make_model``); ``model`` starts from a given model instead.
+
+    With ``out_dir``: writes ``train_state.eqx`` (resumable, after every epoch),
+    ``model_epoch<N>.eqx`` every ``checkpoint_every`` epochs, ``model.eqx`` (final, loadable with
+    :func:`furuta_gym.training.checkpoint.load_model`) and ``history.json``. An ``out_dir`` that
+    already holds a run is refused unless ``resume=True``, which continues it (same model,
+    optimiser state, λ, epoch counter; the data and settings must match). ``forced_trajs``: fit the
+    overall scale on them after training (see the module docstring). ``history`` has one dict per
+    epoch: epoch, stage, horizon, mean loss terms, λ, skipped steps, seconds.
+    """
+    ensure_x64()
+    spec = get_spec(system)
+    if loss not in LOSSES:
+        raise ValueError(f"loss must be one of {LOSSES}, got {loss!r}")
+    config = config or TrainConfig.for_system(spec.name)
+    trajs = list(train_trajs)
+    if not trajs:
+        raise ValueError("train_trajs is empty")
+    for tr in trajs:
+        if np.asarray(tr.q).ndim != 2 or np.asarray(tr.q).shape[1] != spec.n_dof:
+            raise ValueError(
+                f"trajectory {tr.name!r} has q of shape {np.asarray(tr.q).shape}; a {spec.name} "
+                f"trajectory has {spec.n_dof} joint(s)"
+            )
+    if model is None:
+        from ..models import make_model
+
+        model = make_model(spec.name, model_kind, jax.random.PRNGKey(config.seed), **(hparams or {}))
+    elif model.kind != model_kind or model.spec.name != spec.name:
+        raise ValueError(f"model is a {model.spec.name} {model.kind}; asked for {spec.name} {model_kind}")
+    if loss == "aph" and not model.has_augmentation:
+        raise ValueError(f"loss 'aph' needs a model with a data-driven force F_a (aph or adln), not {model_kind!r}")
+    dt = float(np.median([tr.dt for tr in trajs]))
+    shortest = min(len(tr) for tr in trajs)
+    dhash = data_hash(trajs)
+
+    # -- data: integral windows once; trajectory windows per stage --------------------------
+    int_windows = None
+    normalization = config.normalize
+    if loss in ("prop", "itau"):
+        w = min(config.integral_window, shortest)
+        if config.quadrature == "simpson" and w % 2 == 0:
+            w -= 1  # Simpson pairs intervals: an odd number of samples uses them all
+        int_windows = make_windows(trajs, w, stride=w - 1, cover_end=True)
+        if normalization == "auto":
+            normalization = resolve_normalization(int_windows)
+    stage_windows: dict[int, Windows] = {}
+
+    def windows_for(stage: int) -> Windows:
+        if stage not in stage_windows:
+            h = min(_horizon_samples(config.horizons[stage], dt), shortest - 1)
+            stage_windows[stage] = make_windows(trajs, h + 1, stride=1)
+        return stage_windows[stage]
+
+    optimizer, trainable, params = _build_optimizer(model, config)
+    _, static = eqx.partition(model, trainable)
+    opt_state = optimizer.init(params)
+    lam = float(config.lambda_traj)
+    lam_step = config.lambda_step if config.lambda_step is not None else (1000.0 if loss == "aph" else 0.0)
+    history: list[dict] = []
+    start_epoch = 0
+
+    out = Path(out_dir) if out_dir is not None else None
+    run_info = {
+        "model_kind": model_kind,
+        "system": spec.name,
+        "loss": loss,
+        "data_hash": dhash,
+        "config": config.to_json(),
+    }
+    if out is not None:
+        state_path = out / STATE_FILE
+        if state_path.exists() and not resume:
+            raise FileExistsError(
+                f"{out}: holds a training run already ({STATE_FILE}); resume it (resume=True / "
+                "--resume) or choose another output directory"
+            )
+        if resume and state_path.exists():
+            m0, opt_state, header = ckpt.load_training_state(state_path, model, opt_state)
+            st = header["state"]
+            for key in ("model_kind", "system", "loss", "data_hash"):
+                if st["run"][key] != run_info[key]:
+                    raise ValueError(
+                        f"{state_path}: cannot resume: the saved run has {key}={st['run'][key]!r}, "
+                        f"this one {run_info[key]!r}"
+                    )
+            model = m0
+            params, static = eqx.partition(model, trainable)
+            start_epoch = int(st["epoch"])
+            lam = float(st["lambda"])
+            history = list(st["history"])
+        out.mkdir(parents=True, exist_ok=True)
+
+    total_epochs = config.total_epochs
+    bounds = np.cumsum(config.epochs)
+    step = _make_step(static, optimizer, loss, config, normalization)
+
+    def save_state(epoch: int, model_now) -> None:
+        if out is None:
+            return
+        ckpt.save_training_state(
+            out / STATE_FILE,
+            model_now,
+            opt_state,
+            {"epoch": epoch, "lambda": lam, "history": history, "run": run_info, "seed": config.seed,
+             "meta": {"data_hash": dhash, "epoch": epoch, "loss": loss}},
+        )
+
+    # a polite kill (Ctrl-C / SIGTERM) finishes the running epoch and saves; SIGKILL loses at
+    # most the unfinished epoch because the state is written after every epoch
+    stop = {"flag": False}
+    old_handler = None
+    if out is not None:
+        try:
+            old_handler = signal.signal(signal.SIGTERM, lambda *_: stop.__setitem__("flag", True))
+        except ValueError:  # not in the main thread
+            old_handler = None
+
+    bar = None
+    if config.progress and total_epochs > start_epoch:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total_epochs, initial=start_epoch, desc=f"{model_kind}/{loss}", unit="ep")
+    try:
+        for epoch in range(start_epoch, total_epochs):
+            t0 = time.perf_counter()
+            stage = int(np.searchsorted(bounds, epoch, side="right"))
+            rng = np.random.default_rng([config.seed, epoch])
+            traj_batches: list[Windows | None] = [None]
+            if loss != "itau":
+                tw = windows_for(stage)
+                nw = tw.n_windows
+                bs = nw if config.batch_size is None else min(config.batch_size, nw)
+                perm = rng.permutation(nw)
+                traj_batches = [tw.take(perm[k * bs : (k + 1) * bs]) for k in range(nw // bs)]
+            int_batches: list[Windows | None] = [None] * len(traj_batches)
+            if int_windows is not None:
+                ni = int_windows.n_windows
+                ib = ni if config.integral_batch_size is None else min(config.integral_batch_size, ni)
+                if ib == ni and loss != "itau":
+                    int_batches = [int_windows] * len(traj_batches)
+                else:
+                    n_steps = len(traj_batches) if loss != "itau" else max(1, ni // ib)
+                    perm = np.concatenate([rng.permutation(ni) for _ in range(math.ceil(n_steps * ib / ni) + 1)])
+                    int_batches = [int_windows.take(perm[k * ib : (k + 1) * ib]) for k in range(n_steps)]
+                    if loss == "itau":
+                        traj_batches = [None] * n_steps
+            sums: dict[str, float] = {}
+            skipped = 0
+            for tb, ib_ in zip(traj_batches, int_batches):
+                params, opt_state, terms, ok = step(params, opt_state, tb, ib_, jnp.asarray(lam))
+                if bool(ok):
+                    for k, v in terms.items():
+                        sums[k] = sums.get(k, 0.0) + float(v)
+                else:
+                    skipped += 1
+            n_ok = len(traj_batches) - skipped
+            means = {k: v / n_ok for k, v in sums.items()} if n_ok else {}
+            if lam_step and "traj" in means:
+                lam = lam + lam_step * means["traj"]
+            record = {
+                "epoch": epoch + 1,
+                "stage": stage,
+                "horizon": None if loss == "itau" else windows_for(stage).length - 1,
+                **means,
+                "lambda": lam,
+                "steps": len(traj_batches),
+                "skipped": skipped,
+                "seconds": time.perf_counter() - t0,
+            }
+            history.append(record)
+            model_now = eqx.combine(params, static)
+            save_state(epoch + 1, model_now)
+            if out is not None and config.checkpoint_every and (epoch + 1) % config.checkpoint_every == 0:
+                ckpt.save_model(out / f"model_epoch{epoch + 1:06d}.eqx", model_now,
+                                {"data_hash": dhash, "epoch": epoch + 1, "loss": loss}, overwrite=True)
+            if bar is not None:
+                post = {k: f"{v:.3g}" for k, v in means.items() if k != "total"}
+                if loss in ("aph", "prop"):
+                    post["λ"] = f"{lam:.3g}"
+                if skipped:
+                    post["skipped"] = skipped
+                bar.set_postfix(post, refresh=False)
+                bar.update(1)
+            if skipped:
+                import warnings
+
+                warnings.warn(
+                    f"epoch {epoch + 1}: skipped {skipped} of {len(traj_batches)} step(s) with a "
+                    "non-finite loss or gradient (NaN guard)",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+            if stop["flag"]:
+                raise _StopRequested
+    except (KeyboardInterrupt, _StopRequested):
+        if bar is not None:
+            bar.close()
+        raise KeyboardInterrupt(
+            f"training stopped after epoch {len(history)}; resume with resume=True / --resume"
+            + (f" from {out}" if out is not None else "")
+        ) from None
+    finally:
+        if old_handler is not None:
+            signal.signal(signal.SIGTERM, old_handler)
+        if bar is not None:
+            bar.close()
+
+    model = eqx.combine(params, static)
+    meta = {"data_hash": dhash, "epoch": len(history), "loss": loss, "config": config.to_json(),
+            "final": history[-1] if history else None}
+    if forced_trajs:
+        model, fit = fit_scale(model, forced_trajs, rule=config.quadrature)
+        meta["scale_fit"] = fit.to_json()
+        meta["forced_data_hash"] = data_hash(forced_trajs)
+    elif not any(np.any(np.asarray(tr.u) != 0) for tr in trajs):
+        meta["scale_fit"] = None
+        meta["scale_note"] = "trained on free data only: the overall scale of L and τ_NC is unidentified"
+    if out is not None:
+        if bool(_all_finite(model)):
+            ckpt.save_model(out / MODEL_FILE, model, meta, overwrite=True)
+        (out / "history.json").write_text(json.dumps({"meta": meta, "history": history}, indent=1, default=float))
+    return model, history

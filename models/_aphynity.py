@@ -1,0 +1,119 @@
+"""APHYNITY (Yin et al. 2021) as in Laiche et al. 2026, §3 and appendix A.1.
+
+The prior F_p is the analytic model *without friction* (Furuta: c_r = c_p = 0; N-MSD: b1 = b2 = 0)
+whose physical parameters are learnable, plus an additive network F_a(q, q̇) for the missing
+generalized force, so τ_NC = F_a. Physical parameters are learned as log-ratios to their nominal
+values (param = nominal · exp(θ)): Adam's steps are then relative, whatever the parameter's unit.
+Learnable: Furuta mr, Lr, mp, Lp (g and the motor constants kt, km, Rm are known); N-MSD m, k1, k2.
+The Furuta prior keeps the motor model with back-EMF, (kt/Rm)(u − km·α̇): it is part of the
+analytic prior, not friction. Trained with L_aph = ‖F_a‖² + λ·L_traj, λ by dual ascent
+(:mod:`furuta_gym.training.losses`), or L_prop.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from ..lagrangian import SystemSpec
+from ..systems import get_spec
+from ._analytic import NMSD, Furuta, FurutaParameters, NMSDParameters
+from ._augmented import ForceNetwork
+from ._learned import AbstractLearnedSystem, freeze_hparams, system_defaults
+
+__all__ = ["Aphynity", "LEARNABLE_PHYSICAL_PARAMETERS"]
+
+LEARNABLE_PHYSICAL_PARAMETERS = {"furuta": ("mr", "Lr", "mp", "Lp"), "nmsd": ("m", "k1", "k2")}
+
+
+class Aphynity(AbstractLearnedSystem):
+    """APHYNITY (aph): frictionless analytic prior with learnable parameters + F_a network."""
+
+    kind: ClassVar[str] = "aph"
+    log_ratios: Float[Array, " k"]
+    force_net: ForceNetwork
+    scale: Float[Array, ""]
+    spec: SystemSpec = eqx.field(static=True)
+    nominal: tuple[tuple[str, float], ...] = eqx.field(static=True)
+    hparams: tuple[tuple[str, Any], ...] = eqx.field(static=True)
+
+    def __init__(self, system: str, *, key: PRNGKeyArray, **hparams):
+        spec = get_spec(system)
+        hp = system_defaults(spec.name)
+        for k in ("damping_init", "mass_scale", "potential_scale", "input_gain"):
+            hp.pop(k)
+        hp["prior"] = ()  # overrides of nominal parameter values, e.g. (("mp", 0.03),)
+        unknown = set(hparams) - set(hp) - {"activation"}
+        if unknown:
+            raise ValueError(f"unknown APHYNITY hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation']}")
+        hp.update(hparams)
+        params = FurutaParameters() if spec.name == "furuta" else NMSDParameters()
+        overrides = dict(hp["prior"])
+        nominal = {}
+        for name in dataclass_fields(params):
+            value = float(overrides.pop(name, getattr(params, name)))
+            nominal[name] = value
+        if overrides:
+            raise ValueError(f"prior names unknown physical parameters {sorted(overrides)}")
+        # friction is what the network must find: the prior has none
+        for name in ("c_r", "c_p", "b1", "b2"):
+            if name in nominal:
+                nominal[name] = 0.0
+        self.nominal = tuple(nominal.items())
+        self.log_ratios = jnp.zeros(len(LEARNABLE_PHYSICAL_PARAMETERS[spec.name]))
+        self.force_net = ForceNetwork(
+            spec, key=key, hidden=tuple(hp["hidden"]), force_scale=hp["force_scale"],
+            position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
+            activation=hp.get("activation", "tanh"),
+        )
+        self.scale = jnp.asarray(1.0)
+        self.spec = spec
+        self.hparams = freeze_hparams(hp)
+
+    def networks(self):
+        return (self.force_net.net,)
+
+    @property
+    def physical_parameters(self) -> dict[str, Any]:
+        """The prior's current physical parameter values (learned ones included)."""
+        values = dict(self.nominal)
+        for i, name in enumerate(LEARNABLE_PHYSICAL_PARAMETERS[self.spec.name]):
+            values[name] = values[name] * jnp.exp(self.log_ratios[i])
+        return values
+
+    @property
+    def prior(self):
+        """The frictionless analytic model with the current physical parameters."""
+        values = self.physical_parameters
+        if self.spec.name == "furuta":
+            return Furuta(params=FurutaParameters(**values))
+        return NMSD(params=NMSDParameters(**values))
+
+    @property
+    def has_augmentation(self) -> bool:
+        return True
+
+    def augmentation(self, q, qd):
+        return self.scale * self.force_net(q, qd)
+
+    def mass_matrix(self, q):
+        return self.scale * self.prior.mass_matrix(q)
+
+    def potential(self, q):
+        return self.scale * self.prior.potential(q)
+
+    def nonconservative_force(self, q, qd):
+        return self.augmentation(q, qd)
+
+    def input_force(self, q, qd, u):
+        return self.prior.input_force(q, qd, u)
+
+
+def dataclass_fields(module) -> list[str]:
+    import dataclasses
+
+    return [f.name for f in dataclasses.fields(module)]

@@ -1,0 +1,106 @@
+"""Augmented DeLaN (Wu et al. 2024) as in Laiche et al. 2026, §3 and appendix A.1.
+
+DeLaN's conservative part (Cholesky-factor mass matrix, potential network) plus a network for the
+whole non-conservative force, τ_NC = F_a(q, q̇) = force_scale · net(features(q), q̇ / velocity_scale),
+trained with L_aph (‖F_a‖ + λ·L_traj) or L_prop. As in :mod:`._delan`, the Furuta motor's
+back-EMF is not in τ_u (only (kt/Rm)·u is): F_a learns it together with the rotor friction.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from ..lagrangian import SystemSpec
+from ..systems import get_spec
+from ._delan import LagrangianNetworks
+from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
+
+__all__ = ["AugmentedDeLaN", "ForceNetwork"]
+
+
+class ForceNetwork(eqx.Module):
+    """F_a(q, q̇): an MLP of ((cos, sin) / scaled q, q̇ / velocity_scale) times force_scale."""
+
+    net: MLP
+    spec: SystemSpec = eqx.field(static=True)
+    force_scale: float = eqx.field(static=True)
+    position_scale: float = eqx.field(static=True)
+    velocity_scale: float = eqx.field(static=True)
+
+    def __init__(self, spec, *, key, hidden, force_scale, position_scale, velocity_scale, activation="tanh"):
+        n = spec.n_dof
+        self.net = MLP(feature_size(spec) + n, n, tuple(hidden), key=key, activation=activation, final_scale=0.1)
+        self.spec = spec
+        self.force_scale = float(force_scale)
+        self.position_scale = float(position_scale)
+        self.velocity_scale = float(velocity_scale)
+
+    def __call__(self, q, qd):
+        x = jnp.concatenate([coordinate_features(self.spec, q, self.position_scale), qd / self.velocity_scale])
+        return self.force_scale * self.net(x)
+
+
+class AugmentedDeLaN(AbstractLearnedSystem):
+    """Augmented DeLaN (adln): learned M, V and a learned τ_NC network; known τ_u."""
+
+    kind: ClassVar[str] = "adln"
+    lagrangian_nets: LagrangianNetworks
+    force_net: ForceNetwork
+    scale: Float[Array, ""]
+    spec: SystemSpec = eqx.field(static=True)
+    input_gain: float = eqx.field(static=True)
+    hparams: tuple[tuple[str, Any], ...] = eqx.field(static=True)
+
+    def __init__(self, system: str, *, key: PRNGKeyArray, **hparams):
+        spec = get_spec(system)
+        hp = system_defaults(spec.name)
+        hp.pop("damping_init")
+        hp["force_hidden"] = hp["hidden"]
+        unknown = set(hparams) - set(hp) - {"eps", "activation"}
+        if unknown:
+            raise ValueError(f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}")
+        hp.update(hparams)
+        kl, kf = jax.random.split(key)
+        act = hp.get("activation", "tanh")
+        self.lagrangian_nets = LagrangianNetworks(
+            spec, key=kl, hidden=tuple(hp["hidden"]), mass_scale=hp["mass_scale"],
+            potential_scale=hp["potential_scale"], position_scale=hp["position_scale"],
+            eps=hp.get("eps", 1e-3), activation=act,
+        )
+        self.force_net = ForceNetwork(
+            spec, key=kf, hidden=tuple(hp["force_hidden"]), force_scale=hp["force_scale"],
+            position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"], activation=act,
+        )
+        self.scale = jnp.asarray(1.0)
+        self.spec = spec
+        self.input_gain = float(hp["input_gain"])
+        self.hparams = freeze_hparams(hp)
+
+    def networks(self):
+        return (self.lagrangian_nets.mass_net, self.lagrangian_nets.potential_net, self.force_net.net)
+
+    @property
+    def has_augmentation(self) -> bool:
+        return True
+
+    def augmentation(self, q, qd):
+        return self.scale * self.force_net(q, qd)
+
+    def mass_matrix(self, q):
+        return self.scale * self.lagrangian_nets.mass_matrix(q)
+
+    def potential(self, q):
+        return self.scale * self.lagrangian_nets.potential(q)
+
+    def nonconservative_force(self, q, qd):
+        return self.augmentation(q, qd)
+
+    def input_force(self, q, qd, u):
+        if self.spec.name == "furuta":
+            return jnp.stack([self.input_gain * u[0], jnp.zeros_like(u[0])])
+        return self.input_gain * u[:1]

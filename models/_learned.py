@@ -1,0 +1,190 @@
+"""Shared pieces of the learned Lagrangian models: MLPs, coordinate features, physical scales.
+
+Every learned model (DeLaN, APHYNITY, augmented DeLaN) is an Equinox module implementing the
+Lagrangian-system protocol, with two extras the training code relies on:
+
+* ``scale`` — one scalar multiplying the learned Lagrangian *and* the learned non-conservative
+  force (never the known input force). On free (u = 0) data the dynamics do not change when
+  L and τ_NC are multiplied by the same constant, so this overall scale is unidentifiable; it is
+  excluded from gradient training and fitted afterwards by least squares on one forced
+  trajectory (:func:`furuta_gym.training.fit_scale`), as the paper does.
+* ``hparams`` — the keyword arguments that rebuild the module's skeleton with
+  :func:`furuta_gym.models.make_model` (checkpoints store them in their JSON header).
+
+Units (known_pitfalls.md, "Units"): in SI the Furuta potential is ~100× its mass-matrix entries,
+so networks output O(1) numbers multiplied by a physical magnitude per quantity
+(``mass_scale`` ≈ J1, ``potential_scale`` ≈ mp·g·Lp, ``force_scale`` ≈ friction torques).
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any, Callable, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from .._x64 import ensure_x64
+from ..lagrangian import AbstractLagrangianSystem, SystemSpec
+from ..systems import get_spec
+
+__all__ = ["MLP", "AbstractLearnedSystem", "SYSTEM_DEFAULTS", "coordinate_features", "system_defaults"]
+
+_ACTIVATIONS: dict[str, Callable] = {
+    "tanh": jnp.tanh,
+    "softplus": jax.nn.softplus,
+    "gelu": jax.nn.gelu,
+    "silu": jax.nn.silu,
+}
+
+# Reference magnitudes (SI) per system. Furuta: J1 = Jr + mp·Lr² = 2.31e-4 kg·m², mp·g·Lp =
+# 0.0304 J; lumped rotor damping c_r + kt·km/Rm = 5.1e-4 N·m·s/rad. N-MSD: m = 1 kg, k1·(1 m)² =
+# 10 J. Initial damping values are order-of-magnitude guesses, deliberately not the true values.
+SYSTEM_DEFAULTS: dict[str, dict[str, Any]] = {
+    "furuta": dict(
+        hidden=(16, 16),
+        mass_scale=2.3e-4,
+        potential_scale=0.03,
+        force_scale=1e-3,
+        position_scale=1.0,
+        velocity_scale=10.0,
+        damping_init=(1e-3, 1e-4),
+        input_gain=0.042 / 8.4,  # kt / Rm: the motor's torque per volt (back-EMF lumped, see DeLaN)
+    ),
+    "nmsd": dict(
+        hidden=(64, 64),
+        mass_scale=1.0,
+        potential_scale=10.0,
+        force_scale=1.0,
+        position_scale=1.0,
+        velocity_scale=5.0,
+        damping_init=(1.0, 1.0),
+        input_gain=1.0,
+    ),
+}
+
+
+def system_defaults(system: str) -> dict[str, Any]:
+    """A copy of the default hyper-parameters of ``system`` ("furuta" or "nmsd")."""
+    return dict(SYSTEM_DEFAULTS[get_spec(system).name])
+
+
+class MLP(eqx.Module):
+    """A plain multilayer perceptron with a smooth activation (second derivatives are needed:
+    the Coriolis force differentiates M, and training differentiates the dynamics again)."""
+
+    layers: tuple[eqx.nn.Linear, ...]
+    activation: str = eqx.field(static=True)
+
+    def __init__(
+        self,
+        in_size: int,
+        out_size: int,
+        hidden: tuple[int, ...],
+        *,
+        key: PRNGKeyArray,
+        activation: str = "tanh",
+        final_scale: float = 1.0,
+    ):
+        if activation not in _ACTIVATIONS:
+            raise ValueError(f"activation must be one of {sorted(_ACTIVATIONS)}, got {activation!r}")
+        sizes = (in_size, *hidden, out_size)
+        keys = jax.random.split(key, len(sizes) - 1)
+        layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
+        # A small last layer starts the model near its physical reference (outputs ≈ bias ≈ 0).
+        last = layers[-1]
+        layers[-1] = eqx.tree_at(lambda l: (l.weight, l.bias), last, (last.weight * final_scale, last.bias * 0.0))
+        self.layers = tuple(layers)
+        self.activation = activation
+
+    def __call__(self, x: Float[Array, " i"]) -> Float[Array, " o"]:
+        act = _ACTIVATIONS[self.activation]
+        for layer in self.layers[:-1]:
+            x = act(layer(x))
+        return self.layers[-1](x)
+
+
+def coordinate_features(spec: SystemSpec, q: Float[Array, " n"], position_scale: float) -> Float[Array, " f"]:
+    """Network input for q: (cos, sin) of every angle, linear coordinates divided by a scale."""
+    parts = []
+    for i, angular in enumerate(spec.angular):
+        if angular:
+            parts += [jnp.cos(q[i]), jnp.sin(q[i])]
+        else:
+            parts.append(q[i] / position_scale)
+    return jnp.stack(parts)
+
+
+def feature_size(spec: SystemSpec) -> int:
+    return sum(2 if a else 1 for a in spec.angular)
+
+
+def _hashable(value):
+    if isinstance(value, (list, tuple)):
+        return tuple(_hashable(v) for v in value)
+    if isinstance(value, np.ndarray):
+        return tuple(value.tolist())
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    return value
+
+
+def freeze_hparams(hparams: dict[str, Any]) -> tuple[tuple[str, Any], ...]:
+    """Hyper-parameters as a hashable, sorted tuple (Equinox static fields must hash)."""
+    return tuple(sorted((k, _hashable(v)) for k, v in hparams.items()))
+
+
+class AbstractLearnedSystem(AbstractLagrangianSystem):
+    """Base of the learned models: an overall ``scale`` and the hyper-parameters that rebuild it."""
+
+    kind: ClassVar[str]
+    spec: eqx.AbstractVar[SystemSpec]
+    scale: eqx.AbstractVar[Float[Array, ""]]
+    hparams: eqx.AbstractVar[tuple[tuple[str, Any], ...]]
+
+    @property
+    def hyperparameters(self) -> dict[str, Any]:
+        """The keyword arguments of :func:`make_model` that rebuild this module's skeleton."""
+        return dict(self.hparams)
+
+    def with_scale(self, scale) -> "AbstractLearnedSystem":
+        """The same model with its learned Lagrangian and τ_NC multiplied by ``scale / self.scale``."""
+        return eqx.tree_at(lambda m: m.scale, self, jnp.asarray(scale, dtype=float))
+
+    def trainable(self) -> Any:
+        """A filter spec (pytree of bools) of the leaves gradient training may change.
+
+        Everything inexact except ``scale`` (fitted separately; see the module docstring).
+        """
+        spec = jax.tree_util.tree_map(eqx.is_inexact_array, self)
+        return eqx.tree_at(lambda m: m.scale, spec, False)
+
+    def decayed(self) -> Any:
+        """A pytree of bools: which trainable leaves get weight decay (network weights only;
+        physical parameters and log-coefficients are not pulled towards zero)."""
+        spec = jax.tree_util.tree_map(lambda _: False, self)
+        return eqx.tree_at(
+            lambda m: [l.weight for net in m.networks() for l in net.layers],
+            spec,
+            replace_fn=lambda _: True,
+        )
+
+    @abc.abstractmethod
+    def networks(self) -> tuple[MLP, ...]:
+        """The MLPs of this model (for weight decay and parameter counts)."""
+
+    def augmentation(self, q: Float[Array, " n"], qd: Float[Array, " n"]) -> Float[Array, " n"]:
+        """The data-driven force F_a (APHYNITY's additive term); models without one raise."""
+        raise NotImplementedError(f"{type(self).__name__} has no data-driven force F_a")
+
+    @property
+    def has_augmentation(self) -> bool:
+        return False
+
+
+def _positive(x) -> jnp.ndarray:
+    ensure_x64()
+    return jnp.asarray(x, dtype=float)
