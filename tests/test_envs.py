@@ -347,3 +347,27 @@ def test_task_functions_agree_on_floats_numpy_and_jax():
     nm = NMSDEnv(target=0.2)
     nm.reset(seed=0, options={"target": 0.7})
     assert nm.task.target == 0.7 and isinstance(FurutaEnv().task, FurutaSwingUp)
+
+
+# ---------------------------------------------------------------------------- CLI
+
+
+def test_rollout_cli_writes_plot_video_and_refuses_to_overwrite(tmp_path, capsys):
+    from furuta_gym.cli import main
+
+    png, gif, csv = tmp_path / "r.png", tmp_path / "r.gif", tmp_path / "r.csv"
+    argv = ["rollout", "--system", "nmsd", "--policy", "chirp", "--seconds", "0.5",
+            "--out", str(png), "--video", str(gif), "--data", str(csv)]
+    assert main(argv) == 0
+    assert png.stat().st_size > 1000 and gif.stat().st_size > 1000
+    from furuta_gym.data import load_trajectories
+
+    (traj,) = load_trajectories(csv, "nmsd")
+    assert traj.q.shape == (51, 1) and np.ptp(traj.u) > 1.0
+    before = png.stat().st_mtime_ns
+    assert main(argv) == 2  # exists: refused, nothing touched
+    assert "refusing to overwrite" in capsys.readouterr().err
+    assert png.stat().st_mtime_ns == before
+    assert main(argv + ["--overwrite"]) == 0
+    assert main(["rollout", "--dynamics", "nope", "--out", str(tmp_path / "x.png")]) == 2
+    assert "accepted: 'mujoco'" in capsys.readouterr().err
