@@ -71,8 +71,8 @@ class NMSDEnv(LagrangianEnv):
     task_defaults: ClassVar[dict] = {"target": 0.5}
     reset_option_names: ClassVar[tuple[str, ...]] = ("state", "target")
     default_camera_config: ClassVar[dict] = {
-        "distance": 3.2,
-        "elevation": -10.0,
+        "distance": 2.8,
+        "elevation": -25.0,
         "azimuth": 90.0,
         "lookat": (0.0, 0.0, 0.2),
     }
