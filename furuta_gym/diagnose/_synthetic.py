@@ -1,8 +1,11 @@
 """Measured-like datasets with a known undeclared effect, for tests, demos and benchmarks.
 
-The plant is the analytic model plus :class:`furuta_gym.effects.WithEffects` (or a MuJoCo plant
-variant when one is passed as ``plant``), integrated with RK4 and the input held over each sample
-period, as a digital controller drives hardware. What the user would log is then produced:
+The plant is the MuJoCo ground truth with the effects written into it
+(:class:`furuta_gym.envs._backends.MujocoBackend`, a plant variant; Coulomb friction as the exact
+sgn law) — or, with ``plant="analytic"``, the analytic model plus
+:class:`furuta_gym.effects.WithEffects` — integrated with RK4 and the input held over each sample
+period, as a digital controller drives hardware. An input delay is the plant seeing the command
+whole samples late. What the user would log is then produced:
 encoder-quantised angles at 500 Hz for the Furuta (2048 counts/rev), positions with small
 Gaussian noise at 100 Hz for the N-MSD; no velocities.
 """
@@ -48,6 +51,7 @@ def measured_like(
     seed: int = 0,
     forced: bool = True,
     noise: float | None = None,
+    plant: str = "mujoco",
     substeps: int = 10,
 ) -> list[Trajectory]:
     """Trajectories of the pinned model with ``effects`` added, as a sensor would log them.
@@ -63,10 +67,23 @@ def measured_like(
     base = Furuta() if fur else NMSD()
     delay = sum(e.coefficient for e in effects if e.name == "input_delay")
     mem = [e for e in effects if e.name != "input_delay"]
-    plant = WithEffects(base, mem, coulomb_smoothing=1e-3) if mem else base
     T = int(round(duration / dt)) + 1
     t = np.arange(T) * dt
-    roll = jax.jit(lambda x0, us: rollout_zoh(plant, x0, us, dt, substeps))
+    if plant == "mujoco":
+        from ..envs._backends import MujocoBackend
+
+        backend = MujocoBackend(system, substeps=1, effects=mem)
+        assert abs(backend.control_dt - dt) < 1e-12
+
+        def roll(x0, us):
+            backend.reset(np.asarray(x0))
+            return np.stack([np.asarray(x0)] + [backend.step(np.asarray(u_k)) for u_k in us])
+
+    elif plant == "analytic":
+        model = WithEffects(base, mem, coulomb_smoothing=1e-3) if mem else base
+        roll = jax.jit(lambda x0, us: rollout_zoh(model, x0, us, dt, substeps))
+    else:
+        raise ValueError(f"plant must be 'mujoco' or 'analytic', got {plant!r}")
     shift = int(round(delay / dt))
     out = []
     for k in range(n_trajectories):
@@ -76,7 +93,7 @@ def measured_like(
             x0 = np.array([rng.uniform(-1, 1), rng.uniform(-3, 3)])
         u = _inputs(system, t, rng, forced)
         u_plant = np.concatenate([np.full(shift, u[0]), u[: T - shift]]) if shift else u
-        xs = np.asarray(roll(jnp.asarray(x0), jnp.asarray(u_plant[:-1, None])))
+        xs = np.asarray(roll(x0, u_plant[:-1, None]))
         n = 2 if fur else 1
         q = xs[:, :n]
         if fur:

@@ -1,0 +1,98 @@
+"""``furuta-gym diagnose DATA --system {furuta,nmsd}``: which physical effect is the model missing?
+
+Fits the declared analytic model to measured data, traces the residual to an effect of the
+library (:mod:`furuta_gym.effects`), adds it, refits, and reports the held-out errors before and
+after (terminal table, ``--json``, ``--report`` figures). See ``docs/diagnose.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["add_arguments", "run"]
+
+
+def _pairs(text: str | None, what: str, convert=str) -> dict:
+    out = {}
+    if not text:
+        return out
+    for item in text.split(","):
+        if "=" not in item:
+            raise ValueError(f"{what}: expected NAME=VALUE[,NAME=VALUE...], got {item!r}")
+        k, v = item.split("=", 1)
+        try:
+            out[k.strip()] = convert(v.strip())
+        except ValueError:
+            raise ValueError(f"{what}: {k.strip()}={v.strip()!r} is not a number") from None
+    return out
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", metavar="DATA", help="measured data: CSV (long form), NPZ or MAT")
+    parser.add_argument("--system", required=True, choices=["furuta", "nmsd"])
+    parser.add_argument("--json", metavar="OUT", help="write the result as JSON (pinned schema)")
+    parser.add_argument("--report", metavar="DIR", help="write figures into DIR")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing --json/--report outputs")
+    parser.add_argument(
+        "--column-map", metavar="CANON=FILECOL,...",
+        help="columns under other names, e.g. alpha=theta,beta=alpha,u=plant_input",
+    )
+    parser.add_argument("--sign", metavar="CANON=±1,...", help="per-column sign, e.g. beta=-1")
+    parser.add_argument("--offset", metavar="CANON=VALUE,...", help="per-column offset, e.g. beta=3.14159")
+    parser.add_argument(
+        "--velocity", choices=["zero_phase", "derivative_filter"], default="zero_phase",
+        help="velocity estimate when DATA has none: zero-phase (offline, default) or the paper's "
+        "causal derivative filter",
+    )
+    parser.add_argument("--cutoff", type=float, help="zero-phase velocity cutoff in Hz")
+    parser.add_argument("--fix", metavar="PARAM=VALUE,...",
+                        help="lumped parameters held at known values (the scale anchor), e.g. K=0.005")
+    parser.add_argument("--candidates", metavar="EFFECT:JOINT,...", help="restrict the library")
+    parser.add_argument("--max-effects", type=int, default=2)
+    parser.add_argument("--window", type=float, help="open-loop window for trajectory_rmse, s")
+    parser.add_argument("--interval", type=float, help="equation-error interval, s (default 0.1)")
+    parser.add_argument("--skip", type=float, default=0.0,
+                        help="drop this many seconds at the start of every trajectory (start transients)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..data import Trajectory, load_trajectories
+    from ..diagnose import diagnose
+    from ..diagnose._report import write_figures, write_json
+
+    for out in (args.json,):
+        if out and Path(out).exists() and not args.overwrite:
+            raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
+    trajs = load_trajectories(
+        args.data,
+        args.system,
+        column_map=_pairs(args.column_map, "--column-map"),
+        signs=_pairs(args.sign, "--sign", float),
+        offsets=_pairs(args.offset, "--offset", float),
+    )
+    if args.skip > 0:
+        trajs = [
+            Trajectory(t=tr.t[m], q=tr.q[m], u=tr.u[m], qd=None if tr.qd is None else tr.qd[m], name=tr.name)
+            for tr in trajs
+            for m in [tr.t >= tr.t[0] + args.skip]
+        ]
+    overrides = {"velocity": args.velocity, "max_effects": args.max_effects}
+    for key, val in (("velocity_cutoff_hz", args.cutoff), ("window", args.window), ("interval", args.interval)):
+        if val is not None:
+            overrides[key] = val
+    res = diagnose(
+        trajs,
+        args.system,
+        fixed=_pairs(args.fix, "--fix", float) or None,
+        candidates=args.candidates.split(",") if args.candidates else None,
+        **overrides,
+    )
+    print(res.table())
+    if args.json:
+        print(f"wrote {write_json(res, args.json, overwrite=args.overwrite)}")
+    if args.report:
+        for p in write_figures(res, args.report, overwrite=args.overwrite):
+            print(f"wrote {p}")
+    return 0
