@@ -371,3 +371,35 @@ def test_rollout_cli_writes_plot_video_and_refuses_to_overwrite(tmp_path, capsys
     assert main(argv + ["--overwrite"]) == 0
     assert main(["rollout", "--dynamics", "nope", "--out", str(tmp_path / "x.png")]) == 2
     assert "accepted: 'mujoco'" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------- checkpoints
+
+
+def test_learned_checkpoint_by_path_and_object_and_broken_weights(tmp_path):
+    import equinox as eqx
+    import jax
+
+    from furuta_gym.models import make_model
+    from furuta_gym.training.checkpoint import save_model
+
+    model = make_model("furuta", "dln", 0)
+    path = save_model(tmp_path / "delan.eqx", model)
+    acts = _random_actions(5.0, 20)
+    by_path = _run(gym.make(FURUTA_ID, dynamics=str(path)), acts)
+    by_object = _run(gym.make(FURUTA_ID, dynamics=model), acts)
+    np.testing.assert_array_equal(by_path, by_object)
+    assert np.all(np.isfinite(by_path))
+    nmsd_path = save_model(tmp_path / "nmsd.eqx", make_model("nmsd", "dln", 0))
+    with pytest.raises(ValueError, match="'nmsd' model; expected a 'furuta' model"):
+        gym.make(FURUTA_ID, dynamics=str(nmsd_path))
+    # huge weights: the learned model blows up; the env ends the episode cleanly
+    huge = jax.tree_util.tree_map(lambda w: w * 1e4, model, is_leaf=eqx.is_inexact_array)
+    env = gym.make(FURUTA_ID, dynamics=huge)
+    env.reset(seed=0)
+    for _ in range(200):
+        obs, reward, terminated, _, info = env.step(np.array([5.0]))
+        assert np.all(np.isfinite(obs)) and math.isfinite(reward)
+        if terminated:
+            break
+    assert terminated and info["diverged"]

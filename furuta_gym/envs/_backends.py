@@ -541,8 +541,9 @@ def _params_as_floats(params) -> dict[str, float]:
 # ---------------------------------------------------------------------------------------------
 
 
-def load_checkpoint(path: str | os.PathLike) -> AbstractLagrangianSystem:
-    """Load a model written by ``furuta-gym train`` (via ``furuta_gym.training.checkpoint``)."""
+def load_checkpoint(path: str | os.PathLike, system: str | None = None) -> AbstractLagrangianSystem:
+    """Load a model written by ``furuta-gym train`` (via ``furuta_gym.training.checkpoint``);
+    with ``system``, a checkpoint of the other system is a clear error."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"dynamics: checkpoint file {str(path)!r} not found; accepted: {_ACCEPTED}")
@@ -553,7 +554,7 @@ def load_checkpoint(path: str | os.PathLike) -> AbstractLagrangianSystem:
             f"dynamics: cannot load checkpoint {str(path)!r}: the checkpoint loader "
             f"furuta_gym.training.checkpoint.load_model is not available ({exc})"
         ) from exc
-    return load_model(path)
+    return load_model(path, expected_system=system)
 
 
 def make_backend(
@@ -580,7 +581,7 @@ def make_backend(
 
             model = analytic_model(system)
         elif Path(name).exists() or os.sep in name or Path(name).suffix:
-            model = load_checkpoint(name)
+            model = load_checkpoint(name, system)
             if not isinstance(model, AbstractLagrangianSystem):
                 raise ValueError(
                     f"dynamics: checkpoint {name!r} did not load as an AbstractLagrangianSystem "
