@@ -1,0 +1,55 @@
+"""The main job end to end, in its smallest setting (what the README's first command runs, smaller)."""
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+
+@pytest.fixture(scope="module")
+def demo_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo") / "out"
+    proc = subprocess.run(
+        [sys.executable, "-m", "furuta_gym", "demo", "--tiny", "--no-progress", "--out", str(out)],
+        capture_output=True, text=True, timeout=1500,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out, proc.stdout
+
+
+def test_demo_writes_every_output(demo_dir):
+    out, _ = demo_dir
+    for name in ("summary.json", "tracking.png", "swing_up.png", "data/train.csv",
+                 "models/dln_prop/model.eqx", "models/dln_traj/model.eqx",
+                 "diagnose/measured_log.csv", "diagnose/diagnosis.json"):
+        assert (out / name).is_file(), name
+        assert (out / name).stat().st_size > 0, name
+
+
+def test_demo_summary_numbers_are_finite_and_sensible(demo_dir):
+    out, stdout = demo_dir
+    s = json.loads((out / "summary.json").read_text())
+    for loss in ("prop", "traj"):
+        for v in s["tracking"][loss].values():
+            assert math.isfinite(v) and v >= 0
+    c = s["control"]
+    assert 0.0 <= c["success_rate"] <= 1.0 and c["episodes"] >= 2
+    assert c["peak_voltage"] <= 5.0 + 1e-9  # the env's default voltage limit holds
+    d = s["diagnose"]
+    # the undeclared cable spring is what the diagnosis finds, and adding it helps held-out
+    assert d["found"][:1] == ["spring:alpha"]
+    assert d["error_after"]["trajectory_rmse"] < d["error_before"]["trajectory_rmse"] / 2
+    assert "furuta-gym demo summary" in stdout and "spring:alpha" in stdout
+
+
+def test_demo_refuses_to_overwrite_a_previous_run(demo_dir):
+    out, _ = demo_dir
+    before = (out / "summary.json").read_bytes()
+    proc = subprocess.run(
+        [sys.executable, "-m", "furuta_gym", "demo", "--tiny", "--no-progress", "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert proc.returncode == 2 and "previous demo" in proc.stderr
+    assert (out / "summary.json").read_bytes() == before
