@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import collections
 import math
+import os
+import sys
 from typing import Any, ClassVar, Mapping, Sequence
 
 import gymnasium
@@ -202,6 +204,16 @@ class LagrangianEnv(gymnasium.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise EnvArgumentError(
                 f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        if (
+            render_mode == "human"
+            and sys.platform.startswith("linux")
+            and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+        ):
+            # GLFW would abort the whole process (an assertion in C) without a display
+            raise EnvArgumentError(
+                "render_mode='human' opens a window and needs a display (DISPLAY/WAYLAND_DISPLAY "
+                "are unset); use render_mode='rgb_array' on a headless machine"
             )
         self.render_mode = render_mode
         self.width, self.height = int(cfg["width"]), int(cfg["height"])

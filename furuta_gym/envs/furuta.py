@@ -86,8 +86,12 @@ class FurutaEnv(LagrangianEnv):
     | `render_mode`           | str / None    | `None`      | `"rgb_array"` or `"human"` |
     | `width`, `height`       | int           | `480`       | frame size |
 
-    Documented warnings of ``gymnasium.utils.env_checker.check_env``: none expected beyond the
-    infinite observation bounds (the raw state is unbounded).
+    Documented warnings of ``gymnasium.utils.env_checker.check_env``: the infinite observation
+    bounds (the raw state is unbounded) and "we recommend using a symmetric and normalized
+    space" (the action is in volts by design). ``render_mode="human"`` needs a display; without
+    one (DISPLAY/WAYLAND_DISPLAY unset on Linux) the constructor raises a clear ValueError rather
+    than letting GLFW abort the process, so run ``check_env(..., skip_render_check=True)``
+    headless.
     """
 
     system: ClassVar[str] = "furuta"
