@@ -162,8 +162,8 @@ def main(argv=None) -> int:
         "",
         "One Furuta env.step is one RK4 step of 2 ms (500 Hz control). InvertedPendulum-v5 takes two "
         "RK4 steps of 20 ms with collision detection per env.step; Furuta-v0 skips MuJoCo's "
-        "constraint pipeline (no contacts) and keeps its Python step lean (no per-step allocation "
-        "beyond the returned arrays). The analytic backend pays one jitted JAX call per step "
+        "constraint pipeline (no contacts) and keeps its Python step lean (scalar fast paths, "
+        "cached MjData views; allocations only for the returned observation and info). The analytic backend pays one jitted JAX call per step "
         "(dispatch dominates at this size). The machine is shared, so absolute rates vary between "
         "runs; the ratios are measured side by side.",
         MARK_END,
