@@ -42,11 +42,20 @@ def register_envs() -> None:
     """Register the envs with Gymnasium (idempotent; called by ``import furuta_gym``)."""
     import gymnasium
 
-    for env_id, entry in (
-        (ENV_IDS["furuta"], "furuta_gym.envs.furuta:FurutaEnv"),
-        (ENV_IDS["nmsd"], "furuta_gym.envs.nmsd:NMSDEnv"),
+    for env_id, entry, vector_entry in (
+        (
+            ENV_IDS["furuta"],
+            "furuta_gym.envs.furuta:FurutaEnv",
+            "furuta_gym.envs.vector:furuta_vector_entry_point",
+        ),
+        (
+            ENV_IDS["nmsd"],
+            "furuta_gym.envs.nmsd:NMSDEnv",
+            "furuta_gym.envs.vector:nmsd_vector_entry_point",
+        ),
     ):
         if env_id not in gymnasium.registry:
             # no max_episode_steps: the env truncates itself after `episode_seconds`, so the
-            # episode length follows the control rate (frame_skip)
-            gymnasium.register(id=env_id, entry_point=entry)
+            # episode length follows the control rate (frame_skip). gymnasium.make_vec goes to
+            # the batched JAX env for model backends, Sync/Async vector envs for MuJoCo.
+            gymnasium.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry)
