@@ -78,7 +78,10 @@ def test_pfl_gives_commanded_rotor_acceleration(model):
         model, [Effect("spring", "alpha", 2e-3), Effect("input_gain", "u", -0.2),
                 Effect("viscous_friction", "beta", 1e-4)]
     )
-    for m in (model, variant):
+    # and learned models (untrained weights suffice: PFL is exact on whatever model it is given)
+    from furuta_gym.models import make_model
+
+    for m in (model, variant, make_model("furuta", "dln", 0), make_model("furuta", "adln", 1)):
         def achieved(x, ub, m=m):
             u = pfl_voltage(m, x, ub)
             return forward_dynamics(m, x[:2], x[2:], jnp.reshape(u, (1,)))[0]
@@ -125,7 +128,7 @@ def test_voltage_lqr_tolerates_unmodelled_cable_spring_where_pfl_reading_does_no
     plant, the voltage law stays stable; the same Q, R on ū through PFL does not (its rotor
     stiffness, −0.06 V/rad, is below the spring's)."""
     xd = jnp.asarray(UPRIGHT_STATE)
-    A, B = map(np.asarray, linearize(spring_plant, xd, jnp.zeros(1)))
+    A, B = map(np.asarray, eqx.filter_jit(linearize)(spring_plant, xd, jnp.zeros(1)))
     worst = {}
     for acts_on in ("voltage", "pfl"):
         lqr = LQR.from_model(model, acts_on=acts_on)
