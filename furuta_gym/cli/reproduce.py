@@ -1,0 +1,74 @@
+"""``furuta-gym reproduce``: regenerate the paper's Tables 1 and 2 (simulated) and its figures."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import sys
+from pathlib import Path
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--quick", action="store_true",
+        help="scaled-down data and a few epochs: the whole pipeline in minutes (not the paper's numbers)",
+    )
+    parser.add_argument("--out", default=None, help="output folder (default results/reproduce[_quick])")
+    parser.add_argument("--seed", type=int, default=0, help="data seed and first model seed")
+    parser.add_argument(
+        "--seeds", type=int, default=1, metavar="N",
+        help="train every model with N seeds (seed, seed+1, ...) and report mean ± std",
+    )
+    parser.add_argument(
+        "--system", choices=["nmsd", "furuta"], action="append", dest="systems",
+        help="only this system (repeatable; default both)",
+    )
+    parser.add_argument(
+        "--epochs", type=int, nargs=2, metavar=("STAGE1", "STAGE2"),
+        help="override the epochs of the 2-step and the long-horizon stage (both systems)",
+    )
+    parser.add_argument(
+        "--ground-truth", choices=["auto", "mujoco", "analytic"], default="auto",
+        help="data from the MuJoCo model (auto: when available) or the analytic model",
+    )
+    parser.add_argument("--no-figures", action="store_true", help="tables only")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..training.reproduce import ReproduceConfig, reproduce
+
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be at least 1, got {args.seeds}")
+    systems = tuple(dict.fromkeys(args.systems)) if args.systems else ("nmsd", "furuta")
+    epochs = {s: tuple(args.epochs) for s in systems} if args.epochs else None
+    out = Path(args.out) if args.out else Path("results") / ("reproduce_quick" if args.quick else "reproduce")
+    config = ReproduceConfig(
+        quick=args.quick,
+        seeds=tuple(range(args.seed, args.seed + args.seeds)),
+        data_seed=args.seed,
+        systems=systems,
+        epochs=epochs,
+        ground_truth=args.ground_truth,
+        figures=not args.no_figures,
+        progress=not args.no_progress,
+    )
+    # a persistent compilation cache makes a resumed or repeated run skip most JAX compiles
+    if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+        import jax
+
+        cache = Path.home() / ".cache" / "furuta_gym" / "jax"
+        try:
+            cache.mkdir(parents=True, exist_ok=True)
+            jax.config.update("jax_compilation_cache_dir", str(cache))
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+        except (OSError, AttributeError):
+            pass
+    command = "furuta-gym " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:] else None
+    paths = reproduce(out, config, command=command)
+    for name, path in paths.items():
+        print(f"{name:24s} {path}")
+    return 0

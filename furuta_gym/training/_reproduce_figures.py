@@ -1,0 +1,164 @@
+"""Figures of a reproduction run, like the paper's (private helper of :mod:`.reproduce`).
+
+* ``predictions_<system>.png`` — open-loop predictions on the first 10 s of the first forced test
+  trajectory (N-MSD: square pulse; Furuta: chirp), every model beside the ground truth.
+* ``energy_state_<system>.png`` — energy as a function of the state (V(q_rest) = 0): N-MSD over p
+  (ṗ = 0) and ṗ (p = 0); Furuta over β (α = α̇ = β̇ = 0) and β̇ (α = β = α̇ = 0).
+* ``energy_time_<system>.png`` — E(t)/E(0) along the first test trajectory.
+* ``forces_<system>.png`` — inertial, Coriolis and potential-derived forces along the first 10 s of
+  a forced test trajectory, per joint, with the ground-truth accelerations.
+
+Models are those of the first seed; APHYNITY's physics is its prior (N/A in the tables), so it is
+drawn in the prediction figure only.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .reproduce import LOSS_LABELS, MODEL_LABELS, TEST_SETS
+
+FORCED_SET = {"nmsd": "test_square", "furuta": "test_forced"}
+ENERGY_SET = {"nmsd": "test_chirp", "furuta": "test_free"}
+STATE_LABELS = {
+    "nmsd": ("p [m]", "ṗ [m/s]"),
+    "furuta": ("α [rad]", "β [rad]", "α̇ [rad/s]", "β̇ [rad/s]"),
+}
+
+
+def _load_models(out: Path, system: str, config) -> list[tuple[str, str, object]]:
+    from .checkpoint import load_model
+
+    seed = config.seeds[0]
+    models = []
+    for kind, loss in config.pairs:
+        path = out / "runs" / system / f"{kind}_{loss}" / f"seed{seed}" / "model.eqx"
+        if path.exists():
+            models.append((kind, loss, load_model(path, expected_system=system)))
+    return models
+
+
+def _label(kind, loss) -> str:
+    return f"{MODEL_LABELS[kind]} ({LOSS_LABELS[loss]})"
+
+
+def make_figures(out: Path, config, per_system: dict) -> dict[str, Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .metrics import energy_along, predict
+
+    fig_dir = out / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    paths: dict[str, Path] = {}
+    for system in config.systems:
+        data, truth = per_system[system]["data"], per_system[system]["truth"]
+        models = _load_models(out, system, config)
+        n = truth.spec.n_dof
+
+        # -- predictions on the first 10 s of a forced trajectory ----------------------------
+        tr = data[FORCED_SET[system]][0]
+        k = min(len(tr), int(round(10.0 / tr.dt)) + 1)
+        fig, axes = plt.subplots(2 * n, 1, figsize=(8, 2.0 * 2 * n), sharex=True)
+        for j in range(2 * n):
+            axes[j].plot(tr.t[:k], tr.x[:k, j], "k", lw=2, label="ground truth")
+            axes[j].set_ylabel(STATE_LABELS[system][j])
+        for kind, loss, model in models:
+            # the whole set, as in the evaluation: same shapes, so the compiled solve is reused
+            pred = predict(model, data[FORCED_SET[system]])[0]
+            for j in range(2 * n):
+                y = np.where(np.abs(pred[:k, j]) < 1e6, pred[:k, j], np.nan)
+                axes[j].plot(tr.t[:k], y, lw=1, label=_label(kind, loss))
+        axes[0].legend(fontsize=7, ncol=2)
+        axes[-1].set_xlabel("t [s]")
+        fig.suptitle(f"{system}: open-loop predictions, first 10 s of a forced test trajectory")
+        fig.tight_layout()
+        paths[f"predictions_{system}"] = _save(fig, fig_dir / f"predictions_{system}.png")
+
+        physics = [(kind, loss, m) for kind, loss, m in models if kind != "aph"]
+
+        # -- energy as a function of the state ------------------------------------------------
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+        if system == "nmsd":
+            grid = np.linspace(-1.5, 1.5, 201)
+            zeros = np.zeros_like(grid)
+            cases = [
+                (grid, np.stack([grid], 1), np.stack([zeros], 1), "p [m] (ṗ = 0)"),
+                (grid * 3, np.stack([zeros], 1), np.stack([grid * 3], 1), "ṗ [m/s] (p = 0)"),
+            ]
+        else:
+            grid = np.linspace(-np.pi, np.pi, 201)
+            zeros = np.zeros_like(grid)
+            vel = np.linspace(-20, 20, 201)
+            cases = [
+                (grid, np.stack([zeros, grid], 1), np.stack([zeros, zeros], 1), "β [rad] (α̇ = β̇ = 0)"),
+                (vel, np.stack([zeros, zeros], 1), np.stack([zeros, vel], 1), "β̇ [rad/s] (β = α̇ = 0)"),
+            ]
+        for ax, (x, q, qd, xlabel) in zip(axes, cases):
+            ax.plot(x, energy_along(truth, q, qd, normalize=False), "k", lw=2, label="ground truth")
+            for kind, loss, model in physics:
+                ax.plot(x, energy_along(model, q, qd, normalize=False), lw=1, label=_label(kind, loss))
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel("E [J] (V(q_rest) = 0)")
+        axes[0].legend(fontsize=7)
+        fig.suptitle(f"{system}: energy as a function of the state")
+        fig.tight_layout()
+        paths[f"energy_state_{system}"] = _save(fig, fig_dir / f"energy_state_{system}.png")
+
+        # -- energy along a trajectory ----------------------------------------------------------
+        tr_e = data[ENERGY_SET[system]][0]
+        fig, ax = plt.subplots(figsize=(7, 3.4))
+        ax.plot(tr_e.t, energy_along(truth, tr_e.q, tr_e.qd), "k", lw=2, label="ground truth")
+        for kind, loss, model in physics:
+            ax.plot(tr_e.t, energy_along(model, tr_e.q, tr_e.qd), lw=1, label=_label(kind, loss))
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("E(t) / E(0)")
+        ax.legend(fontsize=7)
+        label = next(l for l, name in TEST_SETS[system].items() if name == ENERGY_SET[system])
+        ax.set_title(f"{system}: energy along the first {label} test trajectory")
+        fig.tight_layout()
+        paths[f"energy_time_{system}"] = _save(fig, fig_dir / f"energy_time_{system}.png")
+
+        # -- force decomposition on a forced trajectory ----------------------------------------
+        import jax
+        import jax.numpy as jnp
+
+        from ..lagrangian import forward_dynamics, inverse_dynamics_terms
+
+        q, qd = jnp.asarray(tr.q[:k]), jnp.asarray(tr.qd[:k])
+        u = jnp.asarray(np.asarray(tr.u[:k], dtype=float).reshape(k, -1))
+        qdd = jax.vmap(lambda a, b, c: forward_dynamics(truth, a, b, c))(q, qd, u)
+
+        def terms(system_):
+            return jax.vmap(lambda a, b, c: inverse_dynamics_terms(system_, a, b, c))(q, qd, qdd)
+
+        names = ("inertial", "coriolis", "potential")
+        fig, axes = plt.subplots(n, 3, figsize=(12, 2.6 * n), sharex=True, squeeze=False)
+        true_terms = terms(truth)
+        model_terms = [(kind, loss, terms(m)) for kind, loss, m in physics]
+        for j in range(n):
+            for c, name in enumerate(names):
+                ax = axes[j, c]
+                ax.plot(tr.t[:k], np.asarray(getattr(true_terms, name))[:, j], "k", lw=2, label="ground truth")
+                for kind, loss, tt in model_terms:
+                    ax.plot(tr.t[:k], np.asarray(getattr(tt, name))[:, j], lw=1, label=_label(kind, loss))
+                ax.set_title(f"{name} · {truth.spec.joint_names[j]}", fontsize=9)
+        axes[0, 0].legend(fontsize=7)
+        for ax in axes[-1]:
+            ax.set_xlabel("t [s]")
+        fig.suptitle(f"{system}: force decomposition on a forced test trajectory (first 10 s)")
+        fig.tight_layout()
+        paths[f"forces_{system}"] = _save(fig, fig_dir / f"forces_{system}.png")
+    return paths
+
+
+def _save(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
