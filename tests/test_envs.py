@@ -106,6 +106,15 @@ def test_pickle_roundtrip_continues_identically():
     nm = pickle.loads(pickle.dumps(gym.make(NMSD_ID, plant="coulomb").unwrapped))
     nm.reset(seed=0)
     assert np.all(np.isfinite(nm.step(np.ones(1))[0]))
+    # sensor filter and actuation delay memories travel too
+    sensed = gym.make(FURUTA_ID, velocity="filter", encoder_counts=2048, actuation_delay_steps=3,
+                      measurement_noise=1e-3).unwrapped
+    sensed.reset(seed=2)
+    for a in acts[:10]:
+        sensed.step(a)
+    twin = pickle.loads(pickle.dumps(sensed))
+    for a in acts[10:]:
+        np.testing.assert_array_equal(sensed.step(a)[0], twin.step(a)[0])
 
 
 @pytest.mark.parametrize("env_id,dynamics", [(FURUTA_ID, "mujoco"), (FURUTA_ID, "analytic"), (NMSD_ID, "mujoco")])

@@ -408,17 +408,15 @@ class LagrangianEnv(gymnasium.Env):
         return q
 
     def _observe(self, x: np.ndarray) -> np.ndarray:
+        """Sensor model: quantised, noisy positions; exact or derivative-filtered velocities
+        (from the measured positions), plus velocity noise."""
         if self._exact_observation:
             return x.copy()
+        n = self._n
         q = self._measure_positions(x)
-        if self._filter is not None:
-            qd = self._filter(q)
-        else:
-            qd = x[self._n :].copy()
-        if self._noise[self._n :].any() and self._filter is None:
-            qd = qd + self._noise[self._n :] * self.np_random.standard_normal(self._n)
-        elif self._noise[self._n :].any():
-            qd = qd + self._noise[self._n :] * self.np_random.standard_normal(self._n)
+        qd = self._filter(q) if self._filter is not None else x[n:].copy()
+        if self._noise[n:].any():
+            qd = qd + self._noise[n:] * self.np_random.standard_normal(n)
         return np.concatenate((q, qd))
 
     # ------------------------------------------------------------------ rendering
@@ -459,6 +457,11 @@ class LagrangianEnv(gymnasium.Env):
             "parameters": self.backend.parameters,
             "np_random": self._np_random,
             "task_kwargs": self._task_kwargs,
+            # per-episode memory of the sensors and the actuator
+            "u": self._u,
+            "last_obs": self._last_obs,
+            "buffer": list(self._buffer) if self._has_delay else None,
+            "filter_z": None if self._filter is None else np.array(self._filter._z),
         }
 
     def __setstate__(self, state):
@@ -468,7 +471,13 @@ class LagrangianEnv(gymnasium.Env):
         if state["parameters"] != self.backend.parameters:
             self.backend.set_parameters(state["parameters"])
             self._on_parameters(self.physical_parameters())
+        self._reset_episode(state["x"])  # (may draw sensor noise: restore the RNG after it)
         self._np_random = state["np_random"]
-        self._reset_episode(state["x"])
         self._steps = state["steps"]
         self._diverged = state["diverged"]
+        self._u = state.get("u", 0.0)
+        self._last_obs = state.get("last_obs", self._last_obs)
+        if state.get("buffer") is not None:
+            self._buffer.extend(state["buffer"])
+        if state.get("filter_z") is not None:
+            self._filter._z = np.array(state["filter_z"])
