@@ -49,7 +49,8 @@ class DiagnosisSettings:
     block_seconds: float = 0.5
     max_delay: float = 0.05
     oe: bool = True
-    oe_max_windows: int = 16
+    oe_max_windows: int = 24
+    oe_max_nfev: int = 15
     trim_seconds: float = 0.05
 
     def resolved(self, system: str, dt: float) -> "DiagnosisSettings":
@@ -493,6 +494,7 @@ def diagnose(
     for k, v in fixed.items():
         theta_fixed[layout.index(k)] = v
 
+    theta_nominal = layout.nominal()
     stride = max(1, int(round(settings.interval / dt)))
     _fit.build_regressors(segs, layout, theta_fixed, stride, settings.input_hold, settings.block_seconds)
     c_input = _fit.input_direction(layout, theta_fixed)
@@ -510,22 +512,47 @@ def diagnose(
     L = int(round(settings.window / dt))
     substeps = 1 if spec.name == "furuta" else 2
     smoothing = 0.02 if spec.name == "furuta" else 0.01
-    rng = np.random.default_rng(0)
-    fit_win = _fit.make_windows(fit_segs, L, max_windows=settings.oe_max_windows, rng=rng)
+    all_fit_win = _fit.make_windows(fit_segs, L)
     held_win = _fit.make_windows(held_segs, L)
-    if held_win is None or fit_win is None:
+    if held_win is None or all_fit_win is None:
         raise DataError("too short: no complete open-loop window in the fit or held-out segments")
+    # fit-set windows: a random subset drives the output-error fit, the rest validates effects
+    order = np.random.default_rng(0).permutation(all_fit_win.x0.shape[0])
+    oe_idx = np.sort(order[: settings.oe_max_windows])
+    val_idx = np.sort(order[settings.oe_max_windows :]) if order.size > settings.oe_max_windows else oe_idx
 
-    def refine(theta0, free, delay):
+    def fit_windows(delay, idx):
+        w = _fit.make_windows(fit_segs, L, delay)
+        return _fit.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, L)
+
+    fit_win = fit_windows(0.0, oe_idx)
+
+    def validation_rmse(theta, delay):
+        return _fit.window_errors(layout, theta, fit_windows(delay, val_idx), smoothing, substeps)[1]
+
+    def refine(theta0, free, delay, tag):
         if not settings.oe:
             return theta0
-        win = fit_win if delay == 0 else _fit.make_windows(fit_segs, L, delay, settings.oe_max_windows, np.random.default_rng(0))
-        th, ok = _fit.oe_fit(layout, theta0, free, win, smoothing, substeps)
+        win = fit_win if delay == 0 else fit_windows(delay, oe_idx)
+        # start from the equation-error estimate unless it is non-physical or predicts worse than
+        # the nominal model (closed-loop data: u correlates with the measurement noise, which
+        # biases the equation error far more than velocity noise does)
+        start, label = theta0, "equation-error"
+        nominal = theta0.copy()
+        nominal[: len(layout.base)] = np.where(free[: len(layout.base)], theta_nominal[: len(layout.base)], theta0[: len(layout.base)])
+        cost = lambda th: _fit.window_errors(layout, th, win, smoothing, substeps)[1]  # noqa: E731
+        if not _physical(layout, theta0) or cost(nominal) < cost(theta0):
+            start, label = nominal, "nominal"
+            notes.append(
+                "the equation-error estimate was non-physical or predicted worse than the nominal "
+                f"model ({tag}); output error started from the nominal parameters"
+            )
+        th, ok = _fit.oe_fit(layout, start, free, win, smoothing, substeps, max_nfev=settings.oe_max_nfev)
         if not ok:
-            notes.append("output-error refinement did not improve on the equation-error start")
+            notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
         return th
 
-    th_before = refine(th_ee, free_base, 0.0)
+    th_before = refine(th_ee, free_base, 0.0, "declared model")
     before = _errors(spec, layout, th_before, held_prob, held_segs, weights, L, 0.0, smoothing, substeps, settings)
 
     # --- trace ----------------------------------------------------------------------------------
@@ -563,23 +590,43 @@ def diagnose(
         imp, t = first_round.get(c.key, (None, None))
         evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(spec), False, imp, t, "tested")
 
-    # --- add and refit --------------------------------------------------------------------------
-    has_delay = any(c.name == "input_delay" for c in chosen)
-    free_after = _columns(layout, chosen, fixed_idx)
-    delay = 0.0
-    if has_delay:
-        delay = _search_delay(segs, fit_segs, layout, theta_fixed, free_after, weights, stride, settings, c_input)
+    # --- add and refit, confirmed by open-loop prediction on fit-set validation windows ------
+    # (the trace is an equation-error test; on closed-loop logs the input correlates with the
+    # measurement noise, so an effect is kept only if the refitted model also predicts better)
+    th_after, delay, after = th_before, 0.0, before
+    v_before = validation_rmse(th_before, 0.0) if chosen else None
+    accepted = list(chosen)
+    while accepted:
+        free_after = _columns(layout, accepted, fixed_idx)
+        delay = 0.0
+        if any(c.name == "input_delay" for c in accepted):
+            delay = _search_delay(segs, fit_segs, layout, theta_fixed, free_after, weights, stride, settings, c_input, notes)
         _fit.build_regressors(segs, layout, theta_fixed, stride, settings.input_hold, settings.block_seconds, delay)
         fit_prob, held_prob = _Problem(fit_segs, c_input), _Problem(held_segs, c_input)
-    th_ee_after, _ = _fit_ee(fit_prob, layout, free_after, theta_fixed, weights, False)
-    th_after = refine(th_ee_after, free_after, delay) if chosen else th_before
-    after = _errors(spec, layout, th_after, held_prob, held_segs, weights, L, delay, smoothing, substeps, settings) if chosen else before
+        th_ee_after, _ = _fit_ee(fit_prob, layout, free_after, theta_fixed, weights, False)
+        th_try = refine(th_ee_after, free_after, delay, "with " + ", ".join(c.key for c in accepted))
+        v_after = validation_rmse(th_try, delay)
+        if v_after < v_before:
+            th_after = th_try
+            after = _errors(spec, layout, th_after, held_prob, held_segs, weights, L, delay, smoothing, substeps, settings)
+            break
+        dropped = accepted.pop()
+        ev = evidence[dropped.key]
+        ev.significant, ev.status = False, "not confirmed"
+        ev.note = (f"equation-error evidence, but the refitted model predicts worse on fit-set "
+                   f"validation windows (rmse {v_before:.3g} -> {v_after:.3g})")
+        notes.append(f"{dropped.key}: {ev.note}; dropped")
+        delay = 0.0
+    if not accepted and chosen:
+        _fit.build_regressors(segs, layout, theta_fixed, stride, settings.input_hold, settings.block_seconds, 0.0)
+        fit_prob, held_prob = _Problem(fit_segs, c_input), _Problem(held_segs, c_input)
+    chosen = accepted
 
     # coefficients: the refit for selected effects, a one-effect equation-error fit for the rest
     for key, ev in evidence.items():
         if ev.status == "selected":
             ev.coefficient = delay if ev.name == "input_delay" else float(th_after[layout.index(key)])
-        elif ev.status == "tested":
+        elif ev.status in ("tested", "not confirmed"):
             cand = next(c for c in library if c.key == key)
             if cand.name == "input_delay":
                 _, d = _fit_ee(fit_prob, layout, free_base, theta_fixed, weights, True)
@@ -588,9 +635,9 @@ def diagnose(
                 th_c, _ = _fit_ee(fit_prob, layout, _columns(layout, [cand], fixed_idx), theta_fixed, weights, False)
                 ev.coefficient = float(th_c[layout.index(key)])
     ordered = [evidence[c.key] for c in chosen]
-    rest = sorted((e for e in evidence.values() if e.status == "tested"),
+    rest = sorted((e for e in evidence.values() if e.status in ("tested", "not confirmed")),
                   key=lambda e: -(e.improvement if e.improvement is not None else -np.inf))
-    ordered += rest + [e for e in evidence.values() if e.status not in ("selected", "tested")]
+    ordered += rest + [e for e in evidence.values() if e.status not in ("selected", "tested", "not confirmed")]
     if not chosen:
         notes.append("no effect is significant on held-out data: none added")
 
@@ -614,7 +661,16 @@ def diagnose(
     )
 
 
-def _search_delay(segs, fit_segs, layout, theta_fixed, free, weights, stride, settings, c_input):
+def _physical(layout, theta) -> bool:
+    """Positive-definite mass matrix for every angle and non-negative declared damping."""
+    p = {b: theta[i] for i, b in enumerate(layout.base)}
+    if layout.system == "furuta":
+        ok = p["J1"] > 0 and p["J2"] > 0 and p["J1b"] >= 0 and p["J1"] * p["J2"] > p["Jc"] ** 2
+        return bool(ok and p["c_alpha"] >= 0 and p["c_beta"] >= 0 and p["Jc"] > 0)
+    return bool(p["m"] > 0 and p["b1"] >= 0 and p["k1"] >= 0)
+
+
+def _search_delay(segs, fit_segs, layout, theta_fixed, free, weights, stride, settings, c_input, notes):
     """Delay by golden-section search of the equation-error cost with the input shifted exactly."""
     from scipy.optimize import minimize_scalar
 
@@ -626,7 +682,13 @@ def _search_delay(segs, fit_segs, layout, theta_fixed, free, weights, stride, se
         return float((r**2).sum())
 
     res = minimize_scalar(cost, bounds=(0.0, settings.max_delay), method="bounded", options={"xatol": 1e-4})
-    return float(res.x)
+    d = float(res.x)
+    if d > 0.95 * settings.max_delay:
+        notes.append(
+            f"input delay estimate {d:.4g} s is at the search bound max_delay = {settings.max_delay} s: "
+            "the delay stands in for something else (e.g. unmodelled actuator dynamics)"
+        )
+    return d
 
 
 def _errors(spec, layout, theta, held_prob, held_segs, weights, L, delay, smoothing, substeps, settings):

@@ -293,8 +293,8 @@ def oe_fit(
 ):
     """Refine the free entries of θ by output error (Gauss-Newton / trust region).
 
-    Returns (θ, converged flag). If the start does not simulate (a non-physical equation-error
-    estimate), the start is returned unchanged with ``False``.
+    Returns (θ, improved flag): the start is returned unchanged with ``False`` if it does not
+    simulate or the fit does not lower the output error. Base parameters are bounded below by 0.
     """
     scale = np.maximum(np.abs(theta_start), layout.typical_scale() * 1e-2)
     scale = np.where(free, scale, 1.0)
@@ -324,8 +324,13 @@ def oe_fit(
     r0 = f(z0)
     if np.any(r0 >= 1e3):
         return theta_start, False
-    sol = least_squares(f, z0, jac=J, method="trf", max_nfev=max_nfev, x_scale="jac")
-    theta = full(sol.x)
-    if sol.cost > 0.5 * float(r0 @ r0):  # never return something worse than the start
+    # physical bounds: the declared model's inertias, masses and damping stay non-negative
+    n_base = len(layout.base)
+    lower = np.full(layout.size, -np.inf)
+    lower[:n_base] = 0.0
+    lo = lower[free] / scale[free]
+    z0 = np.maximum(z0, lo + 1e-9)
+    sol = least_squares(f, z0, jac=J, method="trf", bounds=(lo, np.inf), max_nfev=max_nfev, x_scale="jac")
+    if sol.cost >= 0.5 * float(r0 @ r0):  # never return something worse than the start
         return theta_start, False
-    return theta, bool(sol.success)
+    return full(sol.x), True
