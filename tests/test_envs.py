@@ -17,7 +17,7 @@ from furuta_gym.effects import Effect
 from furuta_gym.envs import FurutaEnv, FurutaSwingUp, NMSDEnv, NMSDReach, is_diverged
 from furuta_gym.lagrangian import AbstractLagrangianSystem, SystemSpec
 from furuta_gym.systems import FURUTA
-from furuta_gym.models import NMSD, Furuta
+from furuta_gym.models import NMSD, Furuta, FurutaParameters
 from furuta_gym.signals import derivative_filter
 
 FURUTA_ID, NMSD_ID = "furuta_gym/Furuta-v0", "furuta_gym/NMSD-v0"
@@ -209,6 +209,11 @@ def test_any_lagrangian_object_is_a_backend():
     by_name = _run(gym.make(FURUTA_ID, dynamics="analytic"), _random_actions(5, 50))
     by_object = _run(gym.make(FURUTA_ID, dynamics=Furuta()), _random_actions(5, 50))
     np.testing.assert_array_equal(by_name, by_object)
+    # an analytic model with its own parameters reports (and uses) them
+    heavy = gym.make(FURUTA_ID, dynamics=Furuta(FurutaParameters(mp=0.048))).unwrapped
+    _, info = heavy.reset(options={"state": [0.0, np.pi, 0.0, 0.0]})
+    assert heavy.backend.parameters["mp"] == 0.048
+    assert info["energy"] == pytest.approx(0.048 * 9.81 * 0.129)
 
 
 class _Exploding(AbstractLagrangianSystem):

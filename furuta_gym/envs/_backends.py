@@ -440,7 +440,8 @@ class ModelBackend(AbstractBackend):
         self._n = self.spec.n_dof
         self._scene = None
         self._x = None
-        self._parameters = default_parameters(self.system) if self._has_parameters() else {}
+        # the model's own parameter values (an analytic model may carry non-pinned ones)
+        self._parameters = _params_as_floats(model.params) if self._has_parameters() else {}
         if parameters:
             self.set_parameters(parameters)
         else:
@@ -454,10 +455,9 @@ class ModelBackend(AbstractBackend):
     def _set_model(self, model: AbstractLagrangianSystem) -> None:
         import equinox as eqx
         import jax
+        from jax.flatten_util import ravel_pytree
 
         from ..effects import WithEffects
-
-        from jax.flatten_util import ravel_pytree
 
         self.model = WithEffects(model, self.effects) if self.effects else model
         dynamic, static = eqx.partition(self.model, eqx.is_array)
