@@ -8,7 +8,8 @@ Rows, one run, same seeded starts (x0 = 0 exactly + ``--episodes`` starts near t
 * designed on ``analytic``, run on the MuJoCo ground truth, and on its ``cable_spring`` and
   ``coulomb`` plant variants (effects the design model lacks); with measured-like observations
   (2048-count encoders + derivative-filter velocities); and the LQR-on-ū (PFL) reading on the
-  cable-spring plant, which is why the default LQR acts on the voltage;
+  cable-spring plant, which is why the default LQR acts on the voltage; and (fewer starts) the
+  other presets: quadratic drag, a 20 % weaker motor, 4 ms input delay;
 * designed on learned checkpoints (``--checkpoint "DLN L_prop=runs/furuta_dln/model.eqx"``; also
   found automatically as ``runs/furuta_*/model.eqx``), run on MuJoCo — or a line saying none
   existed;
@@ -107,6 +108,8 @@ def main(argv=None) -> int:
     run("swing-up + LQR (volts)", "analytic", "mujoco coulomb", ctrl, n, plant="coulomb")
     run("swing-up + LQR (volts)", "analytic", "mujoco, encoders + filtered velocity", ctrl, n2,
         encoder_counts=2048, velocity="filter")
+    for preset in ("quadratic_drag", "weak_motor", "delay"):
+        run("swing-up + LQR (volts)", "analytic", f"mujoco {preset}", ctrl, n2, plant=preset)
     ctrl_pfl = SwingUpLQR.from_model(model, acts_on="pfl")
     run("swing-up + LQR on ū (PFL)", "analytic", "mujoco", ctrl_pfl, n2)
     run("swing-up + LQR on ū (PFL)", "analytic", "mujoco cable_spring", ctrl_pfl, n2,
