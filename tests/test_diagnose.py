@@ -202,3 +202,26 @@ def test_extra_viscous_friction_is_absorbed_not_discovered():
     res = _run("furuta", ("viscous_friction", "alpha", 2e-4))
     _check_none(res)
     assert res.parameters_before["c_alpha"] == pytest.approx(3e-4 + 0.042**2 / 8.4 + 2e-4, rel=0.15)
+
+
+def test_free_data_fixes_the_scale_and_says_so():
+    data = measured_like("nmsd", [Effect("constant_torque", "p", 0.5)], seed=5, forced=False, **NMSD)
+    res = diagnose(data, "nmsd")
+    assert res.fixed == {"gain": 1.0, "m": 1.0}
+    assert any("free data (u = 0)" in n and "not identifiable" in n for n in res.notes)
+    statuses = {(e.name, e.status) for e in res.effects}
+    assert {("input_gain", "not identifiable"), ("input_delay", "not identifiable")} <= statuses
+    _check_found(res, "constant_torque", "p", 0.5)
+
+
+@pytest.mark.slow
+def test_input_gain_is_absorbed_when_fitted_and_found_when_two_parameters_are_known():
+    from furuta_gym.diagnose import nominal_base
+
+    nom = nominal_base("furuta")
+    data = measured_like("furuta", [Effect("input_gain", "u", 0.2)], seed=2, **FURUTA)
+    res = diagnose(data, "furuta")  # K is fitted: the gain lands in K, nothing is "discovered"
+    _check_none(res)
+    assert res.parameters_before["K"] == pytest.approx(1.2 * nom["K"], rel=0.1)
+    res = diagnose(data, "furuta", fixed={"G": nom["G"], "K": nom["K"]})
+    _check_found(res, "input_gain", "u", 0.2)

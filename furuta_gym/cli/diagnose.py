@@ -28,7 +28,8 @@ def _pairs(text: str | None, what: str, convert=str) -> dict:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", metavar="DATA", help="measured data: CSV (long form), NPZ or MAT")
+    parser.add_argument("data", metavar="DATA", nargs="+",
+                        help="measured data: CSV (long form), NPZ or MAT; several files are pooled")
     parser.add_argument("--system", required=True, choices=["furuta", "nmsd"])
     parser.add_argument("--json", metavar="OUT", help="write the result as JSON (pinned schema)")
     parser.add_argument("--report", metavar="DIR", help="write figures into DIR")
@@ -51,6 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-effects", type=int, default=2)
     parser.add_argument("--window", type=float, help="open-loop window for trajectory_rmse, s")
     parser.add_argument("--interval", type=float, help="equation-error interval, s (default 0.1)")
+    parser.add_argument("--oe-windows", type=int, help="open-loop windows used by the output-error fit (default 24)")
     parser.add_argument("--skip", type=float, default=0.0,
                         help="drop this many seconds at the start of every trajectory (start transients)")
 
@@ -65,13 +67,18 @@ def run(args: argparse.Namespace) -> int:
     for out in (args.json,):
         if out and Path(out).exists() and not args.overwrite:
             raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
-    trajs = load_trajectories(
-        args.data,
-        args.system,
-        column_map=_pairs(args.column_map, "--column-map"),
-        signs=_pairs(args.sign, "--sign", float),
-        offsets=_pairs(args.offset, "--offset", float),
-    )
+    trajs = []
+    for path in args.data:
+        for tr in load_trajectories(
+            path,
+            args.system,
+            column_map=_pairs(args.column_map, "--column-map"),
+            signs=_pairs(args.sign, "--sign", float),
+            offsets=_pairs(args.offset, "--offset", float),
+        ):
+            if len(args.data) > 1:
+                tr.name = f"{Path(path).stem}:{tr.name}"
+            trajs.append(tr)
     if args.skip > 0:
         trajs = [
             Trajectory(t=tr.t[m], q=tr.q[m], u=tr.u[m], qd=None if tr.qd is None else tr.qd[m], name=tr.name)
@@ -79,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
             for m in [tr.t >= tr.t[0] + args.skip]
         ]
     overrides = {"velocity": args.velocity, "max_effects": args.max_effects}
-    for key, val in (("velocity_cutoff_hz", args.cutoff), ("window", args.window), ("interval", args.interval)):
+    for key, val in (("velocity_cutoff_hz", args.cutoff), ("window", args.window), ("interval", args.interval),
+                     ("oe_max_windows", args.oe_windows)):
         if val is not None:
             overrides[key] = val
     res = diagnose(

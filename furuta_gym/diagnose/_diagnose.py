@@ -188,6 +188,13 @@ class DiagnosisResult:
 def _as_trajectories(data, spec, column_map, signs, offsets) -> list[Trajectory]:
     if isinstance(data, (str, Path)):
         return load_trajectories(data, spec, column_map=column_map, signs=signs, offsets=offsets)
+    if isinstance(data, (list, tuple)) and data and all(isinstance(d, (str, Path)) for d in data):
+        out = []
+        for path in data:
+            for tr in load_trajectories(path, spec, column_map=column_map, signs=signs, offsets=offsets):
+                tr.name = f"{Path(path).stem}:{tr.name}"
+                out.append(tr)
+        return out
     if isinstance(data, Trajectory):
         data = [data]
     trajs = list(data)
@@ -434,7 +441,8 @@ def diagnose(
 ) -> DiagnosisResult:
     """Fit the declared model, trace its residual to a missing effect, add it, refit, report.
 
-    ``data``: a CSV/NPZ/MAT path (long format, see :func:`furuta_gym.data.load_trajectories`;
+    ``data``: a CSV/NPZ/MAT path or a list of paths (long format, see
+    :func:`furuta_gym.data.load_trajectories`;
     ``column_map``/``signs``/``offsets`` as there) or a list of :class:`~furuta_gym.data.Trajectory`.
     ``system``: ``"furuta"`` or ``"nmsd"``. ``fixed``: lumped parameters held at known values
     (the scale anchor; default: the pendulum's gravity term ``G`` = ½mp·g·Lp for the Furuta, the
@@ -473,11 +481,12 @@ def diagnose(
         fixed = {"G": nom["G"]}
         notes.append(
             "scale anchored on the pendulum gravity term G = 0.5*mp*g*Lp = "
-            f"{nom['G']:.6g} N m (nominal); everything else, including the motor gain K, is fitted"
+            f"{nom['G']:.6g} N m (nominal)" + ("; everything else, including the motor gain K, is fitted" if forced else "")
         )
     else:
         fixed = {"gain": 1.0}
-        notes.append("scale anchored on the input gain (u is a force in N)")
+        if forced:
+            notes.append("scale anchored on the input gain (u is a force in N)")
     if not forced:
         if gain_name not in fixed:
             fixed[gain_name] = nom[gain_name]

@@ -99,7 +99,7 @@ def write_figures(res, directory, overwrite: bool = False) -> list[Path]:
         if eff.coefficient is not None:
             xs = np.linspace(x.min(), x.max(), 2)
             ax.plot(xs, -eff.coefficient * xs, "r-", label=f"−coefficient × regressor ({eff.coefficient:.3g} {eff.unit})")
-        ax.set_xlabel(f"regressor of {eff.name} on {eff.joint}: ∫ per-unit force dt over each interval")
+        ax.set_xlabel(f"regressor of {eff.name}:{eff.joint} (∫ unit force dt per interval)")
         ax.set_ylabel(f"residual Z̄ − Ā on {spec_joints[j]} (declared model)")
         verdict = "significant" if eff.significant else "not significant"
         ax.set_title(f"{res.system}: residual vs {eff.name}:{eff.joint} ({verdict})")
