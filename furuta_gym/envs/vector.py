@@ -69,10 +69,13 @@ class _Quantizer:
 _STEP_CACHE: dict = {}
 
 
-def _batched_step(static, treedef_key, *, dt, substeps, action_limit, task, quantizer):
-    """One jitted ``(dynamic, energy_model, xs, us) -> outputs`` for a model structure and task;
-    cached so a second vector env of the same model and settings does not recompile."""
-    key = (treedef_key, dt, substeps, action_limit, task, quantizer)
+def _batched_step(
+    static, treedef, energy_treedef, *, dt, substeps, action_limit, task, quantizer
+):
+    """One jitted ``(model leaves, energy-model leaves, xs, us) -> outputs`` for a model structure
+    and task; cached so a second vector env of the same model and settings does not recompile.
+    Taking flat lists of arrays (not the Equinox modules) keeps the per-call dispatch cheap."""
+    key = (treedef, static, energy_treedef, dt, substeps, action_limit, task, quantizer)
     try:
         return _STEP_CACHE[key]
     except (KeyError, TypeError):
@@ -94,8 +97,9 @@ def _batched_step(static, treedef_key, *, dt, substeps, action_limit, task, quan
         e = energy(energy_model, out.state[:n_dof], out.state[n_dof:])
         return out.state, quantizer(out.state), out.action, out.reward, out.terminated, out.diverged, e
 
-    def step(dynamic, energy_model, xs, us):
-        system = eqx.combine(dynamic, static)
+    def step(leaves, energy_leaves, xs, us):
+        system = eqx.combine(jax.tree_util.tree_unflatten(treedef, leaves), static)
+        energy_model = jax.tree_util.tree_unflatten(energy_treedef, energy_leaves)
         return jax.vmap(one, in_axes=(None, None, 0, 0))(system, energy_model, xs, us)
 
     fn = jax.jit(step)
@@ -163,8 +167,8 @@ class LagrangianVectorEnv(VectorEnv):
         self.max_action = template.max_action
         self._max_steps = template._max_steps
         self.system: AbstractLagrangianSystem = backend.model
-        self._dynamic, self._static = eqx.partition(self.system, eqx.is_array)
-        self._treedef_key = (jax.tree_util.tree_structure(self._dynamic), self._static)
+        dynamic, self._static = eqx.partition(self.system, eqx.is_array)
+        self._leaves, self._treedef = jax.tree_util.tree_flatten(dynamic)
         parameters = backend.parameters or default_parameters(backend.system)
         analytic_params = PARAMETER_CLASSES[backend.system](**parameters)
         from ..models import analytic_model
@@ -173,6 +177,7 @@ class LagrangianVectorEnv(VectorEnv):
         self._energy_model = eqx.tree_at(
             lambda m: m.params, analytic_model(backend.system), analytic_params
         )
+        self._energy_leaves, self._energy_treedef = jax.tree_util.tree_flatten(self._energy_model)
         self._quantizer = _Quantizer(tuple(float(s) for s in template._quant))
         self._set_task(template.task)
 
@@ -223,7 +228,8 @@ class LagrangianVectorEnv(VectorEnv):
         self.task = task
         self._step_fn = _batched_step(
             self._static,
-            self._treedef_key,
+            self._treedef,
+            self._energy_treedef,
             dt=self.dt,
             substeps=self.frame_skip,
             action_limit=self.max_action,
@@ -363,7 +369,7 @@ class LagrangianVectorEnv(VectorEnv):
                 f"{np.flatnonzero(bad)[:10].tolist()} are not"
             )
         x_next, obs, u, reward, terminated, diverged, e = (
-            np.asarray(a) for a in self._step_fn(self._dynamic, self._energy_model, self._x, us)
+            np.asarray(a) for a in self._step_fn(self._leaves, self._energy_leaves, self._x, us)
         )
         x_next, obs = x_next.copy(), obs.copy()
         reward, terminated, diverged, e = (

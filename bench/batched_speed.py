@@ -1,0 +1,255 @@
+"""Batched model-backed env speed vs the MuJoCo ground-truth env (issue 4 benchmark).
+
+Measures, in one run on this machine, side by side:
+
+* the MuJoCo ``furuta_gym/Furuta-v0`` single env: ``env.step`` calls per second (the reference);
+* the same env with a DeLaN backend (single copy): ``env.step``/s, and its ratio to MuJoCo;
+* the DeLaN-backed batched env (:class:`furuta_gym.envs.vector.FurutaVectorEnv`, one jitted vmapped
+  step per ``env.step``) in state-steps/s (copies × steps per second) at N = 1, 64, 1024, 4096,
+  16384, and the pure-JAX rollout (``FurutaVectorEnv.rollout``: a jittable policy inside
+  ``lax.scan``) at the same N; both divided by the MuJoCo env.step/s (target at N = 4096: ≥ 10);
+* the analytic backend at N = 4096 for comparison.
+
+The DeLaN is a trained checkpoint when ``--checkpoint PATH`` is given, otherwise an *untrained*
+DeLaN of the default Furuta architecture (``make_model("furuta", "dln")``: the cost of a step does
+not depend on the weights' values). Times are wall-clock, best of ``--repeats``, after a warm-up
+that compiles. Writes/refreshes its section of BENCHMARKS.md (between markers) unless ``--no-write``.
+
+    python bench/batched_speed.py            # ~3-5 min on 2 cores
+    python bench/batched_speed.py --quick    # smaller N list and fewer steps, for a smoke run
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+ROOT = Path(__file__).resolve().parents[1]
+MARK_START = "<!-- bench/batched_speed.py:start -->"
+MARK_END = "<!-- bench/batched_speed.py:end -->"
+ENV_ID = "furuta_gym/Furuta-v0"
+
+
+def machine() -> str:
+    import jax
+    import mujoco
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return (
+        f"{cpu}, {os.cpu_count()} logical cores (shared; 1-min load average {load:.1f} at start), "
+        f"Python {platform.python_version()}, JAX {jax.__version__} ({jax.default_backend()}), "
+        f"MuJoCo {mujoco.__version__}"
+    )
+
+
+def best_rate(fn, work: float, repeats: int) -> float:
+    """``work`` units per second of ``fn()``, best of ``repeats`` (fn already warmed up)."""
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return work / best
+
+
+def single_env_rate(env, steps: int, repeats: int) -> float:
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-5.0, 5.0, size=(steps, 1))
+    env.reset(seed=0)
+    for a in actions[:200]:  # warm-up (compiles a model backend)
+        env.step(a)
+
+    def run():
+        env.reset(seed=0)
+        for a in actions:
+            env.step(a)
+
+    return best_rate(run, steps, repeats)
+
+
+def batched_env_rate(dynamics, n: int, steps: int, repeats: int) -> float:
+    from furuta_gym.envs.vector import FurutaVectorEnv
+
+    env = FurutaVectorEnv(n, dynamics=dynamics)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-5.0, 5.0, size=(steps, n, 1))
+    env.reset(seed=0)
+    env.step(actions[0])  # compile
+
+    def run():
+        env.reset(seed=0)
+        for a in actions:
+            env.step(a)
+
+    return best_rate(run, n * steps, repeats)
+
+
+def policy(obs):
+    """A jittable linear feedback (its cost is negligible next to the model's)."""
+    import jax.numpy as jnp
+
+    return jnp.array([2.0 * jnp.sin(obs[1]) - 0.1 * obs[2] + 0.05 * obs[3]])
+
+
+def rollout_rate(dynamics, n: int, steps: int, repeats: int) -> float:
+    import jax
+
+    from furuta_gym.envs.vector import FurutaVectorEnv
+
+    env = FurutaVectorEnv(n, dynamics=dynamics)
+    env.reset(seed=0)
+    jax.block_until_ready(env.rollout(policy, steps))  # compile
+
+    def run():
+        jax.block_until_ready(env.rollout(policy, steps))
+
+    return best_rate(run, n * steps, repeats)
+
+
+def steps_for(n: int, budget: float) -> int:
+    """Steps so that one timed run is about ``budget`` state-steps (at least 10)."""
+    return max(10, int(budget // n))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--checkpoint", help="a trained Furuta DeLaN checkpoint (default: untrained)")
+    parser.add_argument("--quick", action="store_true", help="smoke run: fewer N and steps")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-write", action="store_true", help="print only, do not touch BENCHMARKS.md")
+    args = parser.parse_args(argv)
+
+    import jax
+
+    import furuta_gym
+
+    furuta_gym.enable_x64()
+    import gymnasium as gym
+
+    from furuta_gym.models import make_model
+
+    started = datetime.datetime.now(datetime.timezone.utc)
+    host = machine()
+    if args.checkpoint:
+        from furuta_gym.training.checkpoint import load_model
+
+        delan = load_model(args.checkpoint, expected_system="furuta")
+        delan_name = f"trained DeLaN from {args.checkpoint}"
+    else:
+        delan = make_model("furuta", "dln", key=jax.random.PRNGKey(0))
+        delan_name = "untrained DeLaN (make_model('furuta', 'dln'), default architecture)"
+    ns = [1, 64, 1024] if args.quick else [1, 64, 1024, 4096, 16384]
+    env_budget = 2e4 if args.quick else 2e5  # state-steps per timed batched-env run
+    roll_budget = 1e5 if args.quick else 1e6  # state-steps per timed rollout
+    single_steps = 2000 if args.quick else 10000
+
+    lines = []
+
+    def say(msg):
+        print(msg, flush=True)
+
+    mujoco_env = gym.make(ENV_ID)
+    mujoco_rate = single_env_rate(mujoco_env, single_steps, args.repeats)
+    say(f"MuJoCo Furuta-v0 single env: {mujoco_rate:,.0f} env.step/s")
+    delan_env = gym.make(ENV_ID, dynamics=delan)
+    delan_single = single_env_rate(delan_env, single_steps // 2, args.repeats)
+    say(f"DeLaN single env: {delan_single:,.0f} env.step/s ({delan_single / mujoco_rate:.2f}x)")
+
+    rows = []
+    for n in ns:
+        env_rate = batched_env_rate(delan, n, steps_for(n, env_budget), args.repeats)
+        roll_rate = rollout_rate(delan, n, steps_for(n, roll_budget), args.repeats)
+        rows.append((n, env_rate, roll_rate))
+        say(
+            f"DeLaN N={n:>6}: batched env {env_rate:>12,.0f} state-steps/s "
+            f"({env_rate / mujoco_rate:6.2f}x), rollout {roll_rate:>12,.0f} ({roll_rate / mujoco_rate:6.2f}x)"
+        )
+    n_ref = 4096 if 4096 in ns else ns[-1]
+    analytic_env = batched_env_rate("analytic", n_ref, steps_for(n_ref, env_budget), args.repeats)
+    analytic_roll = rollout_rate("analytic", n_ref, steps_for(n_ref, roll_budget), args.repeats)
+    say(
+        f"analytic N={n_ref}: batched env {analytic_env:,.0f} ({analytic_env / mujoco_rate:.2f}x), "
+        f"rollout {analytic_roll:,.0f} ({analytic_roll / mujoco_rate:.2f}x)"
+    )
+    finished = datetime.datetime.now(datetime.timezone.utc)
+
+    ref = dict((n, (e, r)) for n, e, r in rows)[n_ref]
+    lines += [
+        MARK_START,
+        "## Batched model-backed env (issue 4): `bench/batched_speed.py`",
+        "",
+        f"Run {started:%Y-%m-%d %H:%M}–{finished:%H:%M} UTC on {host}."
+        + (" Quick mode (smoke run)." if args.quick else ""),
+        f"Model: {delan_name}. Float64. Ratios divide by the MuJoCo `Furuta-v0` single env's "
+        "env.step/s measured in the same run with the same harness (random actions in ±5 V, "
+        f"best of {args.repeats}).",
+        "",
+        "| what | rate | ÷ MuJoCo env.step/s |",
+        "|---|---:|---:|",
+        f"| MuJoCo `Furuta-v0` single env | {mujoco_rate:,.0f} env.step/s | 1 |",
+        f"| DeLaN single env (`dynamics=model`) | {delan_single:,.0f} env.step/s | "
+        f"{delan_single / mujoco_rate:.2f} (target ≥ 0.5) |",
+        f"| **DeLaN batched env, N = {n_ref}** | {ref[0]:,.0f} state-steps/s | "
+        f"**{ref[0] / mujoco_rate:.1f}** (target ≥ 10) |",
+        f"| DeLaN pure-JAX rollout (`lax.scan`), N = {n_ref} | {ref[1]:,.0f} state-steps/s | "
+        f"{ref[1] / mujoco_rate:.1f} |",
+        f"| analytic batched env, N = {n_ref} | {analytic_env:,.0f} state-steps/s | "
+        f"{analytic_env / mujoco_rate:.1f} |",
+        f"| analytic pure-JAX rollout, N = {n_ref} | {analytic_roll:,.0f} state-steps/s | "
+        f"{analytic_roll / mujoco_rate:.1f} |",
+        "",
+        "Scaling with N (DeLaN; state-steps/s = copies × env steps per second):",
+        "",
+        "| N | batched env (state-steps/s) | ÷ MuJoCo | pure-JAX rollout (state-steps/s) | ÷ MuJoCo |",
+        "|---:|---:|---:|---:|---:|",
+    ]
+    for n, e, r in rows:
+        lines.append(f"| {n} | {e:,.0f} | {e / mujoco_rate:.2f} | {r:,.0f} | {r / mujoco_rate:.2f} |")
+    lines += [
+        "",
+        "The batched env pays one Python `step` call (host↔device copies, autoreset bookkeeping, "
+        "info arrays) per step for all copies; the rollout runs the policy and the model inside "
+        "one compiled `lax.scan`. The machine is shared, so absolute rates vary between runs; the "
+        "ratios are measured side by side.",
+        MARK_END,
+    ]
+    section = "\n".join(lines)
+    print()
+    print(section)
+    if not args.no_write:
+        write_section(ROOT / "BENCHMARKS.md", section)
+    return 0
+
+
+def write_section(path: Path, section: str) -> None:
+    """Replace this script's section of BENCHMARKS.md (between its markers) or append it."""
+    text = path.read_text() if path.exists() else "# Benchmarks\n"
+    pattern = re.compile(re.escape(MARK_START) + ".*?" + re.escape(MARK_END), re.S)
+    if pattern.search(text):
+        text = pattern.sub(lambda _: section, text)
+    else:
+        text = text.rstrip("\n") + "\n\n" + section + "\n"
+    path.write_text(text)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
