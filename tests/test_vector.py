@@ -261,7 +261,7 @@ def test_make_vec_modes():
     SyncVectorEnv for MuJoCo; vectorization_mode="sync" works for the MuJoCo ground truth."""
     import gymnasium as gym
 
-    from furuta_gym.envs.vector import FurutaVectorEnv, furuta_vector_entry_point
+    from furuta_gym.envs.vector import FurutaVectorEnv, NMSDVectorEnv
 
     sync = gym.make_vec(FURUTA_ID, num_envs=2, vectorization_mode="sync")
     obs, _ = sync.reset(seed=0)
@@ -269,21 +269,18 @@ def test_make_vec_modes():
     assert obs2.shape == (2, 4) and np.all(np.isfinite(obs2)) and np.any(obs2 != obs)
     sync.close()
 
-    test_id = "furuta_gym_test/FurutaVec-v0"
-    if test_id not in gym.registry:
-        gym.register(
-            test_id,
-            entry_point="furuta_gym.envs.furuta:FurutaEnv",
-            vector_entry_point=furuta_vector_entry_point,
-        )
-    try:
-        env = gym.make_vec(test_id, num_envs=3, dynamics="analytic")
-        assert isinstance(env.unwrapped, FurutaVectorEnv) and env.num_envs == 3
-        default = gym.make_vec(test_id, num_envs=2)  # dynamics="mujoco": Gymnasium's sync env
-        assert isinstance(default, gym.vector.SyncVectorEnv)
-        default.close()
-    finally:
-        gym.registry.pop(test_id, None)
+    # the registered vector_entry_point: batched JAX for a model, Gymnasium's sync env for MuJoCo
+    env = gym.make_vec(FURUTA_ID, num_envs=3, dynamics="analytic")
+    assert isinstance(env.unwrapped, FurutaVectorEnv) and env.num_envs == 3
+    env = gym.make_vec(
+        NMSD_ID, num_envs=2, vectorization_mode="vector_entry_point", dynamics="analytic"
+    )
+    assert isinstance(env.unwrapped, NMSDVectorEnv)
+    obs, info = env.reset(seed=0, options={"target": -0.2})
+    np.testing.assert_array_equal(info["target"], [-0.2, -0.2])
+    default = gym.make_vec(FURUTA_ID, num_envs=2)  # dynamics="mujoco"
+    assert isinstance(default, gym.vector.SyncVectorEnv)
+    default.close()
 
 
 def test_bad_input_is_one_clear_error():

@@ -35,7 +35,7 @@ from ..lagrangian import AbstractLagrangianSystem, energy
 from ._backends import ModelBackend
 from ._base import EnvArgumentError, LagrangianEnv
 from ._jax_rollout import Rollout, controlled_step, rollout
-from ._parameters import PARAMETER_CLASSES, default_parameters
+from ._parameters import PARAMETER_CLASSES
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv
 
@@ -169,7 +169,7 @@ class LagrangianVectorEnv(VectorEnv):
         self.system: AbstractLagrangianSystem = backend.model
         dynamic, self._static = eqx.partition(self.system, eqx.is_array)
         self._leaves, self._treedef = jax.tree_util.tree_flatten(dynamic)
-        parameters = backend.parameters or default_parameters(backend.system)
+        parameters = template.physical_parameters()
         analytic_params = PARAMETER_CLASSES[backend.system](**parameters)
         from ..models import analytic_model
 
