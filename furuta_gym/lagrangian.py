@@ -43,6 +43,7 @@ __all__ = [
     "inverse_dynamics_terms",
     "inverse_dynamics",
     "forward_dynamics",
+    "solve_mass_matrix",
     "vector_field",
     "linearize",
     "interval_integral",
@@ -193,6 +194,21 @@ def inverse_dynamics(system: AbstractLagrangianSystem, q, qd, qdd) -> Float[Arra
     )
 
 
+def solve_mass_matrix(M: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:
+    """M⁻¹b; in closed form for one or two degrees of freedom, else ``jnp.linalg.solve``.
+
+    Why: on CPU ``jnp.linalg.solve`` is a LAPACK custom call whose fixed cost (~5 µs) is ten times
+    the rest of an RK4 step of these tiny systems; the closed form agrees to round-off.
+    """
+    n = b.shape[-1]
+    if n == 1:
+        return b / M[0, 0]
+    if n == 2:
+        det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+        return jnp.stack([M[1, 1] * b[0] - M[0, 1] * b[1], M[0, 0] * b[1] - M[1, 0] * b[0]]) / det
+    return jnp.linalg.solve(M, b)
+
+
 def forward_dynamics(system: AbstractLagrangianSystem, q, qd, u) -> Float[Array, " n"]:
     """q̈ = M(q)⁻¹ (τ_u + τ_NC + ∂L/∂q − (∂²L/∂q∂q̇) q̇)."""
     rhs = (
@@ -201,7 +217,7 @@ def forward_dynamics(system: AbstractLagrangianSystem, q, qd, u) -> Float[Array,
         + potential_derived_force(system, q, qd)
         - coriolis_force(system, q, qd)
     )
-    return jnp.linalg.solve(system.mass_matrix(q), rhs)
+    return solve_mass_matrix(system.mass_matrix(q), rhs)
 
 
 def vector_field(system: AbstractLagrangianSystem, x, u) -> Float[Array, " 2n"]:

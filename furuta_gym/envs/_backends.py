@@ -330,50 +330,6 @@ class MujocoBackend(AbstractBackend):
 _STEP_CACHE: dict = {}
 
 
-def _solve_small(M, b):
-    """M⁻¹b in closed form for 1 or 2 degrees of freedom, else ``jnp.linalg.solve``.
-
-    Why: on CPU ``jnp.linalg.solve`` is a LAPACK custom call whose fixed cost (~5 µs) is ten
-    times the rest of an RK4 step of these tiny systems; the closed form agrees to round-off.
-    """
-    import jax.numpy as jnp
-
-    n = b.shape[-1]
-    if n == 1:
-        return b / M[0, 0]
-    if n == 2:
-        det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
-        return jnp.stack([M[1, 1] * b[0] - M[0, 1] * b[1], M[0, 0] * b[1] - M[1, 0] * b[0]]) / det
-    return jnp.linalg.solve(M, b)
-
-
-def _vector_field(system: AbstractLagrangianSystem, x, u):
-    """ẋ exactly as :func:`furuta_gym.lagrangian.vector_field` (same force terms, same order),
-    with the mass-matrix solve of :func:`_solve_small`."""
-    import jax.numpy as jnp
-
-    from ..lagrangian import coriolis_force, potential_derived_force
-
-    n = system.spec.n_dof
-    q, qd = x[:n], x[n:]
-    rhs = (
-        system.input_force(q, qd, u)
-        + system.nonconservative_force(q, qd)
-        + potential_derived_force(system, q, qd)
-        - coriolis_force(system, q, qd)
-    )
-    return jnp.concatenate([qd, _solve_small(system.mass_matrix(q), rhs)])
-
-
-def _rk4_step(system, x, u, h):
-    """One classic RK4 step, the formula of :func:`furuta_gym.simulate.rk4_step` (MuJoCo's RK4)."""
-    k1 = _vector_field(system, x, u)
-    k2 = _vector_field(system, x + 0.5 * h * k1, u)
-    k3 = _vector_field(system, x + 0.5 * h * k2, u)
-    k4 = _vector_field(system, x + h * k3, u)
-    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-
 def _compiled_steps(static, unravel, treedef_key, timestep: float, substeps: int):
     """Jitted (full period, split period) steps for one model structure; cached across envs so
     a second env of the same model (or new parameters / weights) does not recompile.
@@ -385,7 +341,8 @@ def _compiled_steps(static, unravel, treedef_key, timestep: float, substeps: int
     import jax
     import jax.numpy as jnp
 
-    rk4_step = _rk4_step
+    from ..simulate import rk4_step
+
     key = (treedef_key, timestep, substeps)
     try:
         return _STEP_CACHE[key]
