@@ -85,21 +85,32 @@ def single_env_rate(env, steps: int, repeats: int) -> float:
     return best_rate(run, steps, repeats)
 
 
-def batched_env_rate(dynamics, n: int, steps: int, repeats: int) -> float:
+def calibrated_steps(run_for, n: int, seconds: float, max_steps: int) -> int:
+    """Steps so that one timed run lasts about ``seconds`` (from a short probe run)."""
+    probe = 10
+    t0 = time.perf_counter()
+    run_for(probe)
+    per_step = (time.perf_counter() - t0) / probe
+    return int(np.clip(seconds / max(per_step, 1e-9), 10, max_steps))
+
+
+def batched_env_rate(dynamics, n: int, seconds: float, repeats: int) -> tuple[float, int]:
     from furuta_gym.envs.vector import FurutaVectorEnv
 
     env = FurutaVectorEnv(n, dynamics=dynamics)
     rng = np.random.default_rng(0)
-    actions = rng.uniform(-5.0, 5.0, size=(steps, n, 1))
     env.reset(seed=0)
-    env.step(actions[0])  # compile
+    env.step(rng.uniform(-5.0, 5.0, size=(n, 1)))  # compile
 
-    def run():
+    def run_for(steps):
         env.reset(seed=0)
-        for a in actions:
+        for a in actions[:steps]:
             env.step(a)
 
-    return best_rate(run, n * steps, repeats)
+    actions = rng.uniform(-5.0, 5.0, size=(10, n, 1))
+    steps = calibrated_steps(run_for, n, seconds, 5000)
+    actions = rng.uniform(-5.0, 5.0, size=(steps, n, 1))
+    return best_rate(lambda: run_for(steps), n * steps, repeats), steps
 
 
 def policy(obs):
@@ -109,24 +120,25 @@ def policy(obs):
     return jnp.array([2.0 * jnp.sin(obs[1]) - 0.1 * obs[2] + 0.05 * obs[3]])
 
 
-def rollout_rate(dynamics, n: int, steps: int, repeats: int) -> float:
+def rollout_rate(dynamics, n: int, seconds: float, repeats: int) -> tuple[float, int]:
     import jax
 
     from furuta_gym.envs.vector import FurutaVectorEnv
 
     env = FurutaVectorEnv(n, dynamics=dynamics)
     env.reset(seed=0)
-    jax.block_until_ready(env.rollout(policy, steps))  # compile
+    probe = 20
+    jax.block_until_ready(env.rollout(policy, probe))  # compile the probe length
+    t0 = time.perf_counter()
+    jax.block_until_ready(env.rollout(policy, probe))
+    per_step = (time.perf_counter() - t0) / probe
+    steps = int(np.clip(seconds / per_step, probe, 20000))
+    jax.block_until_ready(env.rollout(policy, steps))  # compile the timed length
 
     def run():
         jax.block_until_ready(env.rollout(policy, steps))
 
-    return best_rate(run, n * steps, repeats)
-
-
-def steps_for(n: int, budget: float) -> int:
-    """Steps so that one timed run is about ``budget`` state-steps (at least 10)."""
-    return max(10, int(budget // n))
+    return best_rate(run, n * steps, repeats), steps
 
 
 def main(argv=None) -> int:
@@ -157,8 +169,7 @@ def main(argv=None) -> int:
         delan = make_model("furuta", "dln", key=jax.random.PRNGKey(0))
         delan_name = "untrained DeLaN (make_model('furuta', 'dln'), default architecture)"
     ns = [1, 64, 1024] if args.quick else [1, 64, 1024, 4096, 16384]
-    env_budget = 2e4 if args.quick else 2e5  # state-steps per timed batched-env run
-    roll_budget = 1e5 if args.quick else 1e6  # state-steps per timed rollout
+    seconds = 0.5 if args.quick else 2.0  # wall time of one timed run
     single_steps = 2000 if args.quick else 10000
 
     lines = []
@@ -175,20 +186,26 @@ def main(argv=None) -> int:
 
     rows = []
     for n in ns:
-        env_rate = batched_env_rate(delan, n, steps_for(n, env_budget), args.repeats)
-        roll_rate = rollout_rate(delan, n, steps_for(n, roll_budget), args.repeats)
+        env_rate, env_steps = batched_env_rate(delan, n, seconds, args.repeats)
+        roll_rate, roll_steps = rollout_rate(delan, n, seconds, args.repeats)
         rows.append((n, env_rate, roll_rate))
         say(
             f"DeLaN N={n:>6}: batched env {env_rate:>12,.0f} state-steps/s "
-            f"({env_rate / mujoco_rate:6.2f}x), rollout {roll_rate:>12,.0f} ({roll_rate / mujoco_rate:6.2f}x)"
+            f"({env_rate / mujoco_rate:6.2f}x, {env_steps} steps), rollout {roll_rate:>12,.0f} "
+            f"({roll_rate / mujoco_rate:6.2f}x, {roll_steps} steps)"
         )
     n_ref = 4096 if 4096 in ns else ns[-1]
-    analytic_env = batched_env_rate("analytic", n_ref, steps_for(n_ref, env_budget), args.repeats)
-    analytic_roll = rollout_rate("analytic", n_ref, steps_for(n_ref, roll_budget), args.repeats)
+    analytic_env, _ = batched_env_rate("analytic", n_ref, seconds, args.repeats)
+    analytic_roll, _ = rollout_rate("analytic", n_ref, seconds, args.repeats)
     say(
         f"analytic N={n_ref}: batched env {analytic_env:,.0f} ({analytic_env / mujoco_rate:.2f}x), "
         f"rollout {analytic_roll:,.0f} ({analytic_roll / mujoco_rate:.2f}x)"
     )
+    # the machine is shared and its load drifts: measure the reference again at the end and
+    # divide by the faster of the two (the conservative ratio)
+    mujoco_end = single_env_rate(mujoco_env, single_steps, args.repeats)
+    say(f"MuJoCo Furuta-v0 single env again: {mujoco_end:,.0f} env.step/s")
+    mujoco_start, mujoco_rate = mujoco_rate, max(mujoco_rate, mujoco_end)
     finished = datetime.datetime.now(datetime.timezone.utc)
 
     ref = dict((n, (e, r)) for n, e, r in rows)[n_ref]
@@ -204,7 +221,8 @@ def main(argv=None) -> int:
         "",
         "| what | rate | ÷ MuJoCo env.step/s |",
         "|---|---:|---:|",
-        f"| MuJoCo `Furuta-v0` single env | {mujoco_rate:,.0f} env.step/s | 1 |",
+        f"| MuJoCo `Furuta-v0` single env (reference: the faster of start {mujoco_start:,.0f} "
+        f"and end {mujoco_end:,.0f}) | {mujoco_rate:,.0f} env.step/s | 1 |",
         f"| DeLaN single env (`dynamics=model`) | {delan_single:,.0f} env.step/s | "
         f"{delan_single / mujoco_rate:.2f} (target ≥ 0.5) |",
         f"| **DeLaN batched env, N = {n_ref}** | {ref[0]:,.0f} state-steps/s | "
