@@ -1,0 +1,227 @@
+"""Cost of one training epoch: trajectory loss L_traj versus the integral inverse loss L_Iτ.
+
+Same model (Furuta DeLaN, the paper's (16, 16) MLPs), same data, same run: 64 free Furuta
+trajectories × 100 samples at 100 Hz (the paper's training set), then 256. One epoch is what
+:func:`furuta_gym.training.train` runs: L_Iτ = one full-batch step on all trajectories; L_traj =
+all 2-step windows (the paper's first curriculum stage), in minibatches of 256 windows (our
+default) and as one full batch (the paper's recipe). Each step is value + gradient + AdamW
+update. Also: first-call (compile) time of each step in a fresh process, cold and warm with JAX's
+persistent compilation cache.
+
+Run: ``python bench/loss_cost.py`` (≈ 5-10 min on 2 cores). Rewrites its section of
+BENCHMARKS.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SECTION = "loss_cost"
+
+
+def furuta_free_data(n: int, seed: int = 0, samples: int = 100):
+    """n free Furuta trajectories (the paper's sampling: α, β ~ U(−π, π), velocities ~ U(−5, 5))."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from furuta_gym.data import Trajectory
+    from furuta_gym.models import Furuta
+    from furuta_gym.simulate import rollout_zoh
+
+    rng = np.random.default_rng(seed)
+    x0 = np.concatenate([rng.uniform(-np.pi, np.pi, (n, 2)), rng.uniform(-5, 5, (n, 2))], axis=1)
+    us = jnp.zeros((samples - 1, 1))
+    xs = np.asarray(jax.jit(jax.vmap(lambda x: rollout_zoh(Furuta(), x, us, 0.01, 10)))(jnp.asarray(x0)))
+    t = np.arange(samples) * 0.01
+    return [Trajectory(t, x[:, :2], np.zeros((samples, 1)), x[:, 2:], name=str(i)) for i, x in enumerate(xs)]
+
+
+def _setup(loss: str, n_traj: int, batch_size):
+    import equinox as eqx
+    import jax
+
+    from furuta_gym.models import make_model
+    from furuta_gym.training.losses import make_windows
+    from furuta_gym.training.train import TrainConfig, _build_optimizer, _make_step
+
+    trajs = furuta_free_data(n_traj)
+    model = make_model("furuta", "dln", jax.random.PRNGKey(0))
+    config = TrainConfig.for_system("furuta", batch_size=batch_size, progress=False)
+    optimizer, trainable, params = _build_optimizer(model, config)
+    _, static = eqx.partition(model, trainable)
+    opt_state = optimizer.init(params)
+    kind = "itau" if loss == "itau" else "traj"
+    step = _make_step(static, optimizer, kind, config, "momentum")
+    if loss == "itau":
+        w = make_windows(trajs, 100, stride=99, cover_end=True)
+        batches = [(None, w)]
+    else:
+        w = make_windows(trajs, 3, stride=1)
+        bs = w.n_windows if batch_size is None else batch_size
+        batches = [(w.take(slice(k * bs, (k + 1) * bs)), None) for k in range(w.n_windows // bs)]
+    return step, params, opt_state, batches
+
+
+def epoch_time(loss: str, n_traj: int, batch_size=256, repeats: int = 3) -> dict:
+    import jax
+    import jax.numpy as jnp
+
+    step, params, opt_state, batches = _setup(loss, n_traj, batch_size)
+    lam = jnp.asarray(1.0)
+
+    def one_epoch(params, opt_state):
+        for tb, ib in batches:
+            params, opt_state, terms, ok = step(params, opt_state, tb, ib, lam)
+        jax.block_until_ready(terms["total"])
+        return params, opt_state
+
+    t0 = time.perf_counter()
+    params, opt_state = one_epoch(params, opt_state)  # compile + first epoch
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        params, opt_state = one_epoch(params, opt_state)
+        times.append(time.perf_counter() - t0)
+    return {"loss": loss, "n_traj": n_traj, "steps": len(batches), "first_epoch_s": first,
+            "epoch_s": min(times), "epoch_s_median": sorted(times)[len(times) // 2]}
+
+
+def compile_probe(loss: str, cache_dir: str) -> float:
+    """In this (fresh) process: seconds until the first step of ``loss`` has run."""
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", cache_dir)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+    import jax.numpy as jnp
+
+    step, params, opt_state, batches = _setup(loss, 64, 256)
+    tb, ib = batches[0]
+    t0 = time.perf_counter()
+    out = step(params, opt_state, tb, ib, jnp.asarray(1.0))
+    jax.block_until_ready(out[2]["total"])
+    return time.perf_counter() - t0
+
+
+def _probe_subprocess(loss: str, cache_dir: str) -> float:
+    env = dict(os.environ, JAX_ENABLE_X64="1")
+    out = subprocess.run(
+        [sys.executable, __file__, "--probe", loss, "--cache", cache_dir],
+        capture_output=True, text=True, env=env, check=True,
+    )
+    return float(json.loads(out.stdout.strip().splitlines()[-1])["seconds"])
+
+
+def write_section(text: str) -> None:
+    path = ROOT / "BENCHMARKS.md"
+    start, end = f"<!-- {SECTION}:start -->", f"<!-- {SECTION}:end -->"
+    block = f"{start}\n{text.rstrip()}\n{end}\n"
+    old = path.read_text() if path.exists() else "# Benchmarks\n\nEach section is written by its script in bench/.\n\n"
+    if start in old and end in old:
+        new = re.sub(re.escape(start) + r".*?" + re.escape(end) + r"\n?", lambda _: block, old, flags=re.S)
+    else:
+        new = old.rstrip() + "\n\n" + block
+    path.write_text(new)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--probe", choices=["traj", "itau"])
+    parser.add_argument("--cache")
+    parser.add_argument("--no-write", action="store_true")
+    args = parser.parse_args()
+    import furuta_gym
+
+    furuta_gym.enable_x64()
+    if args.probe:
+        print(json.dumps({"seconds": compile_probe(args.probe, args.cache)}))
+        return
+
+    rows = []
+    for n in (64, 256):
+        rows.append(epoch_time("itau", n))
+        rows.append(epoch_time("traj", n, batch_size=256))
+        rows.append(epoch_time("traj", n, batch_size=None, repeats=2))
+        print(rows[-3:], flush=True)
+    compile_rows = {}
+    cache = tempfile.mkdtemp(prefix="furuta_gym_jax_cache_")
+    try:
+        for loss in ("itau", "traj"):
+            cold = _probe_subprocess(loss, cache)
+            warm = _probe_subprocess(loss, cache)
+            compile_rows[loss] = (cold, warm)
+            print(loss, cold, warm, flush=True)
+    finally:
+        shutil.rmtree(cache, ignore_errors=True)
+
+    def get(loss, n, full=False):
+        for r in rows:
+            if r["loss"] == loss and r["n_traj"] == n and ((r["steps"] == 1) == full or loss == "itau"):
+                return r
+        raise KeyError((loss, n, full))
+
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = (float("nan"),) * 3
+    lines = [
+        "## Loss cost: L_traj versus L_Iτ per epoch (`bench/loss_cost.py`)",
+        "",
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"load average at the end {load[0]:.1f} (shared machine: absolute times are inflated, the "
+        f"ratios are measured side by side in one run). Python {platform.python_version()}, "
+        f"jax {__import__('jax').__version__}. Date {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC.",
+        "",
+        "Furuta DeLaN (16, 16), float64, free trajectories × 100 samples at 100 Hz. One epoch = what",
+        "`train` runs: L_Iτ one full-batch step; L_traj every 2-step window (Tsit5, PID rtol 1e-3 / atol",
+        "1e-6) in minibatches of 256 or as one full batch. Each step = value + gradient + AdamW update.",
+        "Best of 3 epochs after the first.",
+        "",
+        "| trajectories | L_Iτ epoch | L_traj epoch (minibatch 256) | L_traj epoch (full batch) | ratio minibatch / L_Iτ | ratio full / L_Iτ |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for n in (64, 256):
+        i, tm, tf = get("itau", n), get("traj", n), get("traj", n, full=True)
+        lines.append(
+            f"| {n} | {i['epoch_s'] * 1e3:.1f} ms | {tm['epoch_s']:.2f} s ({tm['steps']} steps) | "
+            f"{tf['epoch_s']:.2f} s | {tm['epoch_s'] / i['epoch_s']:.0f}× | {tf['epoch_s'] / i['epoch_s']:.0f}× |"
+        )
+    i64, i256 = get("itau", 64), get("itau", 256)
+    t64, t256 = get("traj", 64), get("traj", 256)
+    lines += [
+        "",
+        f"Scaling 64 → 256 trajectories (4× data): L_Iτ ×{i256['epoch_s'] / i64['epoch_s']:.1f}, "
+        f"L_traj (minibatch) ×{t256['epoch_s'] / t64['epoch_s']:.1f}.",
+        "",
+        "First call (trace + compile + one step) in a fresh process, JAX persistent compilation cache",
+        "(`jax.config.update(\"jax_compilation_cache_dir\", ...)`) empty (cold) then filled (warm):",
+        "",
+        "| step | cold | warm | target |",
+        "|---|---:|---:|---:|",
+    ]
+    for loss, label in (("itau", "L_Iτ (64 traj.)"), ("traj", "L_traj 2-step (256 windows)")):
+        cold, warm = compile_rows[loss]
+        lines.append(f"| {label} | {cold:.1f} s | {warm:.1f} s | ≤ 4 s |")
+    lines.append("")
+    text = "\n".join(lines)
+    print(text)
+    if not args.no_write:
+        write_section(text)
+
+
+if __name__ == "__main__":
+    main()
