@@ -23,7 +23,7 @@ from scipy.optimize import least_squares
 
 from ..lagrangian import interval_difference, interval_integral, momentum, potential_derived_force
 from ..simulate import rollout_zoh
-from ._library import LumpedModel, ParameterLayout, layout_for
+from ._library import LumpedModel, ParameterLayout
 
 __all__ = ["Segment", "build_regressors", "ee_fit", "oe_fit", "window_errors", "delay_input"]
 

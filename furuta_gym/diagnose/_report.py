@@ -129,7 +129,7 @@ def write_figures(res, directory, overwrite: bool = False) -> list[Path]:
         ax.set_ylabel(spec_joints[j])
         if j == 0:
             ax.legend(fontsize=8, ncol=3)
-            ax.set_title(f"held-out open-loop predictions ({res.settings.window} s windows), segment {seg.name}")
+            ax.set_title(f"held-out open-loop predictions ({res.settings.window} s windows), segment {seg.name}", fontsize=9)
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     fig.savefig(targets[1], dpi=120)
