@@ -15,12 +15,18 @@ Quick start::
 
 from ._base import AbstractController, wrap_angle
 from ._evaluate import EpisodeRecord, evaluate_on_env
-from ._energy import EnergySwingUp, model_state, upright_potential
+from ._energy import (
+    DEFAULT_PUMP_ACCELERATION,
+    EnergySwingUp,
+    default_k_e,
+    model_state,
+    upright_potential,
+)
 from ._lqr import DEFAULT_Q, DEFAULT_R, LQR, UPRIGHT_STATE, LQRDesign, lqr_design
 from ._metrics import EpisodeMetrics, episode_metrics
 from ._pfl import InputMap, input_map, pfl_torque, pfl_voltage
 from ._rollout import ClosedLoop, Sensor, closed_loop
-from ._switching import BALANCE, DEFAULT_K_E, SWING_UP, SwingUpLQR
+from ._switching import BALANCE, SWING_UP, SwingUpLQR
 from ._tuning import GainSweep, near_rest_starts, pick_k_e
 
 __all__ = [
@@ -49,7 +55,8 @@ __all__ = [
     "near_rest_starts",
     "DEFAULT_Q",
     "DEFAULT_R",
-    "DEFAULT_K_E",
+    "DEFAULT_PUMP_ACCELERATION",
+    "default_k_e",
     "UPRIGHT_STATE",
     "SWING_UP",
     "BALANCE",

@@ -30,9 +30,20 @@ from ..lagrangian import AbstractLagrangianSystem
 from ._base import AbstractController
 from ._pfl import pfl_voltage
 
-__all__ = ["EnergySwingUp", "model_state", "upright_potential"]
+__all__ = [
+    "EnergySwingUp",
+    "model_state",
+    "upright_potential",
+    "default_k_e",
+    "DEFAULT_PUMP_ACCELERATION",
+]
 
 UPRIGHT = jnp.pi
+
+#: Rotor acceleration (rad/s²) the energy law commands at the hanging position, before centring:
+#: k_e·(V(π) − V(0)). 150 rad/s² saturates the 5 V QUBE motor from rest and sits a factor ≈ 2
+#: above the gain where the pump stalls (k_e ≈ 2 500 ↔ 76 rad/s², BENCHMARKS.md).
+DEFAULT_PUMP_ACCELERATION = 150.0
 
 
 def model_state(obs: Float[Array, " 4"]) -> Float[Array, " 4"]:
@@ -60,11 +71,31 @@ def _design_constants(model):
     return upright_potential(model), jnp.where(m_ab >= 0, 1.0, -1.0)
 
 
+def default_k_e(model: AbstractLagrangianSystem) -> float:
+    """k_e = DEFAULT_PUMP_ACCELERATION / (V(π) − V(0)) of ``model``: the same commanded pump
+    whatever the units or scale of the model's potential (4 939 for the analytic QUBE model,
+    whose V(π) − V(0) = 0.0304 J). Raises ``ValueError`` if the model's upright is not above its
+    hanging position (no energy to pump towards)."""
+    dV = float(_potential_rise(model))
+    if not dV > 0:
+        raise ValueError(
+            f"the model's potential is not higher upright than hanging (V(pi) - V(0) = {dV:g}); "
+            "cannot derive a default k_e — give k_e explicitly"
+        )
+    return DEFAULT_PUMP_ACCELERATION / dV
+
+
+@eqx.filter_jit
+def _potential_rise(model):
+    return upright_potential(model) - model.potential(jnp.zeros(2))
+
+
 class EnergySwingUp(AbstractController):
     """Energy swing-up ū = k_e (V(β) − V(π)) sgn(cos β β̇) − k_α α − d_α α̇, through PFL.
 
-    ``k_e`` is in rad/s² per joule of the design model's potential (see docs/control.md for
-    how defaults are picked; the paper's values are tied to its units and don't carry over).
+    ``k_e`` is in rad/s² per joule of the design model's potential; ``None`` (default) takes
+    :func:`default_k_e` (see docs/control.md; the paper's values are tied to its units and don't
+    carry over).
     """
 
     model: AbstractLagrangianSystem
@@ -79,7 +110,7 @@ class EnergySwingUp(AbstractController):
     def __init__(
         self,
         model: AbstractLagrangianSystem,
-        k_e: float = 5000.0,
+        k_e: float | None = None,
         k_alpha: float = 10.0,
         d_alpha: float = 2.0,
         voltage_limit: float = 5.0,
@@ -95,7 +126,7 @@ class EnergySwingUp(AbstractController):
         if push not in (1.0, -1.0):
             raise ValueError(f"push must be +1 or -1, got {push}")
         self.model = model
-        self.k_e = jnp.asarray(k_e, dtype=float)
+        self.k_e = jnp.asarray(default_k_e(model) if k_e is None else k_e, dtype=float)
         self.k_alpha = jnp.asarray(k_alpha, dtype=float)
         self.d_alpha = jnp.asarray(d_alpha, dtype=float)
         self.V_up, self.coupling_sign = _design_constants(model)

@@ -78,8 +78,10 @@ class SwingUpLQR(AbstractController):
     ) -> "SwingUpLQR":
         """Design both parts from any Lagrangian-system model.
 
-        ``k_e=None`` uses :data:`DEFAULT_K_E`; ``auto_gain=True`` picks k_e by a short seeded
-        closed-loop sweep on the design model itself (:func:`furuta_gym.controllers.pick_k_e`).
+        ``k_e=None`` uses :func:`~furuta_gym.controllers.default_k_e` (a fixed commanded pump of
+        150 rad/s² at the bottom, whatever the model's potential scale); ``auto_gain=True``
+        picks k_e by a short seeded closed-loop sweep on the design model itself
+        (:func:`furuta_gym.controllers.pick_k_e`).
         """
         lqr = LQR.from_model(
             model, Q=Q, R=R, dt=dt, acts_on=acts_on, voltage_limit=voltage_limit,
@@ -98,7 +100,7 @@ class SwingUpLQR(AbstractController):
             from ._tuning import pick_k_e
 
             return pick_k_e(build, model, dt=dt, seed=seed).controller
-        return build(DEFAULT_K_E if k_e is None else k_e)
+        return build(k_e)
 
     def init_state(self):
         return jnp.asarray(SWING_UP, dtype=jnp.int32)
@@ -117,5 +119,3 @@ class SwingUpLQR(AbstractController):
         u_lqr, _ = self.lqr.step((), obs)
         return jnp.where(mode == BALANCE, u_lqr, u_swing), mode
 
-
-DEFAULT_K_E = 5000.0

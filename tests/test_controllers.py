@@ -18,6 +18,7 @@ import pytest
 
 from furuta_gym.controllers import (
     BALANCE,
+    DEFAULT_PUMP_ACCELERATION,
     LQR,
     SWING_UP,
     UPRIGHT_STATE,
@@ -25,6 +26,7 @@ from furuta_gym.controllers import (
     Sensor,
     SwingUpLQR,
     closed_loop,
+    default_k_e,
     episode_metrics,
     evaluate_on_env,
     input_map,
@@ -36,7 +38,7 @@ from furuta_gym.controllers import (
 )
 from furuta_gym.effects import Effect, WithEffects
 from furuta_gym.lagrangian import forward_dynamics, linearize
-from furuta_gym.models import Furuta
+from furuta_gym.models import Furuta, FurutaParameters
 
 DT = 1.0 / 500.0
 SECONDS = 7.0
@@ -151,11 +153,13 @@ def lqr_run():
 def test_lqr_alone_stabilises_upright_on_analytic_model(model, lqr_run, beta_offset):
     lqr = LQR.from_model(model)
     x0 = jnp.array([0.3, np.pi + 0.15 + beta_offset, -0.5, 0.4])
-    for sensor in (None, Sensor()):
+    # exact observations converge; quantised angles + filtered velocities leave a small limit
+    # cycle of a few encoder counts
+    for sensor, tol_angle, tol_rate in ((None, 1e-3, 1e-3), (Sensor(), 0.01, 0.3)):
         r = lqr_run(lqr, model, x0, sensor)
         final = np.asarray(r.xs[-1])
-        assert abs((final[1] - np.pi + np.pi) % (2 * np.pi) - np.pi) < 0.01
-        assert abs(final[0]) < 0.05 and np.all(np.abs(final[2:]) < 0.05)
+        assert abs((final[1] - np.pi + np.pi) % (2 * np.pi) - np.pi) < tol_angle
+        assert abs(final[0]) < 5 * tol_angle and np.all(np.abs(final[2:]) < tol_rate)
         assert np.max(np.abs(r.us)) <= 5.0
 
 
@@ -198,11 +202,11 @@ def test_swing_up_with_measured_observations_and_unknown_spring(model, ctrl, spr
 
 
 def test_first_push_at_exact_rest_is_defined(model, ctrl):
-    swing = EnergySwingUp(model)
-    u0 = float(swing.action(jnp.zeros(4))[0])
+    act = eqx.filter_jit(lambda c, o: c.action(o))
+    u0 = float(act(EnergySwingUp(model), jnp.zeros(4))[0])
     assert u0 != 0.0 and abs(u0) <= 5.0
     # push=-1 pushes the other way, by the same amount (the law is odd in the push)
-    u1 = float(EnergySwingUp(model, push=-1.0).action(jnp.zeros(4))[0])
+    u1 = float(act(EnergySwingUp(model, push=-1.0), jnp.zeros(4))[0])
     np.testing.assert_allclose(u1, -u0, rtol=1e-12)
     # and the switching controller does the same at rest (mode swing-up)
     ctrl.reset()
@@ -258,11 +262,20 @@ def test_auto_gain_pick_sits_above_the_stall_threshold(model):
         lambda k: SwingUpLQR(EnergySwingUp(model, k_e=k), lqr), model,
         grid=(1000.0, 2000.0, 4000.0, 8000.0, 16000.0), n_starts=2, horizon=5.0,
     )
-    rates = dict(zip(sweep.grid, sweep.success_rate))
+    rates = dict(zip(sweep.grid, sweep.catch_rate))
     assert rates[1000.0] < 1.0  # small gains stall under 5 V (pitfalls note)
     assert sweep.k_e == 2 * sweep.stall_threshold
     assert all(rates[k] == 1.0 for k in sweep.grid if sweep.stall_threshold <= k <= sweep.k_e)
     assert float(sweep.controller.swing_up.k_e) == sweep.k_e
+
+
+def test_default_k_e_commands_the_same_pump_whatever_the_potential_scale(model):
+    p = model.params
+    rise = float(p.mp * p.g * p.Lp)  # V(π) − V(0) = ½ mp g Lp · 2
+    assert default_k_e(model) == pytest.approx(DEFAULT_PUMP_ACCELERATION / rise, rel=1e-12)
+    heavier = Furuta(params=FurutaParameters(mp=0.048))
+    assert default_k_e(heavier) == pytest.approx(default_k_e(model) / 2, rel=1e-12)
+    assert float(EnergySwingUp(model).k_e) == pytest.approx(default_k_e(model))
 
 
 # ---------------------------------------------------------------------------- errors and CLI
