@@ -27,6 +27,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="only this system (repeatable; default both)",
     )
     parser.add_argument(
+        "--pair", action="append", dest="pairs", metavar="MODEL:LOSS",
+        help="only this model × loss pair, e.g. dln:prop (repeatable; default all six of the paper)",
+    )
+    parser.add_argument(
         "--epochs", type=int, nargs=2, metavar=("STAGE1", "STAGE2"),
         help="override the epochs of the 2-step and the long-horizon stage (both systems)",
     )
@@ -39,18 +43,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..training.reproduce import ReproduceConfig, reproduce
+    from ..training.reproduce import PAPER_PAIRS, ReproduceConfig, reproduce
 
     if args.seeds < 1:
         raise ValueError(f"--seeds must be at least 1, got {args.seeds}")
     systems = tuple(dict.fromkeys(args.systems)) if args.systems else ("nmsd", "furuta")
     epochs = {s: tuple(args.epochs) for s in systems} if args.epochs else None
+    pairs = PAPER_PAIRS
+    if args.pairs:
+        pairs = []
+        for text in args.pairs:
+            kind, sep, loss = text.partition(":")
+            if not sep or (kind, loss) not in PAPER_PAIRS:
+                raise ValueError(
+                    f"--pair {text!r}: expected MODEL:LOSS, one of "
+                    + ", ".join(f"{k}:{l}" for k, l in PAPER_PAIRS)
+                )
+            pairs.append((kind, loss))
+        pairs = tuple(p for p in PAPER_PAIRS if p in set(pairs))  # the paper's row order
     out = Path(args.out) if args.out else Path("results") / ("reproduce_quick" if args.quick else "reproduce")
     config = ReproduceConfig(
         quick=args.quick,
         seeds=tuple(range(args.seed, args.seed + args.seeds)),
         data_seed=args.seed,
         systems=systems,
+        pairs=pairs,
         epochs=epochs,
         ground_truth=args.ground_truth,
         figures=not args.no_figures,
