@@ -36,6 +36,81 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 MARK_START = "<!-- control_benchmark:start -->"
 MARK_END = "<!-- control_benchmark:end -->"
+LEARNED_START = "<!-- control_benchmark_learned:start -->"
+LEARNED_END = "<!-- control_benchmark_learned:end -->"
+CHECKPOINT_GLOBS = (
+    "runs/furuta_*/model.eqx",  # `furuta-gym train --out runs/furuta_...`
+    "results/reproduce/runs/furuta/*/seed*/model.eqx",  # `furuta-gym reproduce`
+)
+TABLE_HEADER = (
+    "| controller | design | plant | success (seeded) | x0 = 0 | time to upright s | "
+    "peak abs α rad | ∫u²dt V²s (median) | peak V | diverged | wall s |\n"
+    "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|"
+)
+
+
+def _short(path) -> str:
+    p = Path(path).resolve()
+    return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p)
+
+
+def learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR) -> str:
+    """The learned-design subsection: each checkpoint's design (default and auto k_e) on MuJoCo."""
+    from furuta_gym.training.checkpoint import load_model
+
+    ckpts = dict(c.split("=", 1) for c in args.checkpoint)
+    for pattern in CHECKPOINT_GLOBS:
+        for p in sorted(glob.glob(str(ROOT / pattern))):
+            rel = Path(p).relative_to(ROOT)
+            name = "/".join(rel.parts[-3:-1]) if "reproduce" in rel.parts else rel.parent.name
+            ckpts.setdefault(name, p)
+    notes, rows = [], []
+    for name, path in ckpts.items():
+        n_ep = n if "prop" in name else n2
+        try:
+            learned = load_model(path, expected_system="furuta")
+        except Exception as exc:
+            notes.append(f"{name}: could not load ({type(exc).__name__}: {exc}).")
+            continue
+        for auto in (False, True) if "prop" in name else (False,):
+            label = f"{name} ({'auto' if auto else 'default'} k_e)"
+            try:
+                t = time.perf_counter()
+                c = SwingUpLQR.from_model(learned, auto_gain=auto, seed=args.seed)
+                design_s = time.perf_counter() - t
+            except Exception as exc:  # a learned design can fail: say how, keep the table
+                notes.append(f"{label}: design failed — {type(exc).__name__}: {exc}.")
+                print(notes[-1], flush=True)
+                continue
+            notes.append(
+                f"{label}: k_e = {float(c.swing_up.k_e):.0f}, LQR K = "
+                f"{np.round(np.asarray(c.lqr.K), 2).tolist()}, design {design_s:.0f} s."
+            )
+            t = time.perf_counter()
+            recs = evaluate_on_env(c, env_factory(), starts(n_ep if not auto else n2), SECONDS,
+                                   seed=args.seed)
+            rows.append(_row("swing-up + LQR (volts)", label, "mujoco", recs,
+                             time.perf_counter() - t))
+            print(rows[-1], flush=True)
+    lines = [LEARNED_START, "### Designed on learned models, run on MuJoCo", ""]
+    if not ckpts:
+        lines.append(
+            "No learned Furuta checkpoint existed when this ran (none passed with --checkpoint, "
+            f"none matching {', '.join(CHECKPOINT_GLOBS)}): the DeLaN L_prop and augmented DeLaN "
+            "L_prop design rows are missing, not failed."
+        )
+    else:
+        found = ", ".join(f"`{k}` ({_short(v)})" for k, v in ckpts.items())
+        lines.append(
+            f"`python bench/control_benchmark.py --learned-only` — "
+            f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC. Design on each "
+            f"checkpoint, plant = MuJoCo, same starts as above. Checkpoints: {found}."
+        )
+        if rows:
+            lines += ["", TABLE_HEADER, *rows]
+        lines += ["", *[f"- {x}" for x in notes]]
+    lines.append(LEARNED_END)
+    return "\n".join(lines)
 SECONDS = 8.0
 
 
@@ -64,6 +139,8 @@ def main(argv=None) -> int:
     parser.add_argument("--checkpoint", action="append", default=[],
                         help='learned design model, "NAME=PATH" (repeatable)')
     parser.add_argument("--skip-sensitivity", action="store_true")
+    parser.add_argument("--learned-only", action="store_true",
+                        help="run and rewrite only the learned-design subsection")
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
 
@@ -103,6 +180,12 @@ def main(argv=None) -> int:
         return recs
 
     n, n2 = args.episodes, args.extra_episodes
+    if args.learned_only:
+        learned_section = learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR)
+        print(learned_section)
+        if not args.no_write:
+            write_section(ROOT / "BENCHMARKS.md", learned_section, LEARNED_START, LEARNED_END)
+        return 0
     run("swing-up + LQR (volts)", "analytic", "mujoco", ctrl, n)
     run("swing-up + LQR (volts)", "analytic", "mujoco cable_spring", ctrl, n, plant="cable_spring")
     run("swing-up + LQR (volts)", "analytic", "mujoco coulomb", ctrl, n, plant="coulomb")
@@ -115,33 +198,7 @@ def main(argv=None) -> int:
     run("swing-up + LQR on ū (PFL)", "analytic", "mujoco cable_spring", ctrl_pfl, n2,
         plant="cable_spring")
 
-    # learned designs
-    ckpts = dict(c.split("=", 1) for c in args.checkpoint)
-    for p in sorted(glob.glob(str(ROOT / "runs" / "furuta_*" / "model.eqx"))):
-        ckpts.setdefault(Path(p).parent.name, p)
-    learned_notes = []
-    if not ckpts:
-        learned_notes.append(
-            "No learned Furuta checkpoint existed when this ran (none passed with --checkpoint, "
-            "none under runs/furuta_*/model.eqx): the DeLaN L_prop and augmented DeLaN L_prop "
-            "design rows are missing, not failed."
-        )
-    for name, path in ckpts.items():
-        from furuta_gym.training.checkpoint import load_model
-
-        try:
-            learned = load_model(path, expected_system="furuta")
-            t = time.perf_counter()
-            c = SwingUpLQR.from_model(learned, auto_gain=True, seed=args.seed)
-            learned_notes.append(
-                f"{name} ({path}): auto k_e = {float(c.swing_up.k_e):.0f}, design "
-                f"{time.perf_counter() - t:.0f} s, LQR |eig| max "
-                f"{np.abs(c.lqr.design.closed_loop_eigenvalues).max():.4f}."
-            )
-            run("swing-up + LQR (volts)", f"{name} (auto k_e)", "mujoco", c, n)
-        except Exception as exc:  # a learned design can fail: say how, keep the table
-            learned_notes.append(f"{name} ({path}): design failed — {type(exc).__name__}: {exc}")
-            print(learned_notes[-1], flush=True)
+    learned_section = learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR)
 
     # k_e sensitivity on model plants (pure JAX, vmapped)
     sens_lines = []
@@ -206,7 +263,7 @@ def main(argv=None) -> int:
         "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|",
         *rows,
         "",
-        "Learned designs: " + " ".join(learned_notes),
+        learned_section,
         "",
     ]
     if sens_lines:
@@ -227,10 +284,10 @@ def main(argv=None) -> int:
     return 0
 
 
-def write_section(path: Path, section: str) -> None:
+def write_section(path: Path, section: str, start: str = MARK_START, end: str = MARK_END) -> None:
     """Replace this script's section of BENCHMARKS.md (between its markers) or append it."""
     text = path.read_text() if path.exists() else "# Benchmarks\n"
-    pattern = re.compile(re.escape(MARK_START) + ".*?" + re.escape(MARK_END), re.S)
+    pattern = re.compile(re.escape(start) + ".*?" + re.escape(end), re.S)
     if pattern.search(text):
         text = pattern.sub(lambda _: section, text)
     else:
