@@ -312,3 +312,5 @@ def test_control_cli_writes_report_plot_and_refuses_overwrite(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err and out.read_text() == before
     assert main(["control", "--plant", "nowhere", "--json", str(tmp_path / "x.json")]) == 2
     assert "--plant 'nowhere'" in capsys.readouterr().err
+    assert main(["control", "--design", str(tmp_path / "no.eqx"), "--json", str(tmp_path / "y.json")]) == 2
+    assert "--design" in capsys.readouterr().err
