@@ -73,12 +73,18 @@ def pfl_torque(model: AbstractLagrangianSystem, q, qd, ubar) -> Float[Array, ""]
     return M[a, a] * ubar + M[a, p] * betadd - h[a]
 
 
-def pfl_voltage(model: AbstractLagrangianSystem, x: Float[Array, " 2n"], ubar) -> Float[Array, ""]:
-    """The (unsaturated) voltage that makes α̈ = ū on ``model`` at state ``x`` = (q, q̇).
+def pfl_voltage(
+    model: AbstractLagrangianSystem,
+    x: Float[Array, " 2n"],
+    ubar,
+    voltage_limit: float | None = None,
+) -> Float[Array, ""]:
+    """The voltage that makes α̈ = ū on ``model`` at state ``x`` = (q, q̇), clipped to
+    ±``voltage_limit`` when given (then α̈ = ū only while unsaturated).
 
     Solves e_αᵀ M⁻¹ (G u + τ_u(q, q̇, 0) + h) = ū for the scalar input u, where G = ∂τ_u/∂u;
     with a collocated input map this is exactly u = (τ_α − offset_α) / G_α, τ_α from
-    :func:`pfl_torque`. Saturate the result yourself (the controllers clip at their limit).
+    :func:`pfl_torque`.
     """
     n = model.spec.n_dof
     q, qd = x[:n], x[n:]
@@ -88,4 +94,5 @@ def pfl_voltage(model: AbstractLagrangianSystem, x: Float[Array, " 2n"], ubar) -
     Minv_row = jnp.linalg.solve(M, jnp.eye(n, dtype=M.dtype)[ACTUATED_JOINT])  # M symmetric
     accel_at_zero = Minv_row @ (imap.offset + h)
     accel_per_volt = Minv_row @ imap.gain[:, 0]
-    return (ubar - accel_at_zero) / accel_per_volt
+    u = (ubar - accel_at_zero) / accel_per_volt
+    return u if voltage_limit is None else jnp.clip(u, -voltage_limit, voltage_limit)

@@ -107,6 +107,9 @@ def test_pfl_torque_is_inverted_through_input_map_with_back_emf(model):
     p = model.params
     np.testing.assert_allclose(imap.gain[0, 0], p.kt / p.Rm, rtol=1e-12)
     np.testing.assert_allclose(imap.offset[0], -p.kt * p.km / p.Rm * 7.0, rtol=1e-12)
+    x = jnp.concatenate([q, qd])
+    assert float(pfl_voltage(model, x, 1e4, voltage_limit=5.0)) == 5.0
+    assert float(pfl_voltage(model, x, -1e4, voltage_limit=5.0)) == -5.0
 
 
 # ---------------------------------------------------------------------------- LQR
