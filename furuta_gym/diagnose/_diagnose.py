@@ -559,6 +559,13 @@ def diagnose(
         th, ok = _fit.oe_fit(layout, start, free, win, smoothing, substeps, max_nfev=settings.oe_max_nfev)
         if not ok:
             notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
+            return th
+        # keep the output-error estimate only if it also predicts better on the validation
+        # windows it did not see (with few windows it can fit the velocity-estimate noise)
+        if _physical(layout, start) and validation_rmse(start, delay) < validation_rmse(th, delay):
+            notes.append(f"the {label} estimate predicts better on validation windows than the "
+                         f"output-error refinement; kept ({tag})")
+            return start
         return th
 
     th_before = refine(th_ee, free_base, 0.0, "declared model")
