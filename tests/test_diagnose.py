@@ -171,8 +171,7 @@ GRID = [
     ("furuta", ("spring", "alpha", 2e-3), None),
     ("furuta", ("coulomb_friction", "alpha", 3e-4), None),
     ("furuta", ("coulomb_friction", "alpha", 1e-3), None),
-    # Coulomb 1e-4 N m on the pendulum is at the detection floor of 2048-count encoders with
-    # 6 × 5 s of data: found first, but the coefficient is off by up to 63 % (docs/diagnose.md)
+    ("furuta", ("coulomb_friction", "beta", 1e-4), "beta"),
     ("furuta", ("coulomb_friction", "beta", 1e-3), "beta"),
     ("furuta", ("quadratic_drag", "beta", 2e-6), "beta"),
     ("furuta", ("constant_torque", "alpha", 2e-4), None),
