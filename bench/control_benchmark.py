@@ -118,13 +118,14 @@ def _row(name, design, plant, records, wall):
     ms = [r.metrics for r in records]
     seeded = ms[1:]
     ok = [m for m in ms if m.success]
-    t = np.array([m.time_to_upright for m in ok]) if ok else np.array([np.nan])
+    t = np.array([m.time_to_upright for m in ok]) if ok else None
     a = np.array([m.peak_abs_alpha for m in ms])
     e = np.array([m.control_energy for m in ms])
     return (
         f"| {name} | {design} | {plant} | {np.mean([m.success for m in seeded]):.0%} "
         f"({sum(m.success for m in seeded)}/{len(seeded)}) | {'yes' if ms[0].success else 'NO'} | "
-        f"{np.nanmedian(t):.2f} / {np.nanmax(t):.2f} | {np.median(a):.2f} / {a.max():.2f} | "
+        + (f"{np.median(t):.2f} / {t.max():.2f}" if t is not None else "—")
+        + f" | {np.median(a):.2f} / {a.max():.2f} | "
         f"{np.median(e):.1f} | {max(m.peak_voltage for m in ms):.1f} | "
         f"{sum(m.diverged for m in ms)} | {wall:.0f} |"
     )
