@@ -154,10 +154,10 @@ def main(argv=None) -> int:
     import equinox as eqx
 
     from furuta_gym.controllers import (
-        EnergySwingUp, LQR, SwingUpLQR, closed_loop, episode_metrics, evaluate_on_env,
+        EnergySwingUp, SwingUpLQR, closed_loop, episode_metrics, evaluate_on_env,
         near_rest_starts, pick_k_e,
     )
-    from furuta_gym.effects import Effect, WithEffects
+    from furuta_gym.effects import WithEffects
     from furuta_gym.envs import PLANT_PRESETS
     from furuta_gym.models import Furuta
 
