@@ -256,6 +256,28 @@ def test_broken_model_diverges_in_one_copy_only():
     assert div_step is not None and not out[4]["diverged"][[0, 2]].any()
 
 
+def test_learned_checkpoint_by_path_matches_single_envs(tmp_path):
+    """dynamics=<checkpoint path>: a (untrained) DeLaN saved by furuta_gym.training loads in the
+    batched env and steps exactly like single envs loading the same file."""
+    import gymnasium as gym
+
+    from furuta_gym.envs.vector import FurutaVectorEnv
+    from furuta_gym.models import make_model
+    from furuta_gym.training.checkpoint import save_model
+
+    path = save_model(tmp_path / "dln.eqx", make_model("furuta", "dln", key=jax.random.PRNGKey(3)))
+    batched = FurutaVectorEnv(2, dynamics=str(path))
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make(FURUTA_ID, dynamics=str(path))] * 2)
+    out, ref = batched.reset(seed=7), sync.reset(seed=7)
+    np.testing.assert_array_equal(out[0], ref[0])
+    rng = np.random.default_rng(2)
+    for _ in range(10):
+        actions = rng.uniform(-5.0, 5.0, size=(2, 1))
+        out, ref = batched.step(actions), sync.step(actions)
+        _assert_same_step(out, ref)
+    assert _max_diff(out[4]["state"], 0.0) > 1e-3 and not out[4]["diverged"].any()
+
+
 def test_make_vec_modes():
     """make_vec: the vector entry point gives the batched env for a model backend and a
     SyncVectorEnv for MuJoCo; vectorization_mode="sync" works for the MuJoCo ground truth."""

@@ -132,7 +132,6 @@ def rollout(
     terminated_fn: TerminatedFn | None = None,
     observation_fn: Callable[[Array], Array] | None = None,
     policy_state: Any = None,
-    chunk_size: int | None = None,
 ) -> Rollout:
     """Run ``policy`` in closed loop from every initial state, entirely inside ``lax.scan``.
 
@@ -147,9 +146,6 @@ def rollout(
     Compiled once per (structure of system and policy, ``steps``, options); new weights of the same
     model reuse the compilation. Pass module-level functions for ``reward_fn`` / ``terminated_fn`` /
     ``observation_fn`` (a new lambda each call recompiles).
-
-    ``chunk_size`` runs a large batch as sequential vmapped chunks of that many copies (less
-    memory; sometimes faster when a batch's intermediates overflow the cache).
 
     Returns a :class:`Rollout` (states, actions, rewards, terminated/diverged/done flags).
     """
@@ -183,7 +179,6 @@ def rollout(
         terminated_fn=terminated_fn,
         observation_fn=observation_fn,
         stateful=stateful,
-        chunk_size=None if chunk_size is None else int(chunk_size),
     )
     if single:
         out = Rollout(*(a[0] for a in out))
@@ -273,18 +268,4 @@ def _rollout_vmapped(
     return jax.vmap(one_copy)(x0s)
 
 
-@eqx.filter_jit
-def _rollout_batch(system, policy, x0s, policy_state, *, chunk_size=None, **options):
-    """Jitted batch rollout; with ``chunk_size`` the batch runs as sequential vmapped chunks
-    (``lax.map``), which keeps each chunk's intermediates in cache at large N."""
-    n = x0s.shape[0]
-    if chunk_size is None or chunk_size >= n:
-        return _rollout_vmapped(system, policy, x0s, policy_state, **options)
-    n_chunks = -(-n // chunk_size)
-    pad = n_chunks * chunk_size - n
-    padded = jnp.concatenate([x0s, jnp.repeat(x0s[-1:], pad, axis=0)]) if pad else x0s
-    chunks = padded.reshape(n_chunks, chunk_size, x0s.shape[-1])
-    out = jax.lax.map(
-        lambda xc: _rollout_vmapped(system, policy, xc, policy_state, **options), chunks
-    )
-    return jax.tree_util.tree_map(lambda a: a.reshape((n_chunks * chunk_size,) + a.shape[2:])[:n], out)
+_rollout_batch = eqx.filter_jit(_rollout_vmapped)

@@ -414,7 +414,6 @@ class LagrangianVectorEnv(VectorEnv):
         *,
         x0s=None,
         policy_state: Any = None,
-        chunk_size: int | None = None,
     ) -> Rollout:
         """Run a jittable ``policy`` for ``steps`` control periods from ``x0s`` (default: the
         copies' current states) entirely in JAX, with this env's integration, clipping, task,
@@ -437,7 +436,6 @@ class LagrangianVectorEnv(VectorEnv):
             terminated_fn=self.task.terminated,
             observation_fn=self._quantizer if any(self._quantizer.steps) else None,
             policy_state=policy_state,
-            chunk_size=chunk_size,
         )
 
     @property
