@@ -204,3 +204,29 @@ def test_scale_fit_recovers_a_known_scale():
     assert fit.relative_residual_after < 1e-3 < fit.relative_residual_before
     with pytest.raises(ValueError, match="forced trajectory"):
         fit_scale(truth, [Trajectory(t, traj.q, np.zeros_like(traj.u), traj.qd)])
+
+
+# -- CLI ---------------------------------------------------------------------------------------
+
+
+def test_cli_trains_writes_a_loadable_model_and_reports_bad_input(nmsd_data, tmp_path, capsys):
+    from furuta_gym.cli import main
+    from furuta_gym.data import save_trajectories
+
+    data = tmp_path / "train.csv"
+    save_trajectories(data, nmsd_data[0][:4], "nmsd")
+    out = tmp_path / "run"
+    args = ["train", "--system", "nmsd", "--model", "dln", "--loss", "itau", "--data", str(data),
+            "--out", str(out), "--epochs", "3", "--hidden", "4,4", "--no-progress"]
+    assert main(args) == 0
+    model = ckpt.load_model(out / "model.eqx", expected_system="nmsd")
+    assert model.hyperparameters["hidden"] == (4, 4)
+    assert ckpt.read_header(out / "model.eqx")["meta"]["epoch"] == 3
+    assert main(args) == 2  # the run exists: refused without --resume
+    assert "--resume" in capsys.readouterr().err
+    assert main(args[:-1] + ["--epochs", "4", "--resume", "--no-progress"]) == 0
+    assert ckpt.read_header(out / "model.eqx")["meta"]["epoch"] == 4
+    assert main(["train", "--system", "furuta", "--model", "dln", "--loss", "itau", "--data", str(data),
+                 "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert "train.csv" in err
