@@ -32,6 +32,9 @@ GRID = [
     ("furuta", ("quadratic_drag", "beta", 2e-6)),
     ("furuta", ("constant_torque", "alpha", 2e-4)),
     ("furuta", ("input_delay", "u", 0.006)),
+    ("furuta", ("spring", "beta", 2e-3)),
+    ("furuta", ("constant_torque", "beta", 5e-5)),
+    ("furuta", ("quadratic_drag", "alpha", 2e-5)),
     ("furuta", ("viscous_friction", "alpha", 2e-4)),  # in the declared model's span: must be absorbed
     ("furuta", None),
     ("nmsd", ("coulomb_friction", "p", 0.3)),
