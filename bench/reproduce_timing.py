@@ -1,0 +1,75 @@
+"""Refresh the "Reproduction timings" section of BENCHMARKS.md from reproduction run records.
+
+`furuta-gym reproduce` times itself (data, every model's training + evaluation, figures, total)
+and writes ``<out>/run.json``; this script tabulates one or more such records side by side:
+
+    python bench/reproduce_timing.py results/reproduce/run.json [more run.json ...]
+
+It never runs a reproduction itself (a full run takes most of an hour on a shared 2-core CPU).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+START, END = "<!-- reproduce_timing:start -->", "<!-- reproduce_timing:end -->"
+
+
+def section(records: list[tuple[Path, dict]]) -> str:
+    lines = [
+        START,
+        "## Reproduction timings (`furuta-gym reproduce`)",
+        "",
+        "Wall-clock seconds from each run's own `run.json` (`python bench/reproduce_timing.py "
+        + " ".join(str(p) for p, _ in records)
+        + "`). Per model: training (JAX compiles included) + evaluation on every test set. "
+        "The machine is shared: the load average at the time is part of the number.",
+        "",
+        "| run | date (UTC) | command | epochs (stage 1, stage 2) | data s | models | per model s (min / median / max) | figures s | total s |",
+        "|---|---|---|---|---:|---:|---|---:|---:|",
+    ]
+    for path, rec in records:
+        secs = rec.get("seconds", {})
+        per_model = [
+            v["seconds"] for k, v in secs.items()
+            if isinstance(v, dict) and v.get("status") in ("trained", "resumed", "loaded")
+        ]
+        data_s = sum(v for k, v in secs.items() if k.endswith("/data"))
+        if per_model:
+            per_model.sort()
+            stats = f"{per_model[0]:.0f} / {per_model[len(per_model) // 2]:.0f} / {per_model[-1]:.0f}"
+        else:
+            stats = "all reused"
+        epochs = ", ".join(f"{s}: {tuple(e)}" for s, e in rec.get("epochs", {}).items())
+        cpu = rec.get("machine", {}).get("cpu", "?")
+        lines.append(
+            f"| {path.parent.name} | {rec.get('date_utc', '?')} | `{rec.get('command') or '(API)'}` | "
+            f"{epochs} | {data_s:.0f} | {len(per_model)} | {stats} | {secs.get('figures', 0):.0f} | "
+            f"{secs.get('total', 0):.0f} |"
+        )
+    lines += ["", f"Machine: {cpu}, {records[-1][1].get('machine', {}).get('cpu_count')} logical cores (shared).", END]
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> int:
+    if not argv:
+        print(__doc__)
+        return 2
+    records = [(Path(a), json.loads(Path(a).read_text())) for a in argv]
+    bench = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
+    text = bench.read_text() if bench.exists() else "# Benchmarks\n"
+    new = section(records)
+    if START in text and END in text:
+        text = re.sub(re.escape(START) + ".*?" + re.escape(END), lambda _: new, text, flags=re.S)
+    else:
+        text = text.rstrip("\n") + "\n\n" + new + "\n"
+    bench.write_text(text)
+    print(new)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

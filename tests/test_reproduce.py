@@ -1,0 +1,111 @@
+"""Reproduction pipeline (issue 6): an end-to-end run smaller than --quick writes the tables
+beside the paper's numbers, figures and a run record, reuses finished models, and the table logic
+(N/A, X, seeds) follows the paper's conventions."""
+
+import csv
+import json
+import math
+
+import pytest
+
+from furuta_gym.training.reproduce import (
+    METRIC_COLUMNS,
+    ReproduceConfig,
+    build_tables,
+    load_paper_table,
+    reproduce,
+)
+
+TINY = ReproduceConfig(
+    quick=True,
+    systems=("nmsd",),
+    pairs=(("dln", "prop"),),
+    epochs={"nmsd": (1, 0)},  # one training compile: the 2-step stage only
+    progress=False,
+    ground_truth="analytic",
+)
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce")
+    logs = []
+    paths = reproduce(out, TINY, command="pytest tiny", log=logs.append)
+    return out, paths, logs
+
+
+def test_tiny_run_writes_tables_beside_the_paper(tiny_run):
+    out, paths, logs = tiny_run
+    with open(paths["tables.csv"]) as fh:
+        rows = list(csv.DictReader(fh))
+    paper = load_paper_table()
+    assert len(rows) == 2 * len(METRIC_COLUMNS["nmsd"])  # Chirp + Square, one model row each
+    for r in rows:
+        assert (r["system"], r["model"], r["loss"]) == ("nmsd", "DLN", "prop")
+        assert math.isfinite(float(r["ours_mean"]))
+        assert r["paper"] == paper[("nmsd", r["test_set"], "DLN", "prop", r["metric"])]
+        assert r["better_or_equal"] in ("yes", "no")
+    md = paths["tables.md"].read_text()
+    assert "| Chirp | DLN (L_prop) |" in md and "(-0.8561)" in md and "Quick run" in md
+    for name in ("predictions_nmsd", "energy_state_nmsd", "energy_time_nmsd", "forces_nmsd"):
+        assert paths[name].stat().st_size > 10_000
+    record = json.loads(paths["run.json"].read_text())
+    assert record["command"] == "pytest tiny" and record["machine"]["cpu_count"] >= 1
+    assert record["seconds"]["nmsd/dln_prop/seed0"]["status"] == "trained"
+    assert (out / "data" / "nmsd" / "manifest.json").exists()
+
+
+def test_rerun_reuses_finished_models_and_refuses_other_settings(tiny_run):
+    out, _, _ = tiny_run
+    logs = []
+    paths = reproduce(out, TINY, command="again", log=logs.append)
+    record = json.loads(paths["run.json"].read_text())
+    assert record["seconds"]["nmsd/dln_prop/seed0"]["status"] == "reused"
+    other = ReproduceConfig(**{**TINY.__dict__, "epochs": {"nmsd": (2, 0)}})
+    with pytest.raises(ValueError, match="other settings"):
+        reproduce(out, other, log=logs.append)
+
+
+def test_evaluate_cli_on_the_trained_checkpoint(tiny_run, tmp_path):
+    from furuta_gym.cli import main
+
+    out, _, _ = tiny_run
+    ckpt = out / "runs" / "nmsd" / "dln_prop" / "seed0" / "model.eqx"
+    js = tmp_path / "m.json"
+    assert main(["evaluate", str(ckpt), "--data", str(out / "data" / "nmsd" / "test_square.csv"),
+                 "--json", str(js)]) == 0
+    result = json.loads(js.read_text())
+    (metrics,) = result["results"].values()
+    stored = json.loads((ckpt.parent / "metrics.json").read_text())["Square"]
+    for name in METRIC_COLUMNS["nmsd"]:
+        assert metrics[name] == pytest.approx(stored[name], abs=1e-6)
+    assert main(["evaluate", str(ckpt), "--data", str(out / "data" / "nmsd" / "test_square.csv"),
+                 "--json", str(js)]) == 2  # never overwrites
+
+
+def test_table_conventions_na_x_and_seed_spread():
+    cfg = ReproduceConfig(systems=("furuta",), pairs=(("dln", "prop"), ("aph", "aph")), seeds=(0, 1, 2))
+    good = {m: -2.0 for m in METRIC_COLUMNS["furuta"]}
+    results = {
+        ("furuta", "dln", "prop"): [
+            {"Free": {**good, "alpha": -1.0}, "Forced": good},
+            {"Free": {**good, "alpha": -3.0}, "Forced": {**good, "alpha": "X"}},
+            {"Free": good, "Forced": good},
+        ],
+        ("furuta", "aph", "aph"): [{"Free": good, "Forced": {**good, "beta": "X"}}] * 3,
+    }
+    rows = {(r["test_set"], r["model"], r["metric"]): r for r in build_tables(results, cfg)}
+    r = rows[("Free", "DLN", "alpha")]
+    assert float(r["ours_mean"]) == pytest.approx(-2.0) and float(r["ours_std"]) == pytest.approx(1.0)
+    assert r["paper"] == "-0.3147" and r["better_or_equal"] == "yes"
+    assert rows[("Forced", "DLN", "alpha")]["ours"].endswith("(1/3 X)")
+    assert rows[("Forced", "APH", "beta")]["ours"] == "X"
+    assert rows[("Forced", "APH", "beta")]["better_or_equal"] == "no"
+    assert rows[("Free", "APH", "inertial")]["ours"] == "N/A" and rows[("Free", "APH", "inertial")]["paper"] == "N/A"
+
+
+def test_config_rejects_pairs_the_paper_does_not_report():
+    with pytest.raises(ValueError, match="not one the paper reports"):
+        ReproduceConfig(pairs=(("dln", "aph"),))
+    with pytest.raises(ValueError, match="unknown system"):
+        ReproduceConfig(systems=("cartpole",))
