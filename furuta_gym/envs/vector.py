@@ -193,7 +193,6 @@ class LagrangianVectorEnv(VectorEnv):
         self._x = np.zeros((self.num_envs, n_state))
         self._obs = np.zeros((self.num_envs, n_state))
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._last_u = np.zeros(self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
         self._needs_reset = True
 
@@ -342,7 +341,6 @@ class LagrangianVectorEnv(VectorEnv):
         obs = self._observe(x0)
         self._obs[idx] = obs
         self._steps[idx] = 0
-        self._last_u[idx] = 0.0
         self._autoreset[idx] = False
         return self._obs.copy(), self._reset_info(idx, x0)
 
