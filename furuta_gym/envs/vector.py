@@ -128,8 +128,12 @@ class LagrangianVectorEnv(VectorEnv):
       (shape ``(2n,)``) or copy ``k`` at ``x[k]`` (shape ``(N, 2n)``); ``options={"reset_mask":
       mask}`` resets only the masked copies.
     * ``step(actions)``: actions of shape ``(N, 1)`` (or ``(N,)``), clipped to the limit; NaN/inf
-      raises ``ValueError``. Next-step autoreset: a copy whose episode ended at the previous step
-      is reset instead of stepped (reward 0, ``terminated``/``truncated`` False, its reset info).
+      raises ``ValueError``. Next-step autoreset (default, Gymnasium's default): a copy whose
+      episode ended at the previous step is reset instead of stepped (reward 0,
+      ``terminated``/``truncated`` False, its reset info). ``autoreset_mode="SameStep"`` resets
+      it within the ending step (its last observation and info in ``info["final_obs"]`` /
+      ``info["final_info"]``); ``"Disabled"`` leaves resets to ``reset(options={"reset_mask":
+      ...})``. Exactly as :class:`~gymnasium.vector.SyncVectorEnv` with that mode.
     * ``info``: ``time``, ``energy``, ``diverged``, ``state``, ``action`` (and ``target`` for
       N-MSD) as arrays over copies, each with its Gymnasium ``_key`` mask.
     """
@@ -137,7 +141,14 @@ class LagrangianVectorEnv(VectorEnv):
     env_class: ClassVar[type[LagrangianEnv]]
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int, dynamics: Any = "analytic", **env_kwargs):
+    def __init__(
+        self,
+        num_envs: int,
+        dynamics: Any = "analytic",
+        *,
+        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+        **env_kwargs,
+    ):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if isinstance(dynamics, str) and dynamics == "mujoco":
@@ -185,7 +196,18 @@ class LagrangianVectorEnv(VectorEnv):
         self.single_action_space = template.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.metadata = {**type(self).metadata, "render_fps": template.metadata["render_fps"]}
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ValueError(
+                f"autoreset_mode must be one of {[m.value for m in AutoresetMode]} (or an "
+                f"AutoresetMode), got {autoreset_mode!r}"
+            ) from None
+        self.metadata = {
+            **type(self).metadata,
+            "autoreset_mode": self.autoreset_mode,
+            "render_fps": template.metadata["render_fps"],
+        }
         self.render_mode = None
 
         n_state = 2 * self._n
@@ -373,36 +395,63 @@ class LagrangianVectorEnv(VectorEnv):
         reward, terminated, diverged, e = (
             reward.astype(np.float64), terminated.copy(), diverged.copy(), e.copy()
         )
-        resetting = self._autoreset
+        mode = self.autoreset_mode
+        resetting = self._autoreset if mode == AutoresetMode.NEXT_STEP else np.zeros_like(self._autoreset)
+        if mode == AutoresetMode.DISABLED and self._autoreset.any():
+            raise ValueError(
+                f"autoreset_mode=DISABLED: copies {np.flatnonzero(self._autoreset)[:10].tolist()} "
+                "ended their episode; reset them with reset(options={'reset_mask': mask}) first"
+            )
         stepped = ~resetting
         steps = self._steps + stepped
         truncated = stepped & (self._max_steps is not None) & (steps >= (self._max_steps or 0))
         # a diverged copy keeps its last observation (already the frozen state's observation)
         action = u[:, 0].copy()
+        final = None
+        if mode == AutoresetMode.SAME_STEP:
+            resetting = terminated | truncated
+            if resetting.any():
+                final = self._step_info(steps, e, diverged, x_next, action, resetting)
+                final_obs = np.full(self.num_envs, None, dtype=object)
+                for k in np.flatnonzero(resetting):
+                    final_obs[k] = obs[k].copy()
         if resetting.any():
             idx = np.flatnonzero(resetting)
             x0 = self._initial_states(idx)
             x_next[idx] = x0
             obs[idx] = self._observe(x0)
-            reward[idx] = 0.0
-            terminated[idx] = False
             diverged[idx] = False
-            truncated[idx] = False
             steps[idx] = 0
             action[idx] = 0.0
             e[idx] = self._energies(x0)
+            if mode == AutoresetMode.NEXT_STEP:  # the reset *is* this step: nothing happened
+                reward[idx] = 0.0
+                terminated[idx] = False
+                truncated[idx] = False
         self._x, self._obs, self._steps = x_next, obs, steps
         self._autoreset = terminated | truncated
+        if mode == AutoresetMode.SAME_STEP:
+            self._autoreset[:] = False
+        info = self._step_info(steps, e, diverged, x_next, action, np.ones(self.num_envs, dtype=bool))
+        if final is not None:
+            info.update(final_obs=final_obs, _final_obs=resetting.copy())
+            info.update(final_info=final, _final_info=resetting.copy())
+        return obs.copy(), reward, terminated, truncated, info
+
+    def _step_info(self, steps, e, diverged, x, action, mask) -> dict[str, Any]:
+        """Batched info (entries outside ``mask`` zeroed, as Gymnasium fills absent copies)."""
         info = {
             "time": steps * self.dt,
-            "energy": e,
-            "diverged": diverged,
-            "state": x_next.copy(),
-            "action": action,
+            "energy": e.copy(),
+            "diverged": diverged.copy(),
+            "state": x.copy(),
+            "action": action.copy(),
         }
         info.update(self._extra_info(self.num_envs))
-        info = _with_masks(info, np.ones(self.num_envs, dtype=bool))
-        return obs.copy(), reward, terminated, truncated, info
+        if not mask.all():
+            info = {k: np.where(mask.reshape((-1,) + (1,) * (v.ndim - 1)), v, 0).astype(v.dtype)
+                    for k, v in info.items()}
+        return _with_masks(info, mask)
 
     # ------------------------------------------------------------------ pure-JAX rollouts
     def rollout(
@@ -512,11 +561,13 @@ def make_vector_env(env_id: str, num_envs: int, dynamics: Any = "mujoco", **kwar
     classes = {ENV_IDS["furuta"]: FurutaVectorEnv, ENV_IDS["nmsd"]: NMSDVectorEnv}
     if env_id not in classes:
         raise ValueError(f"env_id must be one of {sorted(classes)}, got {env_id!r}")
+    autoreset_mode = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
     if isinstance(dynamics, str) and dynamics == "mujoco":
         return gymnasium.vector.SyncVectorEnv(
-            [lambda: gymnasium.make(env_id, dynamics=dynamics, **kwargs)] * int(num_envs)
+            [lambda: gymnasium.make(env_id, dynamics=dynamics, **kwargs)] * int(num_envs),
+            autoreset_mode=autoreset_mode,
         )
-    return classes[env_id](num_envs, dynamics=dynamics, **kwargs)
+    return classes[env_id](num_envs, dynamics=dynamics, autoreset_mode=autoreset_mode, **kwargs)
 
 
 def furuta_vector_entry_point(num_envs: int = 1, **kwargs) -> VectorEnv:
