@@ -57,6 +57,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--weight-decay", type=float, help="AdamW weight decay (default 1e-5)")
     parser.add_argument("--batch-size", type=int, help="trajectory windows per step; 0 = full batch")
     parser.add_argument("--lambda", dest="lam", type=float, help="λ of L_prop / initial λ of L_aph (default 1)")
+    parser.add_argument("--lambda-step", type=float,
+                        help="dual-ascent step τ₂ on λ after each epoch (default 1000 for aph, 0 otherwise)")
     parser.add_argument("--quadrature", choices=["trapezoid", "simpson"], help="L_Iτ rule (default trapezoid)")
     parser.add_argument("--hidden", type=_ints, help="MLP widths, e.g. 16,16")
     parser.add_argument("--seed", type=int, help="random seed (weights, shuffling)")
@@ -72,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     forced = load_trajectories(args.forced, args.system, require_velocities=True) if args.forced else None
     overrides = {}
     for name, key in [("epochs", "epochs"), ("horizons", "horizons"), ("lr", "learning_rate"),
-                      ("weight_decay", "weight_decay"), ("lam", "lambda_traj"),
+                      ("weight_decay", "weight_decay"), ("lam", "lambda_traj"), ("lambda_step", "lambda_step"),
                       ("quadrature", "quadrature"), ("seed", "seed"), ("checkpoint_every", "checkpoint_every")]:
         value = getattr(args, name)
         if value is not None:
