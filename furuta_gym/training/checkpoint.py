@@ -79,7 +79,7 @@ def _tuplify(value):
     return value
 
 
-def _write(path: Path, header: dict, tree: Any, overwrite: bool) -> None:
+def _write(path: Path, header: dict, tree: Any, overwrite: bool, sync: bool = True) -> None:
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path}: already exists; pass overwrite=True to replace it")
@@ -97,8 +97,9 @@ def _write(path: Path, header: dict, tree: Any, overwrite: bool) -> None:
             fh.write(MAGIC)
             fh.write(line + b"\n")
             fh.write(payload)
-            fh.flush()
-            os.fsync(fh.fileno())
+            if sync:
+                fh.flush()
+                os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -232,7 +233,8 @@ def save_training_state(path: str | Path, model, opt_state, header_extra: dict) 
     header = _model_header(model, header_extra.pop("meta", None))
     header["content"] = "training_state"
     header["state"] = header_extra
-    _write(path, header, (model, opt_state), overwrite=True)
+    # no fsync: written after every epoch, and the rename is atomic against a killed process
+    _write(path, header, (model, opt_state), overwrite=True, sync=False)
     return path
 
 

@@ -53,6 +53,7 @@ __all__ = ["TrainConfig", "train", "fit_scale", "data_hash", "LOSSES", "ScaleFit
 
 LOSSES = ("traj", "aph", "prop", "itau")
 STATE_FILE = "train_state.eqx"
+HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
 
 
@@ -263,6 +264,21 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
     return step
 
 
+def _read_history(path: Path, epochs: int) -> list[dict]:
+    """The first ``epochs`` records of a run's history.jsonl (later lines belong to an epoch whose
+    state was never saved: the run was killed in between)."""
+    if not path.exists():
+        return []
+    lines = [l for l in path.read_text().splitlines() if l.strip()]
+    records = [json.loads(l) for l in lines]
+    records = [r for r in records if r["epoch"] <= epochs]
+    # keep the last record of each epoch (a killed run may have written an epoch twice)
+    by_epoch = {r["epoch"]: r for r in records}
+    history = [by_epoch[e] for e in sorted(by_epoch)]
+    path.write_text("".join(json.dumps(r, default=float) + "\n" for r in history))
+    return history
+
+
 class _StopRequested(Exception):
     pass
 
@@ -289,7 +305,7 @@ def train(
 
     With ``out_dir``: writes ``train_state.eqx`` (resumable, after every epoch),
     ``model_epoch<N>.eqx`` every ``checkpoint_every`` epochs, ``model.eqx`` (final, loadable with
-    :func:`furuta_gym.training.checkpoint.load_model`) and ``history.json``. An ``out_dir`` that
+    :func:`furuta_gym.training.checkpoint.load_model`), ``history.jsonl`` (one line per epoch) and ``history.json``. An ``out_dir`` that
     already holds a run is refused unless ``resume=True``, which continues it (same model,
     optimiser state, λ, epoch counter; the data and settings must match). ``forced_trajs``: fit the
     overall scale on them after training (see the module docstring). ``history`` has one dict per
@@ -375,7 +391,7 @@ def train(
             params, static = eqx.partition(model, trainable)
             start_epoch = int(st["epoch"])
             lam = float(st["lambda"])
-            history = list(st["history"])
+            history = _read_history(out / HISTORY_FILE, start_epoch)
         out.mkdir(parents=True, exist_ok=True)
 
     total_epochs = config.total_epochs
@@ -389,7 +405,7 @@ def train(
             out / STATE_FILE,
             model_now,
             opt_state,
-            {"epoch": epoch, "lambda": lam, "history": history, "run": run_info, "seed": config.seed,
+            {"epoch": epoch, "lambda": lam, "run": run_info, "seed": config.seed,
              "meta": {"data_hash": dhash, "epoch": epoch, "loss": loss}},
         )
 
@@ -457,6 +473,11 @@ def train(
             }
             history.append(record)
             model_now = eqx.combine(params, static)
+            if out is not None:
+                # the history is appended line by line (the state file stays small); written
+                # before the state so a resumed run always finds every finished epoch's line
+                with (out / HISTORY_FILE).open("a") as fh:
+                    fh.write(json.dumps(record, default=float) + "\n")
             save_state(epoch + 1, model_now)
             if out is not None and config.checkpoint_every and (epoch + 1) % config.checkpoint_every == 0:
                 ckpt.save_model(out / f"model_epoch{epoch + 1:06d}.eqx", model_now,
