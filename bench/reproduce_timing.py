@@ -50,6 +50,11 @@ def section(records: list[tuple[Path, dict]]) -> str:
             f"{epochs} | {data_s:.0f} | {len(per_model)} | {stats} | {secs.get('figures', 0):.0f} | "
             f"{secs.get('total', 0):.0f} |"
         )
+    lines += [
+        "",
+        "Models counts the runs that trained (or resumed, or only evaluated an existing checkpoint: "
+        "status `loaded` in run.json, which then times evaluation only); `reused` ones are not timed.",
+    ]
     lines += ["", f"Machine: {cpu}, {records[-1][1].get('machine', {}).get('cpu_count')} logical cores (shared).", END]
     return "\n".join(lines)
 
