@@ -87,8 +87,14 @@ def run(args: argparse.Namespace) -> int:
     make = TrainConfig.paper if args.paper else TrainConfig.for_system
     config = make(args.system, **overrides)
     hparams = {"hidden": args.hidden} if args.hidden else None
-    model, history = train(args.model, args.system, args.loss, trajs, config, args.out,
-                           resume=args.resume, forced_trajs=forced, hparams=hparams)
+    try:
+        model, history = train(args.model, args.system, args.loss, trajs, config, args.out,
+                               resume=args.resume, forced_trajs=forced, hparams=hparams)
+    except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM: every finished epoch is saved
+        import sys
+
+        print(f"furuta-gym train: {exc or 'interrupted'}", file=sys.stderr)
+        return 130
     last = history[-1] if history else {}
     summary = {k: v for k, v in last.items() if k in ("epoch", "traj", "itau", "penalty", "lambda")}
     print(f"trained {args.system} {args.model} with L_{args.loss}: {json.dumps(summary)}")
