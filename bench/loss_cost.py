@@ -155,6 +155,7 @@ def main() -> None:
         print(json.dumps({"seconds": compile_probe(args.probe, args.cache)}))
         return
 
+    load_start = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     sizes = tuple(int(v) for v in args.sizes.split(","))
     rows = []
     for n in sizes:
@@ -187,7 +188,7 @@ def main() -> None:
         "## Loss cost: L_traj versus L_Iτ per epoch (`bench/loss_cost.py`)",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-        f"load average at the end {load[0]:.1f} (shared machine: absolute times are inflated, the "
+        f"load average {load_start:.1f} at the start, {load[0]:.1f} at the end (shared machine: absolute times are inflated, the "
         f"ratios are measured side by side in one run). Python {platform.python_version()}, "
         f"jax {__import__('jax').__version__}. Date {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC.",
         "",
