@@ -26,12 +26,13 @@ import datetime
 import glob
 import os
 import platform
-import re
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from _benchmarks_md import write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 MARK_START = "<!-- control_benchmark:start -->"
@@ -185,7 +186,7 @@ def main(argv=None) -> int:
         learned_section = learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR)
         print(learned_section)
         if not args.no_write:
-            write_section(ROOT / "BENCHMARKS.md", learned_section, LEARNED_START, LEARNED_END)
+            write_section(learned_section, LEARNED_START, LEARNED_END)
         return 0
     run("swing-up + LQR (volts)", "analytic", "mujoco", ctrl, n)
     run("swing-up + LQR (volts)", "analytic", "mujoco cable_spring", ctrl, n, plant="cable_spring")
@@ -281,20 +282,8 @@ def main(argv=None) -> int:
     print()
     print(section)
     if not args.no_write:
-        write_section(ROOT / "BENCHMARKS.md", section)
+        write_section(section, MARK_START, MARK_END)
     return 0
-
-
-def write_section(path: Path, section: str, start: str = MARK_START, end: str = MARK_END) -> None:
-    """Replace this script's section of BENCHMARKS.md (between its markers) or append it."""
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    pattern = re.compile(re.escape(start) + ".*?" + re.escape(end), re.S)
-    if pattern.search(text):
-        text = pattern.sub(lambda _: section, text)
-    else:
-        text = text.rstrip("\n") + "\n\n" + section + "\n"
-    path.write_text(text)
-    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

@@ -28,12 +28,13 @@ import argparse
 import datetime
 import os
 import platform
-import re
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from _benchmarks_md import write_section
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -172,20 +173,8 @@ def main(argv=None) -> int:
     print()
     print(section)
     if not args.no_write:
-        write_section(ROOT / "BENCHMARKS.md", section)
+        write_section(section, MARK_START, MARK_END)
     return 0
-
-
-def write_section(path: Path, section: str) -> None:
-    """Replace this script's section of BENCHMARKS.md (between its markers) or append it."""
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    pattern = re.compile(re.escape(MARK_START) + ".*?" + re.escape(MARK_END), re.S)
-    if pattern.search(text):
-        text = pattern.sub(lambda _: section, text)
-    else:
-        text = text.rstrip("\n") + "\n\n" + section + "\n"
-    path.write_text(text)
-    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

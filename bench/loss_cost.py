@@ -19,13 +19,14 @@ import datetime
 import json
 import os
 import platform
-import re
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _benchmarks_md import write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 SECTION = "loss_cost"
@@ -129,16 +130,9 @@ def _probe_subprocess(loss: str, cache_dir: str, eqx_on_error: str | None = None
     return float(json.loads(out.stdout.strip().splitlines()[-1])["seconds"])
 
 
-def write_section(text: str) -> None:
-    path = ROOT / "BENCHMARKS.md"
+def write_section_text(text: str) -> None:
     start, end = f"<!-- {SECTION}:start -->", f"<!-- {SECTION}:end -->"
-    block = f"{start}\n{text.rstrip()}\n{end}\n"
-    old = path.read_text() if path.exists() else "# Benchmarks\n\nEach section is written by its script in bench/.\n\n"
-    if start in old and end in old:
-        new = re.sub(re.escape(start) + r".*?" + re.escape(end) + r"\n?", lambda _: block, old, flags=re.S)
-    else:
-        new = old.rstrip() + "\n\n" + block
-    path.write_text(new)
+    write_section(f"{start}\n{text.rstrip()}\n{end}", start, end)
 
 
 def main() -> None:
@@ -237,7 +231,7 @@ def main() -> None:
     text = "\n".join(lines)
     print(text)
     if not args.no_write:
-        write_section(text)
+        write_section_text(text)
 
 
 if __name__ == "__main__":
