@@ -297,7 +297,7 @@ class _Problem:
         self.D = np.concatenate([s.D for s in segments])
         self.dU = np.concatenate([s.dU for s in segments])
         self.c_input = c_input
-        keys, offs = [], 0
+        keys = []
         for k, s in enumerate(segments):
             keys.append(np.stack([np.full(s.block.shape, k), s.block], 1))
         self.block_key = np.concatenate(keys)

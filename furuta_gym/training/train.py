@@ -27,7 +27,7 @@ import math
 import signal
 import time
 from pathlib import Path
-from typing import Any, Literal, Sequence
+from typing import Any, Sequence
 
 import equinox as eqx
 import jax
@@ -181,7 +181,6 @@ def fit_scale(model, trajs: Sequence[Trajectory], rule: QuadratureRule = "trapez
     ``(model_with_scale, ScaleFit)``. Needs a nonzero input in ``trajs``.
     """
     ensure_x64()
-    n = model.spec.n_dof
     As, Zs = [], []
     for tr in trajs:
         if tr.qd is None:
