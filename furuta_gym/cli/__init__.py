@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 __all__ = ["main", "SUBCOMMANDS"]
@@ -54,6 +55,10 @@ def main(argv: list[str] | None = None) -> int:
     from .._x64 import enable_x64
 
     enable_x64()
+    # Headless by default: MuJoCo's offscreen rendering needs a GL backend chosen before it is
+    # first imported; EGL works on a machine without a display (the user's choice wins).
+    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
+        os.environ["MUJOCO_GL"] = "egl"
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
