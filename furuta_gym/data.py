@@ -46,6 +46,7 @@ class Trajectory:
 
     @property
     def dt(self) -> float:
+        """Sample period (median of the time steps), s."""
         return float(np.median(np.diff(self.t)))
 
     @property

@@ -79,6 +79,7 @@ class Effect:
         return spec.joint_names.index(self.joint)
 
     def unit(self, spec: SystemSpec) -> str:
+        """Unit of the coefficient on this joint of ``spec`` (angular or linear)."""
         angular = self.joint == "u" or spec.angular[self.joint_index(spec)]
         return EFFECT_UNITS[self.name][0 if angular else 1]
 

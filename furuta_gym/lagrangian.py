@@ -73,14 +73,17 @@ class SystemSpec:
 
     @property
     def n_dof(self) -> int:
+        """Number of degrees of freedom."""
         return len(self.joint_names)
 
     @property
     def n_inputs(self) -> int:
+        """Number of inputs."""
         return len(self.input_names)
 
     @property
     def state_names(self) -> tuple[str, ...]:
+        """Names of x = (q, q̇): joints then ``<joint>_dot``."""
         return self.joint_names + tuple(f"{j}_dot" for j in self.joint_names)
 
 
@@ -116,21 +119,27 @@ class AbstractLagrangianSystem(eqx.Module):
 
     # -- derived quantities, delegating to the module functions (the one place they live) --
     def energy(self, q, qd):
+        """Total energy T + V; see :func:`energy`."""
         return energy(self, q, qd)
 
     def momentum(self, q, qd):
+        """∂L/∂q̇ = M(q)q̇; see :func:`momentum`."""
         return momentum(self, q, qd)
 
     def forward_dynamics(self, q, qd, u):
+        """q̈ at (q, q̇, u); see :func:`forward_dynamics`."""
         return forward_dynamics(self, q, qd, u)
 
     def inverse_dynamics_terms(self, q, qd, qdd):
+        """Inertial, Coriolis and potential-derived parts; see :func:`inverse_dynamics_terms`."""
         return inverse_dynamics_terms(self, q, qd, qdd)
 
     def vector_field(self, x, u):
+        """ẋ for x = (q, q̇); see :func:`vector_field`."""
         return vector_field(self, x, u)
 
     def linearize(self, x, u):
+        """(A, B) at (x, u); see :func:`linearize`."""
         return linearize(self, x, u)
 
 

@@ -62,6 +62,7 @@ class DerivativeFilter:
         self._z = None
 
     def reset(self, y0) -> None:
+        """Restart the filter at rest at position ``y0`` (velocity estimate 0)."""
         y0 = np.asarray(y0, dtype=float).reshape(self.n_channels)
         # steady state for a constant input y0: derivative 0
         self._z = np.outer(self._zi_unit, y0)
