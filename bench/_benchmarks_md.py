@@ -20,3 +20,27 @@ def write_section(section: str, start: str, end: str, path: Path = BENCHMARKS_MD
     path.write_text(text)
     print(f"wrote {path}")
     return path
+
+
+def machine() -> str:
+    """CPU model, cores, load and the versions that matter, for a section's header line."""
+    import os
+    import platform
+
+    import jax
+    import mujoco
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return (
+        f"{cpu}, {os.cpu_count()} logical cores (shared; 1-min load average {load:.1f} at start), "
+        f"Python {platform.python_version()}, JAX {jax.__version__} ({jax.default_backend()}), "
+        f"MuJoCo {mujoco.__version__}, Gymnasium {__import__('gymnasium').__version__}"
+    )

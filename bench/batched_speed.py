@@ -24,14 +24,13 @@ from __future__ import annotations
 import argparse
 import datetime
 import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from _benchmarks_md import write_section
+from _benchmarks_md import machine, write_section
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -39,26 +38,6 @@ ROOT = Path(__file__).resolve().parents[1]
 MARK_START = "<!-- bench/batched_speed.py:start -->"
 MARK_END = "<!-- bench/batched_speed.py:end -->"
 ENV_ID = "furuta_gym/Furuta-v0"
-
-
-def machine() -> str:
-    import jax
-    import mujoco
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return (
-        f"{cpu}, {os.cpu_count()} logical cores (shared; 1-min load average {load:.1f} at start), "
-        f"Python {platform.python_version()}, JAX {jax.__version__} ({jax.default_backend()}), "
-        f"MuJoCo {mujoco.__version__}"
-    )
 
 
 class Rate(float):

@@ -27,40 +27,19 @@ from __future__ import annotations
 import argparse
 import datetime
 import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from _benchmarks_md import write_section
+from _benchmarks_md import machine, write_section
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 ROOT = Path(__file__).resolve().parents[1]
 MARK_START = "<!-- bench/env_speed.py:start -->"
 MARK_END = "<!-- bench/env_speed.py:end -->"
-
-
-def machine() -> str:
-    import jax
-    import mujoco
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return (
-        f"{cpu}, {os.cpu_count()} logical cores (shared; 1-min load average {load:.1f} at start), "
-        f"Python {platform.python_version()}, JAX {jax.__version__} ({jax.default_backend()}), "
-        f"MuJoCo {mujoco.__version__}, Gymnasium {__import__('gymnasium').__version__}"
-    )
 
 
 def env_steps_per_second(env, actions: np.ndarray) -> float:
