@@ -24,10 +24,8 @@ __all__ = [
 
 
 def _register_envs() -> None:
-    try:
-        from .envs import register_envs
-    except ImportError:  # envs arrive with issue 2; keep the spine importable meanwhile
-        return
+    from .envs import register_envs
+
     register_envs()
 
 
