@@ -15,12 +15,11 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 from scipy import signal
 
 from ..lagrangian import AbstractLagrangianSystem
-from ..signals import ENCODER_COUNTS_PER_REV
+from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter_coefficients
 from ..simulate import rk4_zoh_step
 from ._base import AbstractController
 
@@ -35,13 +34,8 @@ class Sensor(eqx.Module):
     xi: float = eqx.field(static=True, default=0.8)
 
     def coefficients(self, dt: float):
-        """Bilinear-discretised F(s) = ω0² s / (s² + 2ξω0 s + ω0²) (as furuta_gym.signals)."""
-        b, a, _ = signal.cont2discrete(
-            ([self.omega0**2, 0.0], [1.0, 2.0 * self.xi * self.omega0, self.omega0**2]),
-            dt, method="bilinear",
-        )
-        b, a = np.ravel(b), np.ravel(a)
-        return b / a[0], a / a[0]
+        """Bilinear-discretised F(s) = ω0² s / (s² + 2ξω0 s + ω0²), a[0] = 1."""
+        return derivative_filter_coefficients(dt, self.omega0, self.xi)
 
     def quantize(self, angles):
         step = 2.0 * jnp.pi / self.counts_per_rev

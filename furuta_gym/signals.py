@@ -17,6 +17,7 @@ __all__ = [
     "square_pulse",
     "quantize_encoder",
     "derivative_filter",
+    "derivative_filter_coefficients",
     "DerivativeFilter",
     "zero_phase_velocity",
 ]
@@ -42,11 +43,17 @@ def quantize_encoder(angle, counts_per_rev: int = ENCODER_COUNTS_PER_REV):
     return np.round(np.asarray(angle, dtype=float) / step) * step
 
 
-def _derivative_filter_coefficients(dt: float, omega0: float, xi: float):
+def derivative_filter_coefficients(dt: float, omega0: float = 100.0, xi: float = 0.8):
+    """(b, a) of the paper's derivative filter discretised with the bilinear transform, a[0] = 1.
+
+    The one definition used by :func:`derivative_filter`, :class:`DerivativeFilter` and the
+    controllers' JAX sensor model.
+    """
     num = [omega0**2, 0.0]
     den = [1.0, 2.0 * xi * omega0, omega0**2]
     b, a, _ = signal.cont2discrete((num, den), dt, method="bilinear")
-    return np.ravel(b), np.ravel(a)
+    b, a = np.ravel(b), np.ravel(a)
+    return b / a[0], a / a[0]
 
 
 class DerivativeFilter:
@@ -56,7 +63,7 @@ class DerivativeFilter:
     """
 
     def __init__(self, dt: float, n_channels: int, omega0: float = 100.0, xi: float = 0.8):
-        self.b, self.a = _derivative_filter_coefficients(dt, omega0, xi)
+        self.b, self.a = derivative_filter_coefficients(dt, omega0, xi)
         self._zi_unit = signal.lfilter_zi(self.b, self.a)
         self.n_channels = n_channels
         self._z = None
@@ -84,7 +91,7 @@ def derivative_filter(y, dt: float, omega0: float = 100.0, xi: float = 0.8):
     Discretised with the bilinear transform; starts at rest at ``y[0]``. Lags by ≈ 2ξ/ω0 = 16 ms.
     """
     y = np.asarray(y, dtype=float)
-    b, a = _derivative_filter_coefficients(dt, omega0, xi)
+    b, a = derivative_filter_coefficients(dt, omega0, xi)
     zi = signal.lfilter_zi(b, a)
     zi = zi.reshape((-1,) + (1,) * (y.ndim - 1)) * y[:1]
     out, _ = signal.lfilter(b, a, y, axis=0, zi=zi)
