@@ -26,6 +26,8 @@ otherwise; ``"none"`` is the paper's plain sum of squares divided by the number 
 
 from __future__ import annotations
 
+import contextlib
+import os
 from typing import Literal, NamedTuple, Sequence
 
 import jax
@@ -115,6 +117,37 @@ def make_windows(
     return Windows(jnp.asarray(np.stack(ts)), jnp.asarray(np.stack(xs)), jnp.asarray(np.stack(us)))
 
 
+@contextlib.contextmanager
+def _runtime_checks_as_nan():
+    """While tracing, Equinox runtime checks (``eqx.error_if``) inside diffrax become NaNs.
+
+    diffrax checks its traced inputs (``ts`` increasing, save times inside [t0, t1], the sign of
+    dt0) with ``eqx.error_if``, which by default lowers to a host callback; JAX never stores an
+    executable with host callbacks in its persistent compilation cache, so every process would
+    recompile the L_traj step from scratch. Equinox's ``"nan"`` mode instead returns NaN from a
+    failed check: the loss turns non-finite and the training loop's NaN guard skips the step, as
+    it does for a solve that fails (``throw=False``). The windows come from validated
+    trajectories (:func:`make_windows`), so these checks cannot fire on real data anyway.
+
+    Equinox exposes the mode only through the ``EQX_ON_ERROR`` environment variable, read at
+    import; this sets the same module value for the duration of the trace (checks are resolved at
+    trace time, so compiled code is unaffected afterwards). A user's explicit ``EQX_ON_ERROR``
+    wins, and if Equinox's internals change this silently does nothing.
+    """
+    try:
+        from equinox import _errors
+    except ImportError:  # pragma: no cover - a future Equinox layout
+        _errors = None
+    if _errors is None or "EQX_ON_ERROR" in os.environ or getattr(_errors, "EQX_ON_ERROR", None) != "raise":
+        yield
+        return
+    _errors.EQX_ON_ERROR = "nan"
+    try:
+        yield
+    finally:
+        _errors.EQX_ON_ERROR = "raise"
+
+
 def _predict(model, t, x, u, rtol, atol, max_steps):
     return simulate(
         model, x[0], t - t[0], u, input_interpolation="linear", rtol=rtol, atol=atol,
@@ -132,12 +165,15 @@ def trajectory_loss(
 ) -> Float[Array, ""]:
     """L_traj: mean over windows and predicted samples of ‖x − x̂‖² (open loop from x[0]).
 
-    A solve that fails returns ``inf`` (not an exception), which the training loop's NaN guard
-    skips.
+    A solve that fails (e.g. hits ``max_steps``) returns ``inf`` (not an exception), which the
+    training loop's NaN guard skips; so does a failed diffrax input check (NaN, see
+    :func:`_runtime_checks_as_nan`). Without host callbacks the compiled step can be stored in
+    JAX's persistent compilation cache.
     """
-    pred = jax.vmap(lambda t, x, u: _predict(model, t, x, u, rtol, atol, max_steps))(
-        windows.t, windows.x, windows.u
-    )
+    with _runtime_checks_as_nan():
+        pred = jax.vmap(lambda t, x, u: _predict(model, t, x, u, rtol, atol, max_steps))(
+            windows.t, windows.x, windows.u
+        )
     err = pred[:, 1:] - windows.x[:, 1:]
     return jnp.mean(jnp.sum(err**2, axis=-1))
 
