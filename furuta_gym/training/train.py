@@ -39,6 +39,7 @@ from .._x64 import ensure_x64
 from ..data import Trajectory
 from ..lagrangian import QuadratureRule, integral_terms
 from ..systems import get_spec
+from . import _step_cache
 from . import checkpoint as ckpt
 from .losses import (
     Windows,
@@ -225,6 +226,9 @@ def _build_optimizer(model, config: TrainConfig):
     mask = eqx.filter(decay_mask, trainable)  # same structure as params (None where not trainable)
     adam = optax.adamw(config.learning_rate, weight_decay=config.weight_decay, mask=mask)
     opt = optax.chain(optax.clip_by_global_norm(config.grad_clip), adam) if config.grad_clip else adam
+    # _make_step may store a step traced with this optimiser on disk: record what defines it
+    _step_cache.register_optimizer(opt, f"adamw lr={config.learning_rate!r} wd={config.weight_decay!r} "
+                                   f"clip={config.grad_clip!r} mask={_step_cache.array_digest(mask)}")
     return opt, trainable, params
 
 
@@ -260,6 +264,14 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
         opt_state = _tree_where(ok, new_opt, opt_state)
         return params, opt_state, terms, ok
 
+    # with JAX's persistent compilation cache enabled, a later process loads the traced step from
+    # disk instead of tracing it again (seconds for L_traj); see _step_cache
+    cache_dir = _step_cache.step_cache_dir()
+    described = _step_cache.optimizer_description(optimizer)
+    if cache_dir is not None and described is not None:
+        key = {"loss": loss, "normalization": normalization, "config": repr(config),
+               "optimizer": described, "static": _step_cache.array_digest(static)}
+        return _step_cache.ExportedStep(step, key, cache_dir)
     return step
 
 
