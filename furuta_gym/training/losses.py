@@ -129,23 +129,32 @@ def _runtime_checks_as_nan():
     it does for a solve that fails (``throw=False``). The windows come from validated
     trajectories (:func:`make_windows`), so these checks cannot fire on real data anyway.
 
-    Equinox exposes the mode only through the ``EQX_ON_ERROR`` environment variable, read at
-    import; this sets the same module value for the duration of the trace (checks are resolved at
-    trace time, so compiled code is unaffected afterwards). A user's explicit ``EQX_ON_ERROR``
-    wins, and if Equinox's internals change this silently does nothing.
+    Equinox exposes the mode only globally (the ``EQX_ON_ERROR`` environment variable, read at
+    import). Here the checks traced inside the block ask for ``on_error="nan"`` explicitly —
+    a separate entry of Equinox's jit cache, so neither earlier nor later traces of the same
+    check elsewhere (e.g. :func:`~furuta_gym.simulate.simulate` with ``throw=True``) change
+    behaviour. A user's explicit ``EQX_ON_ERROR`` wins; if Equinox's internals differ from what
+    this expects it does nothing (the step is then just not cacheable). Not thread-safe against
+    another thread tracing Equinox checks at the same moment.
     """
     try:
         from equinox import _errors
-    except ImportError:  # pragma: no cover - a future Equinox layout
-        _errors = None
-    if _errors is None or "EQX_ON_ERROR" in os.environ or getattr(_errors, "EQX_ON_ERROR", None) != "raise":
+        checked = _errors.branched_error_if_impl_jit
+    except (ImportError, AttributeError):  # pragma: no cover - another Equinox layout
         yield
         return
-    _errors.EQX_ON_ERROR = "nan"
+    if "EQX_ON_ERROR" in os.environ:
+        yield
+        return
+
+    def as_nan(x, pred, index, msgs, *, on_error="default"):
+        return checked(x, pred, index, msgs, on_error="nan" if on_error == "default" else on_error)
+
+    _errors.branched_error_if_impl_jit = as_nan
     try:
         yield
     finally:
-        _errors.EQX_ON_ERROR = "raise"
+        _errors.branched_error_if_impl_jit = checked
 
 
 def _predict(model, t, x, u, rtol, atol, max_steps):
