@@ -25,6 +25,7 @@ from typing import Any, ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..lagrangian import SystemSpec
@@ -76,15 +77,23 @@ class LagrangianNetworks(eqx.Module):
         out = self.mass_net(coordinate_features(self.spec, q, self.position_scale))
         # softplus(x + 0.5413) = 1 at x = 0: the untrained M starts near mass_scale · I.
         diag = jax.nn.softplus(out[:n] + 0.5413248546129181) + self.eps
-        L = jnp.diag(diag)
-        if n > 1:
-            rows, cols = jnp.tril_indices(n, -1)
-            L = L.at[rows, cols].set(out[n:])
-        return L
+        # Assembled from its entries at static positions rather than scattered into zeros with
+        # .at[tril_indices].set: the scatter cost XLA:CPU ~15 extra kernels of index arithmetic
+        # per evaluation (a fixed cost each, which dominates a single-copy env step).
+        below = {(int(r), int(c)): out[n + k] for k, (r, c) in enumerate(zip(*np.tril_indices(n, -1)))}
+        zero = jnp.zeros_like(diag[0])
+        return jnp.stack(
+            [
+                jnp.stack([diag[i] if i == j else below.get((i, j), zero) for j in range(n)])
+                for i in range(n)
+            ]
+        )
 
     def mass_matrix(self, q):
         L = self.cholesky_factor(q)
-        return self.mass_scale * (L @ L.T)
+        # L Lᵀ as a broadcast product and sum (the same sums): at n ≤ 2 a dot is a kernel of its
+        # own on XLA:CPU, the product fuses with the assembly of L
+        return self.mass_scale * jnp.sum(L[:, None, :] * L[None, :, :], axis=-1)
 
     def potential(self, q):
         zero = jnp.zeros_like(q)
