@@ -23,7 +23,27 @@ from jaxtyping import Array, Float
 
 from .lagrangian import AbstractLagrangianSystem, vector_field
 
-__all__ = ["simulate", "rk4_step", "rk4_zoh_step", "rollout_zoh"]
+__all__ = ["simulate", "rk4_step", "rk4_zoh_step", "rollout_zoh", "small_kernel_compiler_options"]
+
+# XLA:CPU (jax 0.10) hands small matrix products and the elementwise work around them to YNNPACK
+# "custom fusions"; for the few-neuron layers of these models each such call costs more than the
+# loop it replaces (measured on the batched DeLaN step: ~30 % more CPU time at N = 4096). Plain
+# XLA kernels compute the same quantities (summation order may differ at round-off level).
+_SMALL_KERNEL_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+_small_kernel_options_checked: dict | None = None
+
+
+def small_kernel_compiler_options() -> dict:
+    """``compiler_options`` for ``jax.jit`` of fixed-step model integration on CPU: YNNPACK
+    fusions off. Empty when this jaxlib does not know the option (checked once)."""
+    global _small_kernel_options_checked
+    if _small_kernel_options_checked is None:
+        try:
+            jax.jit(lambda a: a + 1.0, compiler_options=_SMALL_KERNEL_OPTIONS).lower(1.0).compile()
+            _small_kernel_options_checked = dict(_SMALL_KERNEL_OPTIONS)
+        except Exception:  # an unknown option name is an error at compile time
+            _small_kernel_options_checked = {}
+    return dict(_small_kernel_options_checked)
 
 
 def simulate(

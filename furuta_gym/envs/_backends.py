@@ -341,7 +341,7 @@ def _compiled_steps(static, unravel, treedef_key, timestep: float, substeps: int
     import jax
     import jax.numpy as jnp
 
-    from ..simulate import rk4_step
+    from ..simulate import rk4_step, small_kernel_compiler_options
 
     key = (treedef_key, timestep, substeps)
     try:
@@ -361,7 +361,8 @@ def _compiled_steps(static, unravel, treedef_key, timestep: float, substeps: int
 
         return jax.lax.fori_loop(0, substeps, body, x)
 
-    fns = (jax.jit(period), jax.jit(split))
+    options = small_kernel_compiler_options()
+    fns = (jax.jit(period, compiler_options=options), jax.jit(split, compiler_options=options))
     try:
         _STEP_CACHE[key] = fns
     except TypeError:  # unhashable static structure: no sharing, still correct

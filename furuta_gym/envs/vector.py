@@ -32,6 +32,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..lagrangian import AbstractLagrangianSystem, energy
+from ..simulate import small_kernel_compiler_options
 from ._backends import ModelBackend
 from ._base import EnvArgumentError, LagrangianEnv
 from ._jax_rollout import Rollout, controlled_step, rollout
@@ -102,7 +103,7 @@ def _batched_step(
         energy_model = jax.tree_util.tree_unflatten(energy_treedef, energy_leaves)
         return jax.vmap(one, in_axes=(None, None, 0, 0))(system, energy_model, xs, us)
 
-    fn = jax.jit(step)
+    fn = jax.jit(step, compiler_options=small_kernel_compiler_options())
     try:
         _STEP_CACHE[key] = fn
     except TypeError:  # unhashable static structure: no sharing, still correct
