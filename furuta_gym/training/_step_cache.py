@@ -17,8 +17,8 @@ only save time, never change a result.
 **What a stored step is keyed by** — everything the traced computation depends on: the loss
 settings and training configuration given by the caller, the structure and static fields of
 every argument (model, optimiser state, batches) with their shapes and dtypes, the values of
-the non-trained arrays baked into the step, the source code of every loaded ``furuta_gym``
-module, the versions of jax, jaxlib, equinox, diffrax and optax, the backend, and the x64 and
+the non-trained arrays baked into the step, the source code of furuta_gym and of every loaded
+module outside installed packages (a user's own model class), the versions of jax, jaxlib, equinox, diffrax and optax, the backend, and the x64 and
 ``EQX_ON_ERROR`` settings. The optimiser is trusted to be the one the caller says (the key
 includes the caller's description of it): :func:`furuta_gym.training.train._make_step` only
 uses this cache for optimisers built by its own ``_build_optimizer``.
@@ -27,7 +27,9 @@ uses this cache for optimisers built by its own ``_build_optimizer``.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import importlib.metadata
+import importlib.util
 import json
 import os
 import sys
@@ -62,16 +64,45 @@ def step_cache_dir() -> Path | None:
 _SOURCE_DIGEST: str | None = None
 
 
+def _local_sources() -> list[Path]:
+    """Every .py file of furuta_gym (imported or not) and every loaded module that is not part of
+    an installed distribution or the standard library (e.g. a user's own model class)."""
+    import sysconfig
+
+    installed = {Path(sysconfig.get_paths()[k]).resolve() for k in ("stdlib", "platstdlib", "purelib", "platlib")}
+    files: set[Path] = set()
+    # the whole package whatever was imported, so every process computes the same digest; the
+    # folders mapped into it by pyproject's package-dir are found through their specs
+    folders = list(importlib.import_module("furuta_gym").__path__)
+    for sub in ("models", "controllers", "assets"):
+        try:
+            spec = importlib.util.find_spec(f"furuta_gym.{sub}")
+        except (ImportError, ValueError):
+            spec = None
+        folders += list(spec.submodule_search_locations or []) if spec is not None else []
+    for folder in folders:
+        files.update(Path(folder).resolve().rglob("*.py"))
+    prefixes = tuple(str(root) for root in installed)
+    for module in list(sys.modules.values()):
+        path = getattr(module, "__file__", None)
+        if path and path.endswith(".py") and not path.startswith(prefixes):
+            path = Path(path).resolve()
+            if not any(path.is_relative_to(root) for root in installed):
+                files.add(path)
+    return sorted(files)
+
+
 def _source_digest() -> str:
-    """Hash of the source of every loaded furuta_gym module (a code edit invalidates stored steps)."""
+    """Hash of the local source code (a code edit invalidates every stored step)."""
     global _SOURCE_DIGEST
     if _SOURCE_DIGEST is None:
         h = hashlib.sha256()
-        for name in sorted(n for n in sys.modules if n == "furuta_gym" or n.startswith("furuta_gym.")):
-            path = getattr(sys.modules[name], "__file__", None)
-            if path and path.endswith(".py"):
-                h.update(name.encode())
-                h.update(Path(path).read_bytes())
+        for path in _local_sources():
+            h.update(str(path).encode())
+            try:
+                h.update(path.read_bytes())
+            except OSError:
+                h.update(b"<unreadable>")
         _SOURCE_DIGEST = h.hexdigest()
     return _SOURCE_DIGEST
 
@@ -196,7 +227,7 @@ class ExportedStep:
             # the stored computation returns leaves only; the caller rebuilds the trees
             if jax.tree_util.tree_structure(params) != params_def or jax.tree_util.tree_structure(opt_state) != opt_def:
                 raise ValueError("the step changed the structure of params or opt_state")
-            terms_keys[:] = sorted(terms)
+            terms_keys[:] = list(terms)  # the live step's order, so histories read the same
             return (*jax.tree_util.tree_leaves(params), *jax.tree_util.tree_leaves(opt_state),
                     *[terms[k] for k in terms_keys], ok)
 
@@ -210,6 +241,7 @@ class ExportedStep:
         try:
             with os.fdopen(fd, "wb") as f:
                 f.write(data)
+            os.chmod(tmp, 0o644)  # like JAX's own cache entries (mkstemp makes it owner-only)
             os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
