@@ -24,15 +24,19 @@ def _ints(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
 
 
-def _horizons(text: str) -> tuple[int | float, ...]:
+def _horizons(text: str) -> tuple[int | float | None, ...]:
     out = []
     for v in text.split(","):
         v = v.strip()
+        if v.lower() == "itau":  # a stage of L_Iτ alone (prop)
+            out.append(None)
+            continue
         try:
             out.append(float(v[:-1]) if v.endswith("s") else int(v))
         except ValueError:
             raise argparse.ArgumentTypeError(
-                f"horizons are samples (e.g. 2) or seconds with an 's' (e.g. 1s), got {v!r}"
+                f"horizons are samples (e.g. 2), seconds with an 's' (e.g. 1s) or 'itau' (a stage "
+                f"of L_Iτ alone, with --loss prop), got {v!r}"
             ) from None
     return tuple(out)
 
@@ -52,7 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the paper's recipe (50k+10k / 5k+1k epochs, full batch): hours on a CPU")
     parser.add_argument("--epochs", type=_ints, help="epochs per stage, e.g. 200,20")
     parser.add_argument("--horizons", type=_horizons,
-                        help="horizon per stage: samples or seconds, e.g. 2,1s (default 2,1s Furuta; 2,2s N-MSD)")
+                        help="horizon per stage: samples, seconds or 'itau' (L_Iτ alone, with --loss prop), "
+                        "e.g. itau,2,1s (default 2,1s Furuta; 2,2s N-MSD)")
     parser.add_argument("--lr", type=float, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--weight-decay", type=float, help="AdamW weight decay (default 1e-5)")
     parser.add_argument("--batch-size", type=int, help="trajectory windows per step; 0 = full batch")

@@ -63,7 +63,9 @@ class TrainConfig:
     """Hyper-parameters of a training run.
 
     ``epochs[k]`` epochs are run with prediction horizon ``horizons[k]`` (an ``int`` is a number
-    of samples, a ``float`` seconds). The defaults are a short run a 2-core CPU finishes in
+    of samples, a ``float`` seconds; ``None``: a stage of L_Iτ alone, with the ``"prop"`` loss —
+    no ODE solve, so thousands of epochs cost what tens of trajectory epochs do; the reproduction
+    starts every L_prop run with one). The defaults are a short run a 2-core CPU finishes in
     minutes; :meth:`paper` gives the paper's recipe (50 k + 10 k epochs Furuta, 5 k + 1 k N-MSD,
     full batch), which costs hours on a CPU (known_pitfalls.md, "Cost").
 
@@ -77,7 +79,7 @@ class TrainConfig:
     """
 
     epochs: tuple[int, ...] = (100, 20)
-    horizons: tuple[int | float, ...] = (2, 1.0)
+    horizons: tuple[int | float | None, ...] = (2, 1.0)
     learning_rate: float = 1e-3
     weight_decay: float = 1e-5
     batch_size: int | None = 256
@@ -342,6 +344,11 @@ def train(
         model = make_model(spec.name, model_kind, jax.random.PRNGKey(config.seed), **(hparams or {}))
     elif model.kind != model_kind or model.spec.name != spec.name:
         raise ValueError(f"model is a {model.spec.name} {model.kind}; asked for {spec.name} {model_kind}")
+    if any(h is None for h in config.horizons) and loss not in ("prop", "itau"):
+        raise ValueError(
+            f"horizons {config.horizons}: a stage without a horizon (None) trains on L_Iτ alone, "
+            f"which only the 'prop' and 'itau' losses contain, not {loss!r}"
+        )
     if loss == "aph" and not model.has_augmentation:
         raise ValueError(f"loss 'aph' needs a model with a data-driven force F_a (aph or adln), not {model_kind!r}")
     dt = float(np.median([tr.dt for tr in trajs]))
@@ -407,7 +414,18 @@ def train(
 
     total_epochs = config.total_epochs
     bounds = np.cumsum(config.epochs)
-    step = _make_step(static, optimizer, loss, config, normalization)
+
+    def stage_loss(stage: int) -> str:
+        # a stage without a horizon is L_Iτ alone: no ODE solve, an epoch costs milliseconds
+        return "itau" if config.horizons[stage] is None else loss
+
+    steps_by_loss: dict[str, Any] = {}
+
+    def step_for(stage: int):
+        name = stage_loss(stage)
+        if name not in steps_by_loss:
+            steps_by_loss[name] = _make_step(static, optimizer, name, config, normalization)
+        return steps_by_loss[name]
 
     def save_state(epoch: int, model_now) -> None:
         if out is None:
@@ -440,8 +458,10 @@ def train(
             t0 = time.perf_counter()
             stage = int(np.searchsorted(bounds, epoch, side="right"))
             rng = np.random.default_rng([config.seed, epoch])
+            step = step_for(stage)
+            loss_now = stage_loss(stage)
             traj_batches: list[Windows | None] = [None]
-            if loss != "itau":
+            if loss_now != "itau":
                 tw = windows_for(stage)
                 nw = tw.n_windows
                 bs = nw if config.batch_size is None else min(config.batch_size, nw)
@@ -451,13 +471,13 @@ def train(
             if int_windows is not None:
                 ni = int_windows.n_windows
                 ib = ni if config.integral_batch_size is None else min(config.integral_batch_size, ni)
-                if ib == ni and loss != "itau":
+                if ib == ni and loss_now != "itau":
                     int_batches = [int_windows] * len(traj_batches)
                 else:
-                    n_steps = len(traj_batches) if loss != "itau" else max(1, ni // ib)
+                    n_steps = len(traj_batches) if loss_now != "itau" else max(1, ni // ib)
                     perm = np.concatenate([rng.permutation(ni) for _ in range(math.ceil(n_steps * ib / ni) + 1)])
                     int_batches = [int_windows.take(perm[k * ib : (k + 1) * ib]) for k in range(n_steps)]
-                    if loss == "itau":
+                    if loss_now == "itau":
                         traj_batches = [None] * n_steps
             sums: dict[str, float] = {}
             skipped = 0
@@ -475,7 +495,7 @@ def train(
             record = {
                 "epoch": epoch + 1,
                 "stage": stage,
-                "horizon": None if loss == "itau" else windows_for(stage).length - 1,
+                "horizon": None if loss_now == "itau" else windows_for(stage).length - 1,
                 **means,
                 "lambda": lam,
                 "steps": len(traj_batches),

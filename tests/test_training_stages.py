@@ -1,0 +1,45 @@
+"""Per-stage losses in the training curriculum: a stage without a horizon trains on L_Iτ alone
+(the cheap warm start the reproduction gives L_prop), the next stages on the full L_prop."""
+
+import numpy as np
+import pytest
+
+from furuta_gym.data import Trajectory
+from furuta_gym.models import NMSD
+from furuta_gym.signals import chirp
+from furuta_gym.simulate import simulate
+from furuta_gym.training.train import TrainConfig, train
+
+DT = 0.01
+
+
+@pytest.fixture(scope="module")
+def segments():
+    t = np.arange(0.0, 8.0 + DT / 2, DT)
+    u = chirp(t, 0.1, 1.1, 8.0)[:, None]
+    xs = np.asarray(simulate(NMSD(), np.array([0.5, -1.0]), t, u, rtol=1e-10, atol=1e-12))
+    n = 100
+    return [Trajectory(t[k * n : k * n + n + 1] - t[k * n], xs[k * n : k * n + n + 1, :1],
+                       u[k * n : k * n + n + 1], xs[k * n : k * n + n + 1, 1:], name=str(k))
+            for k in range(8)]
+
+
+def test_an_itau_stage_then_prop_stages(segments, tmp_path):
+    cfg = TrainConfig.for_system("nmsd", epochs=(30, 2), horizons=(None, 2), batch_size=64,
+                                 quadrature="simpson", progress=False, checkpoint_every=0)
+    model, history = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "run")
+    assert [h["stage"] for h in history] == [0] * 30 + [1] * 2
+    first, last_itau, prop = history[0], history[29], history[30]
+    # the L_Iτ stage: no trajectory term, one full-batch step per epoch, and it learns
+    assert first["horizon"] is None and "traj" not in first and first["steps"] == 1
+    assert last_itau["itau"] < 0.8 * first["itau"]
+    # the L_prop stages: both terms, minibatches of 2-step windows
+    assert prop["horizon"] == 2 and prop["traj"] > 0 and prop["steps"] == (8 * 99) // 64
+    assert prop["total"] == pytest.approx(prop["itau"] + prop["traj"], rel=1e-12)
+    assert (tmp_path / "run" / "model.eqx").exists()
+
+
+def test_a_stage_without_horizon_needs_the_integral_loss(segments):
+    cfg = TrainConfig.for_system("nmsd", epochs=(1, 1), horizons=(None, 2), progress=False)
+    with pytest.raises(ValueError, match="L_Iτ alone.*'traj'"):
+        train("dln", "nmsd", "traj", segments, cfg)
