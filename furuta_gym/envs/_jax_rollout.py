@@ -27,7 +27,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ..lagrangian import AbstractLagrangianSystem
-from ..simulate import rk4_zoh_step
+from ..simulate import rk4_zoh_step, small_kernel_compiler_options
 
 __all__ = [
     "DEFAULT_STATE_BOUND",
@@ -268,4 +268,14 @@ def _rollout_vmapped(
     return jax.vmap(one_copy)(x0s)
 
 
-_rollout_batch = eqx.filter_jit(_rollout_vmapped)
+_ROLLOUT_JIT: list = []
+
+
+def _rollout_batch(*args, **kwargs):
+    """The jitted rollout, built on first use (its compiler options are probed lazily, not at
+    import) with the model-step options of :func:`furuta_gym.simulate.small_kernel_compiler_options`."""
+    if not _ROLLOUT_JIT:
+        _ROLLOUT_JIT.append(
+            eqx.filter_jit(_rollout_vmapped, compiler_options=small_kernel_compiler_options())
+        )
+    return _ROLLOUT_JIT[0](*args, **kwargs)
