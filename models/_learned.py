@@ -109,17 +109,23 @@ class MLP(eqx.Module):
 
 def coordinate_features(spec: SystemSpec, q: Float[Array, " n"], position_scale: float) -> Float[Array, " f"]:
     """Network input for q: (cos, sin) of every angle, linear coordinates divided by a scale."""
-    angles = [i for i, angular in enumerate(spec.angular) if angular]
+    angular = np.asarray(spec.angular)
+    if angular.all():
+        # (cos q0, sin q0, cos q1, ...) without per-coordinate slices: vmapped, it stays
+        # copy-major, so no transposes around the first layer's matrix product
+        cos, sin = cos_sin(q)
+        return jnp.stack([cos, sin], axis=-1).reshape(-1)
+    angles = [i for i, a in enumerate(spec.angular) if a]
     if angles:
         cos, sin = cos_sin(jnp.stack([q[i] for i in angles]))
     parts = []
-    for i, angular in enumerate(spec.angular):
-        if angular:
+    for i, a in enumerate(spec.angular):
+        if a:
             k = angles.index(i)
             parts += [cos[k], sin[k]]
         else:
             parts.append(q[i] / position_scale)
-    return jnp.stack(parts)
+    return jnp.stack(parts, axis=-1)
 
 
 @jax.custom_jvp
