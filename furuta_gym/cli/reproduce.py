@@ -32,11 +32,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--epochs", type=int, nargs=2, metavar=("STAGE1", "STAGE2"),
-        help="override the epochs of the 2-step and the long-horizon stage (both systems)",
+        help="epochs of the 2-step and the long-horizon stage of the L_traj / L_aph runs (both systems)",
+    )
+    parser.add_argument(
+        "--prop-epochs", type=int, nargs=3, metavar=("ITAU", "STAGE1", "STAGE2"),
+        help="epochs of the L_prop runs: L_Iτ alone, then the 2-step and long-horizon stages of "
+             "L_Iτ + λ·L_traj (both systems)",
     )
     parser.add_argument(
         "--ground-truth", choices=["auto", "mujoco", "analytic"], default="auto",
         help="data from the MuJoCo model (auto: when available) or the analytic model",
+    )
+    parser.add_argument(
+        "--jobs", type=int, default=None, metavar="N",
+        help="train N models at once in separate processes (default: the number of CPU cores, at most 8)",
     )
     parser.add_argument("--no-figures", action="store_true", help="tables only")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -45,10 +54,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..training.reproduce import PAPER_PAIRS, ReproduceConfig, reproduce
 
+    jobs = args.jobs if args.jobs is not None else max(1, min(os.cpu_count() or 1, 8))
+    if jobs < 1:
+        raise ValueError(f"--jobs must be at least 1, got {jobs}")
     if args.seeds < 1:
         raise ValueError(f"--seeds must be at least 1, got {args.seeds}")
     systems = tuple(dict.fromkeys(args.systems)) if args.systems else ("nmsd", "furuta")
     epochs = {s: tuple(args.epochs) for s in systems} if args.epochs else None
+    prop_epochs = {s: tuple(args.prop_epochs) for s in systems} if args.prop_epochs else None
     pairs = PAPER_PAIRS
     if args.pairs:
         pairs = []
@@ -69,9 +82,11 @@ def run(args: argparse.Namespace) -> int:
         systems=systems,
         pairs=pairs,
         epochs=epochs,
+        prop_epochs=prop_epochs,
         ground_truth=args.ground_truth,
         figures=not args.no_figures,
         progress=not args.no_progress,
+        jobs=jobs,
     )
     # a persistent compilation cache makes a resumed or repeated run skip most JAX compiles
     if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
@@ -80,6 +95,9 @@ def run(args: argparse.Namespace) -> int:
         cache = Path.home() / ".cache" / "furuta_gym" / "jax"
         try:
             cache.mkdir(parents=True, exist_ok=True)
+            # the environment too: worker processes (--jobs) start a fresh JAX that reads it
+            os.environ["JAX_COMPILATION_CACHE_DIR"] = str(cache)
+            os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "1.0")
             jax.config.update("jax_compilation_cache_dir", str(cache))
             jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
         except (OSError, AttributeError):

@@ -83,9 +83,13 @@ class ReproduceConfig:
     """What a reproduction run does.
 
     ``quick``: scaled-down datasets and far fewer epochs (minutes, not the paper's numbers);
+    ``jobs``: models trained at once in separate processes (each model is mostly one core's
+    work, so ``jobs`` = number of cores roughly divides the wall time by it);
     ``seeds``: model-initialisation seeds (the data come from ``data_seed``); ``systems`` /
     ``pairs``: subsets for tests; ``epochs``: override the per-system epoch schedule
-    ``{system: (stage-1 epochs, stage-2 epochs)}``; ``small_data`` overrides the dataset size
+    ``{system: (stage-1 epochs, stage-2 epochs)}`` of the L_traj / L_aph runs; ``prop_epochs``
+    the same for L_prop, ``{system: (L_Iτ-alone epochs, stage 1, stage 2)}`` (a pair: no L_Iτ
+    stage); ``small_data`` overrides the dataset size
     (default: small when quick); ``train_overrides``: extra :class:`TrainConfig` fields.
     """
 
@@ -95,13 +99,17 @@ class ReproduceConfig:
     systems: tuple[str, ...] = ("nmsd", "furuta")
     pairs: tuple[tuple[str, str], ...] = PAPER_PAIRS
     epochs: dict | None = None
+    prop_epochs: dict | None = None
     small_data: bool | None = None
     train_overrides: dict | None = None
     ground_truth: str = "auto"
     figures: bool = True
     progress: bool = True
+    jobs: int = 1
 
     def __post_init__(self):
+        if int(self.jobs) < 1:
+            raise ValueError(f"jobs must be at least 1, got {self.jobs}")
         for s in self.systems:
             get_spec(s)
         for kind, loss in self.pairs:
@@ -121,19 +129,38 @@ class ReproduceConfig:
 # issue's budget. Minibatches of 256 windows make an epoch several optimiser steps.
 FULL_EPOCHS = {"nmsd": (100, 100), "furuta": (60, 200)}
 QUICK_EPOCHS = {"nmsd": (8, 2), "furuta": (4, 1)}
+# L_prop runs: (L_Iτ alone, 2-step, long horizon). The first stage has no ODE solve — an epoch
+# costs milliseconds where a trajectory epoch costs seconds — so thousands of its epochs fit in
+# minutes (known_pitfalls.md, "Cost"); the two L_Iτ + λ·L_traj stages follow, shorter than the
+# baselines' so that every L_prop run costs no more wall time than its L_traj / L_aph baseline.
+FULL_PROP_EPOCHS = {"nmsd": (4000, 30, 30), "furuta": (6000, 20, 60)}
+QUICK_PROP_EPOCHS = {"nmsd": (300, 8, 2), "furuta": (300, 4, 1)}
+#: L_Iτ's quadrature in the reproduction: Simpson's rule (the issue's higher-order option). The
+#: paper's trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit;
+#: Simpson's floor is ~7× lower (tests/test_lagrangian.py). ``train_overrides`` can set "trapezoid".
+REPRODUCE_QUADRATURE = "simpson"
 
 
-def training_config(system: str, config: ReproduceConfig, seed: int):
-    """The :class:`~furuta_gym.training.TrainConfig` of one run of ``system``."""
+def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop"):
+    """The :class:`~furuta_gym.training.TrainConfig` of one run of ``system`` with ``loss``."""
     from .train import TrainConfig
 
     name = get_spec(system).name
-    table = config.epochs or (QUICK_EPOCHS if config.quick else FULL_EPOCHS)
+    horizons = tuple(TrainConfig.for_system(name).horizons)
+    if loss == "prop":
+        table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS)
+        epochs = tuple(table[name])
+        if len(epochs) == 3:  # a leading stage of L_Iτ alone
+            horizons = (None, *horizons)
+    else:
+        epochs = tuple((config.epochs or (QUICK_EPOCHS if config.quick else FULL_EPOCHS))[name])
     overrides = dict(
-        epochs=tuple(table[name]),
+        epochs=epochs,
+        horizons=horizons,
         seed=seed,
         progress=config.progress,
         checkpoint_every=0,
+        quadrature=REPRODUCE_QUADRATURE,
     )
     overrides.update(config.train_overrides or {})
     return TrainConfig.for_system(name, **overrides)
@@ -204,7 +231,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
 
     metrics_path = run_dir / "metrics.json"
     model_path = run_dir / MODEL_FILE
-    tcfg = training_config(system, config, seed)
+    tcfg = training_config(system, config, seed, loss)
     cfg_json = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": tcfg.to_json()}
     cfg_json["train"].pop("progress", None)
     cfg_path = run_dir / "reproduce_config.json"
@@ -252,6 +279,55 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     return metrics, t_train, status
 
 
+def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
+    """One model of the run (also the body of a worker process): ``(metrics, seconds, status)``."""
+    from ..models import analytic_model
+
+    if data is None:  # in a worker process: read the datasets the parent generated
+        from .. import ensure_x64
+
+        ensure_x64()
+        data, _ = _datasets(system, out, config)
+        truth = analytic_model(system)
+    run_dir = out / "runs" / system / f"{kind}_{loss}" / f"seed{seed}"
+    t0 = time.perf_counter()
+    metrics, _, status = _run_one(system, kind, loss, seed, data, run_dir, config, truth)
+    return metrics, round(time.perf_counter() - t0, 1), status
+
+
+def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
+    """Yield ``(task, (metrics, seconds, status))`` for every task, ``config.jobs`` at a time."""
+
+    def report(task, result):
+        system, kind, loss, seed = task
+        log(f"[{system}] {MODEL_LABELS[kind]} ({LOSS_LABELS[loss]}) seed {seed}: {result[2]} in {result[1]} s")
+
+    if config.jobs == 1 or len(tasks) == 1:
+        for task in tasks:
+            system = task[0]
+            result = _run_task(*task, out, config, loaded[system]["data"], loaded[system]["truth"])
+            report(task, result)
+            yield task, result
+        return
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    # "spawn": a forked copy of a process that already runs JAX's thread pools can deadlock.
+    # Progress bars of parallel workers would overwrite each other: the log lines stay.
+    worker_config = dataclasses.replace(config, progress=False)
+    # the longest runs first (Furuta before N-MSD, trajectory losses before L_prop) so the
+    # last job to finish is a short one
+    cost = {"furuta": 2, "nmsd": 1}
+    order = sorted(tasks, key=lambda t: (-cost.get(t[0], 0), t[2] == "prop"))
+    with cf.ProcessPoolExecutor(max_workers=config.jobs, mp_context=mp.get_context("spawn")) as pool:
+        futures = {pool.submit(_run_task, *task, out, worker_config): task for task in order}
+        for fut in cf.as_completed(futures):
+            task = futures[fut]
+            result = fut.result()
+            report(task, result)
+            yield task, result
+
+
 def reproduce(
     out: str | Path,
     config: ReproduceConfig = ReproduceConfig(),
@@ -278,17 +354,15 @@ def reproduce(
         data_meta[system] = {k: meta.get(k) for k in ("seed", "small", "ground_truth", "seconds")}
         timings[f"{system}/data"] = round(time.perf_counter() - t0, 1)
         log(f"[{system}] data ready ({meta.get('ground_truth')} ground truth) in {timings[f'{system}/data']} s")
-        truth = analytic_model(system)
-        for kind, loss in config.pairs:
-            for seed in config.seeds:
-                run_dir = out / "runs" / system / f"{kind}_{loss}" / f"seed{seed}"
-                t0 = time.perf_counter()
-                metrics, _, status = _run_one(system, kind, loss, seed, data, run_dir, config, truth)
-                dt = round(time.perf_counter() - t0, 1)
-                timings[f"{system}/{kind}_{loss}/seed{seed}"] = {"seconds": dt, "status": status}
-                results.setdefault((system, kind, loss), []).append(metrics)
-                log(f"[{system}] {MODEL_LABELS[kind]} ({LOSS_LABELS[loss]}) seed {seed}: {status} in {dt} s")
-        models_for_figures[system] = {"data": data, "truth": truth}
+        models_for_figures[system] = {"data": data, "truth": analytic_model(system)}
+    tasks = [(system, kind, loss, seed) for system in config.systems
+             for kind, loss in config.pairs for seed in config.seeds]
+    for (system, kind, loss, seed), (metrics, dt, status) in _run_all(tasks, out, config, models_for_figures, log):
+        timings[f"{system}/{kind}_{loss}/seed{seed}"] = {"seconds": dt, "status": status}
+        results[(system, kind, loss, seed)] = metrics
+    # the paper's row order and seed order, whatever order the jobs finished in
+    results = {(s, k, l): [results[(s, k, l, seed)] for seed in config.seeds]
+               for s in config.systems for k, l in config.pairs}
     paths = {}
     rows = build_tables(results, config)
     paths["tables.csv"] = _write_csv(out / "tables.csv", rows)
@@ -506,6 +580,9 @@ def _write_run_record(path: Path, config: ReproduceConfig, command, timings, dat
         "config": dataclasses.asdict(config),
         "epochs": {s: list((config.epochs or (QUICK_EPOCHS if config.quick else FULL_EPOCHS))[s])
                    for s in config.systems},
+        "prop_epochs": {s: list((config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS))[s])
+                        for s in config.systems},
+        "quadrature": (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE),
         "data": data_meta,
         "machine": _machine(),
         "packages": package_versions(),
