@@ -366,6 +366,9 @@ def reproduce(
              for kind, loss in config.pairs for seed in config.seeds]
     for (system, kind, loss, seed), (metrics, dt, status) in _run_all(tasks, out, config, models_for_figures, log):
         timings[f"{system}/{kind}_{loss}/seed{seed}"] = {"seconds": dt, "status": status}
+        if status == "reused" and isinstance(metrics.get("_seconds"), dict):
+            # what the model cost when it was trained (an earlier or interrupted invocation)
+            timings[f"{system}/{kind}_{loss}/seed{seed}"]["original"] = metrics["_seconds"]
         results[(system, kind, loss, seed)] = metrics
     # the paper's row order and seed order, whatever order the jobs finished in
     results = {(s, k, l): [results[(s, k, l, seed)] for seed in config.seeds]
