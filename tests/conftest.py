@@ -3,6 +3,8 @@
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# the training commands turn on a persistent compilation cache in ~/.cache: tests stay hermetic
+os.environ.setdefault("FURUTA_GYM_COMPILATION_CACHE", "0")
 
 import furuta_gym  # noqa: E402
 

@@ -4,6 +4,7 @@ failed solve is skipped by the NaN guard; the on-disk cache of traced steps (``_
 returns exactly what the live step returns and never serves a step stored under another key."""
 
 import contextlib
+import os
 
 import equinox as eqx
 import jax
@@ -146,3 +147,21 @@ def test_the_step_cache_is_off_unless_asked_for(monkeypatch):
     monkeypatch.delenv("FURUTA_GYM_STEP_CACHE")
     if not jax.config.jax_compilation_cache_dir:  # the library writes nothing by itself
         assert _step_cache.step_cache_dir() is None
+
+
+def test_training_commands_turn_the_cache_on_where_asked_and_never_when_told_not_to(tmp_path):
+    import subprocess
+    import sys
+
+    code = (
+        "import jax; from furuta_gym.cli._cache import enable_compilation_cache as e; "
+        "p = e(); print(p, jax.config.jax_compilation_cache_dir)"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("FURUTA_GYM_COMPILATION_CACHE",)}
+    env["JAX_COMPILATION_CACHE_DIR"] = str(tmp_path / "c")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == [str(tmp_path / "c")] * 2 and (tmp_path / "c").is_dir()
+    env["FURUTA_GYM_COMPILATION_CACHE"] = "0"
+    env["JAX_COMPILATION_CACHE_DIR"] = str(tmp_path / "d")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split()[0] == "None" and not (tmp_path / "d").exists()

@@ -89,19 +89,9 @@ def run(args: argparse.Namespace) -> int:
         jobs=jobs,
     )
     # a persistent compilation cache makes a resumed or repeated run skip most JAX compiles
-    if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
-        import jax
+    from ._cache import enable_compilation_cache
 
-        cache = Path.home() / ".cache" / "furuta_gym" / "jax"
-        try:
-            cache.mkdir(parents=True, exist_ok=True)
-            # the environment too: worker processes (--jobs) start a fresh JAX that reads it
-            os.environ["JAX_COMPILATION_CACHE_DIR"] = str(cache)
-            os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "1.0")
-            jax.config.update("jax_compilation_cache_dir", str(cache))
-            jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-        except (OSError, AttributeError):
-            pass
+    enable_compilation_cache()
     command = "furuta-gym " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:] else None
     paths = reproduce(out, config, command=command)
     for name, path in paths.items():

@@ -77,6 +77,9 @@ def run(args: argparse.Namespace) -> int:
 
     trajs = load_trajectories(args.data, args.system, require_velocities=True)
     forced = load_trajectories(args.forced, args.system, require_velocities=True) if args.forced else None
+    from ._cache import enable_compilation_cache
+
+    enable_compilation_cache()  # ~20 s of compiling once per machine, not once per run
     overrides = {}
     for name, key in [("epochs", "epochs"), ("horizons", "horizons"), ("lr", "learning_rate"),
                       ("weight_decay", "weight_decay"), ("lam", "lambda_traj"), ("lambda_step", "lambda_step"),
