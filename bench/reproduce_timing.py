@@ -28,7 +28,7 @@ def section(records: list[tuple[Path, dict]]) -> str:
         + "`). Per model: training (JAX compiles included) + evaluation on every test set. "
         "The machine is shared: the load average at the time is part of the number.",
         "",
-        "| run | date (UTC) | command | epochs (stage 1, stage 2) | data s | models | per model s (min / median / max) | figures s | total s |",
+        "| run | date (UTC) | command | epochs (stage 1, stage 2; L_prop: L_Iτ alone, stage 1, stage 2) | data s | models | per model s (min / median / max) | figures s | total s |",
         "|---|---|---|---|---:|---:|---|---:|---:|",
     ]
     for path, rec in records:
@@ -44,6 +44,8 @@ def section(records: list[tuple[Path, dict]]) -> str:
         else:
             stats = "all reused"
         epochs = ", ".join(f"{s}: {tuple(e)}" for s, e in rec.get("epochs", {}).items())
+        if rec.get("prop_epochs"):  # L_prop runs: (L_Iτ alone, stage 1, stage 2)
+            epochs += "; L_prop " + ", ".join(f"{s}: {tuple(e)}" for s, e in rec["prop_epochs"].items())
         cpu = rec.get("machine", {}).get("cpu", "?")
         lines.append(
             f"| {path.parent.name} | {rec.get('date_utc', '?')} | `{rec.get('command') or '(API)'}` | "
