@@ -3,7 +3,7 @@
 A training step with the trajectory loss compiles for ~20 s; a persistent cache pays that once
 per machine instead of once per run (and, with it, :mod:`furuta_gym.training._step_cache`
 stores the traced steps too, so a warm first call takes ~1 s). The library itself never writes
-caches; the commands that train (``train``, ``reproduce``, ``demo``) do, in
+caches; the ``train`` and ``reproduce`` commands do, in
 ``~/.cache/furuta_gym/jax`` — or wherever ``JAX_COMPILATION_CACHE_DIR`` points. Set
 ``FURUTA_GYM_COMPILATION_CACHE=0`` to turn it off.
 """

@@ -43,6 +43,7 @@ __all__ = [
     "METRIC_COLUMNS",
     "ReproduceConfig",
     "training_config",
+    "epoch_schedule",
     "reproduce",
     "load_paper_table",
     "build_tables",
@@ -146,19 +147,25 @@ PROP_LAMBDA = 1e-3
 REPRODUCE_QUADRATURE = "simpson"
 
 
+def epoch_schedule(system: str, config: ReproduceConfig, loss: str) -> tuple[int, ...]:
+    """Epochs per stage of ``loss`` runs on ``system``: the config's override or the quick /
+    full table (L_prop: ``(L_Iτ alone, stage 1, stage 2)``, others ``(stage 1, stage 2)``)."""
+    if loss == "prop":
+        table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS)
+    else:
+        table = config.epochs or (QUICK_EPOCHS if config.quick else FULL_EPOCHS)
+    return tuple(table[get_spec(system).name])
+
+
 def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop"):
     """The :class:`~furuta_gym.training.TrainConfig` of one run of ``system`` with ``loss``."""
     from .train import TrainConfig
 
     name = get_spec(system).name
     horizons = tuple(TrainConfig.for_system(name).horizons)
-    if loss == "prop":
-        table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS)
-        epochs = tuple(table[name])
-        if len(epochs) == 3:  # a leading stage of L_Iτ alone
-            horizons = (None, *horizons)
-    else:
-        epochs = tuple((config.epochs or (QUICK_EPOCHS if config.quick else FULL_EPOCHS))[name])
+    epochs = epoch_schedule(name, config, loss)
+    if loss == "prop" and len(epochs) == 3:  # a leading stage of L_Iτ alone
+        horizons = (None, *horizons)
     overrides = dict(
         epochs=epochs,
         horizons=horizons,
@@ -588,10 +595,8 @@ def _write_run_record(path: Path, config: ReproduceConfig, command, timings, dat
         "date_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "furuta_gym_version": __version__,
         "config": dataclasses.asdict(config),
-        "epochs": {s: list((config.epochs or (QUICK_EPOCHS if config.quick else FULL_EPOCHS))[s])
-                   for s in config.systems},
-        "prop_epochs": {s: list((config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS))[s])
-                        for s in config.systems},
+        "epochs": {s: list(epoch_schedule(s, config, "traj")) for s in config.systems},
+        "prop_epochs": {s: list(epoch_schedule(s, config, "prop")) for s in config.systems},
         "quadrature": (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE),
         "data": data_meta,
         "machine": _machine(),
