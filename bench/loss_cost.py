@@ -85,10 +85,11 @@ def epoch_time(loss: str, n_traj: int, batch_size=256, repeats: int = 3) -> dict
 
     step, params, opt_state, batches = _setup(loss, n_traj, batch_size)
     lam = jnp.asarray(1.0)
+    lr = jnp.asarray(1e-3)
 
     def one_epoch(params, opt_state):
         for tb, ib in batches:
-            params, opt_state, terms, ok = step(params, opt_state, tb, ib, lam)
+            params, opt_state, terms, ok = step(params, opt_state, tb, ib, lam, lr)
         jax.block_until_ready(terms["total"])
         return params, opt_state
 
@@ -116,7 +117,7 @@ def compile_probe(loss: str, cache_dir: str) -> float:
     step, params, opt_state, batches = _setup(loss, 64, 256)
     tb, ib = batches[0]
     t0 = time.perf_counter()
-    out = step(params, opt_state, tb, ib, jnp.asarray(1.0))
+    out = step(params, opt_state, tb, ib, jnp.asarray(1.0), jnp.asarray(1e-3))
     jax.block_until_ready(out[2]["total"])
     return time.perf_counter() - t0
 

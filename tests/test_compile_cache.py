@@ -101,7 +101,7 @@ def itau_step(furuta_free):
     step = _make_step(static, optimizer, "itau", config, "momentum")
     assert not isinstance(step, _step_cache.ExportedStep)  # tests never enable JAX's disk cache
     windows = make_windows(furuta_free, 41, stride=40, cover_end=True)
-    args = (params, optimizer.init(params), None, windows, jnp.asarray(1.0))
+    args = (params, optimizer.init(params), None, windows, jnp.asarray(1.0), jnp.asarray(1e-3))
     key = {"loss": "itau", "config": repr(config), "optimizer": _step_cache.optimizer_description(optimizer),
            "static": _step_cache.array_digest(static)}
     return step, args, key

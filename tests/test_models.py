@@ -69,18 +69,9 @@ def test_scale_leaves_free_dynamics_unchanged_but_not_forced(models, system, kin
     n = model.spec.n_dof
     q, qd = (jnp.asarray(a[0]) for a in _random_states(n, 1, seed=2))
     zero, one = jnp.zeros(1), jnp.ones(1)
-    if system == "furuta" and kind == "aph":
-        # APHYNITY's Furuta prior keeps the back-EMF in τ_u (known motor model), so even u = 0
-        # has an unscaled term; only the input-free part of the balance scales.
-        free_a = forward_dynamics(model, q, qd, zero) - jnp.linalg.solve(
-            model.mass_matrix(q), model.input_force(q, qd, zero))
-        free_b = forward_dynamics(scaled, q, qd, zero) - jnp.linalg.solve(
-            scaled.mass_matrix(q), scaled.input_force(q, qd, zero))
-        np.testing.assert_allclose(free_a, free_b, rtol=1e-10)
-    else:
-        np.testing.assert_allclose(
-            forward_dynamics(model, q, qd, zero), forward_dynamics(scaled, q, qd, zero), rtol=1e-10
-        )
+    np.testing.assert_allclose(
+        forward_dynamics(model, q, qd, zero), forward_dynamics(scaled, q, qd, zero), rtol=1e-10
+    )
     forced_a = forward_dynamics(model, q, qd, one) - forward_dynamics(model, q, qd, zero)
     forced_b = forward_dynamics(scaled, q, qd, one) - forward_dynamics(scaled, q, qd, zero)
     np.testing.assert_allclose(forced_a, 3.0 * forced_b, rtol=1e-10)
@@ -99,9 +90,24 @@ def test_delan_known_structure_of_forces():
     assert float(f.rotor_friction) == pytest.approx(5.1e-4 - 0.042**2 / 8.4, rel=1e-12)
 
 
+def test_aphynity_back_emf_kept_in_the_prior_breaks_the_scale_symmetry():
+    """With ``prior_back_emf=True`` the Furuta prior's τ_u holds −(kt·km/Rm)·α̇, which the overall
+    scale does not multiply: free motion then changes with the scale, so the scale fitted on a
+    forced trajectory would change the free dynamics the model was trained on (the default lumps
+    the back-EMF into F_a instead, and the test above holds)."""
+    kept = make_model("furuta", "aph", 0, prior_back_emf=True)
+    q, qd, zero = jnp.array([0.3, 1.0]), jnp.array([4.0, -2.0]), jnp.zeros(1)
+    a = forward_dynamics(kept, q, qd, zero)
+    b = forward_dynamics(kept.with_scale(3.0), q, qd, zero)
+    assert abs(float(a[0] - b[0])) > 1e-3 * abs(float(a[0]))
+    lumped = make_model("furuta", "aph", 0)
+    np.testing.assert_allclose(lumped.input_force(q, qd, jnp.array([2.0])), [0.042 / 8.4 * 2, 0.0], rtol=1e-14)
+    np.testing.assert_allclose(kept.input_force(q, qd, jnp.array([2.0])), [0.042 / 8.4 * (2 - 0.042 * 4), 0.0], rtol=1e-14)
+
+
 @pytest.mark.parametrize("system", ["furuta", "nmsd"])
 def test_aphynity_prior_is_the_frictionless_analytic_model(system):
-    m = make_model(system, "aph", 0)
+    m = make_model(system, "aph", 0, prior_back_emf=True) if system == "furuta" else make_model(system, "aph", 0)
     if system == "furuta":
         ref = Furuta(params=FurutaParameters(c_r=0.0, c_p=0.0))
     else:

@@ -43,3 +43,22 @@ def test_a_stage_without_horizon_needs_the_integral_loss(segments):
     cfg = TrainConfig.for_system("nmsd", epochs=(1, 1), horizons=(None, 2), progress=False)
     with pytest.raises(ValueError, match="L_Iτ alone.*'traj'"):
         train("dln", "nmsd", "traj", segments, cfg)
+
+
+def test_learning_rate_per_stage(segments):
+    """One rate per stage: a second stage at a vanishing rate leaves the first stage's model."""
+    with pytest.raises(ValueError, match="one value or one per stage"):
+        TrainConfig(epochs=(1, 1), horizons=(None, 2), learning_rate=(1e-3,))
+    with pytest.raises(ValueError, match="must be positive"):
+        TrainConfig(epochs=(1,), horizons=(2,), learning_rate=(0.0,))
+    base = dict(horizons=(None, None), quadrature="simpson", progress=False, checkpoint_every=0)
+    hp = dict(hidden=(8, 8))
+    two, _ = train("dln", "nmsd", "prop", segments,
+                   TrainConfig.for_system("nmsd", epochs=(5, 5), learning_rate=(1e-2, 1e-15), **base), hparams=hp)
+    one, _ = train("dln", "nmsd", "prop", segments,
+                   TrainConfig.for_system("nmsd", epochs=(5, 0), learning_rate=1e-2, **base), hparams=hp)
+    fast, _ = train("dln", "nmsd", "prop", segments,
+                    TrainConfig.for_system("nmsd", epochs=(5, 5), learning_rate=1e-2, **base), hparams=hp)
+    a, b, c = (np.asarray(m.lagrangian_nets.potential_net.layers[0].weight) for m in (two, one, fast))
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    assert np.max(np.abs(c - b)) > 1e-4

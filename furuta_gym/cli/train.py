@@ -24,6 +24,14 @@ def _ints(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
 
 
+def _rates(text: str) -> float | tuple[float, ...]:
+    try:
+        rates = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or comma-separated numbers, got {text!r}") from None
+    return rates[0] if len(rates) == 1 else rates
+
+
 def _horizons(text: str) -> tuple[int | float | None, ...]:
     out = []
     for v in text.split(","):
@@ -58,7 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--horizons", type=_horizons,
                         help="horizon per stage: samples, seconds or 'itau' (L_Iτ alone, with --loss prop), "
                         "e.g. itau,2,1s (default 2,1s Furuta; 2,2s N-MSD)")
-    parser.add_argument("--lr", type=float, help="Adam learning rate (default 1e-3)")
+    parser.add_argument("--lr", type=_rates,
+                        help="Adam learning rate, one value or one per stage, e.g. 1e-2,1e-3,1e-3 (default 1e-3)")
     parser.add_argument("--weight-decay", type=float, help="AdamW weight decay (default 1e-5)")
     parser.add_argument("--batch-size", type=int, help="trajectory windows per step; 0 = full batch")
     parser.add_argument("--lambda", dest="lam", type=float, help="λ of L_prop / initial λ of L_aph (default 1)")

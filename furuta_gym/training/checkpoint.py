@@ -170,6 +170,13 @@ def _skeleton(header: dict, path: Path, expected_system: str | None, expected_ki
     if kind not in MODEL_KINDS:
         raise CheckpointError(f"{path}: unknown model kind {kind!r} in header")
     hparams = {k: _tuplify(v) for k, v in header.get("hparams", {}).items()}
+    # checkpoints written before these choices existed rebuild as they were trained
+    if kind == "aph" and "prior_back_emf" not in hparams:
+        hparams["prior_back_emf"] = True
+    if kind in ("aph", "adln") and "linear_velocity" not in hparams:
+        hparams["linear_velocity"] = False
+    if kind in ("aph", "adln") and "force_activation" not in hparams:
+        hparams["force_activation"] = hparams.pop("activation", "tanh") if kind == "aph" else hparams.get("activation", "tanh")
     try:
         return make_model(system, kind, jax.random.PRNGKey(0), **hparams)
     except (ValueError, TypeError) as exc:

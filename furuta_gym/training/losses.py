@@ -12,7 +12,10 @@ every loss is one ``jax.vmap`` over windows and jit-friendly:
   quadrature floor), divided by a normaliser (see below).
 * :func:`augmentation_penalty` — APHYNITY's ‖F_a‖²: the mean squared data-driven force over the
   window samples, in units of the model's ``force_scale``.
-* :func:`aphynity_loss` = ‖F_a‖² + λ·L_traj; :func:`proposed_loss` = L_Iτ + λ·L_traj.
+* :func:`aphynity_loss` = ‖F_a‖² + λ·L_traj; :func:`proposed_loss` = L_Iτ + λ·L_traj, plus
+  μ·P_a for models with a data-driven force F_a (APHYNITY, augmented DeLaN): P_a =
+  Σ‖∫M̂⁻¹F_a dt‖² / Σ‖Δq̇‖², APHYNITY's minimum-norm principle integrated over L_Iτ's intervals
+  (:func:`integral_loss_terms` says why L_Iτ needs it).
 
 **Normalising L_Iτ (scale collapse).** On free data (u = 0) Z̄ = 0 and L_Iτ is minimised by L = 0,
 τ_NC = 0. ``normalize="momentum"`` divides by Σ‖Δp̂‖², the model's own momentum changes over the
@@ -36,7 +39,14 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..data import Trajectory
-from ..lagrangian import QuadratureRule, integral_residual, interval_difference, momentum
+from ..lagrangian import (
+    QuadratureRule,
+    integral_residual,
+    interval_difference,
+    interval_integral,
+    momentum,
+    solve_mass_matrix,
+)
 from ..simulate import simulate
 
 __all__ = [
@@ -44,6 +54,7 @@ __all__ = [
     "make_windows",
     "trajectory_loss",
     "integral_loss",
+    "integral_loss_terms",
     "augmentation_penalty",
     "aphynity_loss",
     "proposed_loss",
@@ -187,7 +198,10 @@ def trajectory_loss(
     return jnp.mean(jnp.sum(err**2, axis=-1))
 
 
-def _residual_and_momentum_change(model, windows: Windows, rule: QuadratureRule):
+def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmentation: bool = False):
+    """Per window: the residual Z̄ − Ā and the model's momentum changes Δp̂ over the quadrature
+    intervals and, if asked, the velocity changes the data-driven force accounts for, ∫M̂⁻¹F_a dt,
+    with the data's own velocity changes Δq̇ over the same intervals."""
     n = model.spec.n_dof
 
     def one(t, x, u):
@@ -195,9 +209,24 @@ def _residual_and_momentum_change(model, windows: Windows, rule: QuadratureRule)
         dt = t[1] - t[0]
         r = integral_residual(model, q, qd, u, dt, rule)
         p = jax.vmap(lambda q_, qd_: momentum(model, q_, qd_))(q, qd)
-        return r, interval_difference(p, rule)
+        if not with_augmentation:
+            return r, interval_difference(p, rule), None, None
+        acc = jax.vmap(lambda q_, qd_: solve_mass_matrix(model.mass_matrix(q_), model.augmentation(q_, qd_)))(q, qd)
+        return r, interval_difference(p, rule), interval_integral(acc, dt, rule), interval_difference(qd, rule)
 
     return jax.vmap(one)(windows.t, windows.x, windows.u)
+
+
+def _normalised(sq, dp, normalize: str, size: int):
+    if normalize == "momentum":
+        return sq / jnp.sum(dp**2)
+    if normalize == "momentum_fixed":
+        return sq / jax.lax.stop_gradient(jnp.sum(dp**2))
+    if normalize == "none":
+        return sq / size
+    raise ValueError(
+        f"normalize must be 'auto', 'momentum', 'momentum_fixed' or 'none', got {normalize!r}"
+    )
 
 
 def integral_loss(
@@ -212,19 +241,38 @@ def integral_loss(
     See the module docstring for ``normalize``; with ``"momentum"`` the value is the squared
     residual relative to the model's own momentum changes (dimensionless).
     """
-    r, dp = _residual_and_momentum_change(model, windows, rule)
-    sq = jnp.sum(r**2)
+    return integral_loss_terms(model, windows, rule=rule, normalize=normalize)[0]
+
+
+def integral_loss_terms(
+    model,
+    windows: Windows,
+    *,
+    rule: QuadratureRule = "trapezoid",
+    normalize: Normalization = "auto",
+    with_augmentation: bool = False,
+) -> tuple[Float[Array, ""], Float[Array, ""] | None]:
+    """``(L_Iτ, P_a)``: L_Iτ as :func:`integral_loss` and, with ``with_augmentation``, the share
+    of the data's velocity changes that the data-driven force accounts for,
+    P_a = Σ‖∫M̂⁻¹F_a dt‖² / Σ‖Δq̇‖² over the same intervals (``None`` otherwise).
+
+    P_a is APHYNITY's minimum-norm principle (Yin et al. 2021: the smallest F_a in the state
+    derivative, i.e. in accelerations), integrated like L_Iτ so no accelerations are measured.
+    L_Iτ alone cannot say what F_a should hold: with a general F_a(q, q̇) any position-dependent
+    force (gravity) or any change of M can be moved into F_a at no cost. In accelerations the
+    choice is clean: the conservative part M̂⁻¹(−C q̇ − ∇V) is even in q̇ and viscous friction is
+    odd, so on data symmetric in q̇ the smallest M̂⁻¹F_a leaves exactly the friction to F_a.
+    Measured in forces and divided by the model's own Δp̂ instead, a learned M can inflate the
+    denominator and the minimum is not physical (augmented DeLaN found one). P_a is invariant to
+    the overall scale (M̂ and F_a scale together) and its denominator is data, so it cannot be
+    gamed by the model; a small weight μ breaks the ties L_Iτ leaves while costing the fit little.
+    """
     if normalize == "auto":
         normalize = resolve_normalization(windows)
-    if normalize == "momentum":
-        return sq / jnp.sum(dp**2)
-    if normalize == "momentum_fixed":
-        return sq / jax.lax.stop_gradient(jnp.sum(dp**2))
-    if normalize == "none":
-        return sq / r.size
-    raise ValueError(
-        f"normalize must be 'auto', 'momentum', 'momentum_fixed' or 'none', got {normalize!r}"
-    )
+    r, dp, acc, dqd = _integral_parts(model, windows, rule, with_augmentation)
+    itau = _normalised(jnp.sum(r**2), dp, normalize, r.size)
+    share = None if acc is None else jnp.sum(acc**2) / jnp.sum(dqd**2)
+    return itau, share
 
 
 def resolve_normalization(windows: Windows) -> str:
@@ -267,12 +315,16 @@ def proposed_loss(
     *,
     rule: QuadratureRule = "trapezoid",
     normalize: Normalization = "auto",
+    augmentation_weight: float = 0.0,
     **traj_kwargs,
 ) -> Float[Array, ""]:
-    """L_prop = L_Iτ + λ·L_traj (paper eq. 11)."""
-    return integral_loss(model, integral_windows, rule=rule, normalize=normalize) + lam * trajectory_loss(
-        model, trajectory_windows, **traj_kwargs
+    """L_prop = L_Iτ + λ·L_traj (paper eq. 11) + μ·P_a with μ = ``augmentation_weight`` (models
+    with F_a only; see :func:`integral_loss_terms`)."""
+    itau, share = integral_loss_terms(
+        model, integral_windows, rule=rule, normalize=normalize, with_augmentation=augmentation_weight != 0.0
     )
+    total = itau + lam * trajectory_loss(model, trajectory_windows, **traj_kwargs)
+    return total if share is None else total + augmentation_weight * share
 
 
 def aphynity_lambda_update(lam: float, trajectory_loss_value: float, step: float) -> float:

@@ -44,7 +44,7 @@ from . import checkpoint as ckpt
 from .losses import (
     Windows,
     augmentation_penalty,
-    integral_loss,
+    integral_loss_terms,
     make_windows,
     resolve_normalization,
     trajectory_loss,
@@ -53,6 +53,9 @@ from .losses import (
 __all__ = ["TrainConfig", "train", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
 
 LOSSES = ("traj", "aph", "prop", "itau")
+#: μ of L_prop's minimum-norm term for models with F_a when TrainConfig.augmentation_weight is
+#: None (docs/reproduce.md, "Training recipe": 1e-2 beat 1e-3 on every augmented-DeLaN cell)
+AUGMENTATION_WEIGHT = 1e-2
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
@@ -69,18 +72,22 @@ class TrainConfig:
     minutes; :meth:`paper` gives the paper's recipe (50 k + 10 k epochs Furuta, 5 k + 1 k N-MSD,
     full batch), which costs hours on a CPU (known_pitfalls.md, "Cost").
 
-    ``batch_size`` trajectory windows per step (``None``: all windows, one step per epoch);
+    ``learning_rate`` Adam's step, one value or one per stage (an L_Iτ-alone stage tolerates a
+    larger step than the trajectory stages after it). ``batch_size`` trajectory windows per step (``None``: all windows, one step per epoch);
     ``lambda_traj`` λ in L_aph / L_prop; ``lambda_step`` APHYNITY's dual-ascent step τ₂ (λ ← λ +
     τ₂·L_traj after every epoch; ``None``: 1000 for ``"aph"``, 0 — a fixed λ — otherwise);
     ``quadrature`` "trapezoid" (paper) | "simpson"; ``normalize`` see
     :mod:`furuta_gym.training.losses`; ``integral_window`` samples per L_Iτ window
     (trajectories are tiled into windows overlapping by one sample); ``integral_batch_size``
-    L_Iτ windows per step (``None``: all).
+    L_Iτ windows per step (``None``: all). ``augmentation_weight`` μ of the minimum-norm term
+    μ·P_a that L_prop / L_Iτ add for models with a data-driven force F_a (APHYNITY, augmented
+    DeLaN; :func:`~furuta_gym.training.losses.integral_loss_terms`): ``None`` means
+    :data:`AUGMENTATION_WEIGHT` for those models and 0 otherwise; 0 turns it off.
     """
 
     epochs: tuple[int, ...] = (100, 20)
     horizons: tuple[int | float | None, ...] = (2, 1.0)
-    learning_rate: float = 1e-3
+    learning_rate: float | tuple[float, ...] = 1e-3
     weight_decay: float = 1e-5
     batch_size: int | None = 256
     lambda_traj: float = 1.0
@@ -89,6 +96,7 @@ class TrainConfig:
     normalize: str = "auto"
     integral_window: int = 101
     integral_batch_size: int | None = None
+    augmentation_weight: float | None = None
     rtol: float = 1e-3
     atol: float = 1e-6
     max_steps: int = 4096
@@ -104,14 +112,32 @@ class TrainConfig:
             raise ValueError(
                 f"epochs {self.epochs} and horizons {self.horizons} must have one entry per stage"
             )
+        if isinstance(self.learning_rate, (tuple, list)):
+            object.__setattr__(self, "learning_rate", tuple(float(r) for r in self.learning_rate))
+            if len(self.learning_rate) != len(self.epochs):
+                raise ValueError(
+                    f"learning_rate {self.learning_rate} must be one value or one per stage "
+                    f"({len(self.epochs)} stages)"
+                )
+        rates = self.learning_rate if isinstance(self.learning_rate, tuple) else (self.learning_rate,)
+        if not all(float(r) > 0 for r in rates):
+            raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
         if any(e < 0 for e in self.epochs):
             raise ValueError(f"epochs must be non-negative, got {self.epochs}")
         if self.quadrature not in ("trapezoid", "simpson"):
             raise ValueError(f"quadrature must be 'trapezoid' or 'simpson', got {self.quadrature!r}")
         if self.normalize not in ("auto", "momentum", "momentum_fixed", "none"):
             raise ValueError(f"normalize must be auto|momentum|momentum_fixed|none, got {self.normalize!r}")
+        if self.augmentation_weight is not None and not self.augmentation_weight >= 0:
+            raise ValueError(f"augmentation_weight must be non-negative or None, got {self.augmentation_weight!r}")
         if self.batch_size is not None and self.batch_size < 1:
             raise ValueError(f"batch_size must be positive or None, got {self.batch_size}")
+
+    def stage_learning_rate(self, stage: int) -> float:
+        """Adam's step in ``stage`` (0-based)."""
+        if isinstance(self.learning_rate, tuple):
+            return self.learning_rate[stage]
+        return float(self.learning_rate)
 
     @property
     def total_epochs(self) -> int:
@@ -226,21 +252,25 @@ def _build_optimizer(model, config: TrainConfig):
     decay_mask = model.decayed()
     params, _ = eqx.partition(model, trainable)
     mask = eqx.filter(decay_mask, trainable)  # same structure as params (None where not trainable)
-    adam = optax.adamw(config.learning_rate, weight_decay=config.weight_decay, mask=mask)
+    # unit step: the step function multiplies the update by the stage's learning rate, so stages
+    # with different rates share one optimiser state and one compiled step
+    adam = optax.adamw(1.0, weight_decay=config.weight_decay, mask=mask)
     opt = optax.chain(optax.clip_by_global_norm(config.grad_clip), adam) if config.grad_clip else adam
     # _make_step may store a step traced with this optimiser on disk: record what defines it
-    _step_cache.register_optimizer(opt, f"adamw lr={config.learning_rate!r} wd={config.weight_decay!r} "
+    _step_cache.register_optimizer(opt, f"adamw lr=1 (scaled per step) wd={config.weight_decay!r} "
                                    f"clip={config.grad_clip!r} mask={_step_cache.array_digest(mask)}")
     return opt, trainable, params
 
 
-def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization: str):
+def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization: str,
+               augmentation_weight: float = 0.0):
     traj_kw = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
     use_traj = loss in ("traj", "aph", "prop")
     use_int = loss in ("prop", "itau")
+    use_share = use_int and augmentation_weight != 0.0
 
     @eqx.filter_jit
-    def step(params, opt_state, traj_b: Windows | None, int_b: Windows | None, lam):
+    def step(params, opt_state, traj_b: Windows | None, int_b: Windows | None, lam, learning_rate):
         def objective(p):
             model = eqx.combine(p, static)
             terms = {}
@@ -248,8 +278,13 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
             if use_traj:
                 terms["traj"] = trajectory_loss(model, traj_b, **traj_kw)
             if use_int:
-                terms["itau"] = integral_loss(model, int_b, rule=config.quadrature, normalize=normalization)
+                terms["itau"], share = integral_loss_terms(
+                    model, int_b, rule=config.quadrature, normalize=normalization, with_augmentation=use_share
+                )
                 total = total + terms["itau"]
+                if use_share:
+                    terms["fa_share"] = share
+                    total = total + augmentation_weight * share
             if loss == "aph":
                 terms["penalty"] = augmentation_penalty(model, traj_b)
                 total = total + terms["penalty"]
@@ -261,6 +296,7 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
         (value, terms), grads = eqx.filter_value_and_grad(objective, has_aux=True)(params)
         ok = jnp.isfinite(value) & _all_finite(grads)
         updates, new_opt = optimizer.update(grads, opt_state, params)
+        updates = jax.tree_util.tree_map(lambda u: learning_rate * u, updates)
         new_params = eqx.apply_updates(params, updates)
         params = _tree_where(ok, new_params, params)
         opt_state = _tree_where(ok, new_opt, opt_state)
@@ -272,6 +308,7 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
     described = _step_cache.optimizer_description(optimizer)
     if cache_dir is not None and described is not None:
         key = {"loss": loss, "normalization": normalization, "config": repr(config),
+               "augmentation_weight": repr(float(augmentation_weight)),
                "optimizer": described, "static": _step_cache.array_digest(static)}
         return _step_cache.ExportedStep(step, key, cache_dir)
     return step
@@ -351,6 +388,15 @@ def train(
         )
     if loss == "aph" and not model.has_augmentation:
         raise ValueError(f"loss 'aph' needs a model with a data-driven force F_a (aph or adln), not {model_kind!r}")
+    if config.augmentation_weight is None:
+        augmentation_weight = AUGMENTATION_WEIGHT if model.has_augmentation else 0.0
+    elif config.augmentation_weight and not model.has_augmentation:
+        raise ValueError(
+            f"augmentation_weight={config.augmentation_weight!r} weighs a data-driven force F_a, which a "
+            f"{model_kind!r} model does not have (only aph and adln do); leave it None or 0"
+        )
+    else:
+        augmentation_weight = float(config.augmentation_weight)
     dt = float(np.median([tr.dt for tr in trajs]))
     shortest = min(len(tr) for tr in trajs)
     dhash = data_hash(trajs)
@@ -424,7 +470,7 @@ def train(
     def step_for(stage: int):
         name = stage_loss(stage)
         if name not in steps_by_loss:
-            steps_by_loss[name] = _make_step(static, optimizer, name, config, normalization)
+            steps_by_loss[name] = _make_step(static, optimizer, name, config, normalization, augmentation_weight)
         return steps_by_loss[name]
 
     def save_state(epoch: int, model_now) -> None:
@@ -482,7 +528,8 @@ def train(
             sums: dict[str, float] = {}
             skipped = 0
             for tb, ib_ in zip(traj_batches, int_batches):
-                params, opt_state, terms, ok = step(params, opt_state, tb, ib_, jnp.asarray(lam))
+                params, opt_state, terms, ok = step(params, opt_state, tb, ib_, jnp.asarray(lam),
+                                                    jnp.asarray(config.stage_learning_rate(stage)))
                 if bool(ok):
                     for k, v in terms.items():
                         sums[k] = sums.get(k, 0.0) + float(v)

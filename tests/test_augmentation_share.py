@@ -1,0 +1,122 @@
+"""L_prop's minimum-norm term for models with a data-driven force F_a (APHYNITY, augmented DeLaN):
+P_a = Σ‖∫M̂⁻¹F_a dt‖² / Σ‖Δq̇‖², weighted by μ = ``TrainConfig.augmentation_weight``."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from furuta_gym.data import Trajectory
+from furuta_gym.lagrangian import interval_difference, interval_integral
+from furuta_gym.models import NMSD, make_model
+from furuta_gym.signals import chirp
+from furuta_gym.simulate import simulate
+from furuta_gym.training.losses import integral_loss, integral_loss_terms, make_windows, proposed_loss
+from furuta_gym.training.train import TrainConfig, train
+
+DT = 0.01
+
+
+@pytest.fixture(scope="module")
+def segments():
+    t = np.arange(0.0, 8.0 + DT / 2, DT)
+    u = 3.0 * chirp(t, 0.1, 1.1, 8.0)[:, None]
+    xs = np.asarray(simulate(NMSD(), np.array([0.5, -1.0]), t, u, rtol=1e-10, atol=1e-12))
+    n = 100
+    return [Trajectory(t[k * n : k * n + n + 1] - t[k * n], xs[k * n : k * n + n + 1, :1],
+                       u[k * n : k * n + n + 1], xs[k * n : k * n + n + 1, 1:], name=str(k))
+            for k in range(8)]
+
+
+def test_share_is_the_augmentation_velocity_change_relative_to_the_data_and_scale_free(segments):
+    model = make_model("nmsd", "aph", jax.random.PRNGKey(3))
+    w = make_windows(segments, 21, stride=20)
+    itau, share = integral_loss_terms(model, w, rule="simpson", normalize="momentum", with_augmentation=True)
+    num = den = 0.0
+    for t, x in zip(np.asarray(w.t), np.asarray(w.x)):
+        q, qd = jnp.asarray(x[:, :1]), jnp.asarray(x[:, 1:])
+        acc = jax.vmap(lambda a, b: jnp.linalg.solve(model.mass_matrix(a), model.augmentation(a, b)))(q, qd)
+        num += float(jnp.sum(interval_integral(acc, t[1] - t[0], "simpson") ** 2))
+        den += float(jnp.sum(interval_difference(qd, "simpson") ** 2))
+    assert float(share) == pytest.approx(num / den, rel=1e-10)
+    assert float(itau) == pytest.approx(float(integral_loss(model, w, rule="simpson", normalize="momentum")), rel=1e-12)
+    # like L_Iτ on free data, the share cannot be lowered by shrinking the whole model
+    _, share3 = integral_loss_terms(model.with_scale(3.0), w, rule="simpson", normalize="momentum",
+                                    with_augmentation=True)
+    assert float(share3) == pytest.approx(float(share), rel=1e-10)
+    # proposed_loss adds μ·P_a on top of L_Iτ + λ·L_traj
+    short = make_windows(segments[:2], 3, stride=10)
+    base = float(proposed_loss(model, w, short, 0.5, rule="simpson", normalize="momentum"))
+    with_mu = float(proposed_loss(model, w, short, 0.5, rule="simpson", normalize="momentum",
+                                  augmentation_weight=0.01))
+    assert with_mu - base == pytest.approx(0.01 * float(share), rel=1e-9)
+
+
+def test_weight_on_a_model_without_augmentation_or_negative_is_refused(segments):
+    with pytest.raises(ValueError, match="augmentation_weight must be non-negative"):
+        TrainConfig(augmentation_weight=-1.0)
+    cfg = TrainConfig.for_system("nmsd", epochs=(1,), horizons=(None,), augmentation_weight=1e-3, progress=False)
+    with pytest.raises(ValueError, match="augmentation_weight=0.001.*'dln'.*only aph and adln"):
+        train("dln", "nmsd", "prop", segments, cfg)
+
+
+def test_the_weight_moves_a_spring_force_out_of_the_network_into_the_prior(segments):
+    """L_Iτ alone is indifferent to whether the spring force sits in the prior (k1) or in F_a(p):
+    started from a prior whose k1 is 30 % low, μ·P_a makes the prior take it back."""
+    cfg = dict(epochs=(300,), horizons=(None,), quadrature="simpson", learning_rate=1e-2, progress=False,
+               checkpoint_every=0)
+    hp = dict(prior=(("k1", 7.0),))
+    runs = {}
+    for mu in (0.0, 0.1):
+        model, history = train("aph", "nmsd", "prop", segments,
+                               TrainConfig.for_system("nmsd", augmentation_weight=mu, **cfg), hparams=hp)
+        k1 = float(model.physical_parameters["k1"])
+        runs[mu] = (k1, history[-1])
+    (k1_free, h_free), (k1_mu, h_mu) = runs[0.0], runs[0.1]
+    assert "fa_share" not in h_free and h_mu["fa_share"] > 0
+    assert h_mu["total"] == pytest.approx(h_mu["itau"] + 0.1 * h_mu["fa_share"], rel=1e-12)
+    # with μ the prior's spring is much closer to the true k1 = 10 (measured: 9.6 against 7.8)
+    assert abs(k1_mu - 10.0) < 0.5 * abs(k1_free - 10.0)
+
+
+def test_force_network_linear_velocity_term_and_activation():
+    """F_a = force_scale·(net(x) + W·q̇/velocity_scale): W starts at zero (the initial F_a is the
+    network's), carries a linear velocity dependence that does not saturate, and can be dropped."""
+    import equinox as eqx
+
+    model = make_model("furuta", "aph", 0)
+    net = model.force_net
+    assert net.linear.shape == (2, 2) and not np.any(np.asarray(net.linear))
+    assert net.net.activation == "silu" and dict(model.hparams)["force_activation"] == "silu"
+    q = jnp.array([0.3, 1.0])
+    W = jnp.array([[-2.0, 0.0], [0.0, -0.5]])
+    linear_only = eqx.tree_at(lambda m: m.force_net.linear, model, W)
+    for qd in (jnp.array([1.0, -2.0]), jnp.array([100.0, 40.0])):
+        diff = linear_only.augmentation(q, qd) - model.augmentation(q, qd)
+        np.testing.assert_allclose(diff, net.force_scale * W @ (qd / net.velocity_scale), rtol=1e-12)
+    plain = make_model("furuta", "adln", 0, linear_velocity=False, force_activation="tanh")
+    assert plain.force_net.linear is None and plain.force_net.net.activation == "tanh"
+    # the Lagrangian networks keep their own activation
+    assert plain.lagrangian_nets.mass_net.activation == "tanh"
+
+
+def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_path):
+    """A checkpoint whose header predates prior_back_emf / linear_velocity / force_activation
+    rebuilds the architecture it was trained with (back-EMF in the prior, no W, tanh)."""
+    import json
+
+    from furuta_gym.training import checkpoint as ckpt
+
+    old = make_model("furuta", "aph", jax.random.PRNGKey(2), prior_back_emf=True, linear_velocity=False,
+                     force_activation="tanh")
+    path = ckpt.save_model(tmp_path / "old.eqx", old)
+    header, payload = ckpt._read(path)
+    for key in ("prior_back_emf", "linear_velocity", "force_activation"):
+        del header["hparams"][key]
+    ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")},
+                old, overwrite=True)
+    assert "linear_velocity" not in json.dumps(ckpt.read_header(path)["hparams"])
+    loaded = ckpt.load_model(path)
+    q, qd, u = jnp.array([0.3, 1.0]), jnp.array([4.0, -2.0]), jnp.array([1.5])
+    np.testing.assert_array_equal(loaded.augmentation(q, qd), old.augmentation(q, qd))
+    np.testing.assert_array_equal(loaded.input_force(q, qd, u), old.input_force(q, qd, u))
