@@ -180,8 +180,9 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
     )
     if loss == "prop":
         overrides["lambda_traj"] = PROP_LAMBDA
-        if len(epochs) == 3:
-            overrides["learning_rate"] = (PROP_ITAU_LEARNING_RATE[name], 1e-3, 1e-3)
+        if len(epochs) == 3 and PROP_ITAU_LEARNING_RATE[name] != TrainConfig.learning_rate:
+            overrides["learning_rate"] = (PROP_ITAU_LEARNING_RATE[name], TrainConfig.learning_rate,
+                                          TrainConfig.learning_rate)
     overrides.update(config.train_overrides or {})
     return TrainConfig.for_system(name, **overrides)
 
@@ -243,6 +244,19 @@ def _datasets(system: str, out: Path, config: ReproduceConfig):
     return data, meta
 
 
+def _same_settings(saved: dict, current: dict) -> bool:
+    """Whether a run directory's recorded settings are this run's. A training setting the record
+    lacks was added later; the run then used what is now that setting's default."""
+    from .train import TrainConfig
+
+    defaults = json.loads(json.dumps(TrainConfig().to_json()))
+    saved = dict(saved, train=dict(saved.get("train", {})))
+    for key, value in current.get("train", {}).items():
+        if key not in saved["train"] and key in defaults and value == defaults[key]:
+            saved["train"][key] = value
+    return saved == current
+
+
 def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceConfig, truth):
     """Train (or resume / reuse) one model and evaluate it; returns its metrics dict."""
     from .checkpoint import load_model
@@ -257,7 +271,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     cfg_path = run_dir / "reproduce_config.json"
     if cfg_path.exists():
         saved = json.loads(cfg_path.read_text())
-        if saved != json.loads(json.dumps(cfg_json)):
+        if not _same_settings(saved, json.loads(json.dumps(cfg_json))):
             raise ValueError(
                 f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out"
             )
