@@ -11,6 +11,9 @@ Measures in one run, with one harness, side by side:
   env.step/s and its ratio to the MuJoCo-backed env (target ≥ 0.5);
 * ``Furuta-v0`` with a learned model, an untrained DeLaN of the default architecture (a step
   costs the same whatever the weights): env.step/s and its ratio to the MuJoCo env (target ≥ 0.5);
+* the same model-backed envs in a child process that opted into
+  :func:`furuta_gym.inline_cpu_dispatch` (JAX runs CPU computations inline instead of handing
+  each to a worker thread), with that process's own MuJoCo env measured beside them;
 * for information: a plant variant that needs MuJoCo's passive callback (``plant="coulomb"``),
   and ``NMSD-v0`` on both backends.
 
@@ -84,9 +87,12 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=7, help="interleaved runs; best is kept")
     parser.add_argument("--quick", action="store_true", help="smoke run: few steps and repeats")
     parser.add_argument("--no-write", action="store_true", help="print only, do not touch BENCHMARKS.md")
+    parser.add_argument("--inline-dispatch-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.quick:
         args.steps, args.repeats = 500, 2
+    if args.inline_dispatch_child:
+        return _inline_dispatch_child(args)
 
     import gymnasium as gym
 
@@ -125,6 +131,7 @@ def main(argv=None) -> int:
         mj_python, mj_native = max(mj_python, p), max(mj_native, nat)
         print(f"repeat {r + 1}/{args.repeats}: " + ", ".join(f"{k} {v:,.0f}/s" for k, v in best.items()))
 
+    inline = _measure_inline_dispatch(args)
     ip, fu, an = best["InvertedPendulum-v5"], best["Furuta-v0 mujoco"], best["Furuta-v0 analytic"]
     ratio_ip = fu / ip
     ratio_an = an / fu
@@ -144,6 +151,9 @@ def main(argv=None) -> int:
         f"| raw `mj_step` of `furuta.xml`, MuJoCo's loop | {mj_native:,.0f} | {mj_native / fu:.2f} × Furuta-v0 | |",
         f"| `Furuta-v0`, `dynamics=\"analytic\"` (JAX) env.step | {an:,.0f} | **{ratio_an:.2f}** × MuJoCo env | ≥ 0.5 |",
         f"| `Furuta-v0`, `dynamics=<DeLaN>` (untrained, default architecture) env.step | {best['Furuta-v0 DeLaN']:,.0f} | **{best['Furuta-v0 DeLaN'] / fu:.2f}** × MuJoCo env | ≥ 0.5 |",
+        f"| same, in a process after `furuta_gym.inline_cpu_dispatch()`: MuJoCo env | {inline['Furuta-v0 mujoco']:,.0f} | 1 | |",
+        f"| — `dynamics=\"analytic\"` env.step | {inline['Furuta-v0 analytic']:,.0f} | **{inline['Furuta-v0 analytic'] / inline['Furuta-v0 mujoco']:.2f}** × its MuJoCo env | ≥ 0.5 |",
+        f"| — `dynamics=<DeLaN>` env.step | {inline['Furuta-v0 DeLaN']:,.0f} | **{inline['Furuta-v0 DeLaN'] / inline['Furuta-v0 mujoco']:.2f}** × its MuJoCo env | ≥ 0.5 |",
         f"| `Furuta-v0`, `plant=\"coulomb\"` (passive callback) | {best['Furuta-v0 mujoco plant=coulomb']:,.0f} | {best['Furuta-v0 mujoco plant=coulomb'] / fu:.2f} × MuJoCo env | |",
         f"| `NMSD-v0` (MuJoCo + cubic-term callback) env.step | {best['NMSD-v0 mujoco']:,.0f} | | |",
         f"| `NMSD-v0`, `dynamics=\"analytic\"` env.step | {best['NMSD-v0 analytic']:,.0f} | {best['NMSD-v0 analytic'] / best['NMSD-v0 mujoco']:.2f} × NMSD MuJoCo | |",
@@ -155,7 +165,10 @@ def main(argv=None) -> int:
         "(dispatch dominates at this size). A DeLaN step compiles to ~150 XLA:CPU kernels (the "
         "analytic model's: 37): run back to back inside `lax.scan` they take ~10 µs per RK4 step, but "
         "one call per env.step costs ~40 µs of CPU (pinned to one core; more wall time under load), "
-        "XLA's fixed per-call and per-kernel costs, not arithmetic. The machine is shared, so absolute rates vary between "
+        "XLA's fixed per-call and per-kernel costs, not arithmetic. `furuta_gym.inline_cpu_dispatch()` "
+        "(opt-in, process-wide, before any JAX computation) runs JAX's CPU computations on the calling "
+        "thread instead of handing each to a worker thread; its rows come from a child process that "
+        "measured its own MuJoCo env beside them. The machine is shared, so absolute rates vary between "
         "runs; the ratios are measured side by side.",
         MARK_END,
     ]
@@ -165,6 +178,53 @@ def main(argv=None) -> int:
     if not args.no_write:
         write_section(section, MARK_START, MARK_END)
     return 0
+
+
+INLINE_CASES = ("Furuta-v0 mujoco", "Furuta-v0 analytic", "Furuta-v0 DeLaN")
+
+
+def _inline_dispatch_child(args) -> int:
+    """Child process: opt into inline dispatch before JAX starts, measure, print JSON."""
+    import json
+
+    import furuta_gym
+
+    furuta_gym.inline_cpu_dispatch()
+    import gymnasium as gym
+    import jax
+
+    from furuta_gym.models import make_model
+
+    furuta_gym.enable_x64()
+    delan = make_model("furuta", "dln", key=jax.random.PRNGKey(0))
+    cases = {
+        "Furuta-v0 mujoco": gym.make("furuta_gym/Furuta-v0"),
+        "Furuta-v0 analytic": gym.make("furuta_gym/Furuta-v0", dynamics="analytic"),
+        "Furuta-v0 DeLaN": gym.make("furuta_gym/Furuta-v0", dynamics=delan),
+    }
+    rng = np.random.default_rng(0)
+    actions = {n: rng.uniform(e.action_space.low, e.action_space.high, (args.steps, 1)) for n, e in cases.items()}
+    for name, env in cases.items():
+        env_steps_per_second(env, actions[name][: min(300, args.steps)])
+    best = {name: 0.0 for name in cases}
+    for _ in range(args.repeats):
+        for name, env in cases.items():
+            best[name] = max(best[name], env_steps_per_second(env, actions[name]))
+    print("INLINE " + json.dumps(best))
+    return 0
+
+
+def _measure_inline_dispatch(args) -> dict[str, float]:
+    import json
+    import subprocess
+
+    cmd = [sys.executable, __file__, "--inline-dispatch-child", "--steps", str(args.steps),
+           "--repeats", str(args.repeats)]
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True)
+    line = next(l for l in out.stdout.splitlines() if l.startswith("INLINE "))
+    result = json.loads(line[len("INLINE "):])
+    print("inline dispatch (child process): " + ", ".join(f"{k} {v:,.0f}/s" for k, v in result.items()))
+    return result
 
 
 if __name__ == "__main__":

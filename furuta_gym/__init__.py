@@ -5,6 +5,7 @@ Importing this package registers the Gymnasium envs ``furuta_gym/Furuta-v0`` and
 :func:`furuta_gym.ensure_x64` and the README section "Float64".
 """
 
+from ._dispatch import inline_cpu_dispatch
 from ._x64 import Float64Warning, enable_x64, ensure_x64
 from .lagrangian import AbstractLagrangianSystem, SystemSpec
 from .systems import FURUTA, NMSD
@@ -19,6 +20,7 @@ __all__ = [
     "Float64Warning",
     "enable_x64",
     "ensure_x64",
+    "inline_cpu_dispatch",
     "__version__",
 ]
 
