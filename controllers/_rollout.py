@@ -19,7 +19,7 @@ from jaxtyping import Array, Float
 from scipy import signal
 
 from ..lagrangian import AbstractLagrangianSystem
-from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter_coefficients
+from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter_coefficients, quantize_encoder
 from ..simulate import rk4_zoh_step
 from ._base import AbstractController
 
@@ -38,8 +38,7 @@ class Sensor(eqx.Module):
         return derivative_filter_coefficients(dt, self.omega0, self.xi)
 
     def quantize(self, angles):
-        step = 2.0 * jnp.pi / self.counts_per_rev
-        return jnp.round(angles / step) * step
+        return quantize_encoder(jnp.asarray(angles), self.counts_per_rev)
 
 
 class ClosedLoop(NamedTuple):

@@ -8,6 +8,8 @@ Inputs: :func:`chirp` (linear frequency sweep, the paper's training and test inp
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 from scipy import signal
 
@@ -16,6 +18,7 @@ __all__ = [
     "chirp",
     "square_pulse",
     "quantize_encoder",
+    "quantize_joints",
     "derivative_filter",
     "derivative_filter_coefficients",
     "DerivativeFilter",
@@ -38,9 +41,22 @@ def square_pulse(t, start: float, width: float, amplitude: float = 1.0):
 
 
 def quantize_encoder(angle, counts_per_rev: int = ENCODER_COUNTS_PER_REV):
-    """Round an angle to the encoder's resolution 2π/counts_per_rev."""
-    step = 2.0 * np.pi / counts_per_rev
-    return np.round(np.asarray(angle, dtype=float) / step) * step
+    """Round an angle to the encoder's resolution 2π/counts_per_rev (see :func:`quantize_joints`)."""
+    return quantize_joints(angle, 2.0 * np.pi / counts_per_rev)
+
+
+def quantize_joints(q, steps):
+    """Round each joint's coordinate to its own quantisation step (a step of 0: exact).
+
+    NumPy in, NumPy out; a JAX array (or a traced value inside ``jax.jit``) in, JAX out — the
+    one encoder model the envs (single and batched), the data generation and the controllers'
+    JAX sensor model share.
+    """
+    xp = jnp if isinstance(q, jax.Array) else np
+    q = q if xp is jnp else np.asarray(q, dtype=float)
+    steps = xp.asarray(steps, dtype=q.dtype)
+    safe = xp.where(steps > 0, steps, 1.0)
+    return xp.where(steps > 0, xp.round(q / safe) * steps, q)
 
 
 def derivative_filter_coefficients(dt: float, omega0: float = 100.0, xi: float = 0.8):

@@ -21,7 +21,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ..effects import Effect
-from ..signals import DerivativeFilter
+from ..signals import DerivativeFilter, quantize_joints
 from ..systems import get_spec
 from ._backends import AbstractBackend, make_backend
 from ._parameters import (
@@ -402,7 +402,7 @@ class LagrangianEnv(gymnasium.Env):
         q = x[: self._n].copy()
         quant = self._quant
         if quant.any():
-            q = np.where(quant > 0, np.round(q / np.where(quant > 0, quant, 1.0)) * quant, q)
+            q = quantize_joints(q, quant)
         if self._noise[: self._n].any():
             q = q + self._noise[: self._n] * self.np_random.standard_normal(self._n)
         return q

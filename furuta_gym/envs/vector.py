@@ -32,6 +32,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..lagrangian import AbstractLagrangianSystem, energy
+from ..signals import quantize_joints
 from ..simulate import small_kernel_compiler_options
 from ._backends import ModelBackend
 from ._base import EnvArgumentError, LagrangianEnv
@@ -60,11 +61,7 @@ class _Quantizer:
 
     def __call__(self, x):
         n = len(self.steps)
-        q = x[..., :n]
-        step = jnp.asarray(self.steps, dtype=x.dtype)
-        safe = jnp.where(step > 0, step, 1.0)
-        q = jnp.where(step > 0, jnp.round(q / safe) * step, q)
-        return jnp.concatenate([q, x[..., n:]], axis=-1)
+        return jnp.concatenate([quantize_joints(x[..., :n], self.steps), x[..., n:]], axis=-1)
 
 
 _STEP_CACHE: dict = {}
