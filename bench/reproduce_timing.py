@@ -28,8 +28,8 @@ def section(records: list[tuple[Path, dict]]) -> str:
         + "`). Per model: training (JAX compiles included) + evaluation on every test set. "
         "The machine is shared: the load average at the time is part of the number.",
         "",
-        "| run | date (UTC) | command | epochs (stage 1, stage 2; L_prop: L_Iτ alone, stage 1, stage 2) | data s | models | per model s (min / median / max) | figures s | total s |",
-        "|---|---|---|---|---:|---:|---|---:|---:|",
+        "| run | date (UTC) | command | epochs (stage 1, stage 2; L_prop: L_Iτ alone, stage 1, stage 2) | data s | models | per model s (min / median / max) | all models s (reused: as trained) | figures s | total s |",
+        "|---|---|---|---|---:|---:|---|---:|---:|---:|",
     ]
     for path, rec in records:
         secs = rec.get("seconds", {})
@@ -38,6 +38,12 @@ def section(records: list[tuple[Path, dict]]) -> str:
             if isinstance(v, dict) and v.get("status") in ("trained", "resumed", "loaded")
         ]
         data_s = sum(v for k, v in secs.items() if k.endswith("/data"))
+        # a reused model's record keeps what it cost when it was trained (train + evaluate)
+        all_models = sum(
+            v["seconds"] if v.get("status") != "reused"
+            else sum((v.get("original") or {}).values())
+            for v in secs.values() if isinstance(v, dict)
+        )
         if per_model:
             per_model.sort()
             stats = f"{per_model[0]:.0f} / {per_model[len(per_model) // 2]:.0f} / {per_model[-1]:.0f}"
@@ -49,7 +55,7 @@ def section(records: list[tuple[Path, dict]]) -> str:
         cpu = rec.get("machine", {}).get("cpu", "?")
         lines.append(
             f"| {path.parent.name} | {rec.get('date_utc', '?')} | `{rec.get('command') or '(API)'}` | "
-            f"{epochs} | {data_s:.0f} | {len(per_model)} | {stats} | {secs.get('figures', 0):.0f} | "
+            f"{epochs} | {data_s:.0f} | {len(per_model)} | {stats} | {all_models:.0f} | {secs.get('figures', 0):.0f} | "
             f"{secs.get('total', 0):.0f} |"
         )
     lines += [
