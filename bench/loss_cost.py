@@ -130,7 +130,7 @@ def breakdown_probe(loss: str) -> dict:
 
     step, params, opt_state, batches = _setup(loss, 64, 256)
     tb, ib = batches[0]
-    args = (params, opt_state, tb, ib, jnp.asarray(1.0))
+    args = (params, opt_state, tb, ib, jnp.asarray(1.0), jnp.asarray(1e-3))
     t0 = time.perf_counter()
     jax.make_jaxpr(step)(*args)  # traces the jitted step (and fills JAX's trace cache)
     t1 = time.perf_counter()

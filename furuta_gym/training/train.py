@@ -73,7 +73,8 @@ class TrainConfig:
     full batch), which costs hours on a CPU (known_pitfalls.md, "Cost").
 
     ``learning_rate`` Adam's step, one value or one per stage (an L_Iτ-alone stage tolerates a
-    larger step than the trajectory stages after it). ``batch_size`` trajectory windows per step (``None``: all windows, one step per epoch);
+    larger step than the trajectory stages after it). ``batch_size`` trajectory windows per step
+    (``None``: all windows, one step per epoch);
     ``lambda_traj`` λ in L_aph / L_prop; ``lambda_step`` APHYNITY's dual-ascent step τ₂ (λ ← λ +
     τ₂·L_traj after every epoch; ``None``: 1000 for ``"aph"``, 0 — a fixed λ — otherwise);
     ``quadrature`` "trapezoid" (paper) | "simpson"; ``normalize`` see
