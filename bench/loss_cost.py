@@ -101,7 +101,7 @@ def epoch_time(loss: str, n_traj: int, batch_size=256, repeats: int = 3) -> dict
         t0 = time.perf_counter()
         params, opt_state = one_epoch(params, opt_state)
         times.append(time.perf_counter() - t0)
-    return {"loss": loss, "n_traj": n_traj, "steps": len(batches), "first_epoch_s": first,
+    return {"loss": loss, "n_traj": n_traj, "full_batch": batch_size is None, "steps": len(batches), "first_epoch_s": first,
             "epoch_s": min(times), "epoch_s_median": sorted(times)[len(times) // 2]}
 
 
@@ -204,7 +204,7 @@ def main() -> None:
 
     def get(loss, n, full=False):
         for r in rows:
-            if r["loss"] == loss and r["n_traj"] == n and ((r["steps"] == 1) == full or loss == "itau"):
+            if r["loss"] == loss and r["n_traj"] == n and (r["full_batch"] == full or loss == "itau"):
                 return r
         raise KeyError((loss, n, full))
 
