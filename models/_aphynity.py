@@ -70,6 +70,8 @@ class Aphynity(AbstractLearnedSystem):
         for name in ("c_r", "c_p", "b1", "b2"):
             if name in nominal:
                 nominal[name] = 0.0
+        if spec.name == "furuta" and not hp["prior_back_emf"]:
+            nominal["km"] = 0.0  # the back-EMF −(kt·km/Rm)·α̇ is F_a's (module docstring)
         self.nominal = tuple(nominal.items())
         self.log_ratios = jnp.zeros(len(LEARNABLE_PHYSICAL_PARAMETERS[spec.name]))
         self.force_net = ForceNetwork(
@@ -117,9 +119,6 @@ class Aphynity(AbstractLearnedSystem):
         return self.augmentation(q, qd)
 
     def input_force(self, q, qd, u):
-        if self.spec.name == "furuta" and not dict(self.hparams)["prior_back_emf"]:
-            p = self.physical_parameters
-            return jnp.stack([p["kt"] / p["Rm"] * u[0], jnp.zeros_like(u[0])])
         return self.prior.input_force(q, qd, u)
 
 

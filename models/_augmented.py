@@ -35,7 +35,7 @@ class ForceNetwork(eqx.Module):
     extrapolation in velocity: a tanh network saturates outside the velocities it was trained on,
     while viscous friction and back-EMF keep growing linearly. The paper's Furuta test sets start
     at |q̇| up to 20 rad/s, four times the training range; without W the learned rotor damping
-    fell 10–20 % short at 20–25 rad/s.
+    fell 10–25 % short at 20–25 rad/s.
     """
 
     net: MLP
