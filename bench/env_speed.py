@@ -94,42 +94,17 @@ def main(argv=None) -> int:
     if args.inline_dispatch_child:
         return _inline_dispatch_child(args)
 
-    import gymnasium as gym
-
-    import jax
-
-    import furuta_gym
-    from furuta_gym.models import make_model
-
-    furuta_gym.enable_x64()
-    delan = make_model("furuta", "dln", key=jax.random.PRNGKey(0))
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     where = machine()
-
-    cases = {
-        "InvertedPendulum-v5": gym.make("InvertedPendulum-v5"),
-        "Furuta-v0 mujoco": gym.make("furuta_gym/Furuta-v0"),
-        "Furuta-v0 analytic": gym.make("furuta_gym/Furuta-v0", dynamics="analytic"),
-        "Furuta-v0 DeLaN": gym.make("furuta_gym/Furuta-v0", dynamics=delan),
-        "Furuta-v0 mujoco plant=coulomb": gym.make("furuta_gym/Furuta-v0", plant="coulomb"),
-        "NMSD-v0 mujoco": gym.make("furuta_gym/NMSD-v0"),
-        "NMSD-v0 analytic": gym.make("furuta_gym/NMSD-v0", dynamics="analytic"),
-    }
-    rng = np.random.default_rng(0)
-    actions = {
-        name: rng.uniform(env.action_space.low, env.action_space.high, (args.steps, 1))
-        for name, env in cases.items()
-    }
-    for name, env in cases.items():  # warm-up: JIT compiles, caches
-        env_steps_per_second(env, actions[name][: min(300, args.steps)])
-    best = {name: 0.0 for name in cases}
     mj_python = mj_native = 0.0
-    for r in range(args.repeats):
-        for name, env in cases.items():
-            best[name] = max(best[name], env_steps_per_second(env, actions[name]))
+
+    def between_repeats(r: int, best: dict[str, float]) -> None:
+        nonlocal mj_python, mj_native
         p, nat = mj_step_rates(args.steps)
         mj_python, mj_native = max(mj_python, p), max(mj_native, nat)
         print(f"repeat {r + 1}/{args.repeats}: " + ", ".join(f"{k} {v:,.0f}/s" for k, v in best.items()))
+
+    best = best_rates(make_cases(), args.steps, args.repeats, between_repeats)
 
     inline = _measure_inline_dispatch(args)
     ip, fu, an = best["InvertedPendulum-v5"], best["Furuta-v0 mujoco"], best["Furuta-v0 analytic"]
@@ -180,6 +155,49 @@ def main(argv=None) -> int:
     return 0
 
 
+def make_cases(names=None) -> dict:
+    """The envs this benchmark times, by name (all of them, or those in ``names``)."""
+    import gymnasium as gym
+    import jax
+
+    import furuta_gym
+    from furuta_gym.models import make_model
+
+    furuta_gym.enable_x64()
+    makers = {
+        "InvertedPendulum-v5": lambda: gym.make("InvertedPendulum-v5"),
+        "Furuta-v0 mujoco": lambda: gym.make("furuta_gym/Furuta-v0"),
+        "Furuta-v0 analytic": lambda: gym.make("furuta_gym/Furuta-v0", dynamics="analytic"),
+        "Furuta-v0 DeLaN": lambda: gym.make(
+            "furuta_gym/Furuta-v0", dynamics=make_model("furuta", "dln", key=jax.random.PRNGKey(0))
+        ),
+        "Furuta-v0 mujoco plant=coulomb": lambda: gym.make("furuta_gym/Furuta-v0", plant="coulomb"),
+        "NMSD-v0 mujoco": lambda: gym.make("furuta_gym/NMSD-v0"),
+        "NMSD-v0 analytic": lambda: gym.make("furuta_gym/NMSD-v0", dynamics="analytic"),
+    }
+    return {name: make() for name, make in makers.items() if names is None or name in names}
+
+
+def best_rates(cases: dict, steps: int, repeats: int, between_repeats=None) -> dict[str, float]:
+    """Best env.step/s of each env over ``repeats`` interleaved runs of ``steps`` pre-drawn uniform
+    random actions, after a warm-up run (JIT compiles, caches)."""
+    rng = np.random.default_rng(0)
+    actions = {
+        name: rng.uniform(env.action_space.low, env.action_space.high, (steps, 1))
+        for name, env in cases.items()
+    }
+    for name, env in cases.items():
+        env_steps_per_second(env, actions[name][: min(300, steps)])
+    best = {name: 0.0 for name in cases}
+    for r in range(repeats):
+        for name, env in cases.items():
+            best[name] = max(best[name], env_steps_per_second(env, actions[name]))
+        if between_repeats is not None:
+            between_repeats(r, best)
+    return best
+
+
+#: the envs the inline-dispatch child process times (its own MuJoCo env is the reference)
 INLINE_CASES = ("Furuta-v0 mujoco", "Furuta-v0 analytic", "Furuta-v0 DeLaN")
 
 
@@ -190,26 +208,7 @@ def _inline_dispatch_child(args) -> int:
     import furuta_gym
 
     furuta_gym.inline_cpu_dispatch()
-    import gymnasium as gym
-    import jax
-
-    from furuta_gym.models import make_model
-
-    furuta_gym.enable_x64()
-    delan = make_model("furuta", "dln", key=jax.random.PRNGKey(0))
-    cases = {
-        "Furuta-v0 mujoco": gym.make("furuta_gym/Furuta-v0"),
-        "Furuta-v0 analytic": gym.make("furuta_gym/Furuta-v0", dynamics="analytic"),
-        "Furuta-v0 DeLaN": gym.make("furuta_gym/Furuta-v0", dynamics=delan),
-    }
-    rng = np.random.default_rng(0)
-    actions = {n: rng.uniform(e.action_space.low, e.action_space.high, (args.steps, 1)) for n, e in cases.items()}
-    for name, env in cases.items():
-        env_steps_per_second(env, actions[name][: min(300, args.steps)])
-    best = {name: 0.0 for name in cases}
-    for _ in range(args.repeats):
-        for name, env in cases.items():
-            best[name] = max(best[name], env_steps_per_second(env, actions[name]))
+    best = best_rates(make_cases(INLINE_CASES), args.steps, args.repeats)
     print("INLINE " + json.dumps(best))
     return 0
 
