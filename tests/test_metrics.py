@@ -131,3 +131,39 @@ def test_wrong_system_and_missing_velocities_are_clear_errors(nmsd_data, furuta_
         evaluate_model(analytic_model("nmsd"), [bare])
     with pytest.raises(DataError, match="joint"):
         evaluate_model(analytic_model("nmsd"), furuta_data["test_free"], truth=analytic_model("nmsd"))
+
+
+def test_force_and_energy_metrics_compile_once_per_model_structure(furuta_data):
+    """The force-decomposition and energy metrics are jitted with the model as an argument: a
+    model of a new structure compiles a handful of programs (traced op by op they compiled one
+    per primitive, hundreds, ~12 s per reproduction model), and a second model of that structure
+    with other weights compiles none."""
+    import jax
+
+    from furuta_gym.models import make_model
+    from furuta_gym.training.metrics import energy_error, force_decomposition_errors
+
+    compiles = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(event)
+
+    truth = analytic_model("furuta")
+    trajs = furuta_data["test_forced"]
+    # an architecture no other test builds, so nothing of it is compiled yet in this process
+    first = make_model("furuta", "adln", jax.random.PRNGKey(0), hidden=(12, 10))
+    second = make_model("furuta", "adln", jax.random.PRNGKey(1), hidden=(12, 10))
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        force_decomposition_errors(first, trajs, truth)
+        energy_error(first, trajs, truth)
+        n_first = len(compiles)
+        forces = force_decomposition_errors(second, trajs, truth)
+        energy = energy_error(second, trajs, truth)
+        n_second = len(compiles) - n_first
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert 1 <= n_first <= 12
+    assert n_second == 0
+    assert all(math.isfinite(v) for v in forces.values()) and math.isfinite(energy)

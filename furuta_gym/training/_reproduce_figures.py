@@ -124,17 +124,16 @@ def make_figures(out: Path, config, per_system: dict) -> dict[str, Path]:
         paths[f"energy_time_{system}"] = _save(fig, fig_dir / f"energy_time_{system}.png")
 
         # -- force decomposition on a forced trajectory ----------------------------------------
-        import jax
         import jax.numpy as jnp
 
-        from ..lagrangian import forward_dynamics, inverse_dynamics_terms
+        from .metrics import _terms_along, _true_accelerations
 
         q, qd = jnp.asarray(tr.q[:k]), jnp.asarray(tr.qd[:k])
         u = jnp.asarray(np.asarray(tr.u[:k], dtype=float).reshape(k, -1))
-        qdd = jax.vmap(lambda a, b, c: forward_dynamics(truth, a, b, c))(q, qd, u)
+        qdd = _true_accelerations(truth, q, qd, u)
 
         def terms(system_):
-            return jax.vmap(lambda a, b, c: inverse_dynamics_terms(system_, a, b, c))(q, qd, qdd)
+            return _terms_along(system_, q, qd, qdd)
 
         names = ("inertial", "coriolis", "potential")
         fig, axes = plt.subplots(n, 3, figsize=(12, 2.6 * n), sharex=True, squeeze=False)

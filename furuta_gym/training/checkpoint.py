@@ -21,6 +21,7 @@ Public: :func:`save_model`, :func:`load_model` (what ``dynamics=<path>`` in the 
 from __future__ import annotations
 
 import datetime
+import functools
 import hashlib
 import io
 import json
@@ -52,6 +53,13 @@ class CheckpointError(ValueError):
 
 def package_versions() -> dict[str, str]:
     """Versions of the packages a checkpoint depends on (recorded in every header)."""
+    return dict(_package_versions())
+
+
+@functools.lru_cache(maxsize=1)
+def _package_versions() -> dict[str, str]:
+    # installed versions do not change in a running process; reading them costs ~7 ms, and a
+    # training run writes a header after every epoch
     out = {}
     for name in ("furuta-gym", "jax", "jaxlib", "equinox", "diffrax", "optax", "numpy"):
         try:
