@@ -131,3 +131,19 @@ def test_config_rejects_pairs_the_paper_does_not_report():
         ReproduceConfig(pairs=(("dln", "aph"),))
     with pytest.raises(ValueError, match="unknown system"):
         ReproduceConfig(systems=("cartpole",))
+
+
+def test_full_run_gives_furuta_augmented_delan_a_longer_itau_stage_and_overrides_win():
+    from furuta_gym.training.reproduce import FULL_PROP_EPOCHS, training_config
+
+    full = ReproduceConfig()
+    adln = training_config("furuta", full, 0, "prop", "adln")
+    dln = training_config("furuta", full, 0, "prop", "dln")
+    assert adln.epochs == (12000, *FULL_PROP_EPOCHS["furuta"][1:])
+    assert dln.epochs == FULL_PROP_EPOCHS["furuta"]
+    assert training_config("nmsd", full, 0, "prop", "adln").epochs == FULL_PROP_EPOCHS["nmsd"]
+    # the baselines, --quick and an explicit schedule are not touched
+    assert training_config("furuta", full, 0, "aph", "adln").epochs == training_config("furuta", full, 0, "aph", "aph").epochs
+    assert training_config("furuta", ReproduceConfig(quick=True), 0, "prop", "adln").epochs == (300, 4, 1)
+    own = ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})
+    assert training_config("furuta", own, 0, "prop", "adln").epochs == (50, 2, 1)

@@ -136,6 +136,12 @@ QUICK_EPOCHS = {"nmsd": (8, 2), "furuta": (4, 1)}
 # baselines' so that every L_prop run costs no more wall time than its L_traj / L_aph baseline.
 FULL_PROP_EPOCHS = {"nmsd": (4000, 30, 30), "furuta": (6000, 20, 60)}
 QUICK_PROP_EPOCHS = {"nmsd": (300, 8, 2), "furuta": (300, 4, 1)}
+#: A longer L_Iτ-alone stage for single models of the full run. Furuta augmented DeLaN's L_Iτ was
+#: still falling at epoch 6000 (6.0e-5 → 4.2e-5 over the last 1000 epochs, against DLN's 1.3e-5
+#: and APHYNITY's flat 1.5e-5): three networks, one of them a general F_a(q, q̇), fit slower. At
+#: 12 000 epochs it reached 2.2e-5 (one run; a training-loss diagnosis). Learning rates 3e-3 and
+#: 1e-2 instead reached 2.5e-5 and 3.2e-5.
+FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 12000}
 #: λ of L_prop = L_Iτ + λ·L_traj (the paper writes λ_k and gives no value). Our L_Iτ is normalised
 #: (dimensionless, ~1e-5 once fitted), L_traj is a mean squared state error: with λ = 1 the 1 s
 #: Furuta stage let L_traj swamp L_Iτ and undid the fit (free α −1.52 → −0.67, forces −4.3 →
@@ -151,23 +157,29 @@ REPRODUCE_QUADRATURE = "simpson"
 PROP_ITAU_LEARNING_RATE = {"nmsd": 1e-2, "furuta": 1e-3}
 
 
-def epoch_schedule(system: str, config: ReproduceConfig, loss: str) -> tuple[int, ...]:
-    """Epochs per stage of ``loss`` runs on ``system``: the config's override or the quick /
-    full table (L_prop: ``(L_Iτ alone, stage 1, stage 2)``, others ``(stage 1, stage 2)``)."""
-    if loss == "prop":
-        table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS)
-    else:
+def epoch_schedule(system: str, config: ReproduceConfig, loss: str, kind: str | None = None) -> tuple[int, ...]:
+    """Epochs per stage of ``loss`` runs of model ``kind`` on ``system``: the config's override or
+    the quick / full table (L_prop: ``(L_Iτ alone, stage 1, stage 2)``, others ``(stage 1,
+    stage 2)``; a full run's L_prop takes :data:`FULL_PROP_ITAU_EPOCHS` for its first stage)."""
+    name = get_spec(system).name
+    if loss != "prop":
         table = config.epochs or (QUICK_EPOCHS if config.quick else FULL_EPOCHS)
-    return tuple(table[get_spec(system).name])
+        return tuple(table[name])
+    table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS)
+    epochs = tuple(table[name])
+    if config.prop_epochs is None and not config.quick and len(epochs) == 3:
+        epochs = (FULL_PROP_ITAU_EPOCHS.get((name, kind), epochs[0]), *epochs[1:])
+    return epochs
 
 
-def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop"):
-    """The :class:`~furuta_gym.training.TrainConfig` of one run of ``system`` with ``loss``."""
+def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop", kind: str | None = None):
+    """The :class:`~furuta_gym.training.TrainConfig` of one run of model ``kind`` on ``system``
+    with ``loss``."""
     from .train import TrainConfig
 
     name = get_spec(system).name
     horizons = tuple(TrainConfig.for_system(name).horizons)
-    epochs = epoch_schedule(name, config, loss)
+    epochs = epoch_schedule(name, config, loss, kind)
     if loss == "prop" and len(epochs) == 3:  # a leading stage of L_Iτ alone
         horizons = (None, *horizons)
     overrides = dict(
@@ -265,7 +277,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
 
     metrics_path = run_dir / "metrics.json"
     model_path = run_dir / MODEL_FILE
-    tcfg = training_config(system, config, seed, loss)
+    tcfg = training_config(system, config, seed, loss, kind)
     cfg_json = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": tcfg.to_json()}
     cfg_json["train"].pop("progress", None)
     cfg_path = run_dir / "reproduce_config.json"
@@ -617,6 +629,9 @@ def _write_run_record(path: Path, config: ReproduceConfig, command, timings, dat
         "config": dataclasses.asdict(config),
         "epochs": {s: list(epoch_schedule(s, config, "traj")) for s in config.systems},
         "prop_epochs": {s: list(epoch_schedule(s, config, "prop")) for s in config.systems},
+        "prop_epochs_by_model": {f"{s}/{k}": list(epoch_schedule(s, config, "prop", k))
+                                 for s in config.systems for k, l in config.pairs
+                                 if l == "prop" and epoch_schedule(s, config, "prop", k) != epoch_schedule(s, config, "prop")},
         "quadrature": (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE),
         "data": data_meta,
         "machine": _machine(),
