@@ -28,8 +28,8 @@ def section(records: list[tuple[Path, dict]]) -> str:
         + "`). Per model: training (JAX compiles included) + evaluation on every test set. "
         "The machine is shared: the load average at the time is part of the number.",
         "",
-        "| run | date (UTC) | command | epochs (stage 1, stage 2; L_prop: L_Iτ alone, stage 1, stage 2) | data s | models | per model s (min / median / max) | all models s (reused: as trained) | figures s | total s |",
-        "|---|---|---|---|---:|---:|---|---:|---:|---:|",
+        "| run | date (UTC) | machine | command | epochs (stage 1, stage 2; L_prop: L_Iτ alone, stage 1, stage 2) | data s | models | per model s (min / median / max) | all models s (reused: as trained) | figures s | total s |",
+        "|---|---|---|---|---|---:|---:|---|---:|---:|---:|",
     ]
     for path, rec in records:
         secs = rec.get("seconds", {})
@@ -52,9 +52,12 @@ def section(records: list[tuple[Path, dict]]) -> str:
         epochs = ", ".join(f"{s}: {tuple(e)}" for s, e in rec.get("epochs", {}).items())
         if rec.get("prop_epochs"):  # L_prop runs: (L_Iτ alone, stage 1, stage 2)
             epochs += "; L_prop " + ", ".join(f"{s}: {tuple(e)}" for s, e in rec["prop_epochs"].items())
-        cpu = rec.get("machine", {}).get("cpu", "?")
+        for model, e in (rec.get("prop_epochs_by_model") or {}).items():  # a model's own L_prop schedule
+            epochs += f"; {model} L_prop: {tuple(e)}"
+        machine = rec.get("machine", {})
+        cpu = f"{machine.get('cpu', '?')}, {machine.get('cpu_count', '?')} cores"
         lines.append(
-            f"| {path.parent.name} | {rec.get('date_utc', '?')} | `{rec.get('command') or '(API)'}` | "
+            f"| {path.parent.name} | {rec.get('date_utc', '?')} | {cpu} | `{rec.get('command') or '(API)'}` | "
             f"{epochs} | {data_s:.0f} | {len(per_model)} | {stats} | {all_models:.0f} | {secs.get('figures', 0):.0f} | "
             f"{secs.get('total', 0):.0f} |"
         )
@@ -63,7 +66,12 @@ def section(records: list[tuple[Path, dict]]) -> str:
         "Models counts the runs that trained (or resumed, or only evaluated an existing checkpoint: "
         "status `loaded` in run.json, which then times evaluation only); `reused` ones are not timed.",
     ]
-    lines += ["", f"Machine: {cpu}, {records[-1][1].get('machine', {}).get('cpu_count')} logical cores (shared).", END]
+    lines += [
+        "",
+        "Machine: the run record's CPU (the shared machine changed from an AMD EPYC to an Intel Xeon, "
+        "both 2 logical cores, between 2026-11-22 and 2026-11-23: compare times on one machine only).",
+        END,
+    ]
     return "\n".join(lines)
 
 
