@@ -133,7 +133,8 @@ QUICK_EPOCHS = {"nmsd": (8, 2), "furuta": (4, 1)}
 # L_prop runs: (L_Iτ alone, 2-step, long horizon). The first stage has no ODE solve — an epoch
 # costs milliseconds where a trajectory epoch costs seconds — so thousands of its epochs fit in
 # minutes (known_pitfalls.md, "Cost"); the two L_Iτ + λ·L_traj stages follow, shorter than the
-# baselines' so that every L_prop run costs no more wall time than its L_traj / L_aph baseline.
+# baselines'. The runs still cost 0.9–2.8× their baseline's training time (docs/reproduce.md,
+# "Training recipe", where a conclusion's dependence on that is checked at equal budget).
 FULL_PROP_EPOCHS = {"nmsd": (4000, 30, 30), "furuta": (6000, 20, 60)}
 QUICK_PROP_EPOCHS = {"nmsd": (300, 8, 2), "furuta": (300, 4, 1)}
 #: A longer L_Iτ-alone stage for single models of the full run. Furuta augmented DeLaN's L_Iτ was
