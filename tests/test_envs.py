@@ -423,3 +423,21 @@ def test_learned_checkpoint_by_path_and_object_and_broken_weights(tmp_path):
         if terminated:
             break
     assert terminated and info["diverged"]
+
+
+def test_read_only_settings_report_what_was_configured():
+    """The settings a batched copy reads (vector.py) come from public read-only properties."""
+    plain = FurutaEnv(dynamics="analytic", episode_seconds=0.5)
+    assert plain.system_spec is FURUTA
+    assert plain.max_episode_steps == 250  # 0.5 s at 500 Hz
+    np.testing.assert_array_equal(plain.encoder_steps, [0.0, 0.0])
+    assert plain.per_episode_state_features() == []
+    sensed = FurutaEnv(dynamics="analytic", encoder_counts=2048, measurement_noise=1e-3,
+                       velocity="filter", actuation_delay_steps=1, episode_seconds=None)
+    np.testing.assert_allclose(sensed.encoder_steps, [2 * math.pi / 2048] * 2)
+    sensed.encoder_steps[:] = 0.0  # a copy: the env keeps quantising
+    assert sensed.encoder_steps[0] > 0
+    assert sensed.max_episode_steps is None
+    features = " ".join(sensed.per_episode_state_features())
+    assert "measurement_noise" in features and "filter" in features and "delay" in features
+    assert "randomize" not in features

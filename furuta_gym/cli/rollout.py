@@ -114,7 +114,7 @@ def run(args) -> int:
         _write_video(args.video, frames, fps=1.0 / (every * unwrapped.dt))
         written.append(args.video)
     if args.data is not None:
-        n = unwrapped._spec.n_dof
+        n = unwrapped.system_spec.n_dof
         traj = Trajectory(t=t, q=x[:, :n], u=u[:, None], qd=x[:, n:], name="0")
         save_trajectories(args.data, [traj], args.system, overwrite=args.overwrite)
         written.append(args.data)
@@ -131,7 +131,7 @@ def _plot(path: Path, env, t, x, u, rewards, args, ended: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    spec = env._spec
+    spec = env.system_spec
     n = spec.n_dof
     fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
     for j in range(n):

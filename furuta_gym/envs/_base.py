@@ -235,6 +235,39 @@ class LagrangianEnv(gymnasium.Env):
         self._reward, self._terminated = task.reward, task.terminated
         self._state_bound = float(task.state_bound)
 
+    # ------------------------------------------------------------------ read-only settings
+    # (what a batched copy of this env needs to know; see vector.py)
+    @property
+    def system_spec(self):
+        """The system's :class:`~furuta_gym.lagrangian.SystemSpec` (joints, state and input names)."""
+        return self._spec
+
+    @property
+    def encoder_steps(self) -> np.ndarray:
+        """Quantisation step of each measured joint position (0: exact), in rad or m."""
+        return self._quant.copy()
+
+    @property
+    def max_episode_steps(self) -> int | None:
+        """env.steps before truncation (None: never truncated)."""
+        return self._max_steps
+
+    def per_episode_state_features(self) -> list[str]:
+        """The configured sensor / plant options whose effect depends on more than the state and
+        the step count (random draws or a signal history): what a stateless batched copy cannot
+        reproduce. Empty for a deterministic, memoryless env."""
+        features = []
+        if np.any(self._noise):
+            features.append("measurement_noise")
+        if self._filter is not None:
+            features.append("velocity='filter'")
+        if self._has_delay:
+            features.append("actuation delay (actuation_delay, actuation_delay_steps, "
+                            "plant='delay' or an input_delay effect)")
+        if self._randomize:
+            features.append("randomize")
+        return features
+
     # ------------------------------------------------------------------ subclass hooks
     def _make_task(self, **task_kwargs):
         raise NotImplementedError

@@ -169,12 +169,12 @@ class LagrangianVectorEnv(VectorEnv):
         backend = template.backend
         assert isinstance(backend, ModelBackend)
         self.num_envs = int(num_envs)
-        self.spec_system = template._spec
-        self._n = template._spec.n_dof
+        self.spec_system = template.system_spec
+        self._n = template.system_spec.n_dof
         self.dt = template.dt
         self.frame_skip = template.frame_skip
         self.max_action = template.max_action
-        self._max_steps = template._max_steps
+        self._max_steps = template.max_episode_steps
         self.system: AbstractLagrangianSystem = backend.model
         dynamic, self._static = eqx.partition(self.system, eqx.is_array)
         self._leaves, self._treedef = jax.tree_util.tree_flatten(dynamic)
@@ -187,7 +187,7 @@ class LagrangianVectorEnv(VectorEnv):
             lambda m: m.params, analytic_model(backend.system), analytic_params
         )
         self._energy_leaves, self._energy_treedef = jax.tree_util.tree_flatten(self._energy_model)
-        self._quantizer = _Quantizer(tuple(float(s) for s in template._quant))
+        self._quantizer = _Quantizer(tuple(float(s) for s in template.encoder_steps))
         self._set_task(template.task)
 
         self.single_observation_space = template.observation_space
@@ -224,16 +224,7 @@ class LagrangianVectorEnv(VectorEnv):
         return ENV_IDS[cls.env_class.system]
 
     def _check_supported(self, env: LagrangianEnv) -> None:
-        unsupported = []
-        if np.any(env._noise):
-            unsupported.append("measurement_noise")
-        if env._filter is not None:
-            unsupported.append("velocity='filter'")
-        if env._has_delay:
-            unsupported.append("actuation delay (actuation_delay, actuation_delay_steps, "
-                               "plant='delay' or an input_delay effect)")
-        if env._randomize:
-            unsupported.append("randomize")
+        unsupported = env.per_episode_state_features()
         if not isinstance(env.backend, ModelBackend):
             unsupported.append(f"backend {type(env.backend).__name__}")
         if unsupported:
