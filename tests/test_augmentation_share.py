@@ -120,3 +120,18 @@ def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_p
     q, qd, u = jnp.array([0.3, 1.0]), jnp.array([4.0, -2.0]), jnp.array([1.5])
     np.testing.assert_array_equal(loaded.augmentation(q, qd), old.augmentation(q, qd))
     np.testing.assert_array_equal(loaded.input_force(q, qd, u), old.input_force(q, qd, u))
+
+
+def test_default_weight_is_on_for_augmented_delan_and_off_for_aphynity(segments):
+    """μ = None takes AUGMENTATION_WEIGHT of the model's kind: augmented DeLaN's general networks
+    need the minimum-norm term, APHYNITY's structured prior does not (train.py)."""
+    from furuta_gym.training.train import AUGMENTATION_WEIGHT
+
+    assert AUGMENTATION_WEIGHT == {"adln": 1e-2, "aph": 0.0}
+    cfg = TrainConfig.for_system("nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False,
+                                 checkpoint_every=0)
+    _, aph = train("aph", "nmsd", "prop", segments, cfg)
+    _, adln = train("adln", "nmsd", "prop", segments, cfg)
+    assert "fa_share" not in aph[-1] and aph[-1]["total"] == pytest.approx(aph[-1]["itau"], rel=1e-12)
+    assert adln[-1]["fa_share"] > 0
+    assert adln[-1]["total"] == pytest.approx(adln[-1]["itau"] + 1e-2 * adln[-1]["fa_share"], rel=1e-12)
