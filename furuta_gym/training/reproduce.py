@@ -619,6 +619,18 @@ def _machine() -> dict[str, Any]:
     return info
 
 
+def _prop_epochs_by_model(config: ReproduceConfig) -> dict[str, list[int]]:
+    """``{"system/kind": schedule}`` of the L_prop runs whose schedule is not their system's."""
+    out = {}
+    for system in config.systems:
+        default = epoch_schedule(system, config, "prop")
+        for kind, loss in config.pairs:
+            own = epoch_schedule(system, config, "prop", kind)
+            if loss == "prop" and own != default:
+                out[f"{system}/{kind}"] = list(own)
+    return out
+
+
 def _write_run_record(path: Path, config: ReproduceConfig, command, timings, data_meta) -> Path:
     from .. import __version__
     from .checkpoint import package_versions
@@ -630,9 +642,7 @@ def _write_run_record(path: Path, config: ReproduceConfig, command, timings, dat
         "config": dataclasses.asdict(config),
         "epochs": {s: list(epoch_schedule(s, config, "traj")) for s in config.systems},
         "prop_epochs": {s: list(epoch_schedule(s, config, "prop")) for s in config.systems},
-        "prop_epochs_by_model": {f"{s}/{k}": list(epoch_schedule(s, config, "prop", k))
-                                 for s in config.systems for k, l in config.pairs
-                                 if l == "prop" and epoch_schedule(s, config, "prop", k) != epoch_schedule(s, config, "prop")},
+        "prop_epochs_by_model": _prop_epochs_by_model(config),
         "quadrature": (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE),
         "data": data_meta,
         "machine": _machine(),
