@@ -5,6 +5,7 @@ Compiles are the cost here, so every jitted object is built once per module and 
 
 from __future__ import annotations
 
+import sys
 from typing import ClassVar
 
 import jax
@@ -365,3 +366,87 @@ def test_bad_input_is_one_clear_error():
         env.step(np.array([[0.0], [np.nan]]))
     with pytest.raises(ValueError, match=r"shape \(2, 1\)"):
         env.step(np.zeros((3, 1)))
+
+
+def _run_env(env, seed, actions, **reset_options):
+    outs = [env.reset(seed=seed, options=reset_options or None)[0]]
+    for a in actions:
+        obs, reward, terminated, truncated, info = env.step(a)
+        outs.append((obs, reward, terminated, truncated, info["energy"], info["state"], info["time"]))
+    return outs
+
+
+def test_split_and_worker_processes_give_every_copy_the_same_numbers():
+    """chunks= (threads in this process) and workers= (processes) only change where copies are
+    computed: a learned model's copies match the unsplit env through truncations and autoresets,
+    a task change reaches the workers, and close() stops them and refuses further steps."""
+    from furuta_gym.envs.vector import FurutaVectorEnv, NMSDVectorEnv
+    from furuta_gym.models import make_model
+
+    model = make_model("furuta", "dln", jax.random.PRNGKey(3))
+    kwargs = dict(dynamics=model, episode_seconds=0.02, reset_noise_scale=0.3)
+    actions = np.random.default_rng(2).uniform(-6.0, 6.0, size=(25, 10, 1))
+    with FurutaVectorEnv(10, chunks=1, **kwargs) as whole:
+        reference = _run_env(whole, 7, actions)
+    assert sum(o[3].sum() for o in reference[1:]) == 20  # two truncations of every copy
+    for split in (dict(chunks=3), dict(workers=2)):
+        with FurutaVectorEnv(10, **split, **kwargs) as env:
+            assert (env.chunks, env.workers) == ((3, 0) if "chunks" in split else (1, 2))
+            outs = _run_env(env, 7, actions)
+        assert _max_diff(outs[0], reference[0]) == 0.0
+        for got, want in zip(outs[1:], reference[1:]):
+            for a, b in zip(got, want):
+                assert _max_diff(a, b) <= 1e-12, split
+
+    targets = []
+    for workers in (0, 2):
+        env = NMSDVectorEnv(6, dynamics="analytic", workers=workers)
+        env.reset(seed=1, options={"target": 0.4})
+        _, reward, *_ , info = env.step(np.full((6, 1), 2.0))
+        targets.append((reward, info["target"]))
+        if workers:
+            processes = env._workers._processes
+            env.close()
+            assert all(p.wait(timeout=10) == 0 for p in processes)
+            with pytest.raises(RuntimeError, match="closed"):
+                env._workers.step(np.zeros((6, 2)), np.zeros((6, 1)))
+    np.testing.assert_array_equal(targets[0][1], 0.4)
+    assert _max_diff(targets[0][0], targets[1][0]) <= 1e-12 and _max_diff(targets[0][1], targets[1][1]) == 0.0
+
+
+def test_auto_chunks_and_bad_split_arguments():
+    import gymnasium as gym
+
+    from furuta_gym.envs.vector import FurutaVectorEnv, auto_chunks
+
+    assert [auto_chunks(n, cores=2) for n in (1, 511, 1024, 4096, 8191, 8192, 16384)] == [1, 1, 2, 4, 4, 1, 1]
+    assert auto_chunks(4096, cores=8) == 8
+    with pytest.raises(ValueError, match="chunks must be an integer from 1 to num_envs = 4"):
+        FurutaVectorEnv(4, dynamics="analytic", chunks=5)
+    with pytest.raises(ValueError, match="workers must be an integer from 0"):
+        FurutaVectorEnv(4, dynamics="analytic", workers=-1)
+    with pytest.raises(ValueError, match="pass one of the two"):
+        FurutaVectorEnv(4, dynamics="analytic", workers=2, chunks=2)
+    with pytest.raises(ValueError, match="SyncVectorEnv, which takes neither"):
+        gym.make_vec(FURUTA_ID, num_envs=2, dynamics="mujoco", workers=2)
+
+
+def test_worker_that_cannot_rebuild_the_model_is_one_clear_error(monkeypatch):
+    """A model class the worker interpreter cannot import ends the constructor with the reason,
+    not a hang; a model importable on the env's path works (this module's BlowUp)."""
+    from furuta_gym.envs.vector import NMSDVectorEnv
+
+    with NMSDVectorEnv(3, dynamics=BlowUp(), workers=1) as env:  # importable: tests/ is on sys.path
+        env.reset(options={"state": np.zeros(2)})
+        assert env.step(np.zeros((3, 1)))[0].shape == (3, 2)
+    # as if defined in the user's script: it pickles here, but a worker's __main__ is not that script
+    monkeypatch.setattr(BlowUp, "__module__", "__main__")
+    monkeypatch.setattr(sys.modules["__main__"], "BlowUp", BlowUp, raising=False)
+    with pytest.raises(RuntimeError, match=r"worker 0: .*class must be importable by name"):
+        NMSDVectorEnv(3, dynamics=BlowUp(), workers=1)
+
+    class Local(BlowUp):  # defined in a function: does not pickle at all
+        pass
+
+    with pytest.raises(ValueError, match="workers=1: the model or task cannot be sent"):
+        NMSDVectorEnv(3, dynamics=Local(), workers=1)
