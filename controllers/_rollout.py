@@ -13,14 +13,12 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 from scipy import signal
 
 from ..lagrangian import AbstractLagrangianSystem
 from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter_coefficients, quantize_encoder
-from ..simulate import rk4_zoh_step
 from ._base import AbstractController
 
 __all__ = ["Sensor", "ClosedLoop", "closed_loop"]
@@ -50,6 +48,30 @@ class ClosedLoop(NamedTuple):
     modes: Array  # controller state after each step (e.g. SwingUpLQR's mode), or zeros
 
 
+class _SensorObserver(eqx.Module):
+    """A :class:`Sensor` at a control period: quantise the angles, filter them into velocities
+    (direct form II transposed, one sample per joint), starting at rest at the first sample."""
+
+    sensor: Sensor
+    dt: float = eqx.field(static=True)
+
+    def _filter(self):
+        b, a = self.sensor.coefficients(self.dt)
+        return jnp.asarray(b), jnp.asarray(a), jnp.asarray(signal.lfilter_zi(b, a))
+
+    def init(self, x0):
+        _, _, zi = self._filter()
+        # the filter's steady state for a constant (quantised) first sample
+        return zi[:, None] * self.sensor.quantize(x0[:2])[None, :]
+
+    def observe(self, x, z):
+        b, a, _ = self._filter()
+        q = self.sensor.quantize(x[:2])
+        v = b[0] * q + z[0]
+        z_new = jnp.stack([b[1] * q - a[1] * v + z[1], b[2] * q - a[2] * v])
+        return jnp.concatenate([q, v]), z_new
+
+
 def closed_loop(
     controller: AbstractController,
     plant: AbstractLagrangianSystem,
@@ -60,39 +82,24 @@ def closed_loop(
     sensor: Sensor | None = None,
 ) -> ClosedLoop:
     """Run ``controller`` on ``plant`` for ``steps`` control periods from ``x0`` (jittable; vmap
-    over ``x0`` for a batch). The controller state starts at ``controller.init_state()``."""
+    over ``x0`` for a batch). The controller state starts at ``controller.init_state()``.
+
+    The loop is the envs' (:func:`furuta_gym.envs.vector.rollout`): the same controlled step, and a
+    plant state that diverges (non-finite or beyond 1e6) is frozen at its last finite value, with
+    zero voltage recorded from then on."""
+    from ..envs._jax_rollout import scan_closed_loop
+
     x0 = jnp.asarray(x0, dtype=float)
-    if sensor is None:
-
-        def observe(x, z):
-            return x, z
-
-        z0 = jnp.zeros((2, 2))
-    else:
-        b_np, a_np = sensor.coefficients(dt)
-        zi = jnp.asarray(signal.lfilter_zi(b_np, a_np))
-        b, a = jnp.asarray(b_np), jnp.asarray(a_np)
-
-        def observe(x, z):
-            q = sensor.quantize(x[:2])
-            # direct form II transposed, one sample per channel (α, β)
-            v = b[0] * q + z[0]
-            z_new = jnp.stack([b[1] * q - a[1] * v + z[1], b[2] * q - a[2] * v])
-            return jnp.concatenate([q, v]), z_new
-
-        # start at rest at the first (quantised) sample: the filter's steady state for constant q
-        q0 = sensor.quantize(x0[:2])
-        z0 = zi[:, None] * q0[None, :]
-
-    def one(carry, _):
-        x, cstate, z = carry
-        o, z = observe(x, z)
-        u, cstate = controller.step(cstate, o)
-        x_next = rk4_zoh_step(plant, x, u, dt, substeps)
-        mode = jnp.asarray(cstate if not isinstance(cstate, tuple) else 0, dtype=jnp.int32)
-        return (x_next, cstate, z), (x_next, u, o, mode)
-
-    _, (xs, us, obs, modes) = jax.lax.scan(
-        one, (x0, controller.init_state(), z0), None, length=steps
+    out, obs, cstates = scan_closed_loop(
+        plant,
+        controller.step,
+        x0,
+        controller.init_state(),
+        steps=int(steps),
+        dt=float(dt),
+        substeps=int(substeps),
+        observer=None if sensor is None else _SensorObserver(sensor, float(dt)),
+        record=True,
     )
-    return ClosedLoop(jnp.concatenate([x0[None], xs]), us, obs, modes)
+    modes = jnp.zeros(int(steps), dtype=jnp.int32) if isinstance(cstates, tuple) else cstates.astype(jnp.int32)
+    return ClosedLoop(out.states, out.actions, obs, modes)

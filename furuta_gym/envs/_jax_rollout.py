@@ -35,6 +35,7 @@ __all__ = [
     "Rollout",
     "is_diverged",
     "controlled_step",
+    "scan_closed_loop",
     "rollout",
 ]
 
@@ -207,65 +208,91 @@ def _as_policy(policy, policy_state):
     return policy, policy_state, policy_state is not None
 
 
-def _rollout_vmapped(
+def scan_closed_loop(
     system,
     policy,
-    x0s,
+    x0,
     policy_state,
     *,
-    steps,
-    dt,
-    substeps,
-    action_limit,
-    state_bound,
-    reward_fn,
-    terminated_fn,
-    observation_fn,
-    stateful,
+    steps: int,
+    dt: float,
+    substeps: int = 1,
+    action_limit: float | None = None,
+    state_bound: float = DEFAULT_STATE_BOUND,
+    reward_fn: RewardFn | None = None,
+    terminated_fn: TerminatedFn | None = None,
+    observation_fn: Callable[[Array], Array] | None = None,
+    observer: Any = None,
+    stateful: bool = True,
+    record: bool = False,
 ):
-    observe = (lambda x: x) if observation_fn is None else observation_fn
+    """The one closed loop of the package: one copy, ``steps`` controlled steps in ``lax.scan``.
 
-    def one_copy(x0):
-        def body(carry, _):
-            x, done, pstate = carry
-            obs = observe(x)
-            if stateful:
-                action, new_pstate = policy(pstate, obs)
-            else:
-                action, new_pstate = policy(obs), pstate
-            out = controlled_step(
-                system,
-                x,
-                action,
-                dt=dt,
-                substeps=substeps,
-                action_limit=action_limit,
-                state_bound=state_bound,
-                reward_fn=reward_fn,
-                terminated_fn=terminated_fn,
-            )
-            live = jnp.logical_not(done)
-            x_next = jnp.where(live, out.state, x)
-            # a frozen copy keeps its policy state too, so nothing it carries can drift to NaN
-            new_pstate = jax.tree_util.tree_map(
-                lambda a, b: jnp.where(live, a, b), new_pstate, pstate
-            )
-            record = (
-                x_next,
-                jnp.where(live, out.action, jnp.zeros_like(out.action)),
-                jnp.where(live, out.reward, jnp.zeros_like(out.reward)),
-                live & out.terminated,
-                live & out.diverged,
-                done | out.terminated,
-            )
-            return (x_next, done | out.terminated, new_pstate), record
+    Each step observes the state, asks the policy, and takes :func:`controlled_step`; after an
+    episode end (task termination or divergence) the copy, its policy state and its observer state
+    are frozen. The observation is ``observation_fn(x)`` (default: the state) or, for a sensor
+    with memory (e.g. a derivative filter), ``observer``: an object with ``init(x0) -> z0`` and
+    ``observe(x, z) -> (obs, z)``. Returns a :class:`Rollout` of this copy and, with
+    ``record=True``, also the observations the policy saw and its state after each step (what
+    :func:`furuta_gym.controllers.closed_loop` reports). Used by :func:`rollout` (vmapped, jitted)
+    and by the controllers' ``closed_loop``; jit and vmap it as they do.
+    """
+    if observer is None:
+        identity = (lambda x: x) if observation_fn is None else observation_fn
+        z0 = ()
 
-        init = (x0, jnp.zeros((), dtype=bool), policy_state)
-        _, (xs, us, rs, term, div, done) = jax.lax.scan(body, init, None, length=steps)
-        states = jnp.concatenate([x0[None], xs], axis=0)
-        return Rollout(states, us, rs, term, div, done)
+        def observe(x, z):
+            return identity(x), z
 
-    return jax.vmap(one_copy)(x0s)
+    else:
+        z0, observe = observer.init(x0), observer.observe
+
+    def freeze(live, new, old):
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(live, a, b), new, old)
+
+    def body(carry, _):
+        x, done, pstate, z = carry
+        obs, new_z = observe(x, z)
+        if stateful:
+            action, new_pstate = policy(pstate, obs)
+        else:
+            action, new_pstate = policy(obs), pstate
+        out = controlled_step(
+            system,
+            x,
+            action,
+            dt=dt,
+            substeps=substeps,
+            action_limit=action_limit,
+            state_bound=state_bound,
+            reward_fn=reward_fn,
+            terminated_fn=terminated_fn,
+        )
+        live = jnp.logical_not(done)
+        x_next = jnp.where(live, out.state, x)
+        # a frozen copy keeps its policy and sensor state too, so nothing it carries can drift to NaN
+        new_pstate, new_z = freeze(live, new_pstate, pstate), freeze(live, new_z, z)
+        record_step = (
+            x_next,
+            jnp.where(live, out.action, jnp.zeros_like(out.action)),
+            jnp.where(live, out.reward, jnp.zeros_like(out.reward)),
+            live & out.terminated,
+            live & out.diverged,
+            done | out.terminated,
+        )
+        if record:
+            record_step = (*record_step, obs, new_pstate)
+        return (x_next, done | out.terminated, new_pstate, new_z), record_step
+
+    init = (x0, jnp.zeros((), dtype=bool), policy_state, z0)
+    _, records = jax.lax.scan(body, init, None, length=steps)
+    xs, us, rs, term, div, done = records[:6]
+    out = Rollout(jnp.concatenate([x0[None], xs], axis=0), us, rs, term, div, done)
+    return (out, records[6], records[7]) if record else out
+
+
+def _rollout_vmapped(system, policy, x0s, policy_state, **options):
+    return jax.vmap(lambda x0: scan_closed_loop(system, policy, x0, policy_state, **options))(x0s)
 
 
 _ROLLOUT_JIT: list = []
