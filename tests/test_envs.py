@@ -441,3 +441,23 @@ def test_read_only_settings_report_what_was_configured():
     features = " ".join(sensed.per_episode_state_features())
     assert "measurement_noise" in features and "filter" in features and "delay" in features
     assert "randomize" not in features
+
+
+def test_initial_state_sampling_and_reset_options_without_an_episode():
+    """The two calls the batched env makes on its template: the same draw as reset(seed), and a
+    task option applied without starting an episode (unknown keys refused by name)."""
+    import gymnasium as gym
+    from gymnasium.utils import seeding
+
+    env = gym.make("furuta_gym/Furuta-v0", dynamics="analytic", reset_noise_scale=0.2).unwrapped
+    obs, _ = env.reset(seed=5)
+    drawn = env.sample_initial_state(seeding.np_random(5)[0])
+    np.testing.assert_array_equal(drawn, obs)
+    assert np.all(np.abs(drawn) <= 0.2) and np.any(drawn != 0.0)
+    np.testing.assert_array_equal(env.sample_initial_state(None), np.zeros(4))
+
+    nmsd = gym.make("furuta_gym/NMSD-v0", dynamics="analytic").unwrapped
+    nmsd.apply_reset_options({"target": 0.25})
+    assert nmsd.task.target == 0.25
+    with pytest.raises(ValueError, match=r"unknown reset option\(s\) \['goal'\]"):
+        nmsd.apply_reset_options({"goal": 1.0})

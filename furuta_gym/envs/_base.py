@@ -268,6 +268,22 @@ class LagrangianEnv(gymnasium.Env):
             features.append("randomize")
         return features
 
+    def sample_initial_state(self, rng: np.random.Generator | None) -> np.ndarray:
+        """A start state drawn from this env's initial-state distribution with ``rng`` (what
+        :meth:`reset` draws with its own generator; the nominal start without ``rng``)."""
+        return self._initial_state(rng)
+
+    def apply_reset_options(self, options: Mapping[str, Any]) -> None:
+        """Apply the system-specific reset options (``reset_option_names`` other than ``state``,
+        e.g. N-MSD's ``target``) to the task without starting an episode; unknown keys are an
+        error."""
+        unknown = sorted(set(options) - set(self.reset_option_names))
+        if unknown:
+            raise EnvArgumentError(
+                f"unknown reset option(s) {unknown}; expected any of {sorted(self.reset_option_names)}"
+            )
+        self._options(options)
+
     # ------------------------------------------------------------------ subclass hooks
     def _make_task(self, **task_kwargs):
         raise NotImplementedError

@@ -388,7 +388,7 @@ class LagrangianVectorEnv(VectorEnv):
             rng = self._rngs[k]
             if rng is None:  # never seeded: what the single env does on its first reset()
                 rng = self._rngs[k] = seeding.np_random(None)[0]
-            out[i] = self._template._initial_state(rng)
+            out[i] = self._template.sample_initial_state(rng)
         return out
 
     def _observe(self, xs: np.ndarray) -> np.ndarray:
@@ -672,7 +672,7 @@ class NMSDVectorEnv(LagrangianVectorEnv):
                     "options['target'] changes the task of every copy: pass it to a full reset "
                     "(no reset_mask)"
                 )
-            self._template._options(options)
+            self._template.apply_reset_options(options)
             self._set_task(self._template.task)
 
     def _extra_info(self, count):
