@@ -450,3 +450,19 @@ def test_worker_that_cannot_rebuild_the_model_is_one_clear_error(monkeypatch):
 
     with pytest.raises(ValueError, match="workers=1: the model or task cannot be sent"):
         NMSDVectorEnv(3, dynamics=Local(), workers=1)
+
+
+def test_rollout_in_concurrent_chunks_equals_one_batch_and_still_traces():
+    """chunks= only changes where the copies run; inside jit the rollout is one batch."""
+    x0s = np.random.default_rng(4).uniform(-0.3, 0.3, size=(7, 4))
+    x0s[:, 1] += np.pi
+    kwargs = dict(dt=DT, action_limit=5.0)
+    whole = rollout(Furuta(), lqr_like, x0s, 50, chunks=1, **kwargs)
+    split = rollout(Furuta(), lqr_like, x0s, 50, chunks=3, **kwargs)
+    for a, b in zip(split, whole):
+        assert a.shape == b.shape and _max_diff(a, b) <= 1e-12
+    assert _max_diff(whole.states[:, -1], whole.states[:, 0]) > 1e-3  # it moved
+    traced = jax.jit(lambda x: rollout(Furuta(), lqr_like, x, 50, chunks=3, **kwargs).states)(x0s)
+    assert _max_diff(traced, whole.states) <= 1e-12
+    with pytest.raises(ValueError, match=r"chunks must be an integer from 1 to the number of copies \(7\)"):
+        rollout(Furuta(), lqr_like, x0s, 5, chunks=8, **kwargs)

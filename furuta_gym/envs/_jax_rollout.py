@@ -19,11 +19,15 @@ a copy's episode ends (task termination or divergence) it stays frozen and later
 
 from __future__ import annotations
 
+import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from ..lagrangian import AbstractLagrangianSystem
@@ -133,6 +137,7 @@ def rollout(
     terminated_fn: TerminatedFn | None = None,
     observation_fn: Callable[[Array], Array] | None = None,
     policy_state: Any = None,
+    chunks: int | None = None,
 ) -> Rollout:
     """Run ``policy`` in closed loop from every initial state, entirely inside ``lax.scan``.
 
@@ -147,6 +152,13 @@ def rollout(
     Compiled once per (structure of system and policy, ``steps``, options); new weights of the same
     model reuse the compilation. Pass module-level functions for ``reward_fn`` / ``terminated_fn`` /
     ``observation_fn`` (a new lambda each call recompiles).
+
+    ``chunks``: the batch runs as this many contiguous sub-batches, concurrently from threads
+    (XLA:CPU runs separate executions side by side, while one execution of a small-network model
+    keeps about one core busy: DeLaN, N = 4 096, 2 cores: 647 k → 1.21 M state-steps/s with 2).
+    Default: one per core from 512 copies on, else 1; always 1 when called inside a JAX
+    transformation (jit, vmap), where the rollout becomes part of the caller's computation. No
+    copy's numbers depend on it.
 
     Returns a :class:`Rollout` (states, actions, rewards, terminated/diverged/done flags).
     """
@@ -166,11 +178,23 @@ def rollout(
         )
     single = x0s.ndim == 1
     step_fn, policy_state, stateful = _as_policy(policy, policy_state)
-    out = _rollout_batch(
+    batch = x0s[None] if single else x0s
+    traced = any(
+        isinstance(leaf, jax.core.Tracer)
+        for leaf in jax.tree_util.tree_leaves((system, step_fn, batch, policy_state))
+    )
+    n = batch.shape[0]
+    if chunks is None:
+        chunks = (os.cpu_count() or 1) if n >= 512 else 1
+    elif isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or not 1 <= chunks <= n:
+        raise ValueError(f"chunks must be an integer from 1 to the number of copies ({n}), got {chunks!r}")
+    # inside someone else's jit, the rollout is part of their computation: a nested jit may not
+    # carry compiler options
+    run = functools.partial(
+        _rollout_vmapped if traced else _rollout_batch,
         system,
         step_fn,
-        x0s[None] if single else x0s,
-        policy_state,
+        policy_state=policy_state,
         steps=steps,
         dt=float(dt),
         substeps=int(substeps),
@@ -181,6 +205,13 @@ def rollout(
         observation_fn=observation_fn,
         stateful=stateful,
     )
+    if traced or chunks == 1:
+        out = run(batch)
+    else:
+        edges = np.linspace(0, n, int(chunks) + 1).round().astype(int)
+        with ThreadPoolExecutor(int(chunks), thread_name_prefix="furuta_gym-rollout") as pool:
+            parts = list(pool.map(lambda i: run(batch[edges[i] : edges[i + 1]]), range(int(chunks))))
+        out = Rollout(*(jnp.concatenate(fields, axis=0) for fields in zip(*parts)))
     if single:
         out = Rollout(*(a[0] for a in out))
     return out
@@ -291,7 +322,7 @@ def scan_closed_loop(
     return (out, records[6], records[7]) if record else out
 
 
-def _rollout_vmapped(system, policy, x0s, policy_state, **options):
+def _rollout_vmapped(system, policy, x0s, *, policy_state, **options):
     return jax.vmap(lambda x0: scan_closed_loop(system, policy, x0, policy_state, **options))(x0s)
 
 
