@@ -102,14 +102,10 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
         outputs = np.ndarray(
             (num_envs, _output_width(n_state, n_input)), dtype=np.float64, buffer=shm_out.buf
         )
-        step, args = _step_function(**settings)
+        step, args = _step_function(**settings, packed=True)
 
         def run():
-            xs, us = inputs[lo:hi, :n_state], inputs[lo:hi, n_state:]
-            result = jax.device_get(step(*args, xs, us))
-            outputs[lo:hi] = np.concatenate(
-                [np.asarray(r, dtype=np.float64).reshape(hi - lo, -1) for r in result], axis=1
-            )
+            outputs[lo:hi] = np.asarray(step(*args, inputs[lo:hi]))
 
         run()  # compile before reporting ready
         conn.send(("ready", None))
@@ -119,7 +115,7 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
                 break
             if message[0] == "task":
                 settings["task"] = message[1]
-                step, args = _step_function(**settings)
+                step, args = _step_function(**settings, packed=True)
             else:
                 run()
             conn.send(("ok", None))

@@ -71,12 +71,16 @@ _STEP_CACHE: dict = {}
 
 
 def _batched_step(
-    static, treedef, energy_treedef, *, dt, substeps, action_limit, task, quantizer
+    static, treedef, energy_treedef, *, dt, substeps, action_limit, task, quantizer, packed=False
 ):
     """One jitted ``(model leaves, energy-model leaves, xs, us) -> outputs`` for a model structure
     and task; cached so a second vector env of the same model and settings does not recompile.
-    Taking flat lists of arrays (not the Equinox modules) keeps the per-call dispatch cheap."""
-    key = (treedef, static, energy_treedef, dt, substeps, action_limit, task, quantizer)
+    Taking flat lists of arrays (not the Equinox modules) keeps the per-call dispatch cheap.
+
+    ``packed=True`` (the worker processes' form): ``(leaves, energy leaves, [xs | us]) -> one
+    float64 array`` of the outputs side by side (booleans as 0/1), one contiguous array in and one
+    out instead of two strided inputs and seven outputs to copy every step."""
+    key = (treedef, static, energy_treedef, dt, substeps, action_limit, task, quantizer, packed)
     try:
         return _STEP_CACHE[key]
     except (KeyError, TypeError):
@@ -103,7 +107,12 @@ def _batched_step(
         energy_model = jax.tree_util.tree_unflatten(energy_treedef, energy_leaves)
         return jax.vmap(one, in_axes=(None, None, 0, 0))(system, energy_model, xs, us)
 
-    fn = jax.jit(step, compiler_options=small_kernel_compiler_options())
+    def packed_step(leaves, energy_leaves, block):
+        n_state = 2 * n_dof
+        outs = step(leaves, energy_leaves, block[:, :n_state], block[:, n_state:])
+        return jnp.concatenate([jnp.reshape(o, (block.shape[0], -1)).astype(block.dtype) for o in outs], axis=1)
+
+    fn = jax.jit(packed_step if packed else step, compiler_options=small_kernel_compiler_options())
     try:
         _STEP_CACHE[key] = fn
     except TypeError:  # unhashable static structure: no sharing, still correct
@@ -111,10 +120,10 @@ def _batched_step(
     return fn
 
 
-def _step_function(*, system, energy_model, dt, substeps, action_limit, task, quantizer):
+def _step_function(*, system, energy_model, dt, substeps, action_limit, task, quantizer, packed=False):
     """The jitted batched step ``(model leaves, energy leaves, xs, us) -> outputs`` of a vector env
-    and its first two arguments. One function for the env's own process and its workers, so both
-    compute the same thing."""
+    (``packed``: see :func:`_batched_step`) and its first two arguments. One function for the
+    env's own process and its workers, so both compute the same thing."""
     dynamic, static = eqx.partition(system, eqx.is_array)
     leaves, treedef = jax.tree_util.tree_flatten(dynamic)
     energy_leaves, energy_treedef = jax.tree_util.tree_flatten(energy_model)
@@ -127,6 +136,7 @@ def _step_function(*, system, energy_model, dt, substeps, action_limit, task, qu
         action_limit=action_limit,
         task=task,
         quantizer=quantizer,
+        packed=packed,
     )
     return fn, (leaves, energy_leaves)
 
