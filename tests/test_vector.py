@@ -380,6 +380,8 @@ def test_split_and_worker_processes_give_every_copy_the_same_numbers():
     """chunks= (threads in this process) and workers= (processes) only change where copies are
     computed: a learned model's copies match the unsplit env through truncations and autoresets,
     a task change reaches the workers, and close() stops them and refuses further steps."""
+    import gymnasium as gym
+
     from furuta_gym.envs.vector import FurutaVectorEnv, NMSDVectorEnv
     from furuta_gym.models import make_model
 
@@ -400,7 +402,8 @@ def test_split_and_worker_processes_give_every_copy_the_same_numbers():
 
     targets = []
     for workers in (0, 2):
-        env = NMSDVectorEnv(6, dynamics="analytic", workers=workers)
+        env = gym.make_vec("furuta_gym/NMSD-v0", num_envs=6, dynamics="analytic", workers=workers)
+        assert isinstance(env, NMSDVectorEnv) and env.workers == workers
         env.reset(seed=1, options={"target": 0.4})
         _, reward, *_ , info = env.step(np.full((6, 1), 2.0))
         targets.append((reward, info["target"]))
