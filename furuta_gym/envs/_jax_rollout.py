@@ -41,6 +41,8 @@ __all__ = [
     "controlled_step",
     "scan_closed_loop",
     "rollout",
+    "chunk_bounds",
+    "map_chunks",
 ]
 
 #: Magnitude beyond which a state counts as "absurd" (diverged) when the caller gives no bound.
@@ -208,13 +210,27 @@ def rollout(
     if traced or chunks == 1:
         out = run(batch)
     else:
-        edges = np.linspace(0, n, int(chunks) + 1).round().astype(int)
         with ThreadPoolExecutor(int(chunks), thread_name_prefix="furuta_gym-rollout") as pool:
-            parts = list(pool.map(lambda i: run(batch[edges[i] : edges[i + 1]]), range(int(chunks))))
+            parts = map_chunks(lambda a, b: run(batch[a:b]), n, int(chunks), pool)
         out = Rollout(*(jnp.concatenate(fields, axis=0) for fields in zip(*parts)))
     if single:
         out = Rollout(*(a[0] for a in out))
     return out
+
+
+def chunk_bounds(n: int, chunks: int) -> np.ndarray:
+    """Edges of ``chunks`` contiguous, near-equal sub-batches of ``n`` copies."""
+    return np.linspace(0, n, chunks + 1).round().astype(int)
+
+
+def map_chunks(fn: Callable[[int, int], Any], n: int, chunks: int, pool=None) -> list:
+    """``fn(a, b)`` for each sub-batch ``[a, b)`` of :func:`chunk_bounds`, in order; concurrently
+    on ``pool`` (a thread pool: JAX releases the GIL while XLA runs) or, without one, in turn."""
+    edges = chunk_bounds(n, chunks)
+    spans = list(zip(edges[:-1].tolist(), edges[1:].tolist()))
+    if pool is None:
+        return [fn(a, b) for a, b in spans]
+    return list(pool.map(lambda span: fn(*span), spans))
 
 
 def _as_policy(policy, policy_state):

@@ -1,18 +1,19 @@
-"""Worker processes for the batched env: each steps a contiguous slice of the copies on one core.
+"""Worker processes for the batched env: each steps a contiguous slice of the copies.
 
 Why processes: one XLA:CPU execution of a batched small-network step keeps one core busy and
 spends the other spinning (batched DeLaN RK4 step, N = 4096, 2 cores: 6.7 ms wall and 9.3 ms CPU
 against 6.5 ms on one pinned core); threads in one process share XLA's intra-op pool and reach
 only ~1.4 cores. A worker whose XLA pool has one thread keeps one core busy, so K workers on K
 cores add up (docs/batched.md "Speed"). The price: start-up (a worker imports JAX and compiles its step,
-~5 s) and a pipe round trip per step (~50 µs), so this pays for thousands of copies, not tens.
+~3 s) and a socket round trip per step (~50 µs), so this pays for thousands of copies, not tens.
 
 Workers are fresh interpreters (``python -m furuta_gym.envs._workers``) that connect back over a
 local socket, not ``multiprocessing`` children: those re-import the user's main script, which then
 needs an ``if __name__ == "__main__"`` guard (and JAX is not fork-safe). The model and task travel
 pickled, so a model class must be importable by name. Data travel through two shared-memory
-blocks (inputs: state and action; outputs: everything the jitted step returns, as float64
-columns); the connections carry only "step" / "task" messages.
+blocks (inputs: state and action; outputs: the packed step's columns, see
+:func:`furuta_gym.envs.vector.unpack_outputs`); the connections carry only "step" / "task"
+messages.
 """
 
 from __future__ import annotations
@@ -29,25 +30,10 @@ from multiprocessing.connection import Client, Listener
 
 import numpy as np
 
+from ._jax_rollout import chunk_bounds
+from .vector import packed_output_width, unpack_outputs
+
 __all__ = ["ProcessChunks"]
-
-
-def _output_width(n_state: int, n_input: int) -> int:
-    # x_next, obs, u, reward, terminated, diverged, energy
-    return 2 * n_state + n_input + 4
-
-
-def _split_outputs(block: np.ndarray, n_state: int, n_input: int) -> tuple[np.ndarray, ...]:
-    s, m = n_state, n_input
-    return (
-        block[:, :s].copy(),
-        block[:, s : 2 * s].copy(),
-        block[:, 2 * s : 2 * s + m].copy(),
-        block[:, 2 * s + m].copy(),
-        block[:, 2 * s + m + 1] != 0.0,
-        block[:, 2 * s + m + 2] != 0.0,
-        block[:, 2 * s + m + 3].copy(),
-    )
 
 
 _ADDRESS_VARIABLE = "FURUTA_GYM_VECTOR_WORKER_ADDRESS"
@@ -100,7 +86,7 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
         shm_in, shm_out = (_attach(name) for name in names)
         inputs = np.ndarray((num_envs, n_state + n_input), dtype=np.float64, buffer=shm_in.buf)
         outputs = np.ndarray(
-            (num_envs, _output_width(n_state, n_input)), dtype=np.float64, buffer=shm_out.buf
+            (num_envs, packed_output_width(n_state, n_input)), dtype=np.float64, buffer=shm_out.buf
         )
         step, args = _step_function(**settings, packed=True)
 
@@ -211,7 +197,7 @@ class ProcessChunks:
     def __init__(self, num_envs: int, workers: int, n_state: int, n_input: int, settings: dict):
         self.num_envs, self.workers = int(num_envs), int(workers)
         self.n_state, self.n_input = int(n_state), int(n_input)
-        width_in, width_out = n_state + n_input, _output_width(n_state, n_input)
+        width_in, width_out = n_state + n_input, packed_output_width(n_state, n_input)
         try:
             payload = pickle.dumps(settings)
         except Exception as exc:
@@ -226,7 +212,7 @@ class ProcessChunks:
         self._inputs = np.ndarray((num_envs, width_in), dtype=np.float64, buffer=blocks[0].buf)
         self._outputs = np.ndarray((num_envs, width_out), dtype=np.float64, buffer=blocks[1].buf)
         self._inputs[:] = 0.0
-        bounds = np.linspace(0, num_envs, workers + 1).round().astype(int)
+        bounds = chunk_bounds(num_envs, workers)
         cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
         key = secrets.token_bytes(32)
         self._connections, self._processes = [], []
@@ -279,7 +265,7 @@ class ProcessChunks:
         except BaseException:  # e.g. Ctrl-C between send and reply: the workers are out of step
             self.close()
             raise
-        return _split_outputs(self._outputs, self.n_state, self.n_input)
+        return unpack_outputs(self._outputs, self.n_state, self.n_input)
 
     def set_task(self, task) -> None:
         for conn in self._connections:

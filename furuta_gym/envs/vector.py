@@ -38,7 +38,7 @@ from ..signals import quantize_joints
 from ..simulate import small_kernel_compiler_options
 from ._backends import ModelBackend
 from ._base import EnvArgumentError, LagrangianEnv
-from ._jax_rollout import Rollout, controlled_step, rollout
+from ._jax_rollout import Rollout, controlled_step, map_chunks, rollout
 from ._parameters import PARAMETER_CLASSES
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv
@@ -107,7 +107,7 @@ def _batched_step(
         energy_model = jax.tree_util.tree_unflatten(energy_treedef, energy_leaves)
         return jax.vmap(one, in_axes=(None, None, 0, 0))(system, energy_model, xs, us)
 
-    def packed_step(leaves, energy_leaves, block):
+    def packed_step(leaves, energy_leaves, block):  # layout: packed_output_width / unpack_outputs
         n_state = 2 * n_dof
         outs = step(leaves, energy_leaves, block[:, :n_state], block[:, n_state:])
         return jnp.concatenate([jnp.reshape(o, (block.shape[0], -1)).astype(block.dtype) for o in outs], axis=1)
@@ -118,6 +118,25 @@ def _batched_step(
     except TypeError:  # unhashable static structure: no sharing, still correct
         pass
     return fn
+
+
+def packed_output_width(n_state: int, n_input: int) -> int:
+    """Columns of the packed step's output: x_next, obs, u, reward, terminated, diverged, energy."""
+    return 2 * n_state + n_input + 4
+
+
+def unpack_outputs(block: np.ndarray, n_state: int, n_input: int) -> tuple[np.ndarray, ...]:
+    """The packed step's output block as the unpacked step's seven arrays (copies)."""
+    s, m = n_state, n_input
+    return (
+        block[:, :s].copy(),
+        block[:, s : 2 * s].copy(),
+        block[:, 2 * s : 2 * s + m].copy(),
+        block[:, 2 * s + m].copy(),
+        block[:, 2 * s + m + 1] != 0.0,
+        block[:, 2 * s + m + 2] != 0.0,
+        block[:, 2 * s + m + 3].copy(),
+    )
 
 
 def _step_function(*, system, energy_model, dt, substeps, action_limit, task, quantizer, packed=False):
@@ -167,26 +186,20 @@ class _ConcurrentChunks:
     """
 
     def __init__(self, num_envs: int, chunks: int):
-        self.bounds = np.linspace(0, num_envs, chunks + 1).round().astype(int)
-        self.chunks = chunks
+        self.num_envs, self.chunks = num_envs, chunks
         self._pool: ThreadPoolExecutor | None = None
-        self._compiled = False
 
     def __call__(self, fn, shared: tuple, *batched: np.ndarray) -> tuple[np.ndarray, ...]:
         if self.chunks == 1:
             return tuple(np.array(a) for a in fn(*shared, *batched))
 
-        def part(i):
-            a, b = self.bounds[i], self.bounds[i + 1]
+        def part(a, b):
             return [np.asarray(r) for r in fn(*shared, *(x[a:b] for x in batched))]
 
-        if not self._compiled:
-            parts = [part(i) for i in range(self.chunks)]
-            self._compiled = True
-        else:
-            if self._pool is None:
-                self._pool = ThreadPoolExecutor(self.chunks, thread_name_prefix="furuta_gym-vector")
-            parts = list(self._pool.map(part, range(self.chunks)))
+        pool = self._pool  # None on the first call: compile in turn
+        parts = map_chunks(part, self.num_envs, self.chunks, pool)
+        if pool is None:
+            self._pool = ThreadPoolExecutor(self.chunks, thread_name_prefix="furuta_gym-vector")
         return tuple(np.concatenate(outs) for outs in zip(*parts))
 
     def close(self) -> None:
@@ -230,7 +243,7 @@ class LagrangianVectorEnv(VectorEnv):
     * ``workers=K``: K worker processes (fresh interpreters, ~3 s to start and compile), each
       stepping a contiguous slice with an XLA thread pool sized for one core; state and actions
       travel through shared memory. For thousands of copies on K cores: at N = 4096 on 2 cores,
-      ~0.9–1.0 M state-steps/s against ~0.55 M in one process (docs/batched.md "Speed"). The
+      ~1.0 M state-steps/s against ~0.76 M by default in one process (docs/batched.md "Speed"). The
       model must pickle and be importable by name in a new interpreter; call :meth:`close` (or
       use the env as a context manager) to stop the workers — they also stop when the env is
       garbage-collected or Python exits.
@@ -254,7 +267,7 @@ class LagrangianVectorEnv(VectorEnv):
         if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 0 <= workers <= num_envs:
             raise ValueError(
                 f"workers must be an integer from 0 (step in this process) to num_envs = "
-                f"{num_envs} (worker processes, each pinned to a core), got {workers!r}"
+                f"{num_envs} (worker processes, each with a one-thread XLA pool), got {workers!r}"
             )
         if chunks is None:
             chunks = auto_chunks(int(num_envs)) if workers == 0 else 1
