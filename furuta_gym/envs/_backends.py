@@ -39,6 +39,7 @@ __all__ = [
     "make_backend",
     "load_checkpoint",
     "DYNAMICS_NAMES",
+    "KERNELS",
 ]
 
 DYNAMICS_NAMES = ("mujoco", "analytic")
@@ -328,29 +329,20 @@ class MujocoBackend(AbstractBackend):
 # ---------------------------------------------------------------------------------------------
 
 _STEP_CACHE: dict = {}
+_C_KERNEL_CACHE: dict = {}
+
+#: ``kernel=`` values of the model backends (see :class:`ModelBackend`)
+KERNELS = ("auto", "c", "xla")
 
 
-def _compiled_steps(static, rebuild, treedef_key, timestep: float, substeps: int):
-    """Jitted (full period, split period) steps for one model structure; cached across envs so
-    a second env of the same model (or new parameters / weights) does not recompile.
-
-    The model's arrays travel as ``(vector, matrices)``: every scalar and vector leaf raveled into
-    ONE float64 vector (one argument to flatten per call instead of many, and XLA fuses the
-    unravelling slices into their elementwise consumers), the matrices (network weights) as a
-    list of their own: a slice feeding a matrix product is a separate XLA kernel per leaf and call
-    (~8 µs of a ~50 µs single-copy DeLaN step).
-    """
+def _step_functions(static, rebuild, timestep: float, substeps: int):
+    """The (full period, split period) steps of one model structure as plain JAX functions of
+    ``(model arrays, x, u...)``: what both kernels compile."""
     import equinox as eqx
     import jax
     import jax.numpy as jnp
 
-    from ..simulate import rk4_step, small_kernel_compiler_options
-
-    key = (treedef_key, timestep, substeps)
-    try:
-        return _STEP_CACHE[key]
-    except (KeyError, TypeError):
-        pass
+    from ..simulate import rk4_step
 
     def period(flat, x, u):
         system = eqx.combine(rebuild(flat), static)
@@ -364,6 +356,29 @@ def _compiled_steps(static, rebuild, treedef_key, timestep: float, substeps: int
 
         return jax.lax.fori_loop(0, substeps, body, x)
 
+    return period, split
+
+
+def _compiled_steps(static, rebuild, treedef_key, timestep: float, substeps: int):
+    """Jitted (full period, split period) steps for one model structure; cached across envs so
+    a second env of the same model (or new parameters / weights) does not recompile.
+
+    The model's arrays travel as ``(vector, matrices)``: every scalar and vector leaf raveled into
+    ONE float64 vector (one argument to flatten per call instead of many, and XLA fuses the
+    unravelling slices into their elementwise consumers), the matrices (network weights) as a
+    list of their own: a slice feeding a matrix product is a separate XLA kernel per leaf and call
+    (~8 µs of a ~50 µs single-copy DeLaN step).
+    """
+    import jax
+
+    from ..simulate import small_kernel_compiler_options
+
+    key = (treedef_key, timestep, substeps)
+    try:
+        return _STEP_CACHE[key]
+    except (KeyError, TypeError):
+        pass
+    period, split = _step_functions(static, rebuild, timestep, substeps)
     options = small_kernel_compiler_options()
     fns = (jax.jit(period, compiler_options=options), jax.jit(split, compiler_options=options))
     try:
@@ -373,6 +388,113 @@ def _compiled_steps(static, rebuild, treedef_key, timestep: float, substeps: int
     return fns
 
 
+class _XlaStepper:
+    """The period step as one jitted XLA call (the state stays a JAX array between steps)."""
+
+    name = "xla"
+
+    def __init__(self, static, rebuild, treedef_key, dynamic, timestep, substeps, n_state, n_inputs):
+        self._period, self._split = _compiled_steps(static, rebuild, treedef_key, timestep, substeps)
+        self._dynamic = dynamic
+        self._x = None
+
+    def reset(self, x) -> None:
+        import jax.numpy as jnp
+
+        self._x = jnp.asarray(np.asarray(x, dtype=np.float64))
+
+    def step(self, u) -> np.ndarray:
+        self._x = self._period(self._dynamic, self._x, u)
+        return np.array(self._x)
+
+    def step_split(self, u_first, n_first: int, u) -> np.ndarray:
+        self._x = self._split(self._dynamic, self._x, u_first, n_first, u)
+        return np.array(self._x)
+
+    @property
+    def state(self) -> np.ndarray | None:
+        return None if self._x is None else np.array(self._x)
+
+
+class _CStepper:
+    """The same period step lowered to one C function (:mod:`furuta_gym._jaxpr_to_c`), called
+    on fixed numpy buffers: the model's arrays are copied in once per model, the state is
+    updated in place. A DeLaN step takes ~5 µs where one XLA call costs ~19 µs, mostly fixed
+    dispatch and per-kernel overheads."""
+
+    name = "c"
+
+    def __init__(self, static, rebuild, treedef_key, dynamic, timestep, substeps, n_state, n_inputs):
+        import jax
+
+        self._n_state = n_state
+        self._functions = _step_functions(static, rebuild, timestep, substeps)
+        self._key = (treedef_key, timestep, substeps, n_inputs)
+        self._leaves = [np.asarray(a) for a in jax.tree_util.tree_leaves(dynamic)]
+        self._dynamic = dynamic
+        self._n_inputs = n_inputs
+        self._x_buf = None
+        self._has_state = False
+        self._period = self._bind("period")  # built now: a model C cannot take fails here
+        self._split = None
+
+    def _kernel(self, which: str, n_state: int):
+        from .._jaxpr_to_c import CKernel
+
+        key = (which, *self._key)
+        try:
+            return _C_KERNEL_CACHE[key]
+        except (KeyError, TypeError):
+            pass
+        period, split = self._functions
+        x, u = np.zeros(n_state), np.zeros(self._n_inputs)
+        if which == "period":
+            kernel = CKernel(period, self._dynamic, x, u, name="period")
+        else:
+            kernel = CKernel(split, self._dynamic, x, u, np.int64(0), u, name="split")
+        try:
+            _C_KERNEL_CACHE[key] = kernel
+        except TypeError:  # unhashable static structure: no sharing, still correct
+            pass
+        return kernel
+
+    def _bind(self, which: str):
+        """(call, the step's input buffers after x); x's buffer is shared by both kernels."""
+        kernel = self._kernel(which, self._n_state)
+        inputs, _ = kernel.new_buffers()
+        for buf, leaf in zip(inputs, self._leaves):
+            buf[...] = leaf
+        k = len(self._leaves)
+        if self._x_buf is None:
+            self._x_buf = inputs[k]
+        inputs[k] = self._x_buf
+        return kernel.bind(inputs, [self._x_buf]), inputs[k + 1:]
+
+    def reset(self, x) -> None:
+        self._x_buf[:] = np.asarray(x, dtype=np.float64)
+        self._has_state = True
+
+    def step(self, u) -> np.ndarray:
+        call, (u_buf,) = self._period
+        u_buf[:] = u
+        call()
+        return self._x_buf.copy()
+
+    def step_split(self, u_first, n_first: int, u) -> np.ndarray:
+        if self._split is None:
+            self._split = self._bind("split")
+        call, (u_first_buf, n_buf, u_buf) = self._split
+        u_first_buf[:] = u_first
+        n_buf[...] = n_first
+        u_buf[:] = u
+        call()
+        return self._x_buf.copy()
+
+    @property
+    def state(self) -> np.ndarray | None:
+        return self._x_buf.copy() if self._has_state else None
+
+
 class ModelBackend(AbstractBackend):
     """Any Lagrangian system in JAX: ``substeps`` RK4 steps of ``timestep`` per period, input held.
 
@@ -380,6 +502,16 @@ class ModelBackend(AbstractBackend):
     :class:`furuta_gym.effects.WithEffects` (Coulomb as the exact sgn law, like the MuJoCo
     backend). :meth:`set_parameters` works for the analytic models (their ``params`` pytree).
     Rendering poses the system's MJCF scene at the model's state.
+
+    ``kernel`` chooses what runs the period step (the same JAX function either way):
+
+    * ``"c"``: the step's jaxpr lowered to one C function and compiled with the system's C
+      compiler (:mod:`furuta_gym._jaxpr_to_c`; cached on disk, ~1–2 s the first time). A single
+      env steps 3–4× faster than through XLA, whose fixed cost per call dominates one small step.
+    * ``"xla"``: one jitted XLA call per step.
+    * ``"auto"`` (default): ``"c"`` when a C compiler is on PATH and every primitive of the model's
+      step has a C translation, else ``"xla"``; :attr:`kernel` says which, and
+      :attr:`kernel_fallback` why not C.
     """
 
     def __init__(
@@ -389,10 +521,16 @@ class ModelBackend(AbstractBackend):
         substeps: int = 1,
         effects: Sequence[Effect] = (),
         parameters: Mapping[str, float] | None = None,
+        kernel: str = "auto",
     ):
         from .._x64 import ensure_x64
 
+        if kernel not in KERNELS:
+            raise ValueError(f"kernel must be one of {list(KERNELS)}, got {kernel!r}")
         ensure_x64()
+        self.kernel_request = kernel
+        self.kernel_fallback: str | None = None
+        self._stepper = None
         self.system = model.spec.name
         self.base_model = model
         self.timestep = float(timestep)
@@ -400,7 +538,6 @@ class ModelBackend(AbstractBackend):
         self.effects = tuple(e for e in effects if e.name != "input_delay")
         self._n = self.spec.n_dof
         self._scene = None
-        self._x = None
         # the model's own parameter values (an analytic model may carry non-pinned ones)
         self._parameters = _params_as_floats(model.params) if self._has_parameters() else {}
         if parameters:
@@ -435,9 +572,32 @@ class ModelBackend(AbstractBackend):
 
         shapes = tuple((a.shape, str(a.dtype)) for a in leaves)
         treedef_key = (treedef, shapes, static)
-        self._period, self._split = _compiled_steps(
-            static, rebuild, treedef_key, self.timestep, self.substeps
-        )
+        self._stepper = self._make_stepper(static, rebuild, treedef_key)
+
+    def _make_stepper(self, static, rebuild, treedef_key):
+        from .._jaxpr_to_c import CKernelError
+
+        state = None if self._stepper is None else self._stepper.state
+        n_inputs = len(self.spec.input_names)
+        args = (static, rebuild, treedef_key, self._dynamic, self.timestep, self.substeps, 2 * self._n, n_inputs)
+        stepper = None
+        if self.kernel_request in ("auto", "c"):
+            try:
+                stepper = _CStepper(*args)
+            except CKernelError as exc:
+                if self.kernel_request == "c":
+                    raise ValueError(f"kernel='c': {exc}") from exc
+                self.kernel_fallback = str(exc)
+        if stepper is None:
+            stepper = _XlaStepper(*args)
+        if state is not None:
+            stepper.reset(state)
+        return stepper
+
+    @property
+    def kernel(self) -> str:
+        """What runs the period step: ``"c"`` or ``"xla"`` (see the class docstring)."""
+        return self._stepper.name
 
     def set_parameters(self, values: Mapping[str, float]) -> None:
         if not self._has_parameters():
@@ -457,48 +617,45 @@ class ModelBackend(AbstractBackend):
         self._set_model(eqx.tree_at(lambda m: m.params, self.base_model, params))
 
     def reset(self, x) -> None:
-        import jax.numpy as jnp
-
-        self._x = jnp.asarray(np.asarray(x, dtype=np.float64))
+        self._stepper.reset(x)
 
     def step(self, u) -> np.ndarray:
-        x = self._period(self._dynamic, self._x, u)
-        self._x = x
-        return np.array(x)
+        return self._stepper.step(u)
 
     def step_split(self, u_first, n_first: int, u) -> np.ndarray:
-        self._x = self._split(self._dynamic, self._x, u_first, n_first, u)
-        return np.array(self._x)
+        return self._stepper.step_split(u_first, n_first, u)
 
     @property
     def state(self) -> np.ndarray:
-        return np.array(self._x)
+        return self._stepper.state
 
     def _scene_data(self):
         if self._scene is None:
             model = load_mjcf(self.system)
             self._scene = (model, mujoco.MjData(model))
         model, data = self._scene
-        data.qpos[:] = np.asarray(self._x)[: self._n]
+        data.qpos[:] = self.state[: self._n]
         return model, data
 
     def __getstate__(self):
-        # jitted functions do not pickle; the model (an Equinox pytree) and the state do
+        # compiled steps do not pickle; the model (an Equinox pytree) and the state do
         state = self.__dict__.copy()
-        for k in ("_period", "_split", "_dynamic", "model"):
+        for k in ("_stepper", "_dynamic", "model"):
             state.pop(k, None)
-        state["_x"] = None if self._x is None else np.asarray(self._x)
+        state["_pickled_state"] = None if self._stepper is None else self._stepper.state
         state["_scene"] = None
         return state
 
     def __setstate__(self, state):
+        x = state.pop("_pickled_state", None)
         self.__dict__.update(state)
+        self._stepper = None
         if self._parameters and self._has_parameters():
             self.set_parameters(self._parameters)
         else:
             self._set_model(self.base_model)
-        if self._x is not None:
-            self.reset(self._x)
+        if x is not None:
+            self.reset(x)
 
 
 def _params_as_floats(params) -> dict[str, float]:
@@ -535,17 +692,26 @@ def make_backend(
     substeps: int = 1,
     effects: Sequence[Effect] = (),
     parameters: Mapping[str, float] | None = None,
+    kernel: str = "auto",
 ) -> AbstractBackend:
     """The backend the envs' ``dynamics=`` keyword names, for ``system`` ("furuta"/"nmsd").
 
-    Model backends use the MJCF model's ``timestep`` so they integrate exactly as MuJoCo does.
+    Model backends use the MJCF model's ``timestep`` so they integrate exactly as MuJoCo does;
+    ``kernel`` is the model backends' step kernel (:class:`ModelBackend`).
     """
     system = get_spec(system).name
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {list(KERNELS)}, got {kernel!r}")
     if isinstance(dynamics, AbstractLagrangianSystem):
         model = dynamics
     elif isinstance(dynamics, (str, os.PathLike)):
         name = os.fspath(dynamics)
         if name == "mujoco":
+            if kernel != "auto":
+                raise ValueError(
+                    f"kernel={kernel!r} chooses how a model backend's step runs; dynamics='mujoco' "
+                    "is stepped by MuJoCo itself (leave kernel at 'auto')"
+                )
             return MujocoBackend(system, substeps, effects, parameters)
         if name == "analytic":
             from ..models import analytic_model
@@ -571,5 +737,5 @@ def make_backend(
             f"load a {system} checkpoint"
         )
     timestep = float(load_mjcf(system).opt.timestep)
-    return ModelBackend(model, timestep, substeps, effects, parameters)
+    return ModelBackend(model, timestep, substeps, effects, parameters, kernel=kernel)
 

@@ -77,6 +77,7 @@ class LagrangianEnv(gymnasium.Env):
     def __init__(self, **kwargs):
         common = dict(
             dynamics="mujoco",
+            kernel="auto",
             frame_skip=self.default_frame_skip,
             reset_noise_scale=self.default_reset_noise_scale,
             episode_seconds=self.default_episode_seconds,
@@ -127,7 +128,7 @@ class LagrangianEnv(gymnasium.Env):
         self.effects: tuple[Effect, ...] = resolve_effects(self.system, cfg["plant"], cfg["effects"])
         self._randomize = parse_randomization(self.system, cfg["randomize"])
         self.backend: AbstractBackend = make_backend(
-            self.system, cfg["dynamics"], substeps=self.frame_skip, effects=self.effects
+            self.system, cfg["dynamics"], substeps=self.frame_skip, effects=self.effects, kernel=cfg["kernel"]
         )
         if self._randomize:
             self.backend.set_parameters(self.backend.parameters)  # fail now, not at reset

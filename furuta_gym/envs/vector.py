@@ -294,8 +294,15 @@ class LagrangianVectorEnv(VectorEnv):
                 f"(gymnasium.make({self._env_id()!r}, render_mode=...)) or use "
                 "gymnasium.make_vec(..., vectorization_mode='sync')"
             )
+        if env_kwargs.get("kernel", "auto") != "auto":
+            raise ValueError(
+                f"kernel={env_kwargs['kernel']!r} chooses a single env's step kernel; "
+                f"{type(self).__name__} steps all copies in one vmapped XLA program (chunks= and "
+                "workers= set how)"
+            )
         # The single env is the specification: its validated settings, spaces, task and initial-
-        # state distribution are what every copy uses.
+        # state distribution are what every copy uses. It never steps: no C kernel to build.
+        env_kwargs["kernel"] = "xla"
         self._template = template = self.env_class(dynamics=dynamics, **env_kwargs)
         self._check_supported(template)
         backend = template.backend
