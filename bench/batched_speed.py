@@ -3,7 +3,8 @@
 Measures, in one run on this machine, side by side:
 
 * the MuJoCo ``furuta_gym/Furuta-v0`` single env: ``env.step`` calls per second (the reference);
-* the same env with a DeLaN backend (single copy): ``env.step``/s, and its ratio to MuJoCo;
+* the same env with a DeLaN backend (single copy): ``env.step``/s, and its ratio to MuJoCo, with
+  the default step kernel (C when a compiler exists) and with ``kernel="xla"``;
 * the DeLaN-backed batched env (:class:`furuta_gym.envs.vector.FurutaVectorEnv`, one jitted vmapped
   step per ``env.step``) in state-steps/s (copies × steps per second) at N = 1, 64, 1024, 4096,
   16384, and the pure-JAX rollout (``FurutaVectorEnv.rollout``: a jittable policy inside
@@ -187,9 +188,12 @@ def main(argv=None) -> int:
     mujoco_env = gym.make(ENV_ID)
     mujoco_rate = single_env_rate(mujoco_env, single_steps, args.repeats)
     say(f"MuJoCo Furuta-v0 single env: {mujoco_rate:,.0f} env.step/s")
-    delan_env = gym.make(ENV_ID, dynamics=delan)
-    delan_single = single_env_rate(delan_env, single_steps // 2, args.repeats)
-    say(f"DeLaN single env: {delan_single:,.0f} env.step/s ({delan_single / mujoco_rate:.2f}x)")
+    delan_env = gym.make(ENV_ID, dynamics=delan)  # kernel="auto": C when a compiler exists
+    delan_kernel = delan_env.unwrapped.backend.kernel
+    delan_single = single_env_rate(delan_env, single_steps, args.repeats)
+    say(f"DeLaN single env (kernel {delan_kernel}): {delan_single:,.0f} env.step/s ({delan_single / mujoco_rate:.2f}x)")
+    delan_xla_single = single_env_rate(gym.make(ENV_ID, dynamics=delan, kernel="xla"), single_steps // 2, args.repeats)
+    say(f"DeLaN single env (kernel xla): {delan_xla_single:,.0f} env.step/s ({delan_xla_single / mujoco_rate:.2f}x)")
 
     from furuta_gym.envs.vector import auto_chunks
 
@@ -246,7 +250,9 @@ def main(argv=None) -> int:
         f"| MuJoCo `Furuta-v0` single env (reference: the faster of start {mujoco_start:,.0f} "
         f"and end {mujoco_end:,.0f} env.step/s) | {mujoco_rate:,.0f} env.step/s | 1 | "
         f"{mujoco_cpu:,.0f} | 1 |",
-        row("DeLaN single env (`dynamics=model`), target ≥ 0.5", delan_single, "env.step/s"),
+        row(f"**DeLaN single env (`dynamics=model`, default `kernel=\"auto\"` → `{delan_kernel}`)**, "
+            "target ≥ 0.5", delan_single, "env.step/s"),
+        row("DeLaN single env, `kernel=\"xla\"` (one jitted XLA call per step)", delan_xla_single, "env.step/s"),
         row(
             f"**DeLaN batched env, N = {n_ref}, `workers={min(workers, n_ref)}`** (worker "
             "processes; CPU includes theirs), target ≥ 10",

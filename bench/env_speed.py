@@ -7,11 +7,13 @@ Measures in one run, with one harness, side by side:
   InvertedPendulum-v5 (target ≥ 1.5);
 * the raw ``mj_step`` rate of ``assets/furuta.xml`` (one RK4 step = one 500 Hz control period),
   called from Python and in MuJoCo's own loop (``mj_step(m, d, nstep)``): the ceiling;
-* ``Furuta-v0`` with ``dynamics="analytic"`` (the closed-form model in JAX, jitted RK4):
-  env.step/s and its ratio to the MuJoCo-backed env (target ≥ 0.5);
+* ``Furuta-v0`` with ``dynamics="analytic"`` (the closed-form model in JAX, RK4):
+  env.step/s and its ratio to the MuJoCo-backed env (target ≥ 0.5), with the default step kernel
+  (C, when a compiler exists) and with ``kernel="xla"``;
 * ``Furuta-v0`` with a learned model, an untrained DeLaN of the default architecture (a step
-  costs the same whatever the weights): env.step/s and its ratio to the MuJoCo env (target ≥ 0.5);
-* the same model-backed envs in a child process that opted into
+  costs the same whatever the weights): env.step/s and its ratio to the MuJoCo env (target ≥ 0.5),
+  both kernels;
+* the XLA-kernel envs in a child process that opted into
   :func:`furuta_gym.inline_cpu_dispatch` (JAX runs CPU computations inline instead of handing
   each to a worker thread), with that process's own MuJoCo env measured beside them;
 * for information: a plant variant that needs MuJoCo's passive callback (``plant="coulomb"``),
@@ -124,11 +126,13 @@ def main(argv=None) -> int:
         f"| `furuta_gym/Furuta-v0` (MuJoCo) env.step | {fu:,.0f} | **{ratio_ip:.2f}** × InvertedPendulum-v5 | ≥ 1.5 |",
         f"| raw `mj_step` of `furuta.xml`, Python loop (ceiling) | {mj_python:,.0f} | {mj_python / fu:.2f} × Furuta-v0 | |",
         f"| raw `mj_step` of `furuta.xml`, MuJoCo's loop | {mj_native:,.0f} | {mj_native / fu:.2f} × Furuta-v0 | |",
-        f"| `Furuta-v0`, `dynamics=\"analytic\"` (JAX) env.step | {an:,.0f} | **{ratio_an:.2f}** × MuJoCo env | ≥ 0.5 |",
-        f"| `Furuta-v0`, `dynamics=<DeLaN>` (untrained, default architecture) env.step | {best['Furuta-v0 DeLaN']:,.0f} | **{best['Furuta-v0 DeLaN'] / fu:.2f}** × MuJoCo env | ≥ 0.5 |",
-        f"| same, in a process after `furuta_gym.inline_cpu_dispatch()`: MuJoCo env | {inline['Furuta-v0 mujoco']:,.0f} | 1 | |",
-        f"| — `dynamics=\"analytic\"` env.step | {inline['Furuta-v0 analytic']:,.0f} | **{inline['Furuta-v0 analytic'] / inline['Furuta-v0 mujoco']:.2f}** × its MuJoCo env | ≥ 0.5 |",
-        f"| — `dynamics=<DeLaN>` env.step | {inline['Furuta-v0 DeLaN']:,.0f} | **{inline['Furuta-v0 DeLaN'] / inline['Furuta-v0 mujoco']:.2f}** × its MuJoCo env | ≥ 0.5 |",
+        f"| `Furuta-v0`, `dynamics=\"analytic\"` env.step (default `kernel=\"auto\"`: C) | {an:,.0f} | **{ratio_an:.2f}** × MuJoCo env | ≥ 0.5 |",
+        f"| — same, `kernel=\"xla\"` (one jitted XLA call per step) | {best['Furuta-v0 analytic xla']:,.0f} | {best['Furuta-v0 analytic xla'] / fu:.2f} × MuJoCo env | |",
+        f"| `Furuta-v0`, `dynamics=<DeLaN>` (untrained, default architecture) env.step (default: C) | {best['Furuta-v0 DeLaN']:,.0f} | **{best['Furuta-v0 DeLaN'] / fu:.2f}** × MuJoCo env | ≥ 0.5 |",
+        f"| — same, `kernel=\"xla\"` | {best['Furuta-v0 DeLaN xla']:,.0f} | {best['Furuta-v0 DeLaN xla'] / fu:.2f} × MuJoCo env | |",
+        f"| in a process after `furuta_gym.inline_cpu_dispatch()`: MuJoCo env | {inline['Furuta-v0 mujoco']:,.0f} | 1 | |",
+        f"| — `dynamics=\"analytic\"`, `kernel=\"xla\"` env.step | {inline['Furuta-v0 analytic xla']:,.0f} | {inline['Furuta-v0 analytic xla'] / inline['Furuta-v0 mujoco']:.2f} × its MuJoCo env | |",
+        f"| — `dynamics=<DeLaN>`, `kernel=\"xla\"` env.step | {inline['Furuta-v0 DeLaN xla']:,.0f} | {inline['Furuta-v0 DeLaN xla'] / inline['Furuta-v0 mujoco']:.2f} × its MuJoCo env | |",
         f"| `Furuta-v0`, `plant=\"coulomb\"` (passive callback) | {best['Furuta-v0 mujoco plant=coulomb']:,.0f} | {best['Furuta-v0 mujoco plant=coulomb'] / fu:.2f} × MuJoCo env | |",
         f"| `NMSD-v0` (MuJoCo + cubic-term callback) env.step | {best['NMSD-v0 mujoco']:,.0f} | | |",
         f"| `NMSD-v0`, `dynamics=\"analytic\"` env.step | {best['NMSD-v0 analytic']:,.0f} | {best['NMSD-v0 analytic'] / best['NMSD-v0 mujoco']:.2f} × NMSD MuJoCo | |",
@@ -136,15 +140,17 @@ def main(argv=None) -> int:
         "One Furuta env.step is one RK4 step of 2 ms (500 Hz control). InvertedPendulum-v5 takes two "
         "RK4 steps of 20 ms with collision detection per env.step; Furuta-v0 skips MuJoCo's "
         "constraint pipeline (no contacts) and keeps its Python step lean (scalar fast paths, "
-        "cached MjData views; allocations only for the returned observation and info). The analytic backend pays one jitted JAX call per step "
-        "(dispatch dominates at this size). A DeLaN step compiles to ~150 XLA:CPU kernels (the "
-        "analytic model's: 37): run back to back inside `lax.scan` they take ~10 µs per RK4 step, but "
-        "one call per env.step costs ~40 µs of CPU (pinned to one core; more wall time under load), "
-        "XLA's fixed per-call and per-kernel costs, not arithmetic. `furuta_gym.inline_cpu_dispatch()` "
-        "(opt-in, process-wide, before any JAX computation) runs JAX's CPU computations on the calling "
-        "thread instead of handing each to a worker thread; its rows come from a child process that "
-        "measured its own MuJoCo env beside them. The machine is shared, so absolute rates vary between "
-        "runs; the ratios are measured side by side.",
+        "cached MjData views; allocations only for the returned observation and info). A model "
+        "backend's step is one JAX function (RK4 of the forward dynamics JAX derives by autodiff). "
+        "With `kernel=\"xla\"` it is one jitted XLA call per env.step: a DeLaN step compiles to "
+        "~150 XLA:CPU kernels and the call costs ~19 µs or more of fixed dispatch and per-kernel "
+        "overhead for ~12 k multiply-adds. The default `kernel=\"auto\"` lowers the same jaxpr to "
+        "one C function (`furuta_gym/_jaxpr_to_c.py`, compiled once per model structure with the "
+        "system's C compiler and cached on disk) called through ctypes on fixed buffers: ~5 µs for "
+        "the DeLaN step. `furuta_gym.inline_cpu_dispatch()` (opt-in, process-wide, before any JAX "
+        "computation) runs JAX's CPU computations on the calling thread; its rows come from a child "
+        "process that measured its own MuJoCo env beside them. The machine is shared, so absolute "
+        "rates vary between runs; the ratios are measured side by side.",
         MARK_END,
     ]
     section = "\n".join(lines)
@@ -164,13 +170,17 @@ def make_cases(names=None) -> dict:
     from furuta_gym.models import make_model
 
     furuta_gym.enable_x64()
+
+    def delan():
+        return make_model("furuta", "dln", key=jax.random.PRNGKey(0))
+
     makers = {
         "InvertedPendulum-v5": lambda: gym.make("InvertedPendulum-v5"),
         "Furuta-v0 mujoco": lambda: gym.make("furuta_gym/Furuta-v0"),
         "Furuta-v0 analytic": lambda: gym.make("furuta_gym/Furuta-v0", dynamics="analytic"),
-        "Furuta-v0 DeLaN": lambda: gym.make(
-            "furuta_gym/Furuta-v0", dynamics=make_model("furuta", "dln", key=jax.random.PRNGKey(0))
-        ),
+        "Furuta-v0 analytic xla": lambda: gym.make("furuta_gym/Furuta-v0", dynamics="analytic", kernel="xla"),
+        "Furuta-v0 DeLaN": lambda: gym.make("furuta_gym/Furuta-v0", dynamics=delan()),
+        "Furuta-v0 DeLaN xla": lambda: gym.make("furuta_gym/Furuta-v0", dynamics=delan(), kernel="xla"),
         "Furuta-v0 mujoco plant=coulomb": lambda: gym.make("furuta_gym/Furuta-v0", plant="coulomb"),
         "NMSD-v0 mujoco": lambda: gym.make("furuta_gym/NMSD-v0"),
         "NMSD-v0 analytic": lambda: gym.make("furuta_gym/NMSD-v0", dynamics="analytic"),
@@ -198,7 +208,7 @@ def best_rates(cases: dict, steps: int, repeats: int, between_repeats=None) -> d
 
 
 #: the envs the inline-dispatch child process times (its own MuJoCo env is the reference)
-INLINE_CASES = ("Furuta-v0 mujoco", "Furuta-v0 analytic", "Furuta-v0 DeLaN")
+INLINE_CASES = ("Furuta-v0 mujoco", "Furuta-v0 analytic xla", "Furuta-v0 DeLaN xla")
 
 
 def _inline_dispatch_child(args) -> int:

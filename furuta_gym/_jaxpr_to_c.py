@@ -248,6 +248,7 @@ class _Translator:
         self.static_arrays: list[str] = []
         self.indent = 1
         self.common: dict = {}
+        self.stack_bytes = 0
 
     # -- emission helpers ---------------------------------------------------------------------
     def emit(self, line: str) -> None:
@@ -257,6 +258,7 @@ class _Translator:
         self.counter += 1
         var = _Var(f"v{self.counter}", aval.shape, aval.dtype)
         self.emit(f"{_ctype(var.dtype)} {var.name}[{max(var.size, 1)}];")
+        self.stack_bytes += max(var.size, 1) * var.dtype.itemsize
         return var
 
     def alias(self, source: _Var, aval) -> _Var:
@@ -432,9 +434,10 @@ class _Translator:
             template = _BINARY[name]
         if name in ("max", "min") and integer:
             template = "({0} > {1} ? {0} : {1})" if name == "max" else "({0} < {1} ? {0} : {1})"
-        if name == "div" and integer:
-            raise CKernelError("integer division has no C translation here (C truncates like XLA, "
-                               "but is undefined for INT_MIN / -1); use the XLA kernel")
+        if name in ("div", "rem") and integer:
+            # C traps on a zero divisor where XLA returns a value: never risk the process
+            raise CKernelError(f"integer {name} has no C translation (a zero divisor would trap); "
+                               "use the XLA kernel for this model")
         operands = [self.broadcast_reader(x, out.shape) for x in ins]
         self.loop(out.size, lambda i: f"{out.name}[{i}] = {template.format(*(read(i) for read in operands))};")
         return out
@@ -804,6 +807,9 @@ def c_compiler() -> str | None:
     return shutil.which(cc)
 
 
+#: the most stack one kernel call may use for its intermediates
+MAX_STACK_BYTES = 1 << 20
+
 _CFLAGS = ("-O2", "-std=c99", "-shared", "-fPIC", "-fno-math-errno", "-fopenmp-simd")
 
 
@@ -890,6 +896,14 @@ class CKernel:
             staged = t.fresh(_Aval(res.shape, res.dtype))
             t._copy_into(staged, res)
             results.append(staged)
+        if t.stack_bytes > MAX_STACK_BYTES:
+            # every intermediate lives on the calling thread's stack (reentrant, no allocation);
+            # a thread's stack may be as small as 2 MiB. Models this large are compute-bound,
+            # where XLA's fixed cost per call matters little.
+            raise CKernelError(
+                f"the step needs {t.stack_bytes / 2**20:.1f} MiB of intermediates (limit "
+                f"{MAX_STACK_BYTES / 2**20:.0f} MiB on the stack); use the XLA kernel for this model"
+            )
         for k, (res, var) in enumerate(zip(results, closed.jaxpr.outvars)):
             ct = _ctype(var.aval.dtype)
             t.emit(f"{{ {ct} *o = ({ct} *)outs[{k}];")

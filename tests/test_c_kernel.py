@@ -226,3 +226,14 @@ def test_batched_env_refuses_a_kernel_and_its_template_builds_none():
         FurutaVectorEnv(4, dynamics="analytic", kernel="c")
     env = FurutaVectorEnv(4, dynamics="analytic")
     assert env._template.backend.kernel == "xla"  # the template only specifies; it never steps
+
+
+def test_a_step_too_large_for_the_stack_is_refused_and_auto_takes_xla(monkeypatch):
+    import furuta_gym._jaxpr_to_c as lowering
+
+    monkeypatch.setattr(lowering, "MAX_STACK_BYTES", 4096)
+    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    with pytest.raises(CKernelError, match=r"MiB of intermediates"):
+        CKernel(lambda w, v: jnp.tanh(jnp.outer(v, v) @ jnp.ones((4, 200))), W, V)
+    backend = gym.make(FURUTA_ID, dynamics=_dynamics("furuta", "dln")).unwrapped.backend
+    assert backend.kernel == "xla" and "intermediates" in backend.kernel_fallback

@@ -71,6 +71,7 @@ class FurutaEnv(LagrangianEnv):
     | Parameter               | Type          | Default     | Description |
     |-------------------------|---------------|-------------|-------------|
     | `dynamics`              | str / model   | `"mujoco"`  | `"mujoco"`, `"analytic"`, a checkpoint path, or an `AbstractLagrangianSystem` |
+    | `kernel`                | str           | `"auto"`    | model backends: `"c"` (the JAX step lowered to C), `"xla"` (jitted), `"auto"` (C when a compiler exists); docs/envs.md |
     | `max_voltage`           | float         | `5.0`       | action limit (V); actions are clipped to it |
     | `frame_skip`            | int           | `1`         | 2 ms RK4 steps per action: control period = 2 ms × frame_skip (500 Hz) |
     | `episode_seconds`       | float / None  | `10.0`      | truncation time (None: never) |

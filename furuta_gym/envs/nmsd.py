@@ -55,7 +55,7 @@ class NMSDEnv(LagrangianEnv):
     ``target``.
 
     ## Arguments
-    As ``Furuta-v0`` (``dynamics``, ``frame_skip`` — 10 ms RK4 steps, default 1 = 100 Hz —,
+    As ``Furuta-v0`` (``dynamics``, ``kernel``, ``frame_skip`` — 10 ms RK4 steps, default 1 = 100 Hz —,
     ``episode_seconds``, ``reset_noise_scale``, ``plant`` — ``"coulomb"``, ``"quadratic_drag"``,
     ``"stiff_spring"``, ``"weak_actuator"``, ``"delay"`` —, ``effects``, ``randomize``,
     ``position_resolution`` (m), ``measurement_noise``, ``velocity``, ``actuation_delay``
