@@ -17,6 +17,7 @@ them. Shared libraries are cached on disk by a hash of the C source and the comp
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import math
@@ -711,20 +712,42 @@ class _Translator:
     def _copy_into(self, dst: _Var, src: _Var) -> None:
         self.loop(max(dst.size, 1), lambda i: f"{dst.name}[{i}] = {src.at(i)};")
 
+    def _fresh_copies(self, values: Sequence[_Var]) -> list[_Var]:
+        copies = []
+        for value in values:
+            copy = self.fresh(_Aval(value.shape, value.dtype))
+            self._copy_into(copy, value)
+            copies.append(copy)
+        return copies
+
+    def _update_carry(self, carry: Sequence[_Var], new: Sequence[_Var]) -> None:
+        """carry ← new, reading every new value before overwriting any (they may alias)."""
+        for dst, src in zip(carry, self._fresh_copies(new)):
+            self._copy_into(dst, src)
+
+    @contextlib.contextmanager
+    def _block(self, opening: str):
+        """A C block: values made inside die with it, so they leave the shared-value table too."""
+        self.emit(opening)
+        self.indent += 1
+        outer_common = dict(self.common)
+        yield
+        self.common = outer_common
+        self.indent -= 1
+        self.emit("}")
+
     def op_scan(self, ins, avals, jaxpr, length, reverse, num_consts, num_carry, **_):
         consts, init, xs = ins[:num_consts], ins[num_consts:num_consts + num_carry], ins[num_consts + num_carry:]
-        carry = []
-        for c, aval in zip(init, avals[:num_carry]):
-            v = self.fresh(aval)
-            self._copy_into(v, c)
-            carry.append(v)
+        carry = self._fresh_copies(init)
         ys = [self.fresh(aval) for aval in avals[num_carry:]]
         self.counter += 1
         it = f"it{self.counter}"
         index = f"({length - 1} - {it})" if reverse else it
-        self.emit(f"for (int {it} = 0; {it} < {length}; ++{it}) {{")
-        self.indent += 1
-        outer_common = dict(self.common)  # values made inside the loop's block die with it
+        with self._block(f"for (int {it} = 0; {it} < {length}; ++{it}) {{"):
+            self._scan_body(jaxpr, consts, carry, xs, ys, index, num_consts, num_carry)
+        return carry + ys
+
+    def _scan_body(self, jaxpr, consts, carry, xs, ys, index, num_consts, num_carry):
         x_slices = []
         for x, var in zip(xs, jaxpr.jaxpr.invars[num_consts + num_carry:]):
             self.counter += 1
@@ -733,45 +756,18 @@ class _Translator:
             self.emit(f"{_ctype(x.dtype)} *{name} = {x.name} + {index} * {size};")
             x_slices.append(_Var(name, var.aval.shape, var.aval.dtype))
         outs = self.closed(jaxpr, list(consts) + carry + x_slices)
-        new_carry, y = outs[:num_carry], outs[num_carry:]
-        staged = []
-        for c in new_carry:  # read every new carry before overwriting any
-            v = self.fresh(_Aval(c.shape, c.dtype))
-            self._copy_into(v, c)
-            staged.append(v)
-        for dst, src in zip(carry, staged):
-            self._copy_into(dst, src)
-        for dst, src in zip(ys, y):
+        self._update_carry(carry, outs[:num_carry])
+        for dst, src in zip(ys, outs[num_carry:]):
             size = max(src.size, 1)
             self.loop(size, lambda i, d=dst, s=src, n=size: f"{d.name}[{index} * {n} + {i}] = {s.at(i)};")
-        self.common = outer_common
-        self.indent -= 1
-        self.emit("}")
-        return carry + ys
 
     def op_while(self, ins, avals, cond_jaxpr, body_jaxpr, cond_nconsts, body_nconsts, **_):
         cconsts, bconsts, init = ins[:cond_nconsts], ins[cond_nconsts:cond_nconsts + body_nconsts], ins[cond_nconsts + body_nconsts:]
-        carry = []
-        for c, aval in zip(init, avals):
-            v = self.fresh(aval)
-            self._copy_into(v, c)
-            carry.append(v)
-        self.emit("for (;;) {")
-        self.indent += 1
-        outer_common = dict(self.common)
-        (go,) = self.closed(cond_jaxpr, list(cconsts) + carry)
-        self.emit(f"if (!{go.at(0)}) break;")
-        outs = self.closed(body_jaxpr, list(bconsts) + carry)
-        staged = []
-        for c in outs:
-            v = self.fresh(_Aval(c.shape, c.dtype))
-            self._copy_into(v, c)
-            staged.append(v)
-        for dst, src in zip(carry, staged):
-            self._copy_into(dst, src)
-        self.common = outer_common
-        self.indent -= 1
-        self.emit("}")
+        carry = self._fresh_copies(init)
+        with self._block("for (;;) {"):
+            (go,) = self.closed(cond_jaxpr, list(cconsts) + carry)
+            self.emit(f"if (!{go.at(0)}) break;")
+            self._update_carry(carry, self.closed(body_jaxpr, list(bconsts) + carry))
         return carry
 
     def op_cond(self, ins, avals, branches, **_):
@@ -780,15 +776,9 @@ class _Translator:
         for k, branch in enumerate(branches):
             keyword = "if" if k == 0 else "else if"
             test = f"({index.at(0)} <= {k})" if k < len(branches) - 1 else None
-            self.emit(f"{keyword} {test} {{" if test else "else {")
-            self.indent += 1
-            outer_common = dict(self.common)
-            results = self.closed(branch, operands)
-            for dst, src in zip(outs, results):
-                self._copy_into(dst, src)
-            self.common = outer_common
-            self.indent -= 1
-            self.emit("}")
+            with self._block(f"{keyword} {test} {{" if test else "else {"):
+                for dst, src in zip(outs, self.closed(branch, operands)):
+                    self._copy_into(dst, src)
         return outs
 
 
@@ -891,11 +881,8 @@ class CKernel:
             a = aval.aval
             args.append(_Var(f"in{k}", a.shape, a.dtype))
             t.emit(f"{_ctype(a.dtype)} *in{k} = ({_ctype(a.dtype)} *)ins[{k}];")
-        results = []
-        for res in t.closed(closed, args):  # staged: an output buffer may be an input buffer
-            staged = t.fresh(_Aval(res.shape, res.dtype))
-            t._copy_into(staged, res)
-            results.append(staged)
+        # staged in fresh copies: an output buffer may be an input buffer
+        results = t._fresh_copies(t.closed(closed, args))
         if t.stack_bytes > MAX_STACK_BYTES:
             # every intermediate lives on the calling thread's stack (reentrant, no allocation);
             # a thread's stack may be as small as 2 MiB. Models this large are compute-bound,
