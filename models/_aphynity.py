@@ -109,6 +109,9 @@ class Aphynity(AbstractLearnedSystem):
     def augmentation(self, q, qd):
         return self.scale * self.force_net(q, qd)
 
+    def augmentation_beyond_linear(self, q, qd):
+        return self.scale * self.force_net.beyond_linear(q, qd)
+
     def mass_matrix(self, q):
         return self.scale * self.prior.mass_matrix(q)
 

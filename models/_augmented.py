@@ -56,12 +56,18 @@ class ForceNetwork(eqx.Module):
         self.velocity_scale = float(velocity_scale)
 
     def __call__(self, q, qd):
-        v = qd / self.velocity_scale
-        x = jnp.concatenate([coordinate_features(self.spec, q, self.position_scale), v])
-        out = self.net(x)
+        out = self._net_out(q, qd)
         if self.linear is not None:
-            out = out + self.linear @ v
+            out = out + self.linear @ (qd / self.velocity_scale)
         return self.force_scale * out
+
+    def beyond_linear(self, q, qd):
+        """The network's part of F_a: F_a without the linear viscous term W·q̇."""
+        return self.force_scale * self._net_out(q, qd)
+
+    def _net_out(self, q, qd):
+        v = qd / self.velocity_scale
+        return self.net(jnp.concatenate([coordinate_features(self.spec, q, self.position_scale), v]))
 
 
 class AugmentedDeLaN(AbstractLearnedSystem):
@@ -112,6 +118,9 @@ class AugmentedDeLaN(AbstractLearnedSystem):
 
     def augmentation(self, q, qd):
         return self.scale * self.force_net(q, qd)
+
+    def augmentation_beyond_linear(self, q, qd):
+        return self.scale * self.force_net.beyond_linear(q, qd)
 
     def mass_matrix(self, q):
         return self.scale * self.lagrangian_nets.mass_matrix(q)

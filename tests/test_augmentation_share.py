@@ -135,3 +135,26 @@ def test_default_weight_is_on_for_augmented_delan_and_off_for_aphynity(segments)
     assert "fa_share" not in aph[-1] and aph[-1]["total"] == pytest.approx(aph[-1]["itau"], rel=1e-12)
     assert adln[-1]["fa_share"] > 0
     assert adln[-1]["total"] == pytest.approx(adln[-1]["itau"] + 1e-2 * adln[-1]["fa_share"], rel=1e-12)
+
+
+def test_share_beyond_linear_leaves_the_viscous_term_free(segments):
+    """augmentation_part='beyond_linear': P_a measures F_a − W·q̇ only, so a pure viscous F_a costs
+    nothing while the full P_a of the same model does not vanish."""
+    import equinox as eqx
+
+    model = make_model("nmsd", "aph", jax.random.PRNGKey(3))
+    w = make_windows(segments, 21, stride=20)
+    viscous = eqx.tree_at(lambda m: m.force_net.linear, model, jnp.array([[-0.7]]))
+    # zero the network's last layer: F_a is then exactly W·q̇ (times the scales)
+    last = viscous.force_net.net.layers[-1]
+    viscous = eqx.tree_at(lambda m: (m.force_net.net.layers[-1].weight, m.force_net.net.layers[-1].bias), viscous,
+                          (jnp.zeros_like(last.weight), jnp.zeros_like(last.bias)))
+    _, full = integral_loss_terms(viscous, w, with_augmentation=True)
+    _, beyond = integral_loss_terms(viscous, w, with_augmentation=True, augmentation_part="beyond_linear")
+    assert float(full) > 1e-3 and float(beyond) == 0.0
+    # with a network part, beyond_linear measures exactly that part
+    _, full0 = integral_loss_terms(model, w, with_augmentation=True)
+    _, beyond0 = integral_loss_terms(model, w, with_augmentation=True, augmentation_part="beyond_linear")
+    assert float(beyond0) == pytest.approx(float(full0), rel=1e-12)  # W starts at zero
+    with pytest.raises(ValueError, match="augmentation_part must be one of"):
+        TrainConfig(augmentation_part="linear")

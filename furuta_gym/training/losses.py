@@ -198,7 +198,12 @@ def trajectory_loss(
     return jnp.mean(jnp.sum(err**2, axis=-1))
 
 
-def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmentation: bool = False):
+#: what P_a measures: all of F_a, or F_a beyond its linear viscous term
+AUGMENTATION_PARTS = ("full", "beyond_linear")
+
+
+def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmentation: bool = False,
+                    augmentation_part: str = "full"):
     """Per window: the residual Z̄ − Ā and the model's momentum changes Δp̂ over the quadrature
     intervals and, if asked, the velocity changes the data-driven force accounts for, ∫M̂⁻¹F_a dt,
     with the data's own velocity changes Δq̇ over the same intervals."""
@@ -211,7 +216,8 @@ def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmenta
         p = jax.vmap(lambda q_, qd_: momentum(model, q_, qd_))(q, qd)
         if not with_augmentation:
             return r, interval_difference(p, rule), None, None
-        acc = jax.vmap(lambda q_, qd_: solve_mass_matrix(model.mass_matrix(q_), model.augmentation(q_, qd_)))(q, qd)
+        force = model.augmentation if augmentation_part == "full" else model.augmentation_beyond_linear
+        acc = jax.vmap(lambda q_, qd_: solve_mass_matrix(model.mass_matrix(q_), force(q_, qd_)))(q, qd)
         return r, interval_difference(p, rule), interval_integral(acc, dt, rule), interval_difference(qd, rule)
 
     return jax.vmap(one)(windows.t, windows.x, windows.u)
@@ -251,6 +257,7 @@ def integral_loss_terms(
     rule: QuadratureRule = "trapezoid",
     normalize: Normalization = "auto",
     with_augmentation: bool = False,
+    augmentation_part: str = "full",
 ) -> tuple[Float[Array, ""], Float[Array, ""] | None]:
     """``(L_Iτ, P_a)``: L_Iτ as :func:`integral_loss` and, with ``with_augmentation``, the share
     of the data's velocity changes that the data-driven force accounts for,
@@ -266,10 +273,17 @@ def integral_loss_terms(
     denominator and the minimum is not physical (augmented DeLaN found one). P_a is invariant to
     the overall scale (M̂ and F_a scale together) and its denominator is data, so it cannot be
     gamed by the model; a small weight μ breaks the ties L_Iτ leaves while costing the fit little.
+
+    ``augmentation_part="beyond_linear"`` measures only what F_a adds to its linear viscous term
+    W·q̇ (:meth:`ForceNetwork.beyond_linear`): the minimum-norm principle then asks for the
+    least force beyond textbook viscous friction instead of the least force, so it no longer
+    pulls the damping itself towards zero.
     """
+    if augmentation_part not in AUGMENTATION_PARTS:
+        raise ValueError(f"augmentation_part must be one of {AUGMENTATION_PARTS}, got {augmentation_part!r}")
     if normalize == "auto":
         normalize = resolve_normalization(windows)
-    r, dp, acc, dqd = _integral_parts(model, windows, rule, with_augmentation)
+    r, dp, acc, dqd = _integral_parts(model, windows, rule, with_augmentation, augmentation_part)
     itau = _normalised(jnp.sum(r**2), dp, normalize, r.size)
     share = None if acc is None else jnp.sum(acc**2) / jnp.sum(dqd**2)
     return itau, share

@@ -42,6 +42,7 @@ from ..systems import get_spec
 from . import _step_cache
 from . import checkpoint as ckpt
 from .losses import (
+    AUGMENTATION_PARTS,
     Windows,
     augmentation_penalty,
     integral_loss_terms,
@@ -103,6 +104,7 @@ class TrainConfig:
     integral_window: int = 101
     integral_batch_size: int | None = None
     augmentation_weight: float | None = None
+    augmentation_part: str = "full"
     rtol: float = 1e-3
     atol: float = 1e-6
     max_steps: int = 4096
@@ -134,6 +136,8 @@ class TrainConfig:
             raise ValueError(f"quadrature must be 'trapezoid' or 'simpson', got {self.quadrature!r}")
         if self.normalize not in ("auto", "momentum", "momentum_fixed", "none"):
             raise ValueError(f"normalize must be auto|momentum|momentum_fixed|none, got {self.normalize!r}")
+        if self.augmentation_part not in AUGMENTATION_PARTS:
+            raise ValueError(f"augmentation_part must be one of {AUGMENTATION_PARTS}, got {self.augmentation_part!r}")
         if self.augmentation_weight is not None and not self.augmentation_weight >= 0:
             raise ValueError(f"augmentation_weight must be non-negative or None, got {self.augmentation_weight!r}")
         if self.batch_size is not None and self.batch_size < 1:
@@ -290,7 +294,8 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
                 terms["traj"] = trajectory_loss(model, traj_b, **traj_kw)
             if use_int:
                 terms["itau"], share = integral_loss_terms(
-                    model, int_b, rule=config.quadrature, normalize=normalization, with_augmentation=use_share
+                    model, int_b, rule=config.quadrature, normalize=normalization, with_augmentation=use_share,
+                    augmentation_part=config.augmentation_part,
                 )
                 total = total + terms["itau"]
                 if use_share:
