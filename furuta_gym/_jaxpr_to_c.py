@@ -831,15 +831,18 @@ def _compile(source: str) -> Path:
     library = directory / f"kernel_{digest}.so"
     if library.exists():
         return library
-    with tempfile.TemporaryDirectory(dir=directory) as tmp:
-        c_file = Path(tmp) / "kernel.c"
-        c_file.write_text(source)
-        partial = Path(tmp) / "kernel.so"
-        result = subprocess.run([*command, str(c_file), "-o", str(partial), "-lm"],
-                                capture_output=True, text=True, timeout=600)
-        if result.returncode != 0:
-            raise CKernelError(f"the C compiler {cc} failed on the generated kernel:\n{result.stderr[-2000:]}")
-        os.replace(partial, library)  # atomic: a concurrent process sees all of it or none
+    try:
+        with tempfile.TemporaryDirectory(dir=directory) as tmp:
+            c_file = Path(tmp) / "kernel.c"
+            c_file.write_text(source)
+            partial = Path(tmp) / "kernel.so"
+            result = subprocess.run([*command, str(c_file), "-o", str(partial), "-lm"],
+                                    capture_output=True, text=True, timeout=600)
+            if result.returncode != 0:
+                raise CKernelError(f"the C compiler {cc} failed on the generated kernel:\n{result.stderr[-2000:]}")
+            os.replace(partial, library)  # atomic: a concurrent process sees all of it or none
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise CKernelError(f"compiling the C kernel with {cc} failed: {type(exc).__name__}: {exc}") from exc
     return library
 
 
@@ -867,7 +870,10 @@ class CKernel:
         _, self.out_tree = jax.tree_util.tree_flatten(jax.eval_shape(flat_fn, *leaves))
         self.source = self._translate(closed)
         self.library_path = _compile(self.source)
-        library = ctypes.CDLL(str(self.library_path))
+        try:
+            library = ctypes.CDLL(str(self.library_path))
+        except OSError as exc:
+            raise CKernelError(f"loading the compiled C kernel {self.library_path} failed: {exc}") from exc
         self._function = library.fg_kernel
         self._function.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
         self._function.restype = None
