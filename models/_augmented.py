@@ -26,9 +26,16 @@ __all__ = ["AugmentedDeLaN", "ForceNetwork"]
 #: activation of the F_a network (APHYNITY, augmented DeLaN); see ForceNetwork
 FORCE_ACTIVATION = "silu"
 
+#: F_a's linear velocity term in physical units: W = 1 is this damping (N·m·s/rad, N·s/m).
+#: Of the order of the real ones (Furuta rotor: c_r + kt·km/Rm = 5.1e-4; N-MSD: b1 = 0.5), so
+#: Adam's steps move W as fast as the network's weights; with force_scale / velocity_scale
+#: (1e-4 for the Furuta) W needed thousands of epochs to reach the rotor damping and the network
+#: carried it instead, badly outside the training velocities.
+DAMPING_SCALE = {"furuta": 1e-3, "nmsd": 1.0}
+
 
 class ForceNetwork(eqx.Module):
-    """F_a(q, q̇) = force_scale · (net(x) + W·q̇ / velocity_scale), x = ((cos, sin) / scaled q,
+    """F_a(q, q̇) = force_scale · net(x) + damping_scale · W·q̇, x = ((cos, sin) / scaled q,
     q̇ / velocity_scale).
 
     The linear term W (n × n, starts at zero; ``linear_velocity=False`` drops it) is there for
@@ -44,9 +51,10 @@ class ForceNetwork(eqx.Module):
     force_scale: float = eqx.field(static=True)
     position_scale: float = eqx.field(static=True)
     velocity_scale: float = eqx.field(static=True)
+    damping_scale: float = eqx.field(static=True)
 
     def __init__(self, spec, *, key, hidden, force_scale, position_scale, velocity_scale, activation="tanh",
-                 linear_velocity=True):
+                 linear_velocity=True, damping_scale=None):
         n = spec.n_dof
         self.net = MLP(feature_size(spec) + n, n, tuple(hidden), key=key, activation=activation, final_scale=0.1)
         self.linear = jnp.zeros((n, n)) if linear_velocity else None
@@ -54,12 +62,14 @@ class ForceNetwork(eqx.Module):
         self.force_scale = float(force_scale)
         self.position_scale = float(position_scale)
         self.velocity_scale = float(velocity_scale)
+        # None: the scale models saved before damping_scale existed were trained with
+        self.damping_scale = float(force_scale / velocity_scale if damping_scale is None else damping_scale)
 
     def __call__(self, q, qd):
-        out = self._net_out(q, qd)
+        out = self.force_scale * self._net_out(q, qd)
         if self.linear is not None:
-            out = out + self.linear @ (qd / self.velocity_scale)
-        return self.force_scale * out
+            out = out + self.damping_scale * (self.linear @ qd)
+        return out
 
     def beyond_linear(self, q, qd):
         """The network's part of F_a: F_a without the linear viscous term W·q̇."""
@@ -87,6 +97,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
         hp.pop("damping_init")
         hp["force_hidden"] = hp["hidden"]
         hp["linear_velocity"] = True  # F_a's linear velocity term (see ForceNetwork)
+        hp["damping_scale"] = DAMPING_SCALE[spec.name]
         hp["force_activation"] = FORCE_ACTIVATION
         unknown = set(hparams) - set(hp) - {"eps", "activation"}
         if unknown:
@@ -103,6 +114,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
             spec, key=kf, hidden=tuple(hp["force_hidden"]), force_scale=hp["force_scale"],
             position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
             activation=hp["force_activation"], linear_velocity=bool(hp["linear_velocity"]),
+            damping_scale=hp["damping_scale"],
         )
         self.scale = jnp.asarray(1.0)
         self.spec = spec

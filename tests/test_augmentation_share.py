@@ -80,8 +80,9 @@ def test_the_weight_moves_a_spring_force_out_of_the_network_into_the_prior(segme
 
 
 def test_force_network_linear_velocity_term_and_activation():
-    """F_a = force_scale·(net(x) + W·q̇/velocity_scale): W starts at zero (the initial F_a is the
-    network's), carries a linear velocity dependence that does not saturate, and can be dropped."""
+    """F_a = force_scale·net(x) + damping_scale·W·q̇: W starts at zero (the initial F_a is the
+    network's), carries a linear velocity dependence that does not saturate, and can be dropped.
+    W = 1 is a damping of the system's physical order (1e-3 N·m·s/rad for the Furuta)."""
     import equinox as eqx
 
     model = make_model("furuta", "aph", 0)
@@ -93,7 +94,8 @@ def test_force_network_linear_velocity_term_and_activation():
     linear_only = eqx.tree_at(lambda m: m.force_net.linear, model, W)
     for qd in (jnp.array([1.0, -2.0]), jnp.array([100.0, 40.0])):
         diff = linear_only.augmentation(q, qd) - model.augmentation(q, qd)
-        np.testing.assert_allclose(diff, net.force_scale * W @ (qd / net.velocity_scale), rtol=1e-12)
+        np.testing.assert_allclose(diff, 1e-3 * W @ qd, rtol=1e-12)
+    assert net.damping_scale == 1e-3 and make_model("nmsd", "adln", 0).force_net.damping_scale == 1.0
     plain = make_model("furuta", "adln", 0, linear_velocity=False, force_activation="tanh")
     assert plain.force_net.linear is None and plain.force_net.net.activation == "tanh"
     # the Lagrangian networks keep their own activation
@@ -122,15 +124,36 @@ def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_p
     np.testing.assert_array_equal(loaded.input_force(q, qd, u), old.input_force(q, qd, u))
 
 
-def test_default_weight_is_on_for_augmented_delan_and_off_for_aphynity(segments):
-    """μ = None takes AUGMENTATION_WEIGHT of the model's kind: augmented DeLaN's general networks
-    need the minimum-norm term, APHYNITY's structured prior does not (train.py)."""
+def test_checkpoints_from_before_damping_scale_keep_their_units_for_w(tmp_path):
+    """Saved before W had its own physical scale, a model's W was in force_scale / velocity_scale
+    units: it must load with that scale, or its damping would change by 10x."""
+    import equinox as eqx
+
+    from furuta_gym.training import checkpoint as ckpt
+
+    old = make_model("furuta", "adln", jax.random.PRNGKey(2), damping_scale=1e-3 / 10.0)
+    old = eqx.tree_at(lambda m: m.force_net.linear, old, jnp.array([[-5.0, 0.1], [0.2, -1.5]]))
+    path = ckpt.save_model(tmp_path / "old.eqx", old)
+    header, _ = ckpt._read(path)
+    del header["hparams"]["damping_scale"]
+    ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")}, old, overwrite=True)
+    loaded = ckpt.load_model(path)
+    assert loaded.force_net.damping_scale == pytest.approx(1e-4)
+    q, qd = jnp.array([0.3, 1.0]), jnp.array([20.0, -7.0])
+    np.testing.assert_array_equal(loaded.augmentation(q, qd), old.augmentation(q, qd))
+
+
+def test_default_weight_is_on_for_both_augmented_kinds_and_zero_turns_it_off(segments):
+    """μ = None takes AUGMENTATION_WEIGHT of the model's kind (1e-2 for augmented DeLaN and
+    APHYNITY, measured beyond the viscous term; train.py); μ = 0 leaves L_prop = L_Iτ + λ·L_traj."""
     from furuta_gym.training.train import AUGMENTATION_WEIGHT
 
-    assert AUGMENTATION_WEIGHT == {"adln": 1e-2, "aph": 0.0}
+    assert AUGMENTATION_WEIGHT == {"adln": 1e-2, "aph": 1e-2}
     cfg = TrainConfig.for_system("nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False,
                                  checkpoint_every=0)
-    _, aph = train("aph", "nmsd", "prop", segments, cfg)
+    off = TrainConfig.for_system("nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False,
+                                 checkpoint_every=0, augmentation_weight=0.0)
+    _, aph = train("aph", "nmsd", "prop", segments, off)
     _, adln = train("adln", "nmsd", "prop", segments, cfg)
     assert "fa_share" not in aph[-1] and aph[-1]["total"] == pytest.approx(aph[-1]["itau"], rel=1e-12)
     assert adln[-1]["fa_share"] > 0

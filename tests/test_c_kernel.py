@@ -237,3 +237,13 @@ def test_a_step_too_large_for_the_stack_is_refused_and_auto_takes_xla(monkeypatc
         CKernel(lambda w, v: jnp.tanh(jnp.outer(v, v) @ jnp.ones((4, 200))), W, V)
     backend = gym.make(FURUTA_ID, dynamics=_dynamics("furuta", "dln")).unwrapped.backend
     assert backend.kernel == "xla" and "intermediates" in backend.kernel_fallback
+
+
+def test_a_failing_compiler_is_one_clear_error_and_auto_takes_xla(monkeypatch, tmp_path):
+    monkeypatch.setenv("CC", "false")  # a "compiler" that always fails
+    monkeypatch.setenv("FURUTA_GYM_CACHE", str(tmp_path))  # nothing cached to fall back on
+    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    with pytest.raises(CKernelError, match="the C compiler .*false failed on the generated kernel"):
+        CKernel(lambda v: v * 2.0, V)
+    backend = gym.make(NMSD_ID, dynamics="analytic").unwrapped.backend
+    assert backend.kernel == "xla" and "failed on the generated kernel" in backend.kernel_fallback

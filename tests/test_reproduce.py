@@ -64,6 +64,19 @@ def test_rerun_reuses_finished_models_and_refuses_other_settings(tiny_run):
     other = ReproduceConfig(**{**TINY.__dict__, "prop_epochs": {"nmsd": (20, 2, 0)}})
     with pytest.raises(ValueError, match="other settings"):
         reproduce(out, other, log=logs.append)
+    # a model trained with another architecture is not reused either; a record from before the
+    # architecture was recorded is trusted
+    cfg_path = out / "runs" / "nmsd" / "dln_prop" / "seed0" / "reproduce_config.json"
+    original = cfg_path.read_text()
+    saved = json.loads(original)
+    saved["model_hparams"]["hidden"] = [8, 8]
+    cfg_path.write_text(json.dumps(saved))
+    with pytest.raises(ValueError, match="other settings"):
+        reproduce(out, TINY, log=logs.append)
+    del saved["model_hparams"]
+    cfg_path.write_text(json.dumps(saved))
+    reproduce(out, TINY, log=logs.append)
+    cfg_path.write_text(original)
 
 
 def test_parallel_jobs_give_the_sequential_models_and_a_seed_spread(tiny_run, tmp_path):

@@ -183,6 +183,8 @@ def _skeleton(header: dict, path: Path, expected_system: str | None, expected_ki
         hparams["prior_back_emf"] = True
     if kind in ("aph", "adln") and "linear_velocity" not in hparams:
         hparams["linear_velocity"] = False
+    if kind in ("aph", "adln") and "damping_scale" not in hparams:
+        hparams["damping_scale"] = None  # W in units of force_scale / velocity_scale, as trained
     if kind in ("aph", "adln") and "force_activation" not in hparams:
         hparams["force_activation"] = hparams.pop("activation", "tanh") if kind == "aph" else hparams.get("activation", "tanh")
     try:

@@ -264,10 +264,23 @@ def _same_settings(saved: dict, current: dict) -> bool:
 
     defaults = json.loads(json.dumps(TrainConfig().to_json()))
     saved = dict(saved, train=dict(saved.get("train", {})))
+    if "model_hparams" not in saved:  # recorded since 2026-11-23; older runs: unknown, trusted
+        current = {k: v for k, v in current.items() if k != "model_hparams"}
     for key, value in current.get("train", {}).items():
         if key not in saved["train"] and key in defaults and value == defaults[key]:
             saved["train"][key] = value
     return saved == current
+
+
+def _default_hparams(system: str, kind: str) -> dict:
+    """The architecture a new model of this kind gets (so a run trained with another is never
+    silently reused)."""
+    import jax
+
+    from ..models import make_model
+
+    model = make_model(system, kind, jax.random.PRNGKey(0))
+    return json.loads(json.dumps(dict(model.hparams), default=str))
 
 
 def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceConfig, truth):
@@ -279,7 +292,8 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     metrics_path = run_dir / "metrics.json"
     model_path = run_dir / MODEL_FILE
     tcfg = training_config(system, config, seed, loss, kind)
-    cfg_json = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": tcfg.to_json()}
+    cfg_json = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": tcfg.to_json(),
+                "model_hparams": _default_hparams(system, kind)}
     cfg_json["train"].pop("progress", None)
     cfg_path = run_dir / "reproduce_config.json"
     if cfg_path.exists():
