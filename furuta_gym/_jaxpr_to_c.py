@@ -10,9 +10,12 @@ Lagrangian, the integrator), and :class:`CKernel` only translates the resulting 
 primitive, with every shape static. Nothing is re-derived by hand; a primitive this module does not
 know is one clear error naming it.
 
-The translation keeps XLA's arithmetic (float64, no fast-math reassociation, NaN propagating
-through max/min/sign) so results agree with the jitted function to round-off; the tests compare
-them. Shared libraries are cached on disk by a hash of the C source and the compiler command.
+The translation keeps XLA's arithmetic (float64, no fast-math, NaN propagating through
+max/min/sign; only a dot product's sum may be split into SIMD lanes, as XLA's own blocked sums
+are) so results agree with the jitted function to round-off; the tests compare them. Equal
+subexpressions are computed once and values known before the step runs (index arithmetic) are
+folded by JAX itself. Shared libraries are cached on disk by a hash of the C source and the
+compiler command.
 """
 
 from __future__ import annotations

@@ -79,6 +79,31 @@ def test_rerun_reuses_finished_models_and_refuses_other_settings(tiny_run):
     cfg_path.write_text(original)
 
 
+def test_a_committed_run_without_its_data_files_regenerates_them_exactly(tiny_run):
+    """results/ keeps the data manifests, not the CSVs: resuming regenerates them (seeded) and
+    checks them against the manifest's sha256; data that came out different are an error."""
+    out, _, _ = tiny_run
+    train_csv = out / "data" / "nmsd" / "train.csv"
+    original = train_csv.read_bytes()
+    train_csv.unlink()
+    paths = reproduce(out, TINY, log=lambda msg: None)
+    assert train_csv.read_bytes() == original and paths["tables.csv"].exists()
+    manifest = out / "data" / "nmsd" / "manifest.json"
+    meta = json.loads(manifest.read_text())
+    good = meta["files"]["train"]["sha256"]
+    meta["files"]["train"]["sha256"] = "0" * 64
+    manifest.write_text(json.dumps(meta))
+    train_csv.unlink()
+    try:
+        with pytest.raises(ValueError, match=r"train.csv: missing, and regenerating it .* gave other data"):
+            reproduce(out, TINY, log=lambda msg: None)
+        assert not train_csv.exists()
+    finally:
+        meta["files"]["train"]["sha256"] = good
+        manifest.write_text(json.dumps(meta))
+        train_csv.write_bytes(original)
+
+
 def test_parallel_jobs_give_the_sequential_models_and_a_seed_spread(tiny_run, tmp_path):
     import dataclasses
 

@@ -249,12 +249,41 @@ def _datasets(system: str, out: Path, config: ReproduceConfig):
                 f"small={meta.get('small')}; this run wants seed={config.data_seed}, "
                 f"small={config.small} — choose another --out"
             )
+        missing = [name for name, f in meta.get("files", {}).items() if not (folder / f["path"]).exists()]
+        if missing:
+            _regenerate_data(system, folder, meta, missing)
     else:
         generate(system, folder, seed=config.data_seed, small=config.small,
                  ground_truth=config.ground_truth, overwrite=True)
     meta = json.loads(manifest.read_text())
     data = {name: load_trajectories(folder / f"{name}.csv", system) for name in DATASET_NAMES[system]}
     return data, meta
+
+
+def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[str]) -> None:
+    """Re-create data files a manifest lists but the folder lacks (a committed run keeps the
+    manifest, not the CSVs): the data are seeded, so they must come out byte for byte as
+    recorded; anything else is an error, never a silent change of the data under the models."""
+    import hashlib
+    import shutil
+    import tempfile
+
+    from .datagen import generate
+
+    with tempfile.TemporaryDirectory() as tmp:
+        generate(system, tmp, seed=meta.get("seed", 0), small=bool(meta.get("small")),
+                 ground_truth=meta.get("ground_truth", "auto"), overwrite=True)
+        for name in missing:
+            entry = meta["files"][name]
+            fresh = Path(tmp) / entry["path"]
+            digest = hashlib.sha256(fresh.read_bytes()).hexdigest()
+            if entry.get("sha256") not in (None, digest):
+                raise ValueError(
+                    f"{folder / entry['path']}: missing, and regenerating it from its manifest gave "
+                    f"other data (sha256 {digest[:12]}… ≠ {entry['sha256'][:12]}…; another MuJoCo or "
+                    "numpy version?). Restore the file or choose another --out"
+                )
+            shutil.copyfile(fresh, folder / entry["path"])
 
 
 def _same_settings(saved: dict, current: dict) -> bool:
