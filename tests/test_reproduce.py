@@ -76,7 +76,21 @@ def test_rerun_reuses_finished_models_and_refuses_other_settings(tiny_run):
     del saved["model_hparams"]
     cfg_path.write_text(json.dumps(saved))
     reproduce(out, TINY, log=logs.append)
-    cfg_path.write_text(original)
+    # without the record, the checkpoint's own header says which architecture was trained
+    from furuta_gym.training import checkpoint as ckpt
+
+    model_path = cfg_path.parent / "model.eqx"
+    model_bytes = model_path.read_bytes()
+    header, _ = ckpt._read(model_path)
+    header["hparams"]["hidden"] = [8, 8]
+    ckpt._write(model_path, {k: v for k, v in header.items() if not k.startswith("payload")},
+                ckpt.load_model(model_path), overwrite=True)
+    try:
+        with pytest.raises(ValueError, match="other settings"):
+            reproduce(out, TINY, log=logs.append)
+    finally:
+        model_path.write_bytes(model_bytes)
+        cfg_path.write_text(original)
 
 
 def test_a_committed_run_without_its_data_files_regenerates_them_exactly(tiny_run):

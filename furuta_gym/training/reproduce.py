@@ -293,7 +293,7 @@ def _same_settings(saved: dict, current: dict) -> bool:
 
     defaults = json.loads(json.dumps(TrainConfig().to_json()))
     saved = dict(saved, train=dict(saved.get("train", {})))
-    if "model_hparams" not in saved:  # recorded since 2026-11-23; older runs: unknown, trusted
+    if "model_hparams" not in saved:  # recorded since 2026-11-23; older runs without a checkpoint: trusted
         current = {k: v for k, v in current.items() if k != "model_hparams"}
     for key, value in current.get("train", {}).items():
         if key not in saved["train"] and key in defaults and value == defaults[key]:
@@ -327,6 +327,11 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     cfg_path = run_dir / "reproduce_config.json"
     if cfg_path.exists():
         saved = json.loads(cfg_path.read_text())
+        if "model_hparams" not in saved and model_path.exists():
+            # a record from before the architecture was recorded: the checkpoint's header knows it
+            from .checkpoint import read_header
+
+            saved["model_hparams"] = json.loads(json.dumps(read_header(model_path).get("hparams", {}), default=str))
         if not _same_settings(saved, json.loads(json.dumps(cfg_json))):
             raise ValueError(
                 f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out"
