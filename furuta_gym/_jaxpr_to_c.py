@@ -311,13 +311,9 @@ class _Translator:
         if isinstance(atom, Literal):
             aval = atom.aval
             value = np.asarray(atom.val)
-            if value.size != 1:
-                self.counter += 1
-                name = f"c{self.counter}"
-                body = ", ".join(_c_literal(v, aval.dtype) for v in value.ravel())
-                self.static_arrays.append(f"static const {_ctype(aval.dtype)} {name}[{value.size}] = {{{body}}};")
-                return _Var(name, aval.shape, aval.dtype, value=value.astype(aval.dtype))
             value = value.astype(aval.dtype).reshape(aval.shape)
+            if value.size != 1:
+                return self.constant(value)
             return _Var("lit", aval.shape, aval.dtype, _c_literal(value.ravel()[0], aval.dtype), value=value)
         return env[atom]
 
@@ -868,9 +864,9 @@ class CKernel:
         def flat_fn(*flat):
             return fn(*jax.tree_util.tree_unflatten(self.in_tree, flat))
 
-        closed = jax.make_jaxpr(flat_fn)(*leaves)
+        closed, out_shapes = jax.make_jaxpr(flat_fn, return_shape=True)(*leaves)  # one trace
         self.out_avals = [_Aval(v.aval.shape, v.aval.dtype) for v in closed.jaxpr.outvars]
-        _, self.out_tree = jax.tree_util.tree_flatten(jax.eval_shape(flat_fn, *leaves))
+        self.out_tree = jax.tree_util.tree_structure(out_shapes)
         self.source = self._translate(closed)
         self.library_path = _compile(self.source)
         try:
