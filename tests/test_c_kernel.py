@@ -247,3 +247,25 @@ def test_a_failing_compiler_is_one_clear_error_and_auto_takes_xla(monkeypatch, t
         CKernel(lambda v: v * 2.0, V)
     backend = gym.make(NMSD_ID, dynamics="analytic").unwrapped.backend
     assert backend.kernel == "xla" and "failed on the generated kernel" in backend.kernel_fallback
+
+
+def test_auto_tries_the_c_translation_once_per_model_structure(monkeypatch):
+    """With domain randomisation every reset rebuilds the step for new parameters: a model whose
+    step C cannot take must fall back without tracing and translating it again each time."""
+    import furuta_gym._jaxpr_to_c as lowering
+
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    attempts = []
+    original = lowering.CKernel.__init__
+
+    def counting(self, *args, **kwargs):
+        attempts.append(1)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(lowering.CKernel, "__init__", counting)
+    env = gym.make(NMSD_ID, dynamics="analytic", randomize=0.1)
+    for seed in range(4):
+        env.reset(seed=seed)
+        env.step(np.array([1.0]))
+    assert env.unwrapped.backend.kernel == "xla" and len(attempts) == 1

@@ -438,29 +438,36 @@ class _CStepper:
         self._period = self._bind("period")  # built now: a model C cannot take fails here
         self._split = None
 
-    def _kernel(self, which: str, n_state: int):
-        from .._jaxpr_to_c import CKernel
+    def _kernel(self, which: str):
+        """The compiled kernel of this model structure, or the CKernelError it gave: a failure is
+        cached too, so ``kernel="auto"`` does not trace and translate the step again at every
+        reset that draws new parameters (domain randomisation)."""
+        from .._jaxpr_to_c import CKernel, CKernelError
 
         key = (which, *self._key)
         try:
-            return _C_KERNEL_CACHE[key]
+            kernel = _C_KERNEL_CACHE[key]
         except (KeyError, TypeError):
-            pass
-        period, split = self._functions
-        x, u = np.zeros(n_state), np.zeros(self._n_inputs)
-        if which == "period":
-            kernel = CKernel(period, self._dynamic, x, u, name="period")
-        else:
-            kernel = CKernel(split, self._dynamic, x, u, np.int64(0), u, name="split")
-        try:
-            _C_KERNEL_CACHE[key] = kernel
-        except TypeError:  # unhashable static structure: no sharing, still correct
-            pass
+            period, split = self._functions
+            x, u = np.zeros(self._n_state), np.zeros(self._n_inputs)
+            try:
+                if which == "period":
+                    kernel = CKernel(period, self._dynamic, x, u, name="period")
+                else:
+                    kernel = CKernel(split, self._dynamic, x, u, np.int64(0), u, name="split")
+            except CKernelError as exc:
+                kernel = exc
+            try:
+                _C_KERNEL_CACHE[key] = kernel
+            except TypeError:  # unhashable static structure: no sharing, still correct
+                pass
+        if isinstance(kernel, CKernelError):
+            raise kernel
         return kernel
 
     def _bind(self, which: str):
         """(call, the step's input buffers after x); x's buffer is shared by both kernels."""
-        kernel = self._kernel(which, self._n_state)
+        kernel = self._kernel(which)
         inputs, _ = kernel.new_buffers()
         for buf, leaf in zip(inputs, self._leaves):
             buf[...] = leaf
