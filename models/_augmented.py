@@ -66,18 +66,15 @@ class ForceNetwork(eqx.Module):
         self.damping_scale = float(force_scale / velocity_scale if damping_scale is None else damping_scale)
 
     def __call__(self, q, qd):
-        out = self.force_scale * self._net_out(q, qd)
+        out = self.beyond_linear(q, qd)
         if self.linear is not None:
             out = out + self.damping_scale * (self.linear @ qd)
         return out
 
     def beyond_linear(self, q, qd):
         """The network's part of F_a: F_a without the linear viscous term W·q̇."""
-        return self.force_scale * self._net_out(q, qd)
-
-    def _net_out(self, q, qd):
-        v = qd / self.velocity_scale
-        return self.net(jnp.concatenate([coordinate_features(self.spec, q, self.position_scale), v]))
+        x = jnp.concatenate([coordinate_features(self.spec, q, self.position_scale), qd / self.velocity_scale])
+        return self.force_scale * self.net(x)
 
 
 class AugmentedDeLaN(AbstractLearnedSystem):
