@@ -62,3 +62,31 @@ def test_learning_rate_per_stage(segments):
     a, b, c = (np.asarray(m.lagrangian_nets.potential_net.layers[0].weight) for m in (two, one, fast))
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     assert np.max(np.abs(c - b)) > 1e-4
+
+
+def test_cosine_decay_within_each_stage(segments):
+    """Each stage's step falls from its rate to cosine_decay_to × rate along a cosine, and a stage
+    restarts at its own rate; the training loop uses that step (a last epoch decayed to nothing
+    leaves the model of the epoch before)."""
+    cfg = TrainConfig(epochs=(5, 3), horizons=(None, 2), learning_rate=(1e-2, 1e-3), cosine_decay_to=0.01)
+    rates = [cfg.epoch_learning_rate(e) for e in range(8)]
+    np.testing.assert_allclose(rates, [1e-2, 1e-2 * (0.01 + 0.99 * 0.5 * (1 + np.cos(np.pi / 4))), 1e-2 * 0.505,
+                                       1e-2 * (0.01 + 0.99 * 0.5 * (1 + np.cos(3 * np.pi / 4))), 1e-4,
+                                       1e-3, 1e-3 * 0.505, 1e-5], rtol=1e-12)
+    constant = TrainConfig(epochs=(5, 3), horizons=(None, 2), learning_rate=(1e-2, 1e-3))
+    assert [constant.epoch_learning_rate(e) for e in range(8)] == [1e-2] * 5 + [1e-3] * 3
+    for bad in (0.0, 1.5, -0.1):
+        with pytest.raises(ValueError, match="cosine_decay_to must be in"):
+            TrainConfig(epochs=(1,), horizons=(2,), cosine_decay_to=bad)
+    with pytest.raises(ValueError, match="outside the 8 epochs"):
+        cfg.epoch_learning_rate(8)
+
+    base = dict(horizons=(None,), quadrature="simpson", progress=False, checkpoint_every=0, learning_rate=1e-2)
+    hp = dict(hidden=(8, 8))
+    decayed, _ = train("dln", "nmsd", "prop", segments,
+                       TrainConfig.for_system("nmsd", epochs=(2,), cosine_decay_to=1e-15, **base), hparams=hp)
+    one, _ = train("dln", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", epochs=(1,), **base), hparams=hp)
+    two, _ = train("dln", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", epochs=(2,), **base), hparams=hp)
+    a, b, c = (np.asarray(m.lagrangian_nets.potential_net.layers[0].weight) for m in (decayed, one, two))
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    assert np.max(np.abs(c - b)) > 1e-4

@@ -78,7 +78,10 @@ class TrainConfig:
     full batch), which costs hours on a CPU (known_pitfalls.md, "Cost").
 
     ``learning_rate`` Adam's step, one value or one per stage (an L_Iτ-alone stage tolerates a
-    larger step than the trajectory stages after it). ``batch_size`` trajectory windows per step
+    larger step than the trajectory stages after it). ``cosine_decay_to`` within each stage the
+    step follows a cosine from the stage's rate down to this fraction of it at the stage's last
+    epoch (1: constant; a constant step leaves Adam hopping around the minimum and the L_Iτ loss
+    still falling when the stage ends). ``batch_size`` trajectory windows per step
     (``None``: all windows, one step per epoch);
     ``lambda_traj`` λ in L_aph / L_prop; ``lambda_step`` APHYNITY's dual-ascent step τ₂ (λ ← λ +
     τ₂·L_traj after every epoch; ``None``: 1000 for ``"aph"``, 0 — a fixed λ — otherwise);
@@ -96,6 +99,7 @@ class TrainConfig:
     epochs: tuple[int, ...] = (100, 20)
     horizons: tuple[int | float | None, ...] = (2, 1.0)
     learning_rate: float | tuple[float, ...] = 1e-3
+    cosine_decay_to: float = 1.0
     weight_decay: float = 1e-5
     batch_size: int | None = 256
     lambda_traj: float = 1.0
@@ -131,6 +135,8 @@ class TrainConfig:
         rates = self.learning_rate if isinstance(self.learning_rate, tuple) else (self.learning_rate,)
         if not all(float(r) > 0 for r in rates):
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
+        if not 0 < self.cosine_decay_to <= 1:
+            raise ValueError(f"cosine_decay_to must be in (0, 1], got {self.cosine_decay_to!r}")
         if any(e < 0 for e in self.epochs):
             raise ValueError(f"epochs must be non-negative, got {self.epochs}")
         if self.quadrature not in ("trapezoid", "simpson"):
@@ -145,10 +151,24 @@ class TrainConfig:
             raise ValueError(f"batch_size must be positive or None, got {self.batch_size}")
 
     def stage_learning_rate(self, stage: int) -> float:
-        """Adam's step in ``stage`` (0-based)."""
+        """Adam's step at the start of ``stage`` (0-based)."""
         if isinstance(self.learning_rate, tuple):
             return self.learning_rate[stage]
         return float(self.learning_rate)
+
+    def epoch_learning_rate(self, epoch: int) -> float:
+        """Adam's step in ``epoch`` (0-based, counted over all stages): the stage's rate, cosine
+        decayed to ``cosine_decay_to`` times it at the stage's last epoch."""
+        if not 0 <= epoch < self.total_epochs:
+            raise ValueError(f"epoch {epoch} is outside the {self.total_epochs} epochs of this config")
+        bounds = np.cumsum(self.epochs)
+        stage = int(np.searchsorted(bounds, epoch, side="right"))
+        rate = self.stage_learning_rate(stage)
+        if self.cosine_decay_to == 1.0 or self.epochs[stage] < 2:
+            return rate
+        progress = (epoch - (bounds[stage] - self.epochs[stage])) / (self.epochs[stage] - 1)
+        end = self.cosine_decay_to
+        return rate * (end + (1.0 - end) * 0.5 * (1.0 + math.cos(math.pi * progress)))
 
     @property
     def total_epochs(self) -> int:
@@ -546,7 +566,7 @@ def train(
             skipped = 0
             for tb, ib_ in zip(traj_batches, int_batches):
                 params, opt_state, terms, ok = step(params, opt_state, tb, ib_, jnp.asarray(lam),
-                                                    jnp.asarray(config.stage_learning_rate(stage)))
+                                                    jnp.asarray(config.epoch_learning_rate(epoch)))
                 if bool(ok):
                     for k, v in terms.items():
                         sums[k] = sums.get(k, 0.0) + float(v)
