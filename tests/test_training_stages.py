@@ -1,6 +1,8 @@
 """Per-stage losses in the training curriculum: a stage without a horizon trains on L_Iτ alone
 (the cheap warm start the reproduction gives L_prop), the next stages on the full L_prop."""
 
+import equinox as eqx
+import jax
 import numpy as np
 import pytest
 
@@ -90,3 +92,62 @@ def test_cosine_decay_within_each_stage(segments):
     a, b, c = (np.asarray(m.lagrangian_nets.potential_net.layers[0].weight) for m in (decayed, one, two))
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     assert np.max(np.abs(c - b)) > 1e-4
+
+
+def _weights(model):
+    return np.concatenate([np.ravel(leaf) for leaf in jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))])
+
+
+SPIKY = dict(horizons=(None,), quadrature="simpson", progress=False, checkpoint_every=0, learning_rate=0.1)
+
+
+def test_a_full_batch_itau_stage_hands_on_its_lowest_loss_iterate(segments):
+    """At a large step the L_Iτ loss jumps from epoch to epoch; the stage's result is the iterate
+    of its lowest recorded loss (bit for bit the model after that many epochs), not the last."""
+    hp = dict(hidden=(8, 8))
+    best, history = train("dln", "nmsd", "prop", segments,
+                          TrainConfig.for_system("nmsd", epochs=(12,), **SPIKY), hparams=hp)
+    last, history_last = train("dln", "nmsd", "prop", segments,
+                               TrainConfig.for_system("nmsd", epochs=(12,), keep_best_itau=False, **SPIKY), hparams=hp)
+    totals = [h["total"] for h in history]
+    assert totals == [h["total"] for h in history_last]  # the same steps; only the hand-over differs
+    k = int(np.argmin(totals))
+    assert k < 11, f"the loss fell monotonically ({totals}): this test needs a non-monotone stage"
+    assert history[-1]["best_epoch"] == k + 1 and history[-1]["best_total"] == totals[k]
+    assert "best_epoch" not in history_last[-1]
+    reference, _ = train("dln", "nmsd", "prop", segments,
+                         TrainConfig.for_system("nmsd", epochs=(k,), keep_best_itau=False, **SPIKY), hparams=hp)
+    np.testing.assert_array_equal(_weights(best), _weights(reference))
+    assert np.max(np.abs(_weights(best) - _weights(last))) > 1e-6
+
+
+def test_resuming_mid_stage_keeps_the_best_iterate(segments, tmp_path, monkeypatch):
+    """Stopped (SIGTERM) in the middle of an L_Iτ stage and resumed: the same model as a run
+    never stopped, so the best iterate travels in the training state."""
+    import os
+    import signal
+
+    from furuta_gym.training import checkpoint as ckpt
+
+    hp = dict(hidden=(8, 8))
+    cfg = TrainConfig.for_system("nmsd", epochs=(12,), **SPIKY)
+    straight, h_straight = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "a", hparams=hp)
+    saves = {"n": 0}
+    original = ckpt.save_training_state
+
+    def save_then_stop(*args, **kwargs):
+        out = original(*args, **kwargs)
+        saves["n"] += 1
+        if saves["n"] == 7:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return out
+
+    monkeypatch.setattr(ckpt, "save_training_state", save_then_stop)
+    with pytest.raises(KeyboardInterrupt, match="after epoch 7"):
+        train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "b", hparams=hp)
+    monkeypatch.setattr(ckpt, "save_training_state", original)
+    assert ckpt.read_header(tmp_path / "b" / "train_state.eqx")["has_best_model"]
+    resumed, h_resumed = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "b", resume=True, hparams=hp)
+    assert [h["total"] for h in h_resumed] == [h["total"] for h in h_straight]
+    assert h_resumed[-1]["best_epoch"] == h_straight[-1]["best_epoch"] < 12
+    np.testing.assert_array_equal(_weights(resumed), _weights(straight))

@@ -243,26 +243,35 @@ def _check_finite(tree, path) -> None:
         raise ValueError(f"{path}: refusing to save a model with NaN/inf weights")
 
 
-def save_training_state(path: str | Path, model, opt_state, header_extra: dict) -> Path:
-    """Save a resumable training state: model + optimiser state + JSON (epoch, λ, history, seed...)."""
+def save_training_state(path: str | Path, model, opt_state, header_extra: dict, best_model=None) -> Path:
+    """Save a resumable training state: model + optimiser state + JSON (epoch, λ, history, seed...),
+    and ``best_model`` (the running stage's lowest-loss iterate) when there is one."""
     path = Path(path)
     _check_finite(model, path)
     header = _model_header(model, header_extra.pop("meta", None))
     header["content"] = "training_state"
     header["state"] = header_extra
+    header["has_best_model"] = best_model is not None
+    payload = (model, opt_state) if best_model is None else (model, opt_state, best_model)
     # no fsync: written after every epoch, and the rename is atomic against a killed process
-    _write(path, header, (model, opt_state), overwrite=True, sync=False)
+    _write(path, header, payload, overwrite=True, sync=False)
     return path
 
 
-def load_training_state(path: str | Path, model_skeleton, opt_state_skeleton) -> tuple[Any, Any, dict]:
-    """(model, opt_state, header) from :func:`save_training_state`; skeletons give the structure."""
+def load_training_state(path: str | Path, model_skeleton, opt_state_skeleton, *, with_best: bool = False):
+    """(model, opt_state, header) from :func:`save_training_state`; skeletons give the structure.
+    ``with_best``: (model, opt_state, header, best model or None)."""
     path = Path(path)
     header, payload = _read(path)
     if header.get("content") != "training_state":
         raise CheckpointError(f"{path}: not a training state (content {header.get('content')!r})")
+    has_best = bool(header.get("has_best_model", False))
+    skeleton = (model_skeleton, opt_state_skeleton) + ((model_skeleton,) if has_best else ())
     try:
-        model, opt_state = eqx.tree_deserialise_leaves(io.BytesIO(payload), (model_skeleton, opt_state_skeleton))
+        loaded = eqx.tree_deserialise_leaves(io.BytesIO(payload), skeleton)
     except Exception as exc:
         raise CheckpointError(f"{path}: training state does not fit this run's model/optimiser ({exc})") from None
+    model, opt_state = loaded[:2]
+    if with_best:
+        return model, opt_state, header, (loaded[2] if has_best else None)
     return model, opt_state, header

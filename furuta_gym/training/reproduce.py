@@ -286,6 +286,11 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
             shutil.copyfile(fresh, folder / entry["path"])
 
 
+#: training settings added with a default that changed behaviour, and what every run recorded
+#: before the setting existed did
+SETTINGS_BEFORE_RECORDED = {"keep_best_itau": False}
+
+
 def _same_settings(saved: dict, current: dict) -> bool:
     """Whether a run directory's recorded settings are this run's. A training setting the record
     lacks was added later; the run then used what is now that setting's default."""
@@ -296,9 +301,22 @@ def _same_settings(saved: dict, current: dict) -> bool:
     if "model_hparams" not in saved:  # recorded since 2026-11-23; older runs without a checkpoint: trusted
         current = {k: v for k, v in current.items() if k != "model_hparams"}
     for key, value in current.get("train", {}).items():
-        if key not in saved["train"] and key in defaults and value == defaults[key]:
+        if key in saved["train"]:
+            continue
+        if key in SETTINGS_BEFORE_RECORDED:
+            saved["train"][key] = SETTINGS_BEFORE_RECORDED[key]
+        elif key in defaults and value == defaults[key]:
             saved["train"][key] = value
+    # keep_best_itau acts on stages of L_Iτ alone only: without one, runs agree whatever it says
+    saved, current = (_without_inert_settings(d) for d in (saved, current))
     return saved == current
+
+
+def _without_inert_settings(settings: dict) -> dict:
+    train = dict(settings.get("train", {}))
+    if None not in train.get("horizons", [None]):
+        train.pop("keep_best_itau", None)
+    return dict(settings, train=train)
 
 
 def _default_hparams(system: str, kind: str) -> dict:
