@@ -26,7 +26,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
 from ._analytic import NMSD, Furuta, FurutaParameters, NMSDParameters
-from ._augmented import DAMPING_SCALE, FORCE_ACTIVATION, ForceNetwork
+from ._augmented import DAMPING_SCALE, FORCE_ACTIVATION, ForceNetwork, _linear_option
 from ._learned import AbstractLearnedSystem, freeze_hparams, system_defaults
 
 __all__ = ["Aphynity", "LEARNABLE_PHYSICAL_PARAMETERS"]
@@ -52,7 +52,7 @@ class Aphynity(AbstractLearnedSystem):
             hp.pop(k)
         hp["prior"] = ()  # overrides of nominal parameter values, e.g. (("mp", 0.03),)
         hp["prior_back_emf"] = False  # Furuta: keep −(kt·km/Rm)·α̇ in the prior's τ_u
-        hp["linear_velocity"] = True  # F_a's linear velocity term (see ForceNetwork)
+        hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
         hp["damping_scale"] = DAMPING_SCALE[spec.name]
         hp["force_activation"] = FORCE_ACTIVATION
         unknown = set(hparams) - set(hp)
@@ -78,7 +78,7 @@ class Aphynity(AbstractLearnedSystem):
         self.force_net = ForceNetwork(
             spec, key=key, hidden=tuple(hp["hidden"]), force_scale=hp["force_scale"],
             position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
-            activation=hp["force_activation"], linear_velocity=bool(hp["linear_velocity"]),
+            activation=hp["force_activation"], linear_velocity=_linear_option(hp["linear_velocity"]),
             damping_scale=hp["damping_scale"],
         )
         self.scale = jnp.asarray(1.0)

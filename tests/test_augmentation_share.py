@@ -82,22 +82,34 @@ def test_the_weight_moves_a_spring_force_out_of_the_network_into_the_prior(segme
 def test_force_network_linear_velocity_term_and_activation():
     """F_a = force_scale·net(x) + damping_scale·W·q̇: W starts at zero (the initial F_a is the
     network's), carries a linear velocity dependence that does not saturate, and can be dropped.
-    W = 1 is a damping of the system's physical order (1e-3 N·m·s/rad for the Furuta)."""
+    W = 1 is a damping of the system's physical order (1e-3 N·m·s/rad for the Furuta). By default
+    W is per joint (diagonal: each joint's friction from its own velocity); a full matrix and no
+    W are options."""
     import equinox as eqx
 
     model = make_model("furuta", "aph", 0)
     net = model.force_net
-    assert net.linear.shape == (2, 2) and not np.any(np.asarray(net.linear))
+    assert net.linear.shape == (2,) and not np.any(np.asarray(net.linear))
+    assert dict(model.hparams)["linear_velocity"] == "diagonal"
+    assert make_model("furuta", "adln", 0).force_net.linear.shape == (2,)
     assert net.net.activation == "silu" and dict(model.hparams)["force_activation"] == "silu"
     q = jnp.array([0.3, 1.0])
-    W = jnp.array([[-2.0, 0.0], [0.0, -0.5]])
-    linear_only = eqx.tree_at(lambda m: m.force_net.linear, model, W)
+    w = jnp.array([-2.0, -0.5])
+    linear_only = eqx.tree_at(lambda m: m.force_net.linear, model, w)
+    full = make_model("furuta", "aph", 0, linear_velocity=True)
+    assert full.force_net.linear.shape == (2, 2)
+    W = jnp.array([[-2.0, 0.3], [0.1, -0.5]])
+    full_only = eqx.tree_at(lambda m: m.force_net.linear, full, W)
     for qd in (jnp.array([1.0, -2.0]), jnp.array([100.0, 40.0])):
         diff = linear_only.augmentation(q, qd) - model.augmentation(q, qd)
+        np.testing.assert_allclose(diff, 1e-3 * w * qd, rtol=1e-12)
+        diff = full_only.augmentation(q, qd) - full.augmentation(q, qd)
         np.testing.assert_allclose(diff, 1e-3 * W @ qd, rtol=1e-12)
     assert net.damping_scale == 1e-3 and make_model("nmsd", "adln", 0).force_net.damping_scale == 1.0
     plain = make_model("furuta", "adln", 0, linear_velocity=False, force_activation="tanh")
     assert plain.force_net.linear is None and plain.force_net.net.activation == "tanh"
+    with pytest.raises(ValueError, match="linear_velocity must be True, False or 'diagonal'"):
+        make_model("furuta", "adln", 0, linear_velocity="upper")
     # the Lagrangian networks keep their own activation
     assert plain.lagrangian_nets.mass_net.activation == "tanh"
 
@@ -144,11 +156,12 @@ def test_checkpoints_from_before_damping_scale_keep_their_units_for_w(tmp_path):
 
 
 def test_default_weight_is_on_for_both_augmented_kinds_and_zero_turns_it_off(segments):
-    """μ = None takes AUGMENTATION_WEIGHT of the model's kind (1e-2 for augmented DeLaN and
-    APHYNITY, measured beyond the viscous term; train.py); μ = 0 leaves L_prop = L_Iτ + λ·L_traj."""
+    """μ = None takes AUGMENTATION_WEIGHT of the system and model kind (chosen on validation data,
+    measured beyond the viscous term; train.py); μ = 0 leaves L_prop = L_Iτ + λ·L_traj."""
     from furuta_gym.training.train import AUGMENTATION_WEIGHT
 
-    assert AUGMENTATION_WEIGHT == {"adln": 1e-2, "aph": 1e-2}
+    assert set(AUGMENTATION_WEIGHT) == {(s, k) for s in ("furuta", "nmsd") for k in ("adln", "aph")}
+    assert all(w > 0 for w in AUGMENTATION_WEIGHT.values())
     cfg = TrainConfig.for_system("nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False,
                                  checkpoint_every=0)
     off = TrainConfig.for_system("nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False,
@@ -157,7 +170,8 @@ def test_default_weight_is_on_for_both_augmented_kinds_and_zero_turns_it_off(seg
     _, adln = train("adln", "nmsd", "prop", segments, cfg)
     assert "fa_share" not in aph[-1] and aph[-1]["total"] == pytest.approx(aph[-1]["itau"], rel=1e-12)
     assert adln[-1]["fa_share"] > 0
-    assert adln[-1]["total"] == pytest.approx(adln[-1]["itau"] + 1e-2 * adln[-1]["fa_share"], rel=1e-12)
+    mu = AUGMENTATION_WEIGHT[("nmsd", "adln")]
+    assert adln[-1]["total"] == pytest.approx(adln[-1]["itau"] + mu * adln[-1]["fa_share"], rel=1e-12)
 
 
 def test_share_beyond_linear_leaves_the_viscous_term_free(segments):
