@@ -194,8 +194,45 @@ def test_full_run_gives_furuta_augmented_delan_a_longer_itau_stage_and_overrides
     assert adln.epochs == (12000, *FULL_PROP_EPOCHS["furuta"][1:])
     assert dln.epochs == FULL_PROP_EPOCHS["furuta"]
     assert training_config("nmsd", full, 0, "prop", "adln").epochs == FULL_PROP_EPOCHS["nmsd"]
+    assert training_config("nmsd", full, 0, "prop", "dln").epochs == (8000, *FULL_PROP_EPOCHS["nmsd"][1:])
     # the baselines, --quick and an explicit schedule are not touched
     assert training_config("furuta", full, 0, "aph", "adln").epochs == training_config("furuta", full, 0, "aph", "aph").epochs
     assert training_config("furuta", ReproduceConfig(quick=True), 0, "prop", "adln").epochs == (300, 4, 1)
     own = ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})
     assert training_config("furuta", own, 0, "prop", "adln").epochs == (50, 2, 1)
+
+
+def test_runs_record_the_augmentation_weight_they_used():
+    """μ is written into each L_prop run's settings (not left to a None default), per system and
+    kind; an explicit override wins; models without F_a and the baselines carry none."""
+    from furuta_gym.training.reproduce import training_config
+    from furuta_gym.training.train import AUGMENTATION_WEIGHT
+
+    full = ReproduceConfig()
+    for (system, kind), mu in AUGMENTATION_WEIGHT.items():
+        assert training_config(system, full, 0, "prop", kind).augmentation_weight == mu
+    assert AUGMENTATION_WEIGHT[("furuta", "adln")] != AUGMENTATION_WEIGHT[("nmsd", "adln")]
+    assert training_config("furuta", full, 0, "prop", "dln").augmentation_weight is None
+    assert training_config("furuta", full, 0, "aph", "adln").augmentation_weight is None
+    own = ReproduceConfig(train_overrides={"augmentation_weight": 0.5})
+    assert training_config("furuta", own, 0, "prop", "adln").augmentation_weight == 0.5
+
+
+def test_a_setting_added_later_compares_as_what_older_runs_did():
+    """A record from before keep_best_itau existed was trained without it: an L_prop run (which
+    has an L_Iτ-alone stage) is then not the same as today's, a baseline without such a stage is."""
+    from furuta_gym.training.reproduce import _same_settings
+    from furuta_gym.training.train import TrainConfig
+
+    def record(horizons):
+        train = json.loads(json.dumps(TrainConfig(epochs=(5,) * len(horizons), horizons=horizons).to_json()))
+        return {"system": "nmsd", "model": "dln", "loss": "prop", "seed": 0, "train": train}
+
+    for horizons, same in (((None, 2, 2.0), False), ((2, 2.0), True)):
+        current = record(horizons)
+        old = json.loads(json.dumps(current))
+        del old["train"]["keep_best_itau"]
+        assert _same_settings(old, current) is same
+        off = json.loads(json.dumps(current))
+        off["train"]["keep_best_itau"] = False
+        assert _same_settings(old, off)

@@ -141,8 +141,11 @@ QUICK_PROP_EPOCHS = {"nmsd": (300, 8, 2), "furuta": (300, 4, 1)}
 #: still falling at epoch 6000 (6.0e-5 → 4.2e-5 over the last 1000 epochs, against DLN's 1.3e-5
 #: and APHYNITY's flat 1.5e-5): three networks, one of them a general F_a(q, q̇), fit slower. At
 #: 12 000 epochs it reached 2.2e-5 (one run; a training-loss diagnosis). Learning rates 3e-3 and
-#: 1e-2 instead reached 2.5e-5 and 3.2e-5.
-FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 12000}
+#: 1e-2 instead reached 2.5e-5 and 3.2e-5. N-MSD DeLaN's was falling fast at epoch 4000
+#: (4.4e-4, the value its 4000-epoch runs ended near); by epoch 5400 it was at 1e-5. 8000 epochs
+#: took the chirp energy from −1.89 to −2.50 even though that run ended on a spike (1.4e-4; its
+#: best iterate, which keep_best_itau now hands on, was 2.1e-6; one run, 2026-11-23).
+FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 12000, ("nmsd", "dln"): 8000}
 #: λ of L_prop = L_Iτ + λ·L_traj (the paper writes λ_k and gives no value). Our L_Iτ is normalised
 #: (dimensionless, ~1e-5 once fitted), L_traj is a mean squared state error: with λ = 1 the 1 s
 #: Furuta stage let L_traj swamp L_Iτ and undid the fit (free α −1.52 → −0.67, forces −4.3 →
@@ -176,7 +179,7 @@ def epoch_schedule(system: str, config: ReproduceConfig, loss: str, kind: str | 
 def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop", kind: str | None = None):
     """The :class:`~furuta_gym.training.TrainConfig` of one run of model ``kind`` on ``system``
     with ``loss``."""
-    from .train import TrainConfig
+    from .train import AUGMENTATION_WEIGHT, TrainConfig
 
     name = get_spec(system).name
     horizons = tuple(TrainConfig.for_system(name).horizons)
@@ -193,6 +196,9 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
     )
     if loss == "prop":
         overrides["lambda_traj"] = PROP_LAMBDA
+        if (name, kind) in AUGMENTATION_WEIGHT:
+            # written out, not left to the None default: the run record then says which μ it used
+            overrides["augmentation_weight"] = AUGMENTATION_WEIGHT[(name, kind)]
         if len(epochs) == 3 and PROP_ITAU_LEARNING_RATE[name] != TrainConfig.learning_rate:
             overrides["learning_rate"] = (PROP_ITAU_LEARNING_RATE[name], TrainConfig.learning_rate,
                                           TrainConfig.learning_rate)

@@ -54,13 +54,15 @@ from .losses import (
 __all__ = ["TrainConfig", "train", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
 
 LOSSES = ("traj", "aph", "prop", "itau")
-#: μ of L_prop's minimum-norm term per model kind with F_a, when TrainConfig.augmentation_weight
-#: is None (docs/reproduce.md, "Training recipe"). Augmented DeLaN needs it: its general networks
-#: can otherwise move gravity or M into F_a (1e-2 beat 1e-3 on every cell). Measured on F_a
-#: beyond its viscous term (TrainConfig.augmentation_part) it no longer pulls the damping towards
-#: zero, and APHYNITY gains from it too: Furuta free / forced α −1.18 / −0.40 with μ = 0,
-#: −1.31 / −0.58 with μ = 1e-2 (one run each, 2026-11-23).
-AUGMENTATION_WEIGHT = {"adln": 1e-2, "aph": 1e-2}
+#: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
+#: TrainConfig.augmentation_weight is None: each chosen among 1e-2 / 1e-1 / 1 (and 10) on
+#: validation trajectories, never the reported test sets (bench/select_augmentation_weight.py,
+#: results/augmentation_weight/, docs/reproduce.md "Training recipe"). P_a measures F_a beyond its
+#: per-joint viscous term (TrainConfig.augmentation_part). The Furuta's friction is viscous, so
+#: a large μ costs its fit nothing and keeps the networks from trading gravity or inertia for
+#: F_a; the N-MSD's cubic damping is beyond linear, and a large μ works against it.
+AUGMENTATION_WEIGHT = {("furuta", "adln"): 10.0, ("nmsd", "adln"): 1e-2,
+                       ("furuta", "aph"): 1e-2, ("nmsd", "aph"): 1e-2}
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
@@ -95,7 +97,7 @@ class TrainConfig:
     L_Iτ windows per step (``None``: all). ``augmentation_weight`` μ of the minimum-norm term
     μ·P_a that L_prop / L_Iτ add for models with a data-driven force F_a (APHYNITY, augmented
     DeLaN; :func:`~furuta_gym.training.losses.integral_loss_terms`): ``None`` means
-    :data:`AUGMENTATION_WEIGHT` of the model's kind (0 for models without F_a); 0 turns it off.
+    :data:`AUGMENTATION_WEIGHT` of the system and model kind (0 for models without F_a); 0 turns it off.
     ``augmentation_part`` what P_a measures: ``"beyond_linear"`` F_a without its linear viscous
     term W·q̇ (the same as all of F_a for a model without W), ``"full"`` all of F_a.
     """
@@ -431,7 +433,7 @@ def train(
     if loss == "aph" and not model.has_augmentation:
         raise ValueError(f"loss 'aph' needs a model with a data-driven force F_a (aph or adln), not {model_kind!r}")
     if config.augmentation_weight is None:
-        augmentation_weight = AUGMENTATION_WEIGHT.get(model.kind, 0.0) if model.has_augmentation else 0.0
+        augmentation_weight = AUGMENTATION_WEIGHT.get((spec.name, model.kind), 0.0) if model.has_augmentation else 0.0
     elif config.augmentation_weight and not model.has_augmentation:
         raise ValueError(
             f"augmentation_weight={config.augmentation_weight!r} weighs a data-driven force F_a, which a "

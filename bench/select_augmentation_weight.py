@@ -1,0 +1,121 @@
+"""Choose μ, the weight of L_prop's minimum-norm term μ·P_a, per system and model kind on
+validation data: never on the test sets the reproduction reports.
+
+Each candidate μ trains the model with the full reproduction recipe (the same data, seed 0, the
+same epochs as ``furuta-gym reproduce``). Every trained model then predicts the trajectories of a
+*validation* draw: the test recipes (free and forced Furuta, chirp and square N-MSD) generated with
+another seed (``--validation-seed``, default 100; the test sets use 0). The criterion is what a
+user could measure on held-out data: the mean over validation sets and state variables of the
+open-loop prediction log10 RMSE (a diverged prediction counts as +2). The smallest wins; the
+choice goes into :data:`furuta_gym.training.train.AUGMENTATION_WEIGHT` by hand.
+
+    python bench/select_augmentation_weight.py --system furuta --kind adln --weights 0.01 0.1 1 10
+
+Writes ``OUT/<system>_<kind>.md`` (and ``.json``) with one row per μ; trained runs live under
+``OUT/<system>_<kind>/mu_<μ>`` and are reused when the script runs again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+DIVERGED_SCORE = 2.0
+
+
+def _train(system: str, kind: str, weight: float, out: Path) -> None:
+    import furuta_gym
+    from furuta_gym.training.reproduce import ReproduceConfig, reproduce
+
+    furuta_gym.enable_x64()
+    cfg = ReproduceConfig(systems=(system,), pairs=((kind, "prop"),),
+                          train_overrides={"augmentation_weight": weight}, figures=False, progress=False, jobs=1)
+    reproduce(out, cfg, command=f"bench/select_augmentation_weight.py μ={weight!r}", log=lambda msg: None)
+
+
+def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int) -> dict[float, dict]:
+    import numpy as np
+
+    from furuta_gym.training.checkpoint import load_model
+    from furuta_gym.training.datagen import generate_datasets
+    from furuta_gym.training.metrics import DIVERGED, evaluate_model
+    from furuta_gym.training.reproduce import TEST_SETS
+
+    data = generate_datasets(system, seed=validation_seed, ground_truth="mujoco")
+    scores = {}
+    for weight, out in runs.items():
+        model = load_model(out / "runs" / system / f"{kind}_prop" / "seed0" / "model.eqx", expected_system=system)
+        per_set, values = {}, []
+        for label, name in TEST_SETS[system].items():
+            result = evaluate_model(model, data[name], physics=False)
+            per_set[label] = {k: result[k] for k in model.spec.state_names}
+            values += [DIVERGED_SCORE if v == DIVERGED else float(v) for v in per_set[label].values()]
+        scores[weight] = {"mean": float(np.mean(values)), "sets": per_set}
+    return scores
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--system", required=True, choices=("furuta", "nmsd"))
+    parser.add_argument("--kind", required=True, choices=("adln", "aph"))
+    parser.add_argument("--weights", type=float, nargs="+", default=[0.01, 0.1, 1.0, 10.0])
+    parser.add_argument("--validation-seed", type=int, default=100)
+    parser.add_argument("--out", type=Path, default=Path("results/augmentation_weight"))
+    parser.add_argument("--jobs", type=int, default=2)
+    args = parser.parse_args(argv)
+    if args.validation_seed == 0:
+        parser.error("--validation-seed 0 is the test sets' seed; validation needs another")
+
+    import furuta_gym
+    from furuta_gym.training.reproduce import _machine
+
+    furuta_gym.enable_x64()
+    machine = _machine()
+    folder = args.out / f"{args.system}_{args.kind}"
+    runs = {w: folder / f"mu_{w:g}" for w in args.weights}
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        list(pool.map(_train, [args.system] * len(runs), [args.kind] * len(runs), runs, runs.values()))
+    # what each model cost when it was trained (a run reused from an earlier invocation included)
+    seconds = {w: json.loads((out / "runs" / args.system / f"{args.kind}_prop" / "seed0" / "metrics.json")
+                             .read_text())["_seconds"]["train"] for w, out in runs.items()}
+    scores = _score(args.system, args.kind, runs, args.validation_seed)
+    best = min(scores, key=lambda w: scores[w]["mean"])
+    sets = list(next(iter(scores.values()))["sets"])
+    names = list(next(iter(scores.values()))["sets"][sets[0]])
+    lines = [
+        f"# μ for {args.kind} on {args.system}, chosen on validation data",
+        "",
+        f"`python bench/select_augmentation_weight.py --system {args.system} --kind {args.kind} "
+        f"--weights {' '.join(f'{w:g}' for w in args.weights)} --validation-seed {args.validation_seed}`, "
+        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', platform.machine())}, "
+        f"{machine['cpu_count']} cores; training {round(sum(seconds.values()))} s summed over the candidates "
+        "(times from each run's metrics.json).",
+        "",
+        f"Open-loop prediction log10 RMSE on the validation draw (seed {args.validation_seed}; the "
+        "reported test sets are seed 0 and take no part in the choice). Lower is better; the mean is "
+        "the criterion.",
+        "",
+        "| μ | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean |",
+        "|---|" + "---:|" * (len(sets) * len(names) + 1),
+    ]
+    for w, sc in scores.items():
+        cells = [sc["sets"][s][n] for s in sets for n in names]
+        text = " | ".join(c if isinstance(c, str) else f"{c:.2f}" for c in cells)
+        mark = " ← chosen" if w == best else ""
+        lines.append(f"| {w:g} | {text} | **{sc['mean']:.3f}**{mark} |")
+    folder.mkdir(parents=True, exist_ok=True)
+    (args.out / f"{args.system}_{args.kind}.md").write_text("\n".join(lines) + "\n")
+    (args.out / f"{args.system}_{args.kind}.json").write_text(json.dumps(
+        {"system": args.system, "kind": args.kind, "validation_seed": args.validation_seed, "chosen": best,
+         "scores": {f"{w:g}": sc for w, sc in scores.items()}, "train_seconds": {f"{w:g}": s for w, s in seconds.items()}},
+        indent=1) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
