@@ -62,7 +62,7 @@ LOSSES = ("traj", "aph", "prop", "itau")
 #: a large μ costs its fit nothing and keeps the networks from trading gravity or inertia for
 #: F_a; the N-MSD's cubic damping is beyond linear, and a large μ works against it.
 AUGMENTATION_WEIGHT = {("furuta", "adln"): 10.0, ("nmsd", "adln"): 1e-2,
-                       ("furuta", "aph"): 1e-2, ("nmsd", "aph"): 1e-2}
+                       ("furuta", "aph"): 0.1, ("nmsd", "aph"): 1e-2}
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
