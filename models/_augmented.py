@@ -46,9 +46,9 @@ class ForceNetwork(eqx.Module):
     ``linear_velocity``: ``"diagonal"`` (the models' default) one viscous coefficient per joint,
     each joint's friction from its own velocity, as in a bearing; ``True`` a full n × n matrix;
     ``False`` no linear term. The full matrix's off-diagonal entries are not friction: on the
-    Furuta they fitted a spurious α̇ → β torque (4.9e-6 N·m·s/rad) that traded against the
-    pendulum's own damping (learned 7-8 % too high relative to its inertia, against 2 % for DeLaN
-    with per-joint damping). The network part stays fully general.
+    Furuta they fitted an α̇ → β torque (4.9e-6 N·m·s/rad) that does not exist, and augmented
+    DeLaN predicted validation trajectories better per joint (docs/reproduce.md, "Training
+    recipe"). The network part stays fully general.
     """
 
     net: MLP
