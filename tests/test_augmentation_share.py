@@ -143,7 +143,8 @@ def test_checkpoints_from_before_damping_scale_keep_their_units_for_w(tmp_path):
 
     from furuta_gym.training import checkpoint as ckpt
 
-    old = make_model("furuta", "adln", jax.random.PRNGKey(2), damping_scale=1e-3 / 10.0)
+    # models of that time had the full matrix W (per-joint W came later)
+    old = make_model("furuta", "adln", jax.random.PRNGKey(2), damping_scale=1e-3 / 10.0, linear_velocity=True)
     old = eqx.tree_at(lambda m: m.force_net.linear, old, jnp.array([[-5.0, 0.1], [0.2, -1.5]]))
     path = ckpt.save_model(tmp_path / "old.eqx", old)
     header, _ = ckpt._read(path)

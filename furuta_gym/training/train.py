@@ -471,7 +471,7 @@ def train(
     history: list[dict] = []
     start_epoch = 0
     # the lowest-loss iterate of the running full-batch L_Iτ stage (keep_best_itau):
-    # {"stage", "epoch" (1-based, the epoch whose step started from it), "total", "params"}
+    # {"stage", "after" (epochs run before it, counted over all stages), "total", "params"}
     best: dict | None = None
 
     out = Path(out_dir) if out_dir is not None else None
@@ -591,14 +591,20 @@ def train(
             n_ok = len(traj_batches) - skipped
             means = {k: v / n_ok for k, v in sums.items()} if n_ok else {}
             if exact_epoch and n_ok and (best is None or best["stage"] != stage or means["total"] < best["total"]):
-                best = {"stage": stage, "epoch": epoch + 1, "total": means["total"], "params": params_before}
+                # "after": how many epochs (counted over all stages) had run on these parameters
+                best = {"stage": stage, "after": epoch, "total": means["total"], "params": params_before}
+            record_best = {}
             if exact_epoch and epoch + 1 == bounds[stage] and best is not None and best["stage"] == stage:
-                # the stage ends: go on from its lowest-loss iterate (the last step's result was
-                # never evaluated, and the lowest recorded loss is what the stage is for)
+                # the stage ends: its last step's result is evaluated too (a step at rate 0 is
+                # just the loss; the step is pure, so its other outputs are dropped), then the
+                # stage hands on whichever iterate had the lowest loss
+                _, _, final_terms, final_ok = step(params, opt_state, None, int_batches[0], jnp.asarray(lam),
+                                                   jnp.asarray(0.0))
+                if bool(final_ok) and float(final_terms["total"]) < best["total"]:
+                    best = {"stage": stage, "after": epoch + 1, "total": float(final_terms["total"]),
+                            "params": params}
                 params = best["params"]
-                record_best = {"best_epoch": best["epoch"], "best_total": best["total"]}
-            else:
-                record_best = {}
+                record_best = {"best_after_epoch": best["after"], "best_total": best["total"]}
             if lam_step and "traj" in means:
                 lam = lam + lam_step * means["traj"]
             record = {
