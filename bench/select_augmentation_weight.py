@@ -37,6 +37,11 @@ def _train(system: str, kind: str, weight: float, out: Path) -> None:
     reproduce(out, cfg, command=f"bench/select_augmentation_weight.py μ={weight!r}", log=lambda msg: None)
 
 
+def _run_dir(out: Path, system: str, kind: str) -> Path:
+    """Where ``furuta-gym reproduce`` writes the one L_prop run of a candidate's folder."""
+    return out / "runs" / system / f"{kind}_prop" / "seed0"
+
+
 def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int) -> dict[float, dict]:
     import numpy as np
 
@@ -48,7 +53,7 @@ def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int
     data = generate_datasets(system, seed=validation_seed, ground_truth="mujoco")
     scores = {}
     for weight, out in runs.items():
-        model = load_model(out / "runs" / system / f"{kind}_prop" / "seed0" / "model.eqx", expected_system=system)
+        model = load_model(_run_dir(out, system, kind) / "model.eqx", expected_system=system)
         per_set, values = {}, []
         for label, name in TEST_SETS[system].items():
             result = evaluate_model(model, data[name], physics=False)
@@ -81,8 +86,8 @@ def main(argv=None) -> None:
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         list(pool.map(_train, [args.system] * len(runs), [args.kind] * len(runs), runs, runs.values()))
     # what each model cost when it was trained (a run reused from an earlier invocation included)
-    seconds = {w: json.loads((out / "runs" / args.system / f"{args.kind}_prop" / "seed0" / "metrics.json")
-                             .read_text())["_seconds"]["train"] for w, out in runs.items()}
+    seconds = {w: json.loads((_run_dir(out, args.system, args.kind) / "metrics.json").read_text())["_seconds"]["train"]
+               for w, out in runs.items()}
     scores = _score(args.system, args.kind, runs, args.validation_seed)
     best = min(scores, key=lambda w: scores[w]["mean"])
     sets = list(next(iter(scores.values()))["sets"])

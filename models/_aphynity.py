@@ -26,7 +26,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
 from ._analytic import NMSD, Furuta, FurutaParameters, NMSDParameters
-from ._augmented import DAMPING_SCALE, FORCE_ACTIVATION, ForceNetwork, _linear_option
+from ._augmented import DAMPING_SCALE, FORCE_ACTIVATION, ForceNetwork
 from ._learned import AbstractLearnedSystem, freeze_hparams, system_defaults
 
 __all__ = ["Aphynity", "LEARNABLE_PHYSICAL_PARAMETERS"]
@@ -78,7 +78,7 @@ class Aphynity(AbstractLearnedSystem):
         self.force_net = ForceNetwork(
             spec, key=key, hidden=tuple(hp["hidden"]), force_scale=hp["force_scale"],
             position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
-            activation=hp["force_activation"], linear_velocity=_linear_option(hp["linear_velocity"]),
+            activation=hp["force_activation"], linear_velocity=hp["linear_velocity"],
             damping_scale=hp["damping_scale"],
         )
         self.scale = jnp.asarray(1.0)

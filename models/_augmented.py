@@ -63,10 +63,14 @@ class ForceNetwork(eqx.Module):
                  linear_velocity=True, damping_scale=None):
         n = spec.n_dof
         self.net = MLP(feature_size(spec) + n, n, tuple(hidden), key=key, activation=activation, final_scale=0.1)
-        if linear_velocity not in (True, False, "diagonal"):
+        # a string must name the per-joint term; anything else is read as a flag (hyper-parameters
+        # from older checkpoint headers are JSON booleans)
+        if isinstance(linear_velocity, str) and linear_velocity != "diagonal":
             raise ValueError(f"linear_velocity must be True, False or 'diagonal', got {linear_velocity!r}")
-        # "diagonal": one viscous coefficient per joint, each joint's friction from its own velocity
-        self.linear = None if linear_velocity is False else jnp.zeros((n,) if linear_velocity == "diagonal" else (n, n))
+        if linear_velocity == "diagonal":
+            self.linear = jnp.zeros(n)  # one viscous coefficient per joint, from its own velocity
+        else:
+            self.linear = jnp.zeros((n, n)) if linear_velocity else None
         self.spec = spec
         self.force_scale = float(force_scale)
         self.position_scale = float(position_scale)
@@ -85,13 +89,6 @@ class ForceNetwork(eqx.Module):
         """The network's part of F_a: F_a without the linear viscous term W·q̇."""
         x = jnp.concatenate([coordinate_features(self.spec, q, self.position_scale), qd / self.velocity_scale])
         return self.force_scale * self.net(x)
-
-
-def _linear_option(value):
-    """The ``linear_velocity`` hyper-parameter as ForceNetwork takes it (True, False, "diagonal")."""
-    if isinstance(value, str):
-        return value  # ForceNetwork names the valid choices if it is not one
-    return bool(value)
 
 
 class AugmentedDeLaN(AbstractLearnedSystem):
@@ -127,7 +124,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
         self.force_net = ForceNetwork(
             spec, key=kf, hidden=tuple(hp["force_hidden"]), force_scale=hp["force_scale"],
             position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
-            activation=hp["force_activation"], linear_velocity=_linear_option(hp["linear_velocity"]),
+            activation=hp["force_activation"], linear_velocity=hp["linear_velocity"],
             damping_scale=hp["damping_scale"],
         )
         self.scale = jnp.asarray(1.0)

@@ -299,7 +299,8 @@ SETTINGS_BEFORE_RECORDED = {"keep_best_itau": False}
 
 def _same_settings(saved: dict, current: dict) -> bool:
     """Whether a run directory's recorded settings are this run's. A training setting the record
-    lacks was added later; the run then used what is now that setting's default."""
+    lacks was added later; the run then did what :data:`SETTINGS_BEFORE_RECORDED` says, or else
+    what is now that setting's default."""
     from .train import TrainConfig
 
     defaults = json.loads(json.dumps(TrainConfig().to_json()))

@@ -82,8 +82,8 @@ class TrainConfig:
     ``learning_rate`` Adam's step, one value or one per stage (an L_Iτ-alone stage tolerates a
     larger step than the trajectory stages after it). ``cosine_decay_to`` within each stage the
     step follows a cosine from the stage's rate down to this fraction of it at the stage's last
-    epoch (1: constant; a constant step leaves Adam hopping around the minimum and the L_Iτ loss
-    still falling when the stage ends). ``keep_best_itau`` a full-batch stage of L_Iτ alone
+    epoch (1, the default: constant; over a whole N-MSD L_Iτ stage the decay slowed the fit
+    more than it steadied it, docs/reproduce.md). ``keep_best_itau`` a full-batch stage of L_Iτ alone
     hands the next stage the parameters of its lowest loss, not its last: its loss is exact (no
     minibatch noise) and at a large step it jumps by 10-100x from epoch to epoch, so the last
     epoch is a draw (N-MSD DeLaN at 1e-2: 1.4e-4 at its last epoch, 2.1e-6 twenty epochs
@@ -605,6 +605,7 @@ def train(
                             "params": params}
                 params = best["params"]
                 record_best = {"best_after_epoch": best["after"], "best_total": best["total"]}
+                best = None  # handed on: later epochs' training states need not carry it
             if lam_step and "traj" in means:
                 lam = lam + lam_step * means["traj"]
             record = {
