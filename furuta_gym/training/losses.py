@@ -45,6 +45,7 @@ from ..lagrangian import (
     interval_difference,
     interval_integral,
     momentum,
+    quadrature_consistency,
     solve_mass_matrix,
 )
 from ..simulate import simulate
@@ -60,6 +61,7 @@ __all__ = [
     "proposed_loss",
     "aphynity_lambda_update",
     "resolve_normalization",
+    "resolution_weights",
     "Normalization",
 ]
 
@@ -202,6 +204,27 @@ def trajectory_loss(
 AUGMENTATION_PARTS = ("full", "beyond_linear")
 
 
+def resolution_weights(windows: Windows, n_dof: int, rule: QuadratureRule,
+                       tolerance: float | None) -> Float[Array, "B K"]:
+    """Per window and quadrature interval, 1 / (1 + (e / tolerance)²) with e the norm over joints
+    of :func:`~furuta_gym.lagrangian.quadrature_consistency` (∫q̇ dt − Δq, from the data alone);
+    all ones when ``tolerance`` is None.
+
+    Weighted least squares with the quadrature error as the noise: an interval whose motion the
+    sampling under-resolves carries a residual of the order of e however good the model, so its
+    weight falls as 1/e² and each such interval counts about as much as one at e = tolerance
+    instead of dominating the sum (see :class:`~furuta_gym.training.train.TrainConfig`).
+    """
+
+    def one(t, x):
+        e = quadrature_consistency(x[:, :n_dof], x[:, n_dof:], t[1] - t[0], rule)
+        if tolerance is None:
+            return jnp.ones(e.shape[0])
+        return 1.0 / (1.0 + jnp.sum(e**2, axis=-1) / tolerance**2)
+
+    return jax.vmap(one)(windows.t, windows.x)
+
+
 def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmentation: bool = False,
                     augmentation_part: str = "full"):
     """Per window: the residual Z̄ − Ā and the model's momentum changes Δp̂ over the quadrature
@@ -223,7 +246,7 @@ def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmenta
     return jax.vmap(one)(windows.t, windows.x, windows.u)
 
 
-def _normalised(sq, dp, normalize: str, size: int):
+def _normalised(sq, dp, normalize: str, size):
     if normalize == "momentum":
         return sq / jnp.sum(dp**2)
     if normalize == "momentum_fixed":
@@ -241,13 +264,16 @@ def integral_loss(
     *,
     rule: QuadratureRule = "trapezoid",
     normalize: Normalization = "auto",
+    resolution_tolerance: float | None = None,
 ) -> Float[Array, ""]:
     """L_Iτ = Σ‖Z̄ − Ā‖² over windows, intervals and joints, divided by the normaliser.
 
     See the module docstring for ``normalize``; with ``"momentum"`` the value is the squared
     residual relative to the model's own momentum changes (dimensionless).
+    ``resolution_tolerance``: see :func:`integral_loss_terms`.
     """
-    return integral_loss_terms(model, windows, rule=rule, normalize=normalize)[0]
+    return integral_loss_terms(model, windows, rule=rule, normalize=normalize,
+                               resolution_tolerance=resolution_tolerance)[0]
 
 
 def integral_loss_terms(
@@ -258,6 +284,7 @@ def integral_loss_terms(
     normalize: Normalization = "auto",
     with_augmentation: bool = False,
     augmentation_part: str = "full",
+    resolution_tolerance: float | None = None,
 ) -> tuple[Float[Array, ""], Float[Array, ""] | None]:
     """``(L_Iτ, P_a)``: L_Iτ as :func:`integral_loss` and, with ``with_augmentation``, the share
     of the data's velocity changes that the data-driven force accounts for,
@@ -278,13 +305,22 @@ def integral_loss_terms(
     W·q̇ (:meth:`ForceNetwork.beyond_linear`): the minimum-norm principle then asks for the
     least force beyond textbook viscous friction instead of the least force, so it no longer
     pulls the damping itself towards zero.
+
+    ``resolution_tolerance`` (position units, rad or m; None: off) weights each interval's
+    squared residual, and its Δp̂² in the normaliser, by :func:`resolution_weights`.
     """
     if augmentation_part not in AUGMENTATION_PARTS:
         raise ValueError(f"augmentation_part must be one of {AUGMENTATION_PARTS}, got {augmentation_part!r}")
     if normalize == "auto":
         normalize = resolve_normalization(windows)
+    if resolution_tolerance is not None and not resolution_tolerance > 0:
+        raise ValueError(f"resolution_tolerance must be positive or None, got {resolution_tolerance!r}")
     r, dp, acc, dqd = _integral_parts(model, windows, rule, with_augmentation, augmentation_part)
-    itau = _normalised(jnp.sum(r**2), dp, normalize, r.size)
+    if resolution_tolerance is None:
+        itau = _normalised(jnp.sum(r**2), dp, normalize, r.size)
+    else:
+        w = resolution_weights(windows, model.spec.n_dof, rule, resolution_tolerance)[..., None]
+        itau = _normalised(jnp.sum(w * r**2), jnp.sqrt(w) * dp, normalize, jnp.sum(w) * r.shape[-1])
     share = None if acc is None else jnp.sum(acc**2) / jnp.sum(dqd**2)
     return itau, share
 
@@ -330,12 +366,14 @@ def proposed_loss(
     rule: QuadratureRule = "trapezoid",
     normalize: Normalization = "auto",
     augmentation_weight: float = 0.0,
+    resolution_tolerance: float | None = None,
     **traj_kwargs,
 ) -> Float[Array, ""]:
     """L_prop = L_Iτ + λ·L_traj (paper eq. 11) + μ·P_a with μ = ``augmentation_weight`` (models
-    with F_a only; see :func:`integral_loss_terms`)."""
+    with F_a only; see :func:`integral_loss_terms`, also for ``resolution_tolerance``)."""
     itau, share = integral_loss_terms(
-        model, integral_windows, rule=rule, normalize=normalize, with_augmentation=augmentation_weight != 0.0
+        model, integral_windows, rule=rule, normalize=normalize, with_augmentation=augmentation_weight != 0.0,
+        resolution_tolerance=resolution_tolerance,
     )
     total = itau + lam * trajectory_loss(model, trajectory_windows, **traj_kwargs)
     return total if share is None else total + augmentation_weight * share

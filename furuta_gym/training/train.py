@@ -100,6 +100,12 @@ class TrainConfig:
     :data:`AUGMENTATION_WEIGHT` of the system and model kind (0 for models without F_a); 0 turns it off.
     ``augmentation_part`` what P_a measures: ``"beyond_linear"`` F_a without its linear viscous
     term W·q̇ (the same as all of F_a for a model without W), ``"full"`` all of F_a.
+    ``resolution_tolerance`` (rad or m; ``None``: off, the paper's unweighted sum) weights each
+    L_Iτ interval by 1 / (1 + (e / tolerance)²), e = |∫q̇ dt − Δq| over the interval, which the
+    data give without any model (:func:`~furuta_gym.training.losses.resolution_weights`). Where
+    the sampling under-resolves the motion the true model's residual is quadrature error of the
+    size of e; unweighted, the few such intervals (a pendulum whirling at 30 rad/s at 100 Hz)
+    make most of L_Iτ's floor, and a flexible model bends its physics to fit that error.
     """
 
     epochs: tuple[int, ...] = (100, 20)
@@ -117,6 +123,7 @@ class TrainConfig:
     integral_batch_size: int | None = None
     augmentation_weight: float | None = None
     augmentation_part: str = "beyond_linear"
+    resolution_tolerance: float | None = None
     rtol: float = 1e-3
     atol: float = 1e-6
     max_steps: int = 4096
@@ -154,6 +161,8 @@ class TrainConfig:
             raise ValueError(f"augmentation_part must be one of {AUGMENTATION_PARTS}, got {self.augmentation_part!r}")
         if self.augmentation_weight is not None and not self.augmentation_weight >= 0:
             raise ValueError(f"augmentation_weight must be non-negative or None, got {self.augmentation_weight!r}")
+        if self.resolution_tolerance is not None and not float(self.resolution_tolerance) > 0:
+            raise ValueError(f"resolution_tolerance must be positive or None, got {self.resolution_tolerance!r}")
         if self.batch_size is not None and self.batch_size < 1:
             raise ValueError(f"batch_size must be positive or None, got {self.batch_size}")
 
@@ -323,7 +332,7 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
             if use_int:
                 terms["itau"], share = integral_loss_terms(
                     model, int_b, rule=config.quadrature, normalize=normalization, with_augmentation=use_share,
-                    augmentation_part=config.augmentation_part,
+                    augmentation_part=config.augmentation_part, resolution_tolerance=config.resolution_tolerance,
                 )
                 total = total + terms["itau"]
                 if use_share:
