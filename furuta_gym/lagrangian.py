@@ -47,15 +47,25 @@ __all__ = [
     "vector_field",
     "linearize",
     "interval_integral",
+    "interval_quadrature",
+    "hermite_states",
     "interval_difference",
     "quadrature_consistency",
     "IntegralTerms",
     "integral_terms",
     "integral_residual",
     "QuadratureRule",
+    "QUADRATURE_RULES",
 ]
 
-QuadratureRule = Literal["trapezoid", "simpson"]
+QuadratureRule = Literal["trapezoid", "simpson", "hermite"]
+#: every quadrature rule of the integral residual (see :func:`interval_quadrature`)
+QUADRATURE_RULES: tuple[str, ...] = ("trapezoid", "simpson", "hermite")
+
+# Two-point Gauss–Legendre nodes on [0, 1] (fractions of a sampling interval) and their weights:
+# exact for cubics, so for any integrand linear in a cubic Hermite interpolant of q
+_GAUSS_NODES = (0.5 - 0.5 / 3.0**0.5, 0.5 + 0.5 / 3.0**0.5)
+_GAUSS_WEIGHTS = (0.5, 0.5)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -253,7 +263,8 @@ def interval_integral(
     ``"simpson"``: K = (T − 1) // 2 intervals [t_{2k}, t_{2k+2}] (a trailing sample is dropped
     when T is even); fourth order, so its quadrature floor on smooth data is far lower.
     Any quantity integrated over the same intervals (a candidate effect, an input) is comparable
-    to the residual term by term.
+    to the residual term by term. ``"hermite"`` integrates between the samples, so it needs the
+    states, not samples of ``f``: use :func:`interval_quadrature`.
     """
     if rule == "trapezoid":
         return 0.5 * dt * (f[1:] + f[:-1])
@@ -261,19 +272,66 @@ def interval_integral(
         k = (f.shape[0] - 1) // 2
         a, m, b = f[0 : 2 * k : 2], f[1 : 2 * k : 2], f[2 : 2 * k + 1 : 2]
         return dt / 3.0 * (a + 4.0 * m + b)
-    raise ValueError(f"rule must be 'trapezoid' or 'simpson', got {rule!r}")
+    if rule == "hermite":
+        raise ValueError(
+            "rule='hermite' evaluates the integrand between the samples and so needs the states: "
+            "use interval_quadrature(g, q, qd, u, dt, 'hermite')"
+        )
+    raise ValueError(f"rule must be one of {QUADRATURE_RULES}, got {rule!r}")
+
+
+def hermite_states(
+    q: Float[Array, "T n"], qd: Float[Array, "T n"], u: Float[Array, "T m"], dt: float, s: float
+) -> tuple[Float[Array, "K n"], Float[Array, "K n"], Float[Array, "K m"]]:
+    """(q, q̇, u) at the fraction ``s`` ∈ [0, 1] of every sampling interval [t_{j−1}, t_j].
+
+    q is the cubic Hermite interpolant through q and q̇ at both ends (the unique cubic that
+    matches the measured positions *and* velocities), q̇ its derivative, u linear between samples
+    (what the simulated plants receive). On the interval q is exact to O(dt⁴) and q̇ to O(dt³),
+    from measured data alone: no acceleration enters.
+    """
+    q0, q1, v0, v1 = q[:-1], q[1:], qd[:-1], qd[1:]
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    d00, d10, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, 3 * s**2 - 2 * s
+    q_s = h00 * q0 + h01 * q1 + dt * (h10 * v0 + h11 * v1)
+    qd_s = d00 * (q0 - q1) / dt + d10 * v0 + d11 * v1
+    return q_s, qd_s, (1.0 - s) * u[:-1] + s * u[1:]
+
+
+def interval_quadrature(
+    g, q: Float[Array, "T n"], qd: Float[Array, "T n"], u: Float[Array, "T m"], dt: float,
+    rule: QuadratureRule = "trapezoid",
+) -> Float[Array, "K *rest"]:
+    """∫ g(q, q̇, u) dt over the intervals of ``rule``, for a per-sample function ``g``.
+
+    ``"trapezoid"`` / ``"simpson"`` evaluate g at the samples (:func:`interval_integral`).
+    ``"hermite"`` keeps the paper's intervals [t_{j−1}, t_j] but evaluates g at two Gauss–Legendre
+    nodes inside each, on the states of :func:`hermite_states`. Where the sampling under-resolves
+    the motion (a pendulum whirling at 30 rad/s sampled at 100 Hz turns 0.3 rad per sample) the
+    sample-based rules integrate a badly resolved integrand, and that quadrature error is what
+    the true model's residual is made of: on the Furuta training data the true model's L_Iτ
+    (normalised) is 4.1e-4 with the trapezoid, 1.1e-5 with Simpson and 2e-9 with this rule; on
+    the N-MSD 1.4e-8 with Simpson, 3e-17 with this rule.
+    """
+    if rule != "hermite":
+        return interval_integral(jax.vmap(g)(q, qd, u), dt, rule)
+    total = 0.0
+    for s, w in zip(_GAUSS_NODES, _GAUSS_WEIGHTS):
+        total = total + w * jax.vmap(g)(*hermite_states(q, qd, u, dt, s))
+    return dt * total
 
 
 def interval_difference(
     p: Float[Array, "T *rest"], rule: QuadratureRule = "trapezoid"
 ) -> Float[Array, "K *rest"]:
-    """p(end) − p(start) over the same intervals as :func:`interval_integral`."""
-    if rule == "trapezoid":
+    """p(end) − p(start) over the same intervals as :func:`interval_integral` (``"hermite"``
+    uses the trapezoid's intervals)."""
+    if rule in ("trapezoid", "hermite"):
         return p[1:] - p[:-1]
     if rule == "simpson":
         k = (p.shape[0] - 1) // 2
         return p[2 : 2 * k + 1 : 2] - p[0 : 2 * k : 2]
-    raise ValueError(f"rule must be 'trapezoid' or 'simpson', got {rule!r}")
+    raise ValueError(f"rule must be one of {QUADRATURE_RULES}, got {rule!r}")
 
 
 def quadrature_consistency(
@@ -286,8 +344,11 @@ def quadrature_consistency(
     30 rad/s sampled at 100 Hz) every integrand of the residual is under-resolved too, and the
     true model's residual there is quadrature error, not physics: on the Furuta training data
     the 1 % of Simpson intervals with the largest consistency error carry 77 % of the true
-    model's squared residual (correlation of the logs 0.86).
+    model's squared residual (correlation of the logs 0.86). Zero for ``"hermite"`` by
+    construction: its interpolant's velocity integrates to Δq exactly.
     """
+    if rule == "hermite":
+        return jnp.zeros_like(interval_difference(q, rule))
     return interval_integral(qd, dt, rule) - interval_difference(q, rule)
 
 
@@ -308,11 +369,15 @@ def integral_terms(
 ) -> IntegralTerms:
     """Ā and Z̄ of one uniformly sampled trajectory; no accelerations needed."""
     p = jax.vmap(lambda q_, qd_: momentum(system, q_, qd_))(q, qd)
-    f = jax.vmap(
-        lambda q_, qd_: potential_derived_force(system, q_, qd_)
-        + system.nonconservative_force(q_, qd_)
-    )(q, qd)
-    tau_u = jax.vmap(system.input_force)(q, qd, u)
+
+    def forces(q_, qd_, u_):
+        return (potential_derived_force(system, q_, qd_) + system.nonconservative_force(q_, qd_),
+                system.input_force(q_, qd_, u_))
+
+    if rule == "hermite":  # one pass over the interior nodes for both integrands
+        f, tau_u = interval_quadrature(lambda *a: jnp.stack(forces(*a)), q, qd, u, dt, rule).swapaxes(0, 1)
+        return IntegralTerms(A=interval_difference(p, rule) - f, Z=tau_u)
+    f, tau_u = jax.vmap(forces)(q, qd, u)
     A = interval_difference(p, rule) - interval_integral(f, dt, rule)
     Z = interval_integral(tau_u, dt, rule)
     return IntegralTerms(A=A, Z=Z)
@@ -329,7 +394,8 @@ def integral_residual(
     """The integral inverse-model residual Z̄ − Ā per interval and joint (paper eq. 10).
 
     Zero for the true model up to the quadrature floor (O(dt²) per unit time for the trapezoid
-    rule, O(dt⁴) for Simpson's); L_Iτ is its sum of squares.
+    rule, O(dt⁴) for Simpson's and for ``"hermite"``, whose integrand is resolved between the
+    samples; see :func:`interval_quadrature`); L_Iτ is its sum of squares.
     """
     terms = integral_terms(system, q, qd, u, dt, rule)
     return terms.Z - terms.A

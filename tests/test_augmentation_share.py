@@ -52,6 +52,33 @@ def test_share_is_the_augmentation_velocity_change_relative_to_the_data_and_scal
     assert with_mu - base == pytest.approx(0.01 * float(share), rel=1e-9)
 
 
+def test_share_with_the_hermite_rule_integrates_at_its_interior_nodes(segments):
+    """P_a and L_Iτ go through the same quadrature: with "hermite" both integrate on the
+    interpolated states between samples, over the paper's per-sample intervals."""
+    model = make_model("nmsd", "aph", jax.random.PRNGKey(3))
+    w = make_windows(segments, 21, stride=20)
+    _, share = integral_loss_terms(model, w, rule="hermite", normalize="momentum", with_augmentation=True)
+    num = den = 0.0
+    g = 0.5 / np.sqrt(3.0)
+    for t, x, u in zip(np.asarray(w.t), np.asarray(w.x), np.asarray(w.u)):
+        q, qd, dt = x[:, :1], x[:, 1:], t[1] - t[0]
+        total = 0.0
+        for s in (0.5 - g, 0.5 + g):  # the cubic through (q, q̇) at both ends, written out here
+            qs = ((2 * s**3 - 3 * s**2 + 1) * q[:-1] + (-2 * s**3 + 3 * s**2) * q[1:]
+                  + dt * ((s**3 - 2 * s**2 + s) * qd[:-1] + (s**3 - s**2) * qd[1:]))
+            vs = ((6 * s**2 - 6 * s) * (q[:-1] - q[1:]) / dt + (3 * s**2 - 4 * s + 1) * qd[:-1]
+                  + (3 * s**2 - 2 * s) * qd[1:])
+            acc = jax.vmap(lambda a, b: jnp.linalg.solve(model.mass_matrix(a), model.augmentation(a, b)))(
+                jnp.asarray(qs), jnp.asarray(vs))
+            total = total + 0.5 * dt * np.asarray(acc)
+        num += float(np.sum(total**2))
+        den += float(np.sum((qd[1:] - qd[:-1]) ** 2))
+    assert float(share) == pytest.approx(num / den, rel=1e-10)
+    # the match above tells the rules apart: Simpson's value on the same data is 1e6× further off
+    _, simpson = integral_loss_terms(model, w, rule="simpson", normalize="momentum", with_augmentation=True)
+    assert abs(float(share) / float(simpson) - 1) > 1e-4
+
+
 def test_weight_on_a_model_without_augmentation_or_negative_is_refused(segments):
     with pytest.raises(ValueError, match="augmentation_weight must be non-negative"):
         TrainConfig(augmentation_weight=-1.0)

@@ -236,3 +236,18 @@ def test_a_setting_added_later_compares_as_what_older_runs_did():
         off = json.loads(json.dumps(current))
         off["train"]["keep_best_itau"] = False
         assert _same_settings(old, off)
+
+
+def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
+    from furuta_gym.cli import build_parser
+    from furuta_gym.cli.reproduce import config_from_args
+    from furuta_gym.training.reproduce import REPRODUCE_QUADRATURE, training_config
+
+    parser = build_parser()
+    _, config = config_from_args(parser.parse_args(["reproduce", "--quadrature", "hermite", "--system", "furuta"]))
+    for kind, loss in config.pairs:  # L_Iτ and, for the Furuta, every run's scale fit
+        assert training_config("furuta", config, 0, loss, kind).quadrature == "hermite"
+    _, default = config_from_args(parser.parse_args(["reproduce"]))
+    assert training_config("nmsd", default, 0, "prop", "dln").quadrature == REPRODUCE_QUADRATURE
+    with pytest.raises(SystemExit):
+        parser.parse_args(["reproduce", "--quadrature", "boole"])

@@ -8,7 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["add_arguments", "config_from_args", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,12 +47,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--jobs", type=int, default=None, metavar="N",
         help="train N models at once in separate processes (default: the number of CPU cores, at most 8)",
     )
+    parser.add_argument(
+        "--quadrature", choices=["trapezoid", "simpson", "hermite"], default=None,
+        help="L_Iτ's rule and the scale fit's (default: the reproduction's recipe, "
+             "furuta_gym.training.reproduce.REPRODUCE_QUADRATURE)",
+    )
     parser.add_argument("--no-figures", action="store_true", help="tables only")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..training.reproduce import PAPER_PAIRS, ReproduceConfig, reproduce
+def config_from_args(args: argparse.Namespace):
+    """``(output folder, ReproduceConfig)`` of parsed ``furuta-gym reproduce`` arguments."""
+    from ..training.reproduce import PAPER_PAIRS, ReproduceConfig
 
     jobs = args.jobs if args.jobs is not None else max(1, min(os.cpu_count() or 1, 8))
     if jobs < 1:
@@ -84,10 +90,18 @@ def run(args: argparse.Namespace) -> int:
         epochs=epochs,
         prop_epochs=prop_epochs,
         ground_truth=args.ground_truth,
+        train_overrides={"quadrature": args.quadrature} if args.quadrature else None,
         figures=not args.no_figures,
         progress=not args.no_progress,
         jobs=jobs,
     )
+    return out, config
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..training.reproduce import reproduce
+
+    out, config = config_from_args(args)
     # a persistent compilation cache makes a resumed or repeated run skip most JAX compiles
     from ._cache import enable_compilation_cache
 

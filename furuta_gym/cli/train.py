@@ -73,7 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lambda", dest="lam", type=float, help="λ of L_prop / initial λ of L_aph (default 1)")
     parser.add_argument("--lambda-step", type=float,
                         help="dual-ascent step τ₂ on λ after each epoch (default 1000 for aph, 0 otherwise)")
-    parser.add_argument("--quadrature", choices=["trapezoid", "simpson"], help="L_Iτ rule (default trapezoid)")
+    parser.add_argument("--quadrature", choices=["trapezoid", "simpson", "hermite"],
+                        help="L_Iτ rule (default trapezoid, the paper's; hermite resolves the motion "
+                             "between samples from q and q̇ and all but removes the quadrature floor)")
     parser.add_argument("--hidden", type=_ints, help="MLP widths, e.g. 16,16")
     parser.add_argument("--seed", type=int, help="random seed (weights, shuffling)")
     parser.add_argument("--checkpoint-every", type=int, help="model snapshot every N epochs")

@@ -9,7 +9,8 @@ every loss is one ``jax.vmap`` over windows and jit-friendly:
   paper writes a sum; a mean keeps the magnitude independent of the batch size.)
 * :func:`integral_loss` — L_Iτ: Σ‖Z̄ − Ā‖² exactly as the paper's trapezoid formula, computed by
   :func:`furuta_gym.lagrangian.integral_residual` (``rule="trapezoid"``; ``"simpson"`` lowers the
-  quadrature floor), divided by a normaliser (see below).
+  quadrature floor, ``"hermite"`` all but removes it by resolving the motion between samples from
+  the measured q and q̇), divided by a normaliser (see below).
 * :func:`augmentation_penalty` — APHYNITY's ‖F_a‖²: the mean squared data-driven force over the
   window samples, in units of the model's ``force_scale``.
 * :func:`aphynity_loss` = ‖F_a‖² + λ·L_traj; :func:`proposed_loss` = L_Iτ + λ·L_traj, plus
@@ -43,7 +44,7 @@ from ..lagrangian import (
     QuadratureRule,
     integral_residual,
     interval_difference,
-    interval_integral,
+    interval_quadrature,
     momentum,
     quadrature_consistency,
     solve_mass_matrix,
@@ -240,8 +241,9 @@ def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmenta
         if not with_augmentation:
             return r, interval_difference(p, rule), None, None
         force = model.augmentation if augmentation_part == "full" else model.augmentation_beyond_linear
-        acc = jax.vmap(lambda q_, qd_: solve_mass_matrix(model.mass_matrix(q_), force(q_, qd_)))(q, qd)
-        return r, interval_difference(p, rule), interval_integral(acc, dt, rule), interval_difference(qd, rule)
+        acc = interval_quadrature(lambda q_, qd_, u_: solve_mass_matrix(model.mass_matrix(q_), force(q_, qd_)),
+                                  q, qd, u, dt, rule)
+        return r, interval_difference(p, rule), acc, interval_difference(qd, rule)
 
     return jax.vmap(one)(windows.t, windows.x, windows.u)
 

@@ -37,7 +37,7 @@ import optax
 
 from .._x64 import ensure_x64
 from ..data import Trajectory
-from ..lagrangian import QuadratureRule, integral_terms
+from ..lagrangian import QUADRATURE_RULES, QuadratureRule, integral_terms
 from ..systems import get_spec
 from . import _step_cache
 from . import checkpoint as ckpt
@@ -91,7 +91,9 @@ class TrainConfig:
     (``None``: all windows, one step per epoch);
     ``lambda_traj`` λ in L_aph / L_prop; ``lambda_step`` APHYNITY's dual-ascent step τ₂ (λ ← λ +
     τ₂·L_traj after every epoch; ``None``: 1000 for ``"aph"``, 0 — a fixed λ — otherwise);
-    ``quadrature`` "trapezoid" (paper) | "simpson"; ``normalize`` see
+    ``quadrature`` "trapezoid" (paper) | "simpson" | "hermite" (the paper's intervals, the motion
+    between samples resolved from the measured q and q̇:
+    :func:`~furuta_gym.lagrangian.interval_quadrature`); ``normalize`` see
     :mod:`furuta_gym.training.losses`; ``integral_window`` samples per L_Iτ window
     (trajectories are tiled into windows overlapping by one sample); ``integral_batch_size``
     L_Iτ windows per step (``None``: all). ``augmentation_weight`` μ of the minimum-norm term
@@ -153,8 +155,8 @@ class TrainConfig:
             raise ValueError(f"cosine_decay_to must be in (0, 1], got {self.cosine_decay_to!r}")
         if any(e < 0 for e in self.epochs):
             raise ValueError(f"epochs must be non-negative, got {self.epochs}")
-        if self.quadrature not in ("trapezoid", "simpson"):
-            raise ValueError(f"quadrature must be 'trapezoid' or 'simpson', got {self.quadrature!r}")
+        if self.quadrature not in QUADRATURE_RULES:
+            raise ValueError(f"quadrature must be one of {QUADRATURE_RULES}, got {self.quadrature!r}")
         if self.normalize not in ("auto", "momentum", "momentum_fixed", "none"):
             raise ValueError(f"normalize must be auto|momentum|momentum_fixed|none, got {self.normalize!r}")
         if self.augmentation_part not in AUGMENTATION_PARTS:
