@@ -63,17 +63,24 @@ def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int
     return scores
 
 
+def parse_selection_args(parser: argparse.ArgumentParser, argv, default_out: str) -> argparse.Namespace:
+    """The validation protocol's own arguments (shared by every selection script): the seed of the
+    validation draw, which may never be the test sets' seed 0, the output folder and the jobs."""
+    parser.add_argument("--validation-seed", type=int, default=100)
+    parser.add_argument("--out", type=Path, default=Path(default_out))
+    parser.add_argument("--jobs", type=int, default=2)
+    args = parser.parse_args(argv)
+    if args.validation_seed == 0:
+        parser.error("--validation-seed 0 is the test sets' seed; validation needs another")
+    return args
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--system", required=True, choices=("furuta", "nmsd"))
     parser.add_argument("--kind", required=True, choices=("adln", "aph"))
     parser.add_argument("--weights", type=float, nargs="+", default=[0.01, 0.1, 1.0, 10.0])
-    parser.add_argument("--validation-seed", type=int, default=100)
-    parser.add_argument("--out", type=Path, default=Path("results/augmentation_weight"))
-    parser.add_argument("--jobs", type=int, default=2)
-    args = parser.parse_args(argv)
-    if args.validation_seed == 0:
-        parser.error("--validation-seed 0 is the test sets' seed; validation needs another")
+    args = parse_selection_args(parser, argv, "results/augmentation_weight")
 
     import furuta_gym
     from furuta_gym.training.reproduce import _machine

@@ -151,9 +151,12 @@ FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 12000, ("nmsd", "dln"): 8000}
 #: Furuta stage let L_traj swamp L_Iτ and undid the fit (free α −1.52 → −0.67, forces −4.3 →
 #: −3.3, one run each), with λ = 1e-3 both stages keep it (α −1.59, forces −4.3).
 PROP_LAMBDA = 1e-3
-#: L_Iτ's quadrature in the reproduction: Simpson's rule (the issue's higher-order option). The
-#: paper's trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit;
-#: Simpson's floor is ~7× lower (tests/test_lagrangian.py). ``train_overrides`` can set "trapezoid".
+#: L_Iτ's quadrature in the reproduction (and the Furuta's scale fit): Simpson's rule. The paper's
+#: trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit; Simpson's
+#: floor is ~7× lower (tests/test_lagrangian.py). "hermite" removes the floor (true model 2e-9
+#: against 1.1e-5 on the Furuta training data) but on validation data it moved the three Furuta
+#: L_prop models by −0.06 to +0.09 decade, within the seed spread, at ~3× the L_Iτ cost
+#: (results/quadrature/furuta.md), so Simpson stays. ``--quadrature`` / ``train_overrides`` choose.
 REPRODUCE_QUADRATURE = "simpson"
 #: Adam's step in the L_Iτ-alone stage of the L_prop runs (the trajectory stages keep 1e-3). The
 #: N-MSD's (64, 64) networks crawl at 1e-3: L_Iτ on the training data was still 0.025 after 4000
