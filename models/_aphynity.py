@@ -55,6 +55,7 @@ class Aphynity(AbstractLearnedSystem):
         hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
         hp["damping_scale"] = DAMPING_SCALE[spec.name]
         hp["force_activation"] = FORCE_ACTIVATION
+        hp["odd_in_velocity"] = False  # see ForceNetwork
         unknown = set(hparams) - set(hp)
         if unknown:
             raise ValueError(f"unknown APHYNITY hyper-parameters {sorted(unknown)}; known: {sorted(hp)}")
@@ -79,7 +80,7 @@ class Aphynity(AbstractLearnedSystem):
             spec, key=key, hidden=tuple(hp["hidden"]), force_scale=hp["force_scale"],
             position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
             activation=hp["force_activation"], linear_velocity=hp["linear_velocity"],
-            damping_scale=hp["damping_scale"],
+            damping_scale=hp["damping_scale"], odd_in_velocity=hp["odd_in_velocity"],
         )
         self.scale = jnp.asarray(1.0)
         self.spec = spec

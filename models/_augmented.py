@@ -43,6 +43,12 @@ class ForceNetwork(eqx.Module):
     growing linearly. The paper's Furuta test sets start at |q̇| up to 20 rad/s, four times the
     training range; without W the learned rotor damping fell 10–25 % short at 20–25 rad/s.
 
+    ``odd_in_velocity``: the network part becomes ½(net(q, q̇) − net(q, −q̇)), odd in q̇ by
+    construction, so F_a(q, 0) = 0: a force of friction type (viscous, cubic, Coulomb are all odd)
+    and nothing even in q̇ — no spring, no gravity, no constant torque — which a general F_a can
+    take over from V at no cost to L_Iτ. Off by default (the paper's F_a is general); it rules
+    out real even effects such as a cable's spring, which the diagnosis loop looks for.
+
     ``linear_velocity``: ``"diagonal"`` (the models' default) one viscous coefficient per joint,
     each joint's friction from its own velocity, as in a bearing; ``True`` a full n × n matrix;
     ``False`` no linear term. The full matrix's off-diagonal entries are not friction: on the
@@ -58,9 +64,10 @@ class ForceNetwork(eqx.Module):
     position_scale: float = eqx.field(static=True)
     velocity_scale: float = eqx.field(static=True)
     damping_scale: float = eqx.field(static=True)
+    odd_in_velocity: bool = eqx.field(static=True)
 
     def __init__(self, spec, *, key, hidden, force_scale, position_scale, velocity_scale, activation="tanh",
-                 linear_velocity=True, damping_scale=None):
+                 linear_velocity=True, damping_scale=None, odd_in_velocity=False):
         n = spec.n_dof
         self.net = MLP(feature_size(spec) + n, n, tuple(hidden), key=key, activation=activation, final_scale=0.1)
         # a string must name the per-joint term; anything else is read as a flag (hyper-parameters
@@ -77,6 +84,9 @@ class ForceNetwork(eqx.Module):
         self.velocity_scale = float(velocity_scale)
         # None: the scale models saved before damping_scale existed were trained with
         self.damping_scale = float(force_scale / velocity_scale if damping_scale is None else damping_scale)
+        if not isinstance(odd_in_velocity, bool):
+            raise ValueError(f"odd_in_velocity must be True or False, got {odd_in_velocity!r}")
+        self.odd_in_velocity = odd_in_velocity
 
     def __call__(self, q, qd):
         out = self.beyond_linear(q, qd)
@@ -87,8 +97,11 @@ class ForceNetwork(eqx.Module):
 
     def beyond_linear(self, q, qd):
         """The network's part of F_a: F_a without the linear viscous term W·q̇."""
-        x = jnp.concatenate([coordinate_features(self.spec, q, self.position_scale), qd / self.velocity_scale])
-        return self.force_scale * self.net(x)
+        features = coordinate_features(self.spec, q, self.position_scale)
+        out = self.net(jnp.concatenate([features, qd / self.velocity_scale]))
+        if self.odd_in_velocity:
+            out = 0.5 * (out - self.net(jnp.concatenate([features, -qd / self.velocity_scale])))
+        return self.force_scale * out
 
 
 class AugmentedDeLaN(AbstractLearnedSystem):
@@ -110,6 +123,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
         hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
         hp["damping_scale"] = DAMPING_SCALE[spec.name]
         hp["force_activation"] = FORCE_ACTIVATION
+        hp["odd_in_velocity"] = False  # see ForceNetwork
         unknown = set(hparams) - set(hp) - {"eps", "activation"}
         if unknown:
             raise ValueError(f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}")
@@ -125,7 +139,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
             spec, key=kf, hidden=tuple(hp["force_hidden"]), force_scale=hp["force_scale"],
             position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
             activation=hp["force_activation"], linear_velocity=hp["linear_velocity"],
-            damping_scale=hp["damping_scale"],
+            damping_scale=hp["damping_scale"], odd_in_velocity=hp["odd_in_velocity"],
         )
         self.scale = jnp.asarray(1.0)
         self.spec = spec

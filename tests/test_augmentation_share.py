@@ -141,6 +141,24 @@ def test_force_network_linear_velocity_term_and_activation():
     assert plain.lagrangian_nets.mass_net.activation == "tanh"
 
 
+@pytest.mark.parametrize("system, kind", [("nmsd", "adln"), ("furuta", "aph")])
+def test_force_network_odd_in_velocity_holds_no_force_at_rest(system, kind):
+    """odd_in_velocity: F_a(q, −q̇) = −F_a(q, q̇), so nothing even in q̇ (a spring, gravity, a
+    constant torque) can sit in F_a. Off by default: the general F_a has a force at rest."""
+    odd = make_model(system, kind, jax.random.PRNGKey(4), odd_in_velocity=True)
+    general = make_model(system, kind, jax.random.PRNGKey(4))
+    assert dict(general.hparams)["odd_in_velocity"] is False
+    n = odd.spec.n_dof
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        q, qd = jnp.asarray(rng.uniform(-2, 2, n)), jnp.asarray(rng.uniform(-8, 8, n))
+        np.testing.assert_allclose(odd.augmentation(q, -qd), -odd.augmentation(q, qd), rtol=0, atol=1e-18)
+        assert float(jnp.max(jnp.abs(odd.augmentation(q, jnp.zeros(n))))) == 0.0
+        assert float(jnp.max(jnp.abs(general.augmentation(q, jnp.zeros(n))))) > 0.0
+    with pytest.raises(ValueError, match="odd_in_velocity must be True or False"):
+        make_model(system, kind, 0, odd_in_velocity="yes")
+
+
 def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_path):
     """A checkpoint whose header predates prior_back_emf / linear_velocity / force_activation
     rebuilds the architecture it was trained with (back-EMF in the prior, no W, tanh)."""
@@ -152,7 +170,7 @@ def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_p
                      force_activation="tanh")
     path = ckpt.save_model(tmp_path / "old.eqx", old)
     header, payload = ckpt._read(path)
-    for key in ("prior_back_emf", "linear_velocity", "force_activation"):
+    for key in ("prior_back_emf", "linear_velocity", "force_activation", "odd_in_velocity"):
         del header["hparams"][key]
     ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")},
                 old, overwrite=True)
@@ -160,6 +178,7 @@ def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_p
     loaded = ckpt.load_model(path)
     q, qd, u = jnp.array([0.3, 1.0]), jnp.array([4.0, -2.0]), jnp.array([1.5])
     np.testing.assert_array_equal(loaded.augmentation(q, qd), old.augmentation(q, qd))
+    assert loaded.force_net.odd_in_velocity is False
     np.testing.assert_array_equal(loaded.input_force(q, qd, u), old.input_force(q, qd, u))
 
 

@@ -238,6 +238,23 @@ def test_a_setting_added_later_compares_as_what_older_runs_did():
         assert _same_settings(old, off)
 
 
+def test_a_model_hyperparameter_added_later_compares_as_what_older_models_were():
+    """Runs recorded before F_a's odd_in_velocity existed had a general F_a: they match today's
+    default and not a model with the option on."""
+    from furuta_gym.training.reproduce import _default_hparams, _same_settings
+    from furuta_gym.training.train import TrainConfig
+
+    train = json.loads(json.dumps(TrainConfig().to_json()))
+    current = {"system": "nmsd", "model": "adln", "loss": "prop", "seed": 0, "train": train,
+               "model_hparams": _default_hparams("nmsd", "adln")}
+    old = json.loads(json.dumps(current))
+    del old["model_hparams"]["odd_in_velocity"]
+    assert _same_settings(old, current)
+    odd = json.loads(json.dumps(current))
+    odd["model_hparams"]["odd_in_velocity"] = True
+    assert not _same_settings(old, odd)
+
+
 def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
     from furuta_gym.cli import build_parser
     from furuta_gym.cli.reproduce import config_from_args

@@ -185,6 +185,8 @@ def _skeleton(header: dict, path: Path, expected_system: str | None, expected_ki
         hparams["linear_velocity"] = False
     if kind in ("aph", "adln") and "damping_scale" not in hparams:
         hparams["damping_scale"] = None  # W in units of force_scale / velocity_scale, as trained
+    if kind in ("aph", "adln") and "odd_in_velocity" not in hparams:
+        hparams["odd_in_velocity"] = False
     if kind in ("aph", "adln") and "force_activation" not in hparams:
         hparams["force_activation"] = hparams.pop("activation", "tanh") if kind == "aph" else hparams.get("activation", "tanh")
     try:
