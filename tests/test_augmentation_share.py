@@ -144,10 +144,9 @@ def test_force_network_linear_velocity_term_and_activation():
 @pytest.mark.parametrize("system, kind", [("nmsd", "adln"), ("furuta", "aph")])
 def test_force_network_odd_in_velocity_holds_no_force_at_rest(system, kind):
     """odd_in_velocity: F_a(q, −q̇) = −F_a(q, q̇), so nothing even in q̇ (a spring, gravity, a
-    constant torque) can sit in F_a. Off by default: the general F_a has a force at rest."""
+    constant torque) can sit in F_a. A general F_a has a force at rest."""
     odd = make_model(system, kind, jax.random.PRNGKey(4), odd_in_velocity=True)
-    general = make_model(system, kind, jax.random.PRNGKey(4))
-    assert dict(general.hparams)["odd_in_velocity"] is False
+    general = make_model(system, kind, jax.random.PRNGKey(4), odd_in_velocity=False)
     n = odd.spec.n_dof
     rng = np.random.default_rng(0)
     for _ in range(5):
@@ -157,6 +156,15 @@ def test_force_network_odd_in_velocity_holds_no_force_at_rest(system, kind):
         assert float(jnp.max(jnp.abs(general.augmentation(q, jnp.zeros(n))))) > 0.0
     with pytest.raises(ValueError, match="odd_in_velocity must be True or False"):
         make_model(system, kind, 0, odd_in_velocity="yes")
+
+
+def test_only_augmented_delan_on_the_nmsd_has_an_odd_force_by_default():
+    """The per-system choice made on validation data (models/_augmented.py, ADLN_ODD_IN_VELOCITY)."""
+    defaults = {(s, k): dict(make_model(s, k, 0).hparams)["odd_in_velocity"]
+                for s in ("nmsd", "furuta") for k in ("aph", "adln")}
+    assert defaults == {("nmsd", "aph"): False, ("nmsd", "adln"): True,
+                        ("furuta", "aph"): False, ("furuta", "adln"): False}
+    assert make_model("nmsd", "adln", 0).force_net.odd_in_velocity is True
 
 
 def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_path):

@@ -239,14 +239,20 @@ def test_a_setting_added_later_compares_as_what_older_runs_did():
 
 
 def test_a_model_hyperparameter_added_later_compares_as_what_older_models_were():
-    """Runs recorded before F_a's odd_in_velocity existed had a general F_a: they match today's
-    default and not a model with the option on."""
+    """Runs recorded before F_a's odd_in_velocity existed had a general F_a: they match a model
+    with a general F_a (the Furuta's augmented DeLaN today) and not one with the option on (the
+    N-MSD's, whose old runs are therefore retrained)."""
     from furuta_gym.training.reproduce import _default_hparams, _same_settings
     from furuta_gym.training.train import TrainConfig
 
     train = json.loads(json.dumps(TrainConfig().to_json()))
-    current = {"system": "nmsd", "model": "adln", "loss": "prop", "seed": 0, "train": train,
-               "model_hparams": _default_hparams("nmsd", "adln")}
+    current = {"system": "furuta", "model": "adln", "loss": "prop", "seed": 0, "train": train,
+               "model_hparams": _default_hparams("furuta", "adln")}
+    nmsd = {"system": "nmsd", "model": "adln", "loss": "prop", "seed": 0, "train": train,
+            "model_hparams": _default_hparams("nmsd", "adln")}
+    old_nmsd = json.loads(json.dumps(nmsd))
+    del old_nmsd["model_hparams"]["odd_in_velocity"]
+    assert not _same_settings(old_nmsd, nmsd)
     old = json.loads(json.dumps(current))
     del old["model_hparams"]["odd_in_velocity"]
     assert _same_settings(old, current)
@@ -268,3 +274,18 @@ def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
     assert training_config("nmsd", default, 0, "prop", "dln").quadrature == REPRODUCE_QUADRATURE
     with pytest.raises(SystemExit):
         parser.parse_args(["reproduce", "--quadrature", "boole"])
+
+
+def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys():
+    """A run trained with a model option records it, so it is never reused for the default model."""
+    from furuta_gym.training.reproduce import _default_hparams, _same_settings
+
+    default = _default_hparams("furuta", "adln")
+    odd = _default_hparams("furuta", "adln", {"odd_in_velocity": True})
+    assert default["odd_in_velocity"] is False and odd["odd_in_velocity"] is True
+    assert {k: v for k, v in odd.items() if k != "odd_in_velocity"} == \
+        {k: v for k, v in default.items() if k != "odd_in_velocity"}
+    record = {"system": "furuta", "model": "adln", "loss": "prop", "seed": 0, "train": {}}
+    assert not _same_settings(dict(record, model_hparams=odd), dict(record, model_hparams=default))
+    with pytest.raises(ValueError, match="unknown DeLaN hyper-parameters|unknown"):
+        _default_hparams("furuta", "dln", {"odd_in_velocity": True})

@@ -91,7 +91,10 @@ class ReproduceConfig:
     ``{system: (stage-1 epochs, stage-2 epochs)}`` of the L_traj / L_aph runs; ``prop_epochs``
     the same for L_prop, ``{system: (L_Iτ-alone epochs, stage 1, stage 2)}`` (a pair: no L_Iτ
     stage); ``small_data`` overrides the dataset size
-    (default: small when quick); ``train_overrides``: extra :class:`TrainConfig` fields.
+    (default: small when quick); ``train_overrides``: extra :class:`TrainConfig` fields;
+    ``model_overrides``: model hyper-parameters (:func:`~furuta_gym.models.make_model` keywords)
+    for every model of the run, recorded with its settings like the defaults (a key a model kind
+    does not know is an error, so runs that override F_a options name only aph / adln pairs).
     """
 
     quick: bool = False
@@ -103,6 +106,7 @@ class ReproduceConfig:
     prop_epochs: dict | None = None
     small_data: bool | None = None
     train_overrides: dict | None = None
+    model_overrides: dict | None = None
     ground_truth: str = "auto"
     figures: bool = True
     progress: bool = True
@@ -337,14 +341,14 @@ def _without_inert_settings(settings: dict) -> dict:
     return dict(settings, train=train)
 
 
-def _default_hparams(system: str, kind: str) -> dict:
-    """The architecture a new model of this kind gets (so a run trained with another is never
-    silently reused)."""
+def _default_hparams(system: str, kind: str, overrides: dict | None = None) -> dict:
+    """The architecture a new model of this kind gets, with ``overrides`` (so a run trained with
+    another is never silently reused)."""
     import jax
 
     from ..models import make_model
 
-    model = make_model(system, kind, jax.random.PRNGKey(0))
+    model = make_model(system, kind, jax.random.PRNGKey(0), **(overrides or {}))
     return json.loads(json.dumps(dict(model.hparams), default=str))
 
 
@@ -358,7 +362,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     model_path = run_dir / MODEL_FILE
     tcfg = training_config(system, config, seed, loss, kind)
     cfg_json = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": tcfg.to_json(),
-                "model_hparams": _default_hparams(system, kind)}
+                "model_hparams": _default_hparams(system, kind, config.model_overrides)}
     cfg_json["train"].pop("progress", None)
     cfg_path = run_dir / "reproduce_config.json"
     if cfg_path.exists():
@@ -389,7 +393,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
         forced = data.get("scale_fit") if system == "furuta" else None
         try:
             train(kind, system, loss, data["train"], tcfg, out_dir=run_dir, resume=resume,
-                  forced_trajs=forced)
+                  forced_trajs=forced, hparams=config.model_overrides)
             error = None if model_path.exists() else "training ended without a finite model"
         except (ValueError, FloatingPointError, RuntimeError) as exc:  # e.g. a failed scale fit
             error = f"{type(exc).__name__}: {exc}"

@@ -1,0 +1,161 @@
+"""Choose one option of the reproduction's recipe on validation data, never on the test sets the
+reproduction reports: a training setting (``--train NAME VALUE …``, e.g. L_Iτ's quadrature) or a
+model option (``--model NAME VALUE …``, e.g. F_a's ``odd_in_velocity``).
+
+Every value trains each named L_prop model with the full reproduction recipe (the same data, seed
+0, epochs and μ as ``furuta-gym reproduce``; only that option differs). Every model then predicts
+the trajectories of the *validation* draw (the test recipes generated with seed 100; the test sets
+use 0), and the mean open-loop prediction log10 RMSE over sets and state variables is the
+criterion, as for μ (bench/select_augmentation_weight.py). The choice goes into the code by hand.
+
+    python bench/select_option.py --system furuta --kinds dln aph adln \
+        --train quadrature simpson hermite --reuse results/reproduce --out results/quadrature
+    python bench/select_option.py --system nmsd --kinds adln --model odd_in_velocity false true \
+        --reuse results/augmentation_weight/nmsd_adln/mu_0.01 --out results/force_parity
+
+Values are JSON where they parse (false, 0.1) and strings otherwise. ``--reuse DIR``: a run of
+DIR (a reproduction's output) whose recorded settings are exactly a candidate's is copied in
+instead of trained again (the reproduction then reuses it as it would its own). Writes
+``OUT/<system>.md`` / ``.json``; runs live under ``OUT/<system>_<kind>/<value>``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import shutil
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from select_augmentation_weight import _run_dir, _score, parse_selection_args
+
+
+def _parse(text: str):
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def _config(system: str, kind: str, where: str, name: str, value):
+    """The reproduction config of one candidate: ``where`` is "train" or "model"."""
+    from furuta_gym.training.reproduce import ReproduceConfig
+
+    override = {name: value}
+    return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), figures=False, progress=False, jobs=1,
+                           train_overrides=override if where == "train" else None,
+                           model_overrides=override if where == "model" else None)
+
+
+def _train(system: str, kind: str, where: str, name: str, value, out: Path) -> None:
+    import furuta_gym
+    from furuta_gym.training.reproduce import reproduce
+
+    furuta_gym.enable_x64()
+    reproduce(out, _config(system, kind, where, name, value),
+              command=f"bench/select_option.py {system} {kind} {where} {name}={value!r}", log=lambda msg: None)
+
+
+def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path) -> bool:
+    """Copy ``source``'s run of this model into ``out`` if it was trained with exactly the
+    candidate's settings (the reproduction's own comparison decides); True if ``out`` holds it."""
+    from furuta_gym.training.reproduce import _default_hparams, _same_settings, training_config
+
+    src = _run_dir(source, system, kind)
+    dst = _run_dir(out, system, kind)
+    if not (src / "model.eqx").exists() or not (src / "reproduce_config.json").exists():
+        return False
+    if dst.exists():  # copied by an earlier invocation?
+        return (dst / "model.eqx").exists() and (dst / "model.eqx").read_bytes() == (src / "model.eqx").read_bytes()
+    tcfg = training_config(system, config, 0, "prop", kind).to_json()
+    tcfg.pop("progress", None)
+    current = {"system": system, "model": kind, "loss": "prop", "seed": 0, "train": tcfg,
+               "model_hparams": _default_hparams(system, kind, config.model_overrides)}
+    saved = json.loads((src / "reproduce_config.json").read_text())
+    if not _same_settings(saved, json.loads(json.dumps(current))):
+        return False
+    dst.mkdir(parents=True)
+    for name in ("model.eqx", "metrics.json", "reproduce_config.json", "history.json"):
+        if (src / name).exists():
+            shutil.copy2(src / name, dst / name)
+    return True
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--system", required=True, choices=("furuta", "nmsd"))
+    parser.add_argument("--kinds", nargs="+", default=["dln", "aph", "adln"], choices=("dln", "aph", "adln"))
+    option = parser.add_mutually_exclusive_group(required=True)
+    option.add_argument("--train", nargs="+", metavar=("NAME", "VALUE"), help="a TrainConfig field and its values")
+    option.add_argument("--model", nargs="+", metavar=("NAME", "VALUE"), help="a model option and its values")
+    parser.add_argument("--reuse", type=Path, default=None, help="a reproduction's output to copy matching runs from")
+    args = parse_selection_args(parser, argv, "results/selection")
+    where = "train" if args.train else "model"
+    name, *texts = args.train or args.model
+    if len(texts) < 2:
+        parser.error(f"--{where} {name}: give at least two values to choose between")
+
+    import furuta_gym
+    from furuta_gym.training.reproduce import _machine
+
+    furuta_gym.enable_x64()
+    machine = _machine()
+    candidates = [(kind, text, _config(args.system, kind, where, name, _parse(text)),
+                   args.out / f"{args.system}_{kind}" / text) for kind in args.kinds for text in texts]
+    copied = [(k, t) for k, t, cfg, out in candidates
+              if args.reuse is not None and _copy_matching_run(args.reuse, args.system, k, cfg, out)]
+    # spawn, not fork: comparing settings above already ran JAX, whose threads a forked child
+    # would inherit mid-flight (it deadlocked)
+    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        list(pool.map(_train, *zip(*[(args.system, k, where, name, _parse(t), out) for k, t, _, out in candidates])))
+    rows = {}
+    for kind in args.kinds:
+        runs = {text: out for k, text, _, out in candidates if k == kind}
+        scores = _score(args.system, kind, runs, args.validation_seed)
+        for text, out in runs.items():
+            metrics = json.loads((_run_dir(out, args.system, kind) / "metrics.json").read_text())
+            scores[text]["train_seconds"] = metrics["_seconds"]["train"]
+            scores[text]["reused_from"] = str(args.reuse) if (kind, text) in copied else None
+        rows[kind] = scores
+    first = next(iter(next(iter(rows.values())).values()))
+    sets = list(first["sets"])
+    names = list(first["sets"][sets[0]])
+    lines = [
+        f"# {name} for the {args.system} L_prop runs, chosen on validation data",
+        "",
+        f"`python bench/select_option.py --system {args.system} --kinds {' '.join(args.kinds)} "
+        f"--{where} {name} {' '.join(texts)} --validation-seed {args.validation_seed}"
+        + (f" --reuse {args.reuse}" if args.reuse else "") + f" --out {args.out}`, "
+        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', 'cpu')}, "
+        f"{machine['cpu_count']} cores. Training seconds from each run's metrics.json (runs trained "
+        "beside others are slower than alone).",
+        "",
+        f"Open-loop prediction log10 RMSE on the validation draw (seed {args.validation_seed}; the "
+        "reported test sets are seed 0 and take no part in the choice). Lower is better; the mean is "
+        "the criterion.",
+        "",
+        f"| model | {name} | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean | train s |",
+        "|---|---|" + "---:|" * (len(sets) * len(names) + 2),
+    ]
+    chosen = {}
+    for kind, scores in rows.items():
+        best = min(scores, key=lambda t: scores[t]["mean"])
+        chosen[kind] = best
+        for text, sc in scores.items():
+            cells = [sc["sets"][s][n] for s in sets for n in names]
+            cell_text = " | ".join(c if isinstance(c, str) else f"{c:.2f}" for c in cells)
+            mark = " ← lower" if text == best else ""
+            reused = " (reused)" if sc["reused_from"] else ""
+            lines.append(f"| {kind} | {text}{reused} | {cell_text} | **{sc['mean']:.3f}**{mark} | {sc['train_seconds']:.0f} |")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / f"{args.system}.md").write_text("\n".join(lines) + "\n")
+    (args.out / f"{args.system}.json").write_text(json.dumps(
+        {"system": args.system, "option": {where: name}, "validation_seed": args.validation_seed,
+         "lower": chosen, "scores": rows}, indent=1) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
