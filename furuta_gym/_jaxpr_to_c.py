@@ -33,6 +33,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ._paths import cache_root
+
 __all__ = ["CKernel", "CKernelError", "c_compiler"]
 
 
@@ -803,8 +805,7 @@ _CFLAGS = ("-O2", "-std=c99", "-shared", "-fPIC", "-fno-math-errno", "-fopenmp-s
 
 
 def _cache_dir() -> Path:
-    base = os.environ.get("FURUTA_GYM_CACHE") or os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache")
-    path = Path(base) / "furuta_gym" / "c_kernels"
+    path = cache_root() / "c_kernels"
     try:
         path.mkdir(parents=True, exist_ok=True)
         probe = path / ".probe"

@@ -161,6 +161,13 @@ def test_training_commands_turn_the_cache_on_where_asked_and_never_when_told_not
     env["JAX_COMPILATION_CACHE_DIR"] = str(tmp_path / "c")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.split() == [str(tmp_path / "c")] * 2 and (tmp_path / "c").is_dir()
+    # without JAX_COMPILATION_CACHE_DIR it lives under the one cache root, which XDG_CACHE_HOME
+    # moves like the C kernels' (an empty XDG_CACHE_HOME is a cold start for everything)
+    del env["JAX_COMPILATION_CACHE_DIR"]
+    env.pop("FURUTA_GYM_CACHE", None)
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == [str(tmp_path / "xdg" / "furuta_gym" / "jax")] * 2
     env["FURUTA_GYM_COMPILATION_CACHE"] = "0"
     env["JAX_COMPILATION_CACHE_DIR"] = str(tmp_path / "d")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)

@@ -3,8 +3,9 @@
 A training step with the trajectory loss compiles for ~20 s; a persistent cache pays that once
 per machine instead of once per run (and, with it, :mod:`furuta_gym.training._step_cache`
 stores the traced steps too, so a warm first call takes ~1 s). The library itself never writes
-caches; the ``train`` and ``reproduce`` commands do, in
-``~/.cache/furuta_gym/jax`` — or wherever ``JAX_COMPILATION_CACHE_DIR`` points. Set
+caches; the ``train`` and ``reproduce`` commands do, in ``jax/`` under the cache root of
+:func:`furuta_gym._paths.cache_root` (``~/.cache/furuta_gym`` unless ``FURUTA_GYM_CACHE`` or
+``XDG_CACHE_HOME`` move it) — or wherever ``JAX_COMPILATION_CACHE_DIR`` points. Set
 ``FURUTA_GYM_COMPILATION_CACHE=0`` to turn it off.
 """
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-DEFAULT_CACHE_DIR = Path.home() / ".cache" / "furuta_gym" / "jax"
+from .._paths import cache_root
 
 
 def enable_compilation_cache() -> Path | None:
@@ -23,7 +24,7 @@ def enable_compilation_cache() -> Path | None:
         return None
     import jax
 
-    cache = Path(os.environ.get("JAX_COMPILATION_CACHE_DIR") or DEFAULT_CACHE_DIR).expanduser()
+    cache = Path(os.environ.get("JAX_COMPILATION_CACHE_DIR") or cache_root() / "jax").expanduser()
     try:
         cache.mkdir(parents=True, exist_ok=True)
         # the environment too: worker processes (reproduce --jobs) start a fresh JAX that reads it
