@@ -162,6 +162,12 @@ def _model_header(model, meta: dict | None) -> dict:
     }
 
 
+#: F_a hyper-parameters added after checkpoints (and reproduction run records) began to hold
+#: hyper-parameters, and what every model saved before them was; a header or record without one
+#: is read as this value (furuta_gym.training.reproduce compares records the same way)
+HPARAMS_BEFORE_RECORDED = {"odd_in_velocity": False}
+
+
 def _skeleton(header: dict, path: Path, expected_system: str | None, expected_kind: str | None = None):
     from ..models import MODEL_KINDS, make_model
     from ..systems import get_spec
@@ -185,8 +191,9 @@ def _skeleton(header: dict, path: Path, expected_system: str | None, expected_ki
         hparams["linear_velocity"] = False
     if kind in ("aph", "adln") and "damping_scale" not in hparams:
         hparams["damping_scale"] = None  # W in units of force_scale / velocity_scale, as trained
-    if kind in ("aph", "adln") and "odd_in_velocity" not in hparams:
-        hparams["odd_in_velocity"] = False
+    if kind in ("aph", "adln"):
+        for key, value in HPARAMS_BEFORE_RECORDED.items():
+            hparams.setdefault(key, value)
     if kind in ("aph", "adln") and "force_activation" not in hparams:
         hparams["force_activation"] = hparams.pop("activation", "tanh") if kind == "aph" else hparams.get("activation", "tanh")
     try:

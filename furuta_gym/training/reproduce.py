@@ -302,8 +302,6 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
 #: training settings added with a default that changed behaviour, and what every run recorded
 #: before the setting existed did
 SETTINGS_BEFORE_RECORDED = {"keep_best_itau": False}
-#: model hyper-parameters added later, and what every model recorded before them was
-HPARAMS_BEFORE_RECORDED = {"odd_in_velocity": False}
 
 
 def _same_settings(saved: dict, current: dict) -> bool:
@@ -317,6 +315,8 @@ def _same_settings(saved: dict, current: dict) -> bool:
     if "model_hparams" not in saved:  # recorded since 2026-11-23; older runs without a checkpoint: trusted
         current = {k: v for k, v in current.items() if k != "model_hparams"}
     elif "model_hparams" in current:
+        from .checkpoint import HPARAMS_BEFORE_RECORDED  # what a model recorded before a key existed was
+
         hp = dict(saved["model_hparams"])
         for key in current["model_hparams"].keys() - hp.keys():
             if key in HPARAMS_BEFORE_RECORDED:
