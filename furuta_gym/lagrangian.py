@@ -370,12 +370,17 @@ def integral_terms(
     """Ā and Z̄ of one uniformly sampled trajectory; no accelerations needed."""
     p = jax.vmap(lambda q_, qd_: momentum(system, q_, qd_))(q, qd)
 
-    def forces(q_, qd_, u_):  # both integrands in one pass over the rule's points
-        return jnp.stack([potential_derived_force(system, q_, qd_) + system.nonconservative_force(q_, qd_),
-                          system.input_force(q_, qd_, u_)])
+    def forces(q_, qd_, u_):
+        return (potential_derived_force(system, q_, qd_) + system.nonconservative_force(q_, qd_),
+                system.input_force(q_, qd_, u_))
 
-    integrals = interval_quadrature(forces, q, qd, u, dt, rule)
-    return IntegralTerms(A=interval_difference(p, rule) - integrals[:, 0], Z=integrals[:, 1])
+    if rule == "hermite":  # one pass over the interior nodes for both integrands
+        f, tau_u = interval_quadrature(lambda *a: jnp.stack(forces(*a)), q, qd, u, dt, rule).swapaxes(0, 1)
+        return IntegralTerms(A=interval_difference(p, rule) - f, Z=tau_u)
+    f, tau_u = jax.vmap(forces)(q, qd, u)
+    A = interval_difference(p, rule) - interval_integral(f, dt, rule)
+    Z = interval_integral(tau_u, dt, rule)
+    return IntegralTerms(A=A, Z=Z)
 
 
 def integral_residual(
