@@ -130,6 +130,31 @@ def test_exported_step_round_trips_through_disk_exactly(itau_step, tmp_path):
         _step_cache.ExportedStep(_never_traced, other, tmp_path)(*args)
 
 
+def test_an_exported_step_compiles_once_for_a_whole_run(itau_step, tmp_path):
+    """The stored step returns arrays committed to their device, while a run's first params and
+    optimiser state (and every batch) arrive uncommitted: feeding its outputs back, as training
+    does, must not compile the step a second time (seconds per run for a trajectory loss)."""
+    step, args, key = itau_step
+    compiles, listening = [], [True]
+
+    def on_duration(event, duration, **kwargs):
+        if listening[0] and event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(on_duration)
+    try:
+        exported = _step_cache.ExportedStep(step, key, tmp_path)
+        params, opt_state, _, _ = exported(*args)
+        after_first = len(compiles)
+        assert after_first >= 1  # the listener sees compilations
+        for _ in range(3):
+            params, opt_state, terms, ok = exported(params, opt_state, *args[2:])
+        assert len(compiles) == after_first
+        assert bool(ok) and float(terms["itau"]) > 0
+    finally:
+        listening[0] = False
+
+
 def test_a_damaged_stored_step_is_replaced_not_trusted(itau_step, tmp_path):
     step, args, key = itau_step
     _step_cache.ExportedStep(step, key, tmp_path)(*args)

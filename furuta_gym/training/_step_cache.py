@@ -208,6 +208,13 @@ class ExportedStep:
         run = jax.jit(exp.call)
 
         def call(args, leaves):
+            # The deserialised computation returns arrays committed to their device, while a
+            # run's first params / opt_state and every batch arrive uncommitted. jit keys its
+            # compilation on that too, so the first and second calls each compiled the whole step
+            # (6-10 s for a trajectory loss, once per training run). Committing every argument
+            # where it already lives makes all calls alike: one compilation, same results.
+            leaves = [leaf if leaf.committed else jax.device_put(leaf, next(iter(leaf.devices())))
+                      for leaf in leaves]
             out = run(*leaves)
             params = jax.tree_util.tree_unflatten(params_def, out[:n_params])
             opt_state = jax.tree_util.tree_unflatten(opt_def, out[n_params : n_params + n_opt])
