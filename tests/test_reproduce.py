@@ -122,11 +122,17 @@ def test_parallel_jobs_give_the_sequential_models_and_a_seed_spread(tiny_run, tm
     import dataclasses
 
     out, _, _ = tiny_run
-    config = dataclasses.replace(TINY, seeds=(0, 1), jobs=2, figures=False)
+    config = dataclasses.replace(TINY, seeds=(0, 1), jobs=2)
     logs = []
     paths = reproduce(tmp_path / "par", config, log=logs.append)
     record = json.loads(paths["run.json"].read_text())
     assert {record["seconds"][f"nmsd/dln_prop/seed{k}"]["status"] for k in (0, 1)} == {"trained"}
+    # the figures are made in the pool once the system's models are done, and reported like
+    # the sequential run's
+    assert not any("figures failed" in line for line in logs)
+    for name in ("predictions_nmsd", "energy_state_nmsd", "energy_time_nmsd", "forces_nmsd"):
+        assert paths[name].parent == tmp_path / "par" / "figures" and paths[name].stat().st_size > 10_000
+    assert record["seconds"]["figures"] == record["seconds"]["figures/nmsd"] > 0
     seq = json.loads((out / "runs" / "nmsd" / "dln_prop" / "seed0" / "metrics.json").read_text())
     par = [json.loads((tmp_path / "par" / "runs" / "nmsd" / "dln_prop" / f"seed{k}" / "metrics.json").read_text())
            for k in (0, 1)]
@@ -138,6 +144,25 @@ def test_parallel_jobs_give_the_sequential_models_and_a_seed_spread(tiny_run, tm
     with open(paths["tables.csv"]) as fh:
         rows = list(csv.DictReader(fh))
     assert all(r["n_seeds"] == "2" and float(r["ours_std"]) > 0 and "±" in r["ours"] for r in rows)
+
+
+def test_a_pool_starts_the_longest_models_first():
+    from furuta_gym.training.reproduce import EXPECTED_SECONDS, PAPER_PAIRS, _longest_first
+
+    for quick in (True, False):
+        config = ReproduceConfig(quick=quick)
+        tasks = [(s, k, l, seed) for s in config.systems for k, l in PAPER_PAIRS for seed in (0, 1)]
+        table = EXPECTED_SECONDS["quick" if quick else "full"]
+        assert set(table) == {t[:3] for t in tasks}  # every model of the run has an estimate
+        ordered = _longest_first(tasks, config)
+        assert sorted(ordered) == sorted(tasks)
+        costs = [table[t[:3]] for t in ordered]
+        assert costs == sorted(costs, reverse=True)
+        # the seeds of one model stay in the order given
+        assert [t[3] for t in ordered if t[:3] == ordered[0][:3]] == [0, 1]
+    # the full run's longest is an N-MSD L_prop model, not the Furuta trajectory runs started
+    # first before
+    assert _longest_first(tasks, ReproduceConfig())[0][:3] == ("nmsd", "adln", "prop")
 
 
 def test_evaluate_cli_on_the_trained_checkpoint(tiny_run, tmp_path):

@@ -430,19 +430,77 @@ def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
     return metrics, round(time.perf_counter() - t0, 1), status
 
 
+#: Seconds one model takes (training + evaluation, one seed) on this project's 2-core Xeon, from
+#: the committed run records (results/reproduce/run.json and the seed runs beside it for the full
+#: recipe, results/reproduce_quick/run.json for --quick). Only the order in which a pool of jobs
+#: starts the models reads them: longest first, so no job is left with a long model at the end
+#: while the others idle (LPT scheduling). Replayed on 2 jobs with the 2026-11-25 records, the
+#: order used before (Furuta first, trajectory losses before L_prop) finished the full run's 12
+#: models in 59 min and --quick's in 280 s; longest first, in 53 min and 264 s.
+EXPECTED_SECONDS = {
+    "full": {
+        ("nmsd", "dln", "traj"): 870, ("nmsd", "dln", "prop"): 1000, ("nmsd", "aph", "aph"): 140,
+        ("nmsd", "aph", "prop"): 200, ("nmsd", "adln", "aph"): 970, ("nmsd", "adln", "prop"): 1400,
+        ("furuta", "dln", "traj"): 300, ("furuta", "dln", "prop"): 190, ("furuta", "aph", "aph"): 80,
+        ("furuta", "aph", "prop"): 120, ("furuta", "adln", "aph"): 100, ("furuta", "adln", "prop"): 860,
+    },
+    "quick": {
+        ("nmsd", "dln", "traj"): 38, ("nmsd", "dln", "prop"): 56, ("nmsd", "aph", "aph"): 32,
+        ("nmsd", "aph", "prop"): 39, ("nmsd", "adln", "aph"): 44, ("nmsd", "adln", "prop"): 62,
+        ("furuta", "dln", "traj"): 42, ("furuta", "dln", "prop"): 39, ("furuta", "aph", "aph"): 36,
+        ("furuta", "aph", "prop"): 44, ("furuta", "adln", "aph"): 45, ("furuta", "adln", "prop"): 49,
+    },
+}
+
+
+def _longest_first(tasks, config: ReproduceConfig) -> list:
+    """``tasks`` in the order a pool should start them: longest expected first (ties: as given)."""
+    table = EXPECTED_SECONDS["quick" if config.quick else "full"]
+    return sorted(tasks, key=lambda t: -table.get(t[:3], 0))
+
+
+def _figures_task(system: str, out: Path, config: ReproduceConfig, data=None, truth=None):
+    """The figures of one system (also the body of a worker process): ``(paths | error text,
+    seconds)``. A failure is returned, not raised: figures must never lose the tables."""
+    t0 = time.perf_counter()
+    try:
+        from ..models import analytic_model
+        from ._reproduce_figures import make_figures
+
+        if data is None:  # in a worker process
+            from .. import enable_x64
+
+            enable_x64()
+            data, _ = _datasets(system, out, config)
+            truth = analytic_model(system)
+        one = dataclasses.replace(config, systems=(system,))
+        result = make_figures(out, one, {system: {"data": data, "truth": truth}})
+    except Exception as exc:
+        result = f"{type(exc).__name__}: {exc}"
+    return result, round(time.perf_counter() - t0, 1)
+
+
 def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
-    """Yield ``(task, (metrics, seconds, status))`` for every task, ``config.jobs`` at a time."""
+    """Yield ``("model", task, (metrics, seconds, status))`` for every task, ``config.jobs`` at a
+    time, and with ``config.figures`` ``("figures", system, (paths | error, seconds))`` once per
+    system, made as soon as that system's last model is done (in the pool: beside the models still
+    training, and in the worker that has most likely compiled the models' predictions already)."""
 
     def report(task, result):
         system, kind, loss, seed = task
         log(f"[{system}] {MODEL_LABELS[kind]} ({LOSS_LABELS[loss]}) seed {seed}: {result[2]} in {result[1]} s")
 
+    systems = list(dict.fromkeys(t[0] for t in tasks))
     if config.jobs == 1 or len(tasks) == 1:
         for task in tasks:
             system = task[0]
             result = _run_task(*task, out, config, loaded[system]["data"], loaded[system]["truth"])
             report(task, result)
-            yield task, result
+            yield "model", task, result
+        if config.figures:
+            for system in systems:
+                yield "figures", system, _figures_task(system, out, config, loaded[system]["data"],
+                                                       loaded[system]["truth"])
         return
     import concurrent.futures as cf
     import multiprocessing as mp
@@ -450,17 +508,23 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
     # "spawn": a forked copy of a process that already runs JAX's thread pools can deadlock.
     # Progress bars of parallel workers would overwrite each other: the log lines stay.
     worker_config = dataclasses.replace(config, progress=False)
-    # the longest runs first (Furuta before N-MSD, trajectory losses before L_prop) so the
-    # last job to finish is a short one
-    cost = {"furuta": 2, "nmsd": 1}
-    order = sorted(tasks, key=lambda t: (-cost.get(t[0], 0), t[2] == "prop"))
+    left = {s: sum(1 for t in tasks if t[0] == s) for s in systems}
     with cf.ProcessPoolExecutor(max_workers=config.jobs, mp_context=mp.get_context("spawn")) as pool:
-        futures = {pool.submit(_run_task, *task, out, worker_config): task for task in order}
-        for fut in cf.as_completed(futures):
-            task = futures[fut]
-            result = fut.result()
-            report(task, result)
-            yield task, result
+        futures = {pool.submit(_run_task, *task, out, worker_config): ("model", task)
+                   for task in _longest_first(tasks, config)}
+        while futures:
+            done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
+            for fut in done:
+                what, item = futures.pop(fut)
+                result = fut.result()
+                if what == "figures":
+                    yield "figures", item, result
+                    continue
+                report(item, result)
+                yield "model", item, result
+                left[item[0]] -= 1
+                if config.figures and left[item[0]] == 0:
+                    futures[pool.submit(_figures_task, item[0], out, worker_config)] = ("figures", item[0])
 
 
 def reproduce(
@@ -492,7 +556,17 @@ def reproduce(
         models_for_figures[system] = {"data": data, "truth": analytic_model(system)}
     tasks = [(system, kind, loss, seed) for system in config.systems
              for kind, loss in config.pairs for seed in config.seeds]
-    for (system, kind, loss, seed), (metrics, dt, status) in _run_all(tasks, out, config, models_for_figures, log):
+    figure_paths: dict[str, dict] = {}
+    for what, item, result in _run_all(tasks, out, config, models_for_figures, log):
+        if what == "figures":
+            made, seconds = result
+            timings[f"figures/{item}"] = seconds
+            if isinstance(made, str):
+                log(f"[{item}] figures failed: {made}")
+            else:
+                figure_paths[item] = made
+            continue
+        (system, kind, loss, seed), (metrics, dt, status) = item, result
         timings[f"{system}/{kind}_{loss}/seed{seed}"] = {"seconds": dt, "status": status}
         if status == "reused" and isinstance(metrics.get("_seconds"), dict):
             # what the model cost when it was trained (an earlier or interrupted invocation)
@@ -505,15 +579,11 @@ def reproduce(
     rows = build_tables(results, config)
     paths["tables.csv"] = _write_csv(out / "tables.csv", rows)
     paths["tables.md"] = _write_markdown(out / "tables.md", rows, config, data_meta)
+    for system in config.systems:
+        paths.update(figure_paths.get(system, {}))
     if config.figures:
-        t0 = time.perf_counter()
-        try:
-            from ._reproduce_figures import make_figures
-
-            paths.update(make_figures(out, config, models_for_figures))
-        except Exception as exc:  # figures must never lose the tables
-            log(f"figures failed: {type(exc).__name__}: {exc}")
-        timings["figures"] = round(time.perf_counter() - t0, 1)
+        # seconds spent making figures, all systems (with jobs > 1, beside the training)
+        timings["figures"] = round(sum(timings.get(f"figures/{s}", 0.0) for s in config.systems), 1)
     timings["total"] = round(time.perf_counter() - t_start, 1)
     paths["run.json"] = _write_run_record(out / "run.json", config, command, timings, data_meta)
     log(f"done in {timings['total']} s: {out / 'tables.md'}")
