@@ -1,0 +1,101 @@
+"""`furuta-gym reproduce --quick` from a truly cold start, two installations side by side.
+
+"Cold" means every cache a run could find empty: JAX's persistent compilation cache (with the
+traced training steps stored beside it) and the C-kernel cache, both pointed at fresh temporary
+folders (``JAX_COMPILATION_CACHE_DIR``, ``XDG_CACHE_HOME``). Pointing only ``XDG_CACHE_HOME``
+elsewhere is not enough for code before 2026-11-25 (its JAX cache ignored it), which is how a warm
+run was once recorded as cold.
+
+Each installation is a Python interpreter with furuta-gym installed (e.g. this checkout's venv and
+one with an older commit installed: ``git worktree add /tmp/old REV && python -m venv /tmp/oldvenv
+&& /tmp/oldvenv/bin/pip install -e /tmp/old``). The runs go one after the other, baseline first,
+on whatever else the machine is doing: run it on a quiet machine. Both runs' tables must agree
+(a speed change must not change a result); the section says whether they do.
+
+    python bench/quick_cold.py --python /root/venv/bin/python --baseline-python /tmp/oldvenv/bin/python
+
+≈ 11 min. Rewrites its section of BENCHMARKS.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from _benchmarks_md import machine, write_section
+
+SECTION = "quick_cold"
+
+
+def describe(python: str) -> str:
+    """Where that interpreter's furuta_gym lives and, if in a git checkout, its commit."""
+    code = "import furuta_gym, pathlib; print(pathlib.Path(furuta_gym.__file__).resolve().parents[1])"
+    root = subprocess.run([python, "-c", code], capture_output=True, text=True, cwd=tempfile.gettempdir(),
+                          check=True).stdout.strip()
+    rev = subprocess.run(["git", "-C", root, "describe", "--always", "--dirty"], capture_output=True, text=True)
+    return f"{root} @ {rev.stdout.strip() or '?'}"
+
+
+def cold_quick(python: str, work: Path) -> tuple[float, float, list[str]]:
+    """(wall seconds of the whole command, the run's own total, its table rows) of one cold run."""
+    for sub in ("xdg", "jax"):
+        (work / sub).mkdir(parents=True)
+    env = dict(os.environ, XDG_CACHE_HOME=str(work / "xdg"), JAX_COMPILATION_CACHE_DIR=str(work / "jax"),
+               MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    env.pop("FURUTA_GYM_CACHE", None)  # it would win over XDG_CACHE_HOME
+    out = work / "out"
+    t0 = time.perf_counter()
+    subprocess.run([python, "-m", "furuta_gym", "reproduce", "--quick", "--out", str(out), "--no-progress"],
+                   env=env, cwd=tempfile.gettempdir(), check=True, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    record = json.loads((out / "run.json").read_text())
+    # the table without the paper's columns' formatting: ours per cell
+    rows = [",".join(line.split(",")[:9]) for line in (out / "tables.csv").read_text().splitlines()]
+    return wall, float(record["seconds"]["total"]), rows
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--python", default=sys.executable, help="interpreter of the code measured")
+    parser.add_argument("--baseline-python", required=True, help="interpreter of the code compared against")
+    parser.add_argument("--no-write", action="store_true", help="print the section, leave BENCHMARKS.md alone")
+    args = parser.parse_args(argv)
+
+    header = f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, {machine()}"
+    results = {}
+    with tempfile.TemporaryDirectory(prefix="quick_cold_") as tmp:
+        for name, python in (("baseline", args.baseline_python), ("measured", args.python)):
+            results[name] = (describe(python), *cold_quick(python, Path(tmp) / name))
+            print(f"{name}: {results[name][0]}: {results[name][1]:.1f} s", flush=True)
+    (b_code, b_wall, b_total, b_rows), (m_code, m_wall, m_total, m_rows) = results["baseline"], results["measured"]
+    same = "identical" if b_rows == m_rows else "**different**"
+    text = "\n".join([
+        f"<!-- {SECTION}:start -->",
+        "## `furuta-gym reproduce --quick`, truly cold (`python bench/quick_cold.py`)",
+        "",
+        f"{header}. Both caches empty (JAX compilation + traced steps, C kernels); baseline first, then",
+        "the measured code, one after the other. Target: ≤ 300 s.",
+        "",
+        "| code | whole command s | run's own total s |",
+        "|---|---:|---:|",
+        f"| baseline: {b_code} | {b_wall:.1f} | {b_total:.1f} |",
+        f"| measured: {m_code} | {m_wall:.1f} | {m_total:.1f} |",
+        f"| ratio measured / baseline | {m_wall / b_wall:.3f} | {m_total / b_total:.3f} |",
+        "",
+        f"Tables of the two runs: {same}.",
+        f"<!-- {SECTION}:end -->",
+    ])
+    print(text)
+    if not args.no_write:
+        write_section(text, f"<!-- {SECTION}:start -->", f"<!-- {SECTION}:end -->")
+
+
+if __name__ == "__main__":
+    main()
