@@ -153,7 +153,10 @@ FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 12000, ("nmsd", "dln"): 8000}
 #: λ of L_prop = L_Iτ + λ·L_traj (the paper writes λ_k and gives no value). Our L_Iτ is normalised
 #: (dimensionless, ~1e-5 once fitted), L_traj is a mean squared state error: with λ = 1 the 1 s
 #: Furuta stage let L_traj swamp L_Iτ and undid the fit (free α −1.52 → −0.67, forces −4.3 →
-#: −3.3, one run each), with λ = 1e-3 both stages keep it (α −1.59, forces −4.3).
+#: −3.3, one run each), with λ = 1e-3 both stages keep it (α −1.59, forces −4.3). Checked again
+#: on validation data for the Furuta augmented DeLaN, whose damping the trajectory stages might
+#: have corrected: λ = 1e-2 and 1e-1 gave a mean of −0.33 against −0.80 at 1e-3, their L_Iτ
+#: ending 20–100× higher (results/lambda_traj/furuta.md, one run each).
 PROP_LAMBDA = 1e-3
 #: L_Iτ's quadrature in the reproduction (and the Furuta's scale fit): Simpson's rule. The paper's
 #: trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit; Simpson's
