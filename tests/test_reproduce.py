@@ -93,6 +93,27 @@ def test_rerun_reuses_finished_models_and_refuses_other_settings(tiny_run):
         cfg_path.write_text(original)
 
 
+def test_failed_figures_are_logged_and_never_lose_the_tables(tiny_run, tmp_path, monkeypatch):
+    import shutil
+
+    from furuta_gym.training import _reproduce_figures
+
+    out, _, _ = tiny_run
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    (copy / "tables.md").unlink()
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no display")
+
+    monkeypatch.setattr(_reproduce_figures, "make_figures", broken)
+    logs = []
+    paths = reproduce(copy, TINY, log=logs.append)
+    assert "[nmsd] figures failed: RuntimeError: no display" in logs
+    assert paths["tables.md"].exists() and not any(k.startswith("predictions") for k in paths)
+    assert json.loads(paths["run.json"].read_text())["seconds"]["figures/nmsd"] >= 0
+
+
 def test_a_committed_run_without_its_data_files_regenerates_them_exactly(tiny_run):
     """results/ keeps the data manifests, not the CSVs: resuming regenerates them (seeded) and
     checks them against the manifest's sha256; data that came out different are an error."""
