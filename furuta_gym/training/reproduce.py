@@ -433,20 +433,20 @@ def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
     return metrics, round(time.perf_counter() - t0, 1), status
 
 
-#: Seconds one model takes (training + evaluation, one seed) on this project's 2-core Xeon, from
-#: the committed run records (results/reproduce/run.json and the seed runs beside it for the full
-#: recipe, results/reproduce_quick/run.json for --quick). Only the order in which a pool of jobs
-#: starts the models reads them: longest first, so no job is left with a long model at the end
-#: while the others idle (LPT scheduling). Replayed on 2 jobs with the 2026-11-25 records, the
-#: order used before (Furuta first, trajectory losses before L_prop) finished the full run's 12
-#: models in 66 min and --quick's in 280 s; longest first, in 56 min (the bound: half the sum)
-#: and 264 s.
+#: Seconds one model takes (training + evaluation, one seed) on this project's 2-core Xeon, two
+#: jobs at a time: the full recipe from the one-invocation run of 2026-11-25
+#: (results/reproduce_from_scratch/run.json), --quick from results/reproduce_quick/run.json. Only
+#: the order in which a pool of jobs starts the models reads them: longest first, so no job is
+#: left with a long model at the end while the others idle (LPT scheduling). Replayed on 2 jobs,
+#: the order used before (Furuta first, trajectory losses before L_prop) finished --quick's 12
+#: models in 280 s and longest first in 264 s; for the full run's these times give 2202 s and
+#: 2186 s (the bound, half the sum, is 2173 s): little there, but no order is left to chance.
 EXPECTED_SECONDS = {
     "full": {
-        ("nmsd", "dln", "traj"): 870, ("nmsd", "dln", "prop"): 1000, ("nmsd", "aph", "aph"): 140,
-        ("nmsd", "aph", "prop"): 200, ("nmsd", "adln", "aph"): 970, ("nmsd", "adln", "prop"): 1400,
-        ("furuta", "dln", "traj"): 300, ("furuta", "dln", "prop"): 190, ("furuta", "aph", "aph"): 80,
-        ("furuta", "aph", "prop"): 120, ("furuta", "adln", "aph"): 100, ("furuta", "adln", "prop"): 860,
+        ("nmsd", "dln", "traj"): 321, ("nmsd", "dln", "prop"): 1101, ("nmsd", "aph", "aph"): 99,
+        ("nmsd", "aph", "prop"): 232, ("nmsd", "adln", "aph"): 435, ("nmsd", "adln", "prop"): 1058,
+        ("furuta", "dln", "traj"): 93, ("furuta", "dln", "prop"): 211, ("furuta", "aph", "aph"): 57,
+        ("furuta", "aph", "prop"): 132, ("furuta", "adln", "aph"): 104, ("furuta", "adln", "prop"): 504,
     },
     "quick": {
         ("nmsd", "dln", "traj"): 38, ("nmsd", "dln", "prop"): 56, ("nmsd", "aph", "aph"): 32,
