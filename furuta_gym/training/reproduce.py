@@ -417,16 +417,21 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     return metrics, t_train, status
 
 
-def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
-    """One model of the run (also the body of a worker process): ``(metrics, seconds, status)``."""
+def _worker_inputs(system: str, out: Path, config: ReproduceConfig):
+    """``(datasets, ground-truth model)`` of ``system`` in a worker process, read from what the
+    parent generated under ``out``."""
+    from .. import enable_x64
     from ..models import analytic_model
 
-    if data is None:  # in a worker process: read the datasets the parent generated
-        from .. import enable_x64
+    enable_x64()  # the parent already chose float64 (and said so): no second warning
+    data, _ = _datasets(system, out, config)
+    return data, analytic_model(system)
 
-        enable_x64()  # the parent already chose float64 (and said so): no second warning
-        data, _ = _datasets(system, out, config)
-        truth = analytic_model(system)
+
+def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
+    """One model of the run (also the body of a worker process): ``(metrics, seconds, status)``."""
+    if data is None:  # in a worker process
+        data, truth = _worker_inputs(system, out, config)
     run_dir = out / "runs" / system / f"{kind}_{loss}" / f"seed{seed}"
     t0 = time.perf_counter()
     metrics, _, status = _run_one(system, kind, loss, seed, data, run_dir, config, truth)
@@ -468,15 +473,10 @@ def _figures_task(system: str, out: Path, config: ReproduceConfig, data=None, tr
     seconds)``. A failure is returned, not raised: figures must never lose the tables."""
     t0 = time.perf_counter()
     try:
-        from ..models import analytic_model
         from ._reproduce_figures import make_figures
 
         if data is None:  # in a worker process
-            from .. import enable_x64
-
-            enable_x64()
-            data, _ = _datasets(system, out, config)
-            truth = analytic_model(system)
+            data, truth = _worker_inputs(system, out, config)
         one = dataclasses.replace(config, systems=(system,))
         result = make_figures(out, one, {system: {"data": data, "truth": truth}})
     except Exception as exc:
