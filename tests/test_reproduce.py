@@ -249,6 +249,27 @@ def test_full_run_gives_furuta_augmented_delan_a_longer_itau_stage_and_overrides
     assert training_config("furuta", own, 0, "prop", "adln").epochs == (50, 2, 1)
 
 
+def test_full_run_fine_tunes_furuta_augmented_delan_at_a_smaller_step():
+    """Its two L_Iτ + λ·L_traj stages run at FULL_PROP_FINETUNE_LEARNING_RATE after the L_Iτ
+    stage's own rate; other models, the baselines, --quick, an explicit schedule and an explicit
+    learning_rate keep what they had."""
+    from furuta_gym.training.reproduce import FULL_PROP_FINETUNE_LEARNING_RATE, training_config
+
+    full = ReproduceConfig()
+    step = FULL_PROP_FINETUNE_LEARNING_RATE[("furuta", "adln")]
+    assert step < 1e-3
+    assert training_config("furuta", full, 0, "prop", "adln").learning_rate == (1e-3, step, step)
+    assert training_config("furuta", full, 0, "prop", "dln").learning_rate == (1e-3, step, step)
+    assert training_config("furuta", full, 0, "prop", "aph").learning_rate == 1e-3
+    assert training_config("nmsd", full, 0, "prop", "adln").learning_rate == (1e-2, 1e-3, 1e-3)
+    assert training_config("furuta", full, 0, "aph", "adln").learning_rate == 1e-3
+    assert training_config("furuta", ReproduceConfig(quick=True), 0, "prop", "adln").learning_rate == 1e-3
+    own = ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})
+    assert training_config("furuta", own, 0, "prop", "adln").learning_rate == 1e-3
+    rate = ReproduceConfig(train_overrides={"learning_rate": 3e-3})
+    assert training_config("furuta", rate, 0, "prop", "adln").learning_rate == 3e-3
+
+
 def test_runs_record_the_augmentation_weight_they_used():
     """μ is written into each L_prop run's settings (not left to a None default), per system and
     kind; an explicit override wins; models without F_a and the baselines carry none."""

@@ -156,7 +156,8 @@ FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 12000, ("nmsd", "dln"): 8000}
 #: −3.3, one run each), with λ = 1e-3 both stages keep it (α −1.59, forces −4.3). Checked again
 #: on validation data for the Furuta augmented DeLaN, whose damping the trajectory stages might
 #: have corrected: λ = 1e-2 and 1e-1 gave a mean of −0.33 against −0.80 at 1e-3, their L_Iτ
-#: ending 20–100× higher (results/lambda_traj/furuta.md, one run each).
+#: ending 20–100× higher (results/lambda_traj/furuta.md, one run each); 1e-4 and 0 scored −0.82
+#: and −0.84, a tie within the seed spread (results/lambda_traj_small/furuta.md).
 PROP_LAMBDA = 1e-3
 #: L_Iτ's quadrature in the reproduction (and the Furuta's scale fit): Simpson's rule. The paper's
 #: trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit; Simpson's
@@ -169,6 +170,17 @@ REPRODUCE_QUADRATURE = "simpson"
 #: N-MSD's (64, 64) networks crawl at 1e-3: L_Iτ on the training data was still 0.025 after 4000
 #: epochs, against 3e-4 at 1e-2 (one run each); the Furuta's (16, 16) ones fit at 1e-3.
 PROP_ITAU_LEARNING_RATE = {"nmsd": 1e-2, "furuta": 1e-3}
+#: Adam's step in the two L_Iτ + λ·L_traj stages of a full run's L_prop, for single models (the
+#: others keep 1e-3). These stages fine-tune a model whose L_Iτ fit has converged, and at 1e-3 they
+#: undid it: Furuta augmented DeLaN's L_Iτ went from its stage's best 1.1e-5 to 3.8e-5 at the last
+#: epoch — the same with λ = 0, so the step size and not L_traj moved it (results/lambda_traj_small/).
+#: At 1e-4 it ends at 1.2e-5 and its trajectory loss falls 0.024 → 0.009. Chosen on validation
+#: data (results/finetune_rate*/furuta.md, one run each; the 1e-3 augmented DeLaN's seed spread
+#: is −0.79 … −0.91): augmented DeLaN's mean −0.795 → −1.029 (3e-4: −0.970, 3e-5: −1.018), DeLaN's
+#: −1.048 → −1.153; APHYNITY's moved −1.583 → −1.574 (its M and V are the prior's, nothing of its
+#: fit was undone), so it keeps 1e-3. Not in --quick, whose 300 L_Iτ epochs leave nothing
+#: converged to keep.
+FULL_PROP_FINETUNE_LEARNING_RATE = {("furuta", "dln"): 1e-4, ("furuta", "adln"): 1e-4}
 
 
 def epoch_schedule(system: str, config: ReproduceConfig, loss: str, kind: str | None = None) -> tuple[int, ...]:
@@ -209,9 +221,11 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
         if (name, kind) in AUGMENTATION_WEIGHT:
             # written out, not left to the None default: the run record then says which μ it used
             overrides["augmentation_weight"] = AUGMENTATION_WEIGHT[(name, kind)]
-        if len(epochs) == 3 and PROP_ITAU_LEARNING_RATE[name] != TrainConfig.learning_rate:
-            overrides["learning_rate"] = (PROP_ITAU_LEARNING_RATE[name], TrainConfig.learning_rate,
-                                          TrainConfig.learning_rate)
+        finetune = TrainConfig.learning_rate
+        if not config.quick and config.prop_epochs is None:
+            finetune = FULL_PROP_FINETUNE_LEARNING_RATE.get((name, kind), finetune)
+        if len(epochs) == 3 and (PROP_ITAU_LEARNING_RATE[name], finetune) != (TrainConfig.learning_rate,) * 2:
+            overrides["learning_rate"] = (PROP_ITAU_LEARNING_RATE[name], finetune, finetune)
     overrides.update(config.train_overrides or {})
     return TrainConfig.for_system(name, **overrides)
 
