@@ -132,6 +132,22 @@ def test_resume_continues_the_same_optimiser_state(nmsd_data, tmp_path):
         train("dln", "nmsd", "itau", other, _itau_config(epochs=(5,)), tmp_path / "b", resume=True, hparams=hp)
 
 
+def test_resume_refuses_other_training_settings(nmsd_data, tmp_path):
+    """A saved run continues only under its own settings: another step size or λ is refused
+    (naming each), more epochs are not."""
+    train_set, _ = nmsd_data
+    hp = dict(hidden=(4, 4))
+    train("dln", "nmsd", "itau", train_set, _itau_config(epochs=(2,)), tmp_path, hparams=hp)
+    with pytest.raises(ValueError, match="other training settings") as err:
+        train("dln", "nmsd", "itau", train_set, _itau_config(epochs=(3,), learning_rate=1e-3, lambda_traj=0.5),
+              tmp_path, resume=True, hparams=hp)
+    assert "learning_rate: saved 0.005, now 0.001" in str(err.value)
+    assert "lambda_traj: saved 1.0, now 0.5" in str(err.value)
+    assert "epochs" not in str(err.value)
+    _, history = train("dln", "nmsd", "itau", train_set, _itau_config(epochs=(3,)), tmp_path, resume=True, hparams=hp)
+    assert len(history) == 3
+
+
 def test_nan_guard_skips_poisoned_steps_and_never_saves_nan(nmsd_data, tmp_path):
     train_set, _ = nmsd_data
     poisoned = list(train_set)

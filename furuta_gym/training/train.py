@@ -217,6 +217,28 @@ class TrainConfig:
         return dataclasses.asdict(self)
 
 
+#: TrainConfig fields a resumed run may change: how long it runs and what it prints or saves.
+#: Anything else (a step size, λ, μ, the quadrature, ...) would continue one run under another's
+#: name.
+RESUMABLE_CHANGES = frozenset({"epochs", "progress", "checkpoint_every"})
+
+
+def _check_resumable_config(state_path, saved: dict | None, current: dict) -> None:
+    """Refuse to resume a run whose saved training settings differ from ``current`` in a field
+    outside :data:`RESUMABLE_CHANGES` (one error naming every such field). A field the saved
+    state lacks was added later and is not compared."""
+    if saved is None:
+        return
+    saved = json.loads(json.dumps(saved, default=list))
+    current = json.loads(json.dumps(current, default=list))
+    differ = sorted(k for k in current.keys() & saved.keys()
+                    if k not in RESUMABLE_CHANGES and saved[k] != current[k])
+    if differ:
+        detail = "; ".join(f"{k}: saved {saved[k]!r}, now {current[k]!r}" for k in differ)
+        raise ValueError(f"{state_path}: cannot resume with other training settings ({detail}); "
+                         "train into another output directory, or resume with the saved settings")
+
+
 def data_hash(trajs: Sequence[Trajectory]) -> str:
     """SHA-256 over the trajectories' arrays (t, q, u, q̇): identifies the training data."""
     h = hashlib.sha256()
@@ -412,7 +434,8 @@ def train(
     ``model_epoch<N>.eqx`` every ``checkpoint_every`` epochs, ``model.eqx`` (final, loadable with
     :func:`furuta_gym.training.checkpoint.load_model`), ``history.jsonl`` (one line per epoch) and ``history.json``. An ``out_dir`` that
     already holds a run is refused unless ``resume=True``, which continues it (same model,
-    optimiser state, λ, epoch counter; the data and settings must match). ``forced_trajs``: fit the
+    optimiser state, λ, epoch counter; the data and the training settings must match, except
+    the epochs, the progress bar and the snapshot cadence: :data:`RESUMABLE_CHANGES`). ``forced_trajs``: fit the
     overall scale on them after training (see the module docstring). ``history`` has one dict per
     epoch: epoch, stage, horizon, mean loss terms, λ, skipped steps, seconds.
     """
@@ -510,6 +533,7 @@ def train(
                         f"{state_path}: cannot resume: the saved run has {key}={st['run'][key]!r}, "
                         f"this one {run_info[key]!r}"
                     )
+            _check_resumable_config(state_path, st["run"].get("config"), run_info["config"])
             model = m0
             params, static = eqx.partition(model, trainable)
             start_epoch = int(st["epoch"])
