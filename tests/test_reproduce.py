@@ -256,10 +256,10 @@ def test_full_run_fine_tunes_furuta_augmented_delan_at_a_smaller_step():
     from furuta_gym.training.reproduce import FULL_PROP_FINETUNE_LEARNING_RATE, training_config
 
     full = ReproduceConfig()
-    step = FULL_PROP_FINETUNE_LEARNING_RATE[("furuta", "adln")]
-    assert step < 1e-3
-    assert training_config("furuta", full, 0, "prop", "adln").learning_rate == (1e-3, step, step)
-    assert training_config("furuta", full, 0, "prop", "dln").learning_rate == (1e-3, step, step)
+    for kind in ("adln", "dln"):
+        step = FULL_PROP_FINETUNE_LEARNING_RATE[("furuta", kind)]
+        assert step < 1e-3
+        assert training_config("furuta", full, 0, "prop", kind).learning_rate == (1e-3, step, step)
     assert training_config("furuta", full, 0, "prop", "aph").learning_rate == 1e-3
     assert training_config("nmsd", full, 0, "prop", "adln").learning_rate == (1e-2, 1e-3, 1e-3)
     assert training_config("furuta", full, 0, "aph", "adln").learning_rate == 1e-3
