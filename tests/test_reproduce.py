@@ -249,10 +249,10 @@ def test_full_run_gives_furuta_augmented_delan_a_longer_itau_stage_and_overrides
     assert training_config("furuta", own, 0, "prop", "adln").epochs == (50, 2, 1)
 
 
-def test_full_run_fine_tunes_furuta_augmented_delan_at_a_smaller_step():
-    """Its two L_Iτ + λ·L_traj stages run at FULL_PROP_FINETUNE_LEARNING_RATE after the L_Iτ
-    stage's own rate; other models, the baselines, --quick, an explicit schedule and an explicit
-    learning_rate keep what they had."""
+def test_full_run_fine_tunes_furuta_delan_and_augmented_delan_at_smaller_steps():
+    """Their two L_Iτ + λ·L_traj stages run at FULL_PROP_FINETUNE_LEARNING_RATE after the L_Iτ
+    stage's own rate; APHYNITY, the N-MSD, the baselines, --quick, an explicit schedule and an
+    explicit learning_rate keep what they had."""
     from furuta_gym.training.reproduce import FULL_PROP_FINETUNE_LEARNING_RATE, training_config
 
     full = ReproduceConfig()
