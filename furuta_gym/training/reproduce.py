@@ -157,7 +157,9 @@ FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 12000, ("nmsd", "dln"): 8000}
 #: on validation data for the Furuta augmented DeLaN, whose damping the trajectory stages might
 #: have corrected: λ = 1e-2 and 1e-1 gave a mean of −0.33 against −0.80 at 1e-3, their L_Iτ
 #: ending 20–100× higher (results/lambda_traj/furuta.md, one run each); 1e-4 and 0 scored −0.82
-#: and −0.84, a tie within the seed spread (results/lambda_traj_small/furuta.md).
+#: and −0.84, a tie within the seed spread (results/lambda_traj_small/furuta.md). With the
+#: fine-tuning step of 1e-4 (below) 1e-3 still wins: −1.029 against −0.919 (1e-2) and −0.992
+#: (1e-1) (results/lambda_finetuned/furuta.md).
 PROP_LAMBDA = 1e-3
 #: L_Iτ's quadrature in the reproduction (and the Furuta's scale fit): Simpson's rule. The paper's
 #: trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit; Simpson's
