@@ -187,6 +187,13 @@ PROP_ITAU_LEARNING_RATE = {"nmsd": 1e-2, "furuta": 1e-3}
 FULL_PROP_FINETUNE_LEARNING_RATE = {("furuta", "dln"): 1e-6, ("furuta", "adln"): 1e-4}
 
 
+def _full_prop_recipe(config: ReproduceConfig) -> bool:
+    """Whether the L_prop runs follow the full run's own recipe, so its per-model settings
+    (:data:`FULL_PROP_ITAU_EPOCHS`, :data:`FULL_PROP_FINETUNE_LEARNING_RATE`) apply: not --quick
+    and no schedule of the caller's."""
+    return not config.quick and config.prop_epochs is None
+
+
 def epoch_schedule(system: str, config: ReproduceConfig, loss: str, kind: str | None = None) -> tuple[int, ...]:
     """Epochs per stage of ``loss`` runs of model ``kind`` on ``system``: the config's override or
     the quick / full table (L_prop: ``(L_Iτ alone, stage 1, stage 2)``, others ``(stage 1,
@@ -197,7 +204,7 @@ def epoch_schedule(system: str, config: ReproduceConfig, loss: str, kind: str | 
         return tuple(table[name])
     table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS)
     epochs = tuple(table[name])
-    if config.prop_epochs is None and not config.quick and len(epochs) == 3:
+    if _full_prop_recipe(config) and len(epochs) == 3:
         epochs = (FULL_PROP_ITAU_EPOCHS.get((name, kind), epochs[0]), *epochs[1:])
     return epochs
 
@@ -226,7 +233,7 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
             # written out, not left to the None default: the run record then says which μ it used
             overrides["augmentation_weight"] = AUGMENTATION_WEIGHT[(name, kind)]
         finetune = TrainConfig.learning_rate
-        if not config.quick and config.prop_epochs is None:
+        if _full_prop_recipe(config):
             finetune = FULL_PROP_FINETUNE_LEARNING_RATE.get((name, kind), finetune)
         if len(epochs) == 3 and (PROP_ITAU_LEARNING_RATE[name], finetune) != (TrainConfig.learning_rate,) * 2:
             overrides["learning_rate"] = (PROP_ITAU_LEARNING_RATE[name], finetune, finetune)

@@ -229,8 +229,7 @@ def _check_resumable_config(state_path, saved: dict | None, current: dict) -> No
     state lacks was added later and is not compared."""
     if saved is None:
         return
-    saved = json.loads(json.dumps(saved, default=list))
-    current = json.loads(json.dumps(current, default=list))
+    current = json.loads(json.dumps(current))  # tuples as the saved JSON holds them: lists
     differ = sorted(k for k in current.keys() & saved.keys()
                     if k not in RESUMABLE_CHANGES and saved[k] != current[k])
     if differ:
