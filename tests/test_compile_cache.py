@@ -197,3 +197,43 @@ def test_training_commands_turn_the_cache_on_where_asked_and_never_when_told_not
     env["JAX_COMPILATION_CACHE_DIR"] = str(tmp_path / "d")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.split()[0] == "None" and not (tmp_path / "d").exists()
+
+
+
+def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported(furuta_free, tmp_path, monkeypatch):
+    """``TrainConfig.fast_compile`` (XLA optimisation level 0, used by ``reproduce --quick``):
+    the options reach the compiler on both paths, the live jitted step and the exported one (a
+    nested jit may not carry them, which once made every export fail and fall back), and the
+    steps agree with the optimised ones to rounding."""
+    import warnings
+
+    model = make_model("furuta", "dln", jax.random.PRNGKey(5), hidden=(4, 4))
+    windows = make_windows(furuta_free, 41, stride=40, cover_end=True)
+    traj_windows = make_windows(furuta_free, 3, stride=7)
+    outputs = []
+    for fast in (False, True):
+        config = TrainConfig.for_system("furuta", progress=False, fast_compile=fast)
+        optimizer, trainable, params = _build_optimizer(model, config)
+        _, static = eqx.partition(model, trainable)
+        args = (params, optimizer.init(params), traj_windows, windows, jnp.asarray(1.0), jnp.asarray(1e-3))
+        live = _make_step(static, optimizer, "prop", config, "momentum")
+        assert not isinstance(live, _step_cache.ExportedStep)
+        if fast:  # JAX refuses compiler options below an outer trace: so they are on this jit
+            with pytest.raises(ValueError, match="compiler_options"):
+                jax.make_jaxpr(live)(*args)
+        else:
+            jax.make_jaxpr(live)(*args)
+        store = tmp_path / f"fast_{fast}"
+        monkeypatch.setattr(_step_cache, "step_cache_dir", lambda: store)
+        exported = _make_step(static, optimizer, "prop", config, "momentum")
+        monkeypatch.undo()
+        assert isinstance(exported, _step_cache.ExportedStep)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # "training step not exported" is a failed export
+            outputs += [live(*args), exported(*args)]
+        assert len(list(store.glob("step-*.jaxexport"))) == 1
+    reference = outputs[0]
+    for out in outputs[1:]:
+        for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(reference)):
+            np.testing.assert_allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), rtol=1e-10, atol=1e-14)
+    assert float(reference[2]["traj"]) > 0 and float(reference[2]["itau"]) > 0

@@ -357,3 +357,25 @@ def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys
     assert not _same_settings(dict(record, model_hparams=odd), dict(record, model_hparams=default))
     with pytest.raises(ValueError, match="unknown DeLaN hyper-parameters|unknown"):
         _default_hparams("furuta", "dln", {"odd_in_velocity": True})
+
+
+def test_quick_runs_compile_their_steps_fast_and_full_runs_keep_their_records():
+    """--quick trains a few hundred steps per model, so its steps are compiled unoptimised
+    (``fast_compile``); the full run's are not, and its committed runs, recorded before the
+    setting existed, still count as trained with exactly its settings (so they are reused)."""
+    import json
+    from pathlib import Path
+
+    from furuta_gym.training.reproduce import _same_settings, training_config
+
+    for kind, loss in (("dln", "traj"), ("adln", "prop"), ("aph", "aph")):
+        assert training_config("furuta", ReproduceConfig(quick=True), 0, loss, kind).fast_compile
+        assert not training_config("furuta", ReproduceConfig(), 0, loss, kind).fast_compile
+    record = Path(__file__).resolve().parents[1] / "results/reproduce/runs/furuta/dln_prop/seed0/reproduce_config.json"
+    saved = json.loads(record.read_text())
+    assert "fast_compile" not in saved["train"]
+    current = json.loads(json.dumps(dict(saved, train=training_config("furuta", ReproduceConfig(), 0, "prop", "dln").to_json())))
+    current["train"].pop("progress", None)
+    assert _same_settings(saved, current)
+    quick = json.loads(json.dumps(dict(current, train=dict(current["train"], fast_compile=True))))
+    assert not _same_settings(saved, quick)

@@ -142,12 +142,19 @@ class ExportedStep:
     ``cache_dir`` or exports and stores it, then runs the deserialised computation under
     ``jax.jit``. ``terms`` must be a dict of arrays; ``params``/``opt_state`` come back with the
     structure they went in with. Falls back to ``step`` for anything it cannot handle.
+    ``compiler_options`` (XLA's, as for ``jax.jit``) compile the deserialised computation; JAX
+    refuses them on a jit nested in another, so a ``step`` compiled with them is exported through
+    ``export_step``, the same step jitted without them. Options that change results must enter
+    ``key`` too.
     """
 
-    def __init__(self, step: Callable, key: dict[str, Any], cache_dir: Path):
+    def __init__(self, step: Callable, key: dict[str, Any], cache_dir: Path,
+                 compiler_options: dict[str, Any] | None = None, export_step: Callable | None = None):
         self._step = step
         self._key = key
         self._dir = Path(cache_dir)
+        self._compiler_options = compiler_options
+        self._export_step = step if export_step is None else export_step
         self._calls: dict[Any, Callable | None] = {}
 
     def __call__(self, *args):
@@ -205,7 +212,7 @@ class ExportedStep:
                 warnings.warn(f"training step not exported ({type(e).__name__}: {e}); using the jitted step", stacklevel=3)
                 return None
 
-        run = jax.jit(exp.call)
+        run = jax.jit(exp.call, compiler_options=self._compiler_options)
 
         def call(args, leaves):
             # The deserialised computation returns arrays committed to their device, while a
@@ -227,7 +234,7 @@ class ExportedStep:
         from jax import export
 
         terms_keys: list[str] = []
-        step = self._step
+        step = self._export_step
 
         def flat_step(*flat):
             params, opt_state, terms, ok = step(*jax.tree_util.tree_unflatten(treedef, flat))

@@ -227,6 +227,8 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
         checkpoint_every=0,
         quadrature=REPRODUCE_QUADRATURE,
     )
+    if config.quick:  # a few hundred steps per model: compiling them is most of the run
+        overrides["fast_compile"] = True
     if loss == "prop":
         overrides["lambda_traj"] = PROP_LAMBDA
         if (name, kind) in AUGMENTATION_WEIGHT:

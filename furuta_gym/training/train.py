@@ -108,6 +108,10 @@ class TrainConfig:
     the sampling under-resolves the motion the true model's residual is quadrature error of the
     size of e; unweighted, the few such intervals (a pendulum whirling at 30 rad/s at 100 Hz)
     make most of L_Iτ's floor, and a flexible model bends its physics to fit that error.
+    ``fast_compile`` compiles the training steps with XLA's backend optimisation level 0: a
+    trajectory-loss step compiles in ~2/3 of the time and runs ~2.7× slower (BENCHMARKS.md,
+    "Loss cost"), and results agree to rounding, not bit for bit. Worth it only for runs of a few
+    hundred steps, whose time is mostly compiling (``furuta-gym reproduce --quick``).
     """
 
     epochs: tuple[int, ...] = (100, 20)
@@ -130,6 +134,7 @@ class TrainConfig:
     atol: float = 1e-6
     max_steps: int = 4096
     grad_clip: float | None = 10.0
+    fast_compile: bool = False
     seed: int = 0
     checkpoint_every: int = 50
     progress: bool = True
@@ -344,7 +349,6 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
     use_int = loss in ("prop", "itau")
     use_share = use_int and augmentation_weight != 0.0
 
-    @eqx.filter_jit
     def step(params, opt_state, traj_b: Windows | None, int_b: Windows | None, lam, learning_rate):
         def objective(p):
             model = eqx.combine(p, static)
@@ -378,6 +382,9 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
         opt_state = _tree_where(ok, new_opt, opt_state)
         return params, opt_state, terms, ok
 
+    # level 0 skips LLVM's optimisations: a third less compile time for a slower step
+    compiler_options = {"xla_backend_optimization_level": 0} if config.fast_compile else None
+    live_step = eqx.filter_jit(step, compiler_options=compiler_options)
     # with JAX's persistent compilation cache enabled, a later process loads the traced step from
     # disk instead of tracing it again (seconds for L_traj); see _step_cache
     cache_dir = _step_cache.step_cache_dir()
@@ -386,8 +393,11 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
         key = {"loss": loss, "normalization": normalization, "config": repr(config),
                "augmentation_weight": repr(float(augmentation_weight)),
                "optimizer": described, "static": _step_cache.array_digest(static)}
-        return _step_cache.ExportedStep(step, key, cache_dir)
-    return step
+        # JAX takes compiler options on an outermost jit only: the step is exported without them
+        # and the stored computation compiled with them
+        return _step_cache.ExportedStep(live_step, key, cache_dir, compiler_options=compiler_options,
+                                        export_step=eqx.filter_jit(step) if compiler_options else None)
+    return live_step
 
 
 def _read_history(path: Path, epochs: int) -> list[dict]:
