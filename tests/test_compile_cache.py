@@ -201,8 +201,8 @@ def test_training_commands_turn_the_cache_on_where_asked_and_never_when_told_not
 
 
 def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported(furuta_free, tmp_path, monkeypatch):
-    """``TrainConfig.fast_compile`` (XLA optimisation level 0, used by ``reproduce --quick``):
-    the options reach the compiler on both paths, the live jitted step and the exported one (a
+    """``TrainConfig.fast_compile`` (XLA optimisation level 0 for the trajectory-loss steps, used
+    by ``reproduce --quick``): the options reach the compiler on both paths, the live jitted step and the exported one (a
     nested jit may not carry them, which once made every export fail and fall back), and the
     steps agree with the optimised ones to rounding."""
     import warnings
@@ -237,3 +237,9 @@ def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported
         for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(reference)):
             np.testing.assert_allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), rtol=1e-10, atol=1e-14)
     assert float(reference[2]["traj"]) > 0 and float(reference[2]["itau"]) > 0
+    # a stage of L_Iτ alone keeps the optimised code: it runs thousands of cheap-to-compile steps
+    config = TrainConfig.for_system("furuta", progress=False, fast_compile=True)
+    optimizer, trainable, params = _build_optimizer(model, config)
+    _, static = eqx.partition(model, trainable)
+    itau = _make_step(static, optimizer, "itau", config, "momentum")
+    jax.make_jaxpr(itau)(params, optimizer.init(params), None, windows, jnp.asarray(1.0), jnp.asarray(1e-3))

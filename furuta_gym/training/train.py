@@ -108,10 +108,12 @@ class TrainConfig:
     the sampling under-resolves the motion the true model's residual is quadrature error of the
     size of e; unweighted, the few such intervals (a pendulum whirling at 30 rad/s at 100 Hz)
     make most of L_Iτ's floor, and a flexible model bends its physics to fit that error.
-    ``fast_compile`` compiles the training steps with XLA's backend optimisation level 0: a
-    trajectory-loss step compiles in ~2/3 of the time and runs ~2.7× slower (BENCHMARKS.md,
-    "Loss cost"), and results agree to rounding, not bit for bit. Worth it only for runs of a few
-    hundred steps, whose time is mostly compiling (``furuta-gym reproduce --quick``).
+    ``fast_compile`` compiles the steps with a trajectory loss (an ODE solve: L_traj, L_aph and
+    L_prop's stages after the L_Iτ-alone one) with XLA's backend optimisation level 0: such a
+    step compiles in ~2/3 of the time and runs ~2.7× slower, and results agree to rounding, not
+    bit for bit. Worth it only for a few hundred trajectory steps, whose time is mostly
+    compiling (``furuta-gym reproduce --quick``); an L_Iτ-alone step compiles in seconds and runs
+    thousands of epochs, so it keeps the optimised code.
     """
 
     epochs: tuple[int, ...] = (100, 20)
@@ -382,8 +384,10 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
         opt_state = _tree_where(ok, new_opt, opt_state)
         return params, opt_state, terms, ok
 
-    # level 0 skips LLVM's optimisations: a third less compile time for a slower step
-    compiler_options = {"xla_backend_optimization_level": 0} if config.fast_compile else None
+    # level 0 skips LLVM's optimisations: a third less compile time for a slower step. Only
+    # the steps with an ODE solve: an L_Iτ step compiles in seconds and runs many epochs
+    fast = config.fast_compile and use_traj
+    compiler_options = {"xla_backend_optimization_level": 0} if fast else None
     live_step = eqx.filter_jit(step, compiler_options=compiler_options)
     # with JAX's persistent compilation cache enabled, a later process loads the traced step from
     # disk instead of tracing it again (seconds for L_traj); see _step_cache
