@@ -238,7 +238,7 @@ def test_full_run_gives_furuta_augmented_delan_a_longer_itau_stage_and_overrides
     full = ReproduceConfig()
     adln = training_config("furuta", full, 0, "prop", "adln")
     dln = training_config("furuta", full, 0, "prop", "dln")
-    assert adln.epochs == (12000, *FULL_PROP_EPOCHS["furuta"][1:])
+    assert adln.epochs == (24000, *FULL_PROP_EPOCHS["furuta"][1:])
     assert dln.epochs == FULL_PROP_EPOCHS["furuta"]
     assert training_config("nmsd", full, 0, "prop", "adln").epochs == FULL_PROP_EPOCHS["nmsd"]
     assert training_config("nmsd", full, 0, "prop", "dln").epochs == (8000, *FULL_PROP_EPOCHS["nmsd"][1:])

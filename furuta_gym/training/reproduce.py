@@ -149,7 +149,11 @@ QUICK_PROP_EPOCHS = {"nmsd": (300, 8, 2), "furuta": (300, 4, 1)}
 #: (4.4e-4, the value its 4000-epoch runs ended near); by epoch 5400 it was at 1e-5. 8000 epochs
 #: took the chirp energy from −1.89 to −2.50 even though that run ended on a spike (1.4e-4; its
 #: best iterate, which keep_best_itau now hands on, was 2.1e-6; one run, 2026-11-23).
-FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 12000, ("nmsd", "dln"): 8000}
+#: Furuta augmented DeLaN then went from 12 000 to 24 000 on validation data (seed 100, one run
+#: each, results/adln_stage_epochs): mean prediction log10 RMSE −1.029 → −1.115, where longer
+#: trajectory stages (40 + 120) gave −0.989; its best L_Iτ 1.2e-5 → 8.2e-6, flattening (9.1e-6
+#: at 18 000).
+FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 24000, ("nmsd", "dln"): 8000}
 #: λ of L_prop = L_Iτ + λ·L_traj (the paper writes λ_k and gives no value). Our L_Iτ is normalised
 #: (dimensionless, ~1e-5 once fitted), L_traj is a mean squared state error: with λ = 1 the 1 s
 #: Furuta stage let L_traj swamp L_Iτ and undid the fit (free α −1.52 → −0.67, forces −4.3 →
