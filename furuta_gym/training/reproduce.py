@@ -184,8 +184,9 @@ PROP_ITAU_LEARNING_RATE = {"nmsd": 1e-2, "furuta": 1e-3}
 #: data (results/finetune_rate*/furuta.md, one run each; the 1e-3 augmented DeLaN's seed spread
 #: is −0.79 … −0.91): augmented DeLaN's mean −0.795 → −1.029 (3e-4: −0.970, 3e-5: −1.018).
 #: DeLaN's fell with every smaller step, −1.048 / −1.158 / −1.153 / −1.167 / −1.201 / −1.242 for
-#: 1e-3 / 3e-4 / 1e-4 / 3e-5 / 1e-5 / 1e-6; the grid stops there, where the 1 s stage still
-#: lowers its trajectory loss by a quarter (2.3e-2 → 1.7e-2). APHYNITY's moved −1.583 → −1.574
+#: 1e-3 / 3e-4 / 1e-4 / 3e-5 / 1e-5 / 1e-6 and rose again below it (1e-7: −1.209, 1e-8:
+#: −1.194); at 1e-6 the 1 s stage still lowers its trajectory loss by a quarter (2.3e-2 →
+#: 1.7e-2). APHYNITY's moved −1.583 → −1.574
 #: (its M and V are the prior's, nothing of its fit was undone), so it keeps 1e-3. Not in
 #: --quick, whose 300 L_Iτ epochs leave nothing converged to keep.
 FULL_PROP_FINETUNE_LEARNING_RATE = {("furuta", "dln"): 1e-6, ("furuta", "adln"): 1e-4}
