@@ -199,12 +199,11 @@ def test_training_commands_turn_the_cache_on_where_asked_and_never_when_told_not
     assert out.stdout.split()[0] == "None" and not (tmp_path / "d").exists()
 
 
-
 def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported(furuta_free, tmp_path, monkeypatch):
     """``TrainConfig.fast_compile`` (XLA optimisation level 0 for the trajectory-loss steps, used
-    by ``reproduce --quick``): the options reach the compiler on both paths, the live jitted step and the exported one (a
-    nested jit may not carry them, which once made every export fail and fall back), and the
-    steps agree with the optimised ones to rounding."""
+    by ``reproduce --quick``): the live jitted step carries the options, the step is still
+    exported to the disk cache (a nested jit may not carry them, which once made every export
+    fail and fall back), and both agree with the optimised step to rounding."""
     import warnings
 
     model = make_model("furuta", "dln", jax.random.PRNGKey(5), hidden=(4, 4))
