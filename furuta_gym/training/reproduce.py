@@ -187,9 +187,12 @@ PROP_ITAU_LEARNING_RATE = {"nmsd": 1e-2, "furuta": 1e-3}
 #: 1e-3 / 3e-4 / 1e-4 / 3e-5 / 1e-5 / 1e-6 and rose again below it (1e-7: −1.209, 1e-8:
 #: −1.194); at 1e-6 the 1 s stage still lowers its trajectory loss by a quarter (2.3e-2 →
 #: 1.7e-2). APHYNITY's moved −1.583 → −1.574
-#: (its M and V are the prior's, nothing of its fit was undone), so it keeps 1e-3. Not in
-#: --quick, whose 300 L_Iτ epochs leave nothing converged to keep.
-FULL_PROP_FINETUNE_LEARNING_RATE = {("furuta", "dln"): 1e-6, ("furuta", "adln"): 1e-4}
+#: (its M and V are the prior's, nothing of its fit was undone), so it keeps 1e-3. Once augmented
+#: DeLaN's L_Iτ stage ran 24 000 epochs (above), its step was chosen again from the model that
+#: stage makes (results/finetune_rate_itau24k): 3e-4 −1.139, 1e-4 −1.115, 3e-5 −1.123 — the free
+#: cells alike, the forced ones 0.03–0.05 better at 3e-4. Not in --quick, whose 300 L_Iτ epochs
+#: leave nothing converged to keep.
+FULL_PROP_FINETUNE_LEARNING_RATE = {("furuta", "dln"): 1e-6, ("furuta", "adln"): 3e-4}
 
 
 def _full_prop_recipe(config: ReproduceConfig) -> bool:
