@@ -61,7 +61,7 @@ def _train(system: str, kind: str, where: str, name: str, value, out: Path) -> N
 def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path) -> bool:
     """Copy ``source``'s run of this model into ``out`` if it was trained with exactly the
     candidate's settings (the reproduction's own comparison decides); True if ``out`` holds it."""
-    from furuta_gym.training.reproduce import _default_hparams, _same_settings, training_config
+    from furuta_gym.training.reproduce import _run_settings, _same_settings
 
     src = _run_dir(source, system, kind)
     dst = _run_dir(out, system, kind)
@@ -69,12 +69,8 @@ def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path) 
         return False
     if dst.exists():  # copied by an earlier invocation?
         return (dst / "model.eqx").exists() and (dst / "model.eqx").read_bytes() == (src / "model.eqx").read_bytes()
-    tcfg = training_config(system, config, 0, "prop", kind).to_json()
-    tcfg.pop("progress", None)
-    current = {"system": system, "model": kind, "loss": "prop", "seed": 0, "train": tcfg,
-               "model_hparams": _default_hparams(system, kind, config.model_overrides)}
     saved = json.loads((src / "reproduce_config.json").read_text())
-    if not _same_settings(saved, json.loads(json.dumps(current))):
+    if not _same_settings(saved, _run_settings(system, kind, "prop", 0, config)):
         return False
     dst.mkdir(parents=True)
     for name in ("model.eqx", "metrics.json", "reproduce_config.json", "history.json"):

@@ -366,7 +366,7 @@ def test_quick_runs_compile_their_steps_fast_and_full_runs_keep_their_records():
     import json
     from pathlib import Path
 
-    from furuta_gym.training.reproduce import _same_settings, training_config
+    from furuta_gym.training.reproduce import _run_settings, _same_settings, training_config
 
     for kind, loss in (("dln", "traj"), ("adln", "prop"), ("aph", "aph")):
         assert training_config("furuta", ReproduceConfig(quick=True), 0, loss, kind).fast_compile
@@ -374,8 +374,8 @@ def test_quick_runs_compile_their_steps_fast_and_full_runs_keep_their_records():
     record = Path(__file__).resolve().parents[1] / "results/reproduce/runs/furuta/dln_prop/seed0/reproduce_config.json"
     saved = json.loads(record.read_text())
     assert "fast_compile" not in saved["train"]
-    current = json.loads(json.dumps(dict(saved, train=training_config("furuta", ReproduceConfig(), 0, "prop", "dln").to_json())))
-    current["train"].pop("progress", None)
+    current = _run_settings("furuta", "dln", "prop", 0, ReproduceConfig())
+    assert current["train"]["fast_compile"] is False
     assert _same_settings(saved, current)
-    quick = json.loads(json.dumps(dict(current, train=dict(current["train"], fast_compile=True))))
+    quick = dict(current, train=dict(current["train"], fast_compile=True))
     assert not _same_settings(saved, quick)

@@ -342,6 +342,17 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
 SETTINGS_BEFORE_RECORDED = {"keep_best_itau": False}
 
 
+def _run_settings(system: str, kind: str, loss: str, seed: int, config: ReproduceConfig) -> dict:
+    """What a run directory's ``reproduce_config.json`` records for this run — its training
+    settings (the progress bar aside) and architecture — in JSON's own form (lists, not tuples),
+    so it compares with a saved record as it is."""
+    train = training_config(system, config, seed, loss, kind).to_json()
+    train.pop("progress", None)
+    settings = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": train,
+                "model_hparams": _default_hparams(system, kind, config.model_overrides)}
+    return json.loads(json.dumps(settings))
+
+
 def _same_settings(saved: dict, current: dict) -> bool:
     """Whether a run directory's recorded settings are this run's. A training setting the record
     lacks was added later; the run then did what :data:`SETTINGS_BEFORE_RECORDED` says, or else
@@ -399,9 +410,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     metrics_path = run_dir / "metrics.json"
     model_path = run_dir / MODEL_FILE
     tcfg = training_config(system, config, seed, loss, kind)
-    cfg_json = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": tcfg.to_json(),
-                "model_hparams": _default_hparams(system, kind, config.model_overrides)}
-    cfg_json["train"].pop("progress", None)
+    cfg_json = _run_settings(system, kind, loss, seed, config)
     cfg_path = run_dir / "reproduce_config.json"
     if cfg_path.exists():
         saved = json.loads(cfg_path.read_text())
@@ -410,7 +419,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
             from .checkpoint import read_header
 
             saved["model_hparams"] = json.loads(json.dumps(read_header(model_path).get("hparams", {}), default=str))
-        if not _same_settings(saved, json.loads(json.dumps(cfg_json))):
+        if not _same_settings(saved, cfg_json):
             raise ValueError(
                 f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out"
             )
