@@ -37,12 +37,16 @@ def _train(system: str, kind: str, weight: float, out: Path) -> None:
     reproduce(out, cfg, command=f"bench/select_augmentation_weight.py μ={weight!r}", log=lambda msg: None)
 
 
-def _run_dir(out: Path, system: str, kind: str) -> Path:
-    """Where ``furuta-gym reproduce`` writes the one L_prop run of a candidate's folder."""
-    return out / "runs" / system / f"{kind}_prop" / "seed0"
+def _run_dir(out: Path, system: str, kind: str, seed: int = 0) -> Path:
+    """Where ``furuta-gym reproduce`` writes a candidate folder's L_prop run of model ``seed``."""
+    return out / "runs" / system / f"{kind}_prop" / f"seed{seed}"
 
 
-def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int) -> dict[float, dict]:
+def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int,
+           seeds: tuple[int, ...] = (0,)) -> dict[float, dict]:
+    """Each candidate's validation score: per model seed the mean over sets and state variables,
+    then averaged over ``seeds`` (``"mean"``, the criterion; ``"seed_means"`` each seed's), a
+    diverged prediction counted as +2; the cells (``"sets"``) are means over the seeds."""
     import numpy as np
 
     from furuta_gym.training.checkpoint import load_model
@@ -52,14 +56,25 @@ def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int
 
     data = generate_datasets(system, seed=validation_seed, ground_truth="mujoco")
     scores = {}
-    for weight, out in runs.items():
-        model = load_model(_run_dir(out, system, kind) / "model.eqx", expected_system=system)
-        per_set, values = {}, []
-        for label, name in TEST_SETS[system].items():
-            result = evaluate_model(model, data[name], physics=False)
-            per_set[label] = {k: result[k] for k in model.spec.state_names}
-            values += [DIVERGED_SCORE if v == DIVERGED else float(v) for v in per_set[label].values()]
-        scores[weight] = {"mean": float(np.mean(values)), "sets": per_set}
+    for key, out in runs.items():
+        per_seed = []
+        for seed in seeds:
+            model = load_model(_run_dir(out, system, kind, seed) / "model.eqx", expected_system=system)
+            per_set = {}
+            for label, name in TEST_SETS[system].items():
+                result = evaluate_model(model, data[name], physics=False)
+                per_set[label] = {k: result[k] for k in model.spec.state_names}
+            per_seed.append(per_set)
+
+        def value(v):
+            return DIVERGED_SCORE if v == DIVERGED else float(v)
+
+        # a cell shows DIVERGED if any seed's prediction diverged; the criterion counts it as +2
+        sets = {label: {k: DIVERGED if any(p[label][k] == DIVERGED for p in per_seed)
+                        else float(np.mean([p[label][k] for p in per_seed])) for k in per_seed[0][label]}
+                for label in per_seed[0]}
+        seed_means = [float(np.mean([value(v) for cells in p.values() for v in cells.values()])) for p in per_seed]
+        scores[key] = {"mean": float(np.mean(seed_means)), "seed_means": seed_means, "sets": sets}
     return scores
 
 

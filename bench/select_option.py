@@ -2,20 +2,26 @@
 reproduction reports: a training setting (``--train NAME VALUE …``, e.g. L_Iτ's quadrature) or a
 model option (``--model NAME VALUE …``, e.g. F_a's ``odd_in_velocity``).
 
-Every value trains each named L_prop model with the full reproduction recipe (the same data, seed
-0, epochs and μ as ``furuta-gym reproduce``; only that option differs). Every model then predicts
-the trajectories of the *validation* draw (the test recipes generated with seed 100; the test sets
-use 0), and the mean open-loop prediction log10 RMSE over sets and state variables is the
-criterion, as for μ (bench/select_augmentation_weight.py). The choice goes into the code by hand.
+Every value trains each named L_prop model with the full reproduction recipe (the same data, model
+seed 0, epochs and μ as ``furuta-gym reproduce``; only that option differs). Every model then
+predicts the trajectories of the *validation* draw (the test recipes generated with seed 100; the
+test sets use 0), and the mean open-loop prediction log10 RMSE over sets and state variables is the
+criterion, as for μ (bench/select_augmentation_weight.py). ``--seeds N`` trains model seeds 0 … N−1
+of every candidate and takes the mean over them: one run each cannot tell options apart whose
+difference is smaller than the seeds' spread (the Furuta augmented DeLaN's validation means of
+three seeds, fine-tuned at 1e-3: −0.79, −0.79, −0.91). The choice goes into the code by hand.
 
     python bench/select_option.py --system furuta --kinds dln aph adln \
         --train quadrature simpson hermite --reuse results/reproduce --out results/quadrature
     python bench/select_option.py --system nmsd --kinds adln --model odd_in_velocity false true \
         --reuse results/augmentation_weight/nmsd_adln/mu_0.01 --out results/force_parity
+    python bench/select_option.py --system furuta --kinds adln --train quadrature simpson hermite \
+        --seeds 3 --reuse results/reproduce_seeds --out results/quadrature_adln_seeds
 
-Values are JSON where they parse (false, 0.1) and strings otherwise. ``--reuse DIR``: a run of
-DIR (a reproduction's output) whose recorded settings are exactly a candidate's is copied in
-instead of trained again (the reproduction then reuses it as it would its own). Writes
+Values are JSON where they parse (false, 0.1) and strings otherwise. ``--reuse DIR …``: a run of
+a DIR (a reproduction's output; the first that has one) whose recorded settings are exactly a
+candidate's, seed included, is copied in instead of trained again (the reproduction then reuses it
+as it would its own). Writes
 ``OUT/<system>.md`` / ``.json``; runs live under ``OUT/<system>_<kind>/<value>``.
 """
 
@@ -29,6 +35,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import numpy as np
 from select_augmentation_weight import _run_dir, _score, parse_selection_args
 
 
@@ -39,38 +46,40 @@ def _parse(text: str):
         return text
 
 
-def _config(system: str, kind: str, where: str, name: str, value):
-    """The reproduction config of one candidate: ``where`` is "train" or "model"."""
+def _config(system: str, kind: str, where: str, name: str, value, seeds: int = 1):
+    """The reproduction config of one candidate: ``where`` is "train" or "model"; model seeds
+    0 … ``seeds`` − 1."""
     from furuta_gym.training.reproduce import ReproduceConfig
 
     override = {name: value}
-    return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), figures=False, progress=False, jobs=1,
+    return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), seeds=tuple(range(seeds)),
+                           figures=False, progress=False, jobs=1,
                            train_overrides=override if where == "train" else None,
                            model_overrides=override if where == "model" else None)
 
 
-def _train(system: str, kind: str, where: str, name: str, value, out: Path) -> None:
+def _train(system: str, kind: str, where: str, name: str, value, out: Path, seeds: int = 1) -> None:
     import furuta_gym
     from furuta_gym.training.reproduce import reproduce
 
     furuta_gym.enable_x64()
-    reproduce(out, _config(system, kind, where, name, value),
+    reproduce(out, _config(system, kind, where, name, value, seeds),
               command=f"bench/select_option.py {system} {kind} {where} {name}={value!r}", log=lambda msg: None)
 
 
-def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path) -> bool:
-    """Copy ``source``'s run of this model into ``out`` if it was trained with exactly the
-    candidate's settings (the reproduction's own comparison decides); True if ``out`` holds it."""
+def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path, seed: int = 0) -> bool:
+    """Copy ``source``'s run of this model and ``seed`` into ``out`` if it was trained with exactly
+    the candidate's settings (the reproduction's own comparison decides); True if ``out`` holds it."""
     from furuta_gym.training.reproduce import _run_settings, _same_settings
 
-    src = _run_dir(source, system, kind)
-    dst = _run_dir(out, system, kind)
+    src = _run_dir(source, system, kind, seed)
+    dst = _run_dir(out, system, kind, seed)
     if not (src / "model.eqx").exists() or not (src / "reproduce_config.json").exists():
         return False
     if dst.exists():  # copied by an earlier invocation?
         return (dst / "model.eqx").exists() and (dst / "model.eqx").read_bytes() == (src / "model.eqx").read_bytes()
     saved = json.loads((src / "reproduce_config.json").read_text())
-    if not _same_settings(saved, _run_settings(system, kind, "prop", 0, config)):
+    if not _same_settings(saved, _run_settings(system, kind, "prop", seed, config)):
         return False
     dst.mkdir(parents=True)
     for name in ("model.eqx", "metrics.json", "reproduce_config.json", "history.json"):
@@ -86,7 +95,10 @@ def main(argv=None) -> None:
     option = parser.add_mutually_exclusive_group(required=True)
     option.add_argument("--train", nargs="+", metavar=("NAME", "VALUE"), help="a TrainConfig field and its values")
     option.add_argument("--model", nargs="+", metavar=("NAME", "VALUE"), help="a model option and its values")
-    parser.add_argument("--reuse", type=Path, default=None, help="a reproduction's output to copy matching runs from")
+    parser.add_argument("--reuse", type=Path, nargs="+", default=[],
+                        help="reproductions' outputs to copy matching runs from (the first that has one)")
+    parser.add_argument("--seeds", type=int, default=1,
+                        help="model seeds per candidate (0 … N-1); the criterion is their mean")
     args = parse_selection_args(parser, argv, "results/selection")
     where = "train" if args.train else "model"
     name, *texts = args.train or args.model
@@ -98,22 +110,31 @@ def main(argv=None) -> None:
 
     furuta_gym.enable_x64()
     machine = _machine()
-    candidates = [(kind, text, _config(args.system, kind, where, name, _parse(text)),
+    if args.seeds < 1:
+        parser.error(f"--seeds must be at least 1, got {args.seeds}")
+    seeds = tuple(range(args.seeds))
+    candidates = [(kind, text, _config(args.system, kind, where, name, _parse(text), args.seeds),
                    args.out / f"{args.system}_{kind}" / text) for kind in args.kinds for text in texts]
-    copied = [(k, t) for k, t, cfg, out in candidates
-              if args.reuse is not None and _copy_matching_run(args.reuse, args.system, k, cfg, out)]
+    # {(kind, value): {seed: the folder its run was copied from}}
+    copied = {(k, t): {seed: str(src) for seed in seeds
+                       for src in [next((r for r in args.reuse
+                                         if _copy_matching_run(r, args.system, k, cfg, out, seed)), None)]
+                       if src is not None}
+              for k, t, cfg, out in candidates}
     # spawn, not fork: comparing settings above already ran JAX, whose threads a forked child
     # would inherit mid-flight (it deadlocked)
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        list(pool.map(_train, *zip(*[(args.system, k, where, name, _parse(t), out) for k, t, _, out in candidates])))
+        list(pool.map(_train, *zip(*[(args.system, k, where, name, _parse(t), out, args.seeds)
+                                      for k, t, _, out in candidates])))
     rows = {}
     for kind in args.kinds:
         runs = {text: out for k, text, _, out in candidates if k == kind}
-        scores = _score(args.system, kind, runs, args.validation_seed)
+        scores = _score(args.system, kind, runs, args.validation_seed, seeds)
         for text, out in runs.items():
-            metrics = json.loads((_run_dir(out, args.system, kind) / "metrics.json").read_text())
-            scores[text]["train_seconds"] = metrics["_seconds"]["train"]
-            scores[text]["reused_from"] = str(args.reuse) if (kind, text) in copied else None
+            seconds = [json.loads((_run_dir(out, args.system, kind, seed) / "metrics.json").read_text())
+                       ["_seconds"]["train"] for seed in seeds]
+            scores[text]["train_seconds"] = sum(seconds) / len(seconds)
+            scores[text]["reused_from"] = copied[(kind, text)] or None
         rows[kind] = scores
     first = next(iter(next(iter(rows.values())).values()))
     sets = list(first["sets"])
@@ -123,17 +144,21 @@ def main(argv=None) -> None:
         "",
         f"`python bench/select_option.py --system {args.system} --kinds {' '.join(args.kinds)} "
         f"--{where} {name} {' '.join(texts)} --validation-seed {args.validation_seed}"
-        + (f" --reuse {args.reuse}" if args.reuse else "") + f" --out {args.out}`, "
+        + (f" --seeds {args.seeds}" if args.seeds > 1 else "")
+        + (f" --reuse {' '.join(map(str, args.reuse))}" if args.reuse else "") + f" --out {args.out}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', 'cpu')}, "
         f"{machine['cpu_count']} cores. Training seconds from each run's metrics.json (runs trained "
-        "beside others are slower than alone).",
+        "beside others are slower than alone)"
+        + (f"; cells, mean and seconds are means over model seeds {', '.join(map(str, seeds))}, "
+           "whose own means follow (± their standard deviation)" if args.seeds > 1 else "") + ".",
         "",
         f"Open-loop prediction log10 RMSE on the validation draw (seed {args.validation_seed}; the "
         "reported test sets are seed 0 and take no part in the choice). Lower is better; the mean is "
         "the criterion.",
         "",
-        f"| model | {name} | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean | train s |",
-        "|---|---|" + "---:|" * (len(sets) * len(names) + 2),
+        f"| model | {name} | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean |"
+        + (" seeds |" if args.seeds > 1 else "") + " train s |",
+        "|---|---|" + "---:|" * (len(sets) * len(names) + 2 + (args.seeds > 1)),
     ]
     chosen = {}
     for kind, scores in rows.items():
@@ -143,8 +168,15 @@ def main(argv=None) -> None:
             cells = [sc["sets"][s][n] for s in sets for n in names]
             cell_text = " | ".join(c if isinstance(c, str) else f"{c:.2f}" for c in cells)
             mark = " ← lower" if text == best else ""
-            reused = " (reused)" if sc["reused_from"] else ""
-            lines.append(f"| {kind} | {text}{reused} | {cell_text} | **{sc['mean']:.3f}**{mark} | {sc['train_seconds']:.0f} |")
+            reused = ""
+            if sc["reused_from"]:
+                reused = " (reused)" if len(sc["reused_from"]) == args.seeds else f" (seeds {', '.join(map(str, sc['reused_from']))} reused)"
+            per_seed = ""
+            if args.seeds > 1:
+                spread = float(np.std(sc["seed_means"], ddof=1))
+                per_seed = f" {' / '.join(f'{m:.3f}' for m in sc['seed_means'])} (± {spread:.3f}) |"
+            lines.append(f"| {kind} | {text}{reused} | {cell_text} | **{sc['mean']:.3f}**{mark} |{per_seed}"
+                         f" {sc['train_seconds']:.0f} |")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{args.system}.md").write_text("\n".join(lines) + "\n")
     (args.out / f"{args.system}.json").write_text(json.dumps(
