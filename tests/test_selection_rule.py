@@ -1,0 +1,30 @@
+"""The rule bench/select_option.py applies to choose a recipe option over several model seeds."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from select_option import choose  # noqa: E402
+
+
+def test_a_value_replaces_the_recipes_only_if_every_seed_prefers_it():
+    # the Furuta DeLaN's quadrature (results/quadrature_seeds): Hermite's mean is lower, seed 0 is not
+    chosen, paired = choose({"simpson": [-1.242, -0.961, -0.888], "hermite": [-1.166, -1.094, -0.993]})
+    assert chosen == "simpson"
+    assert paired["hermite"]["every_seed"] is False
+    assert paired["hermite"]["differences"] == pytest.approx([0.076, -0.133, -0.105])
+    # augmented DeLaN's (results/quadrature_adln_seeds): lower on every seed
+    chosen, paired = choose({"simpson": [-1.139, -1.068, -1.226], "hermite": [-1.178, -1.508, -1.475]})
+    assert chosen == "hermite" and paired["hermite"]["every_seed"]
+
+
+def test_among_values_better_on_every_seed_the_lowest_mean_wins_and_ties_keep_the_recipe():
+    means = {"a": [0.0, 0.0, 0.0], "b": [-0.1, -0.1, -0.1], "c": [-0.5, -0.01, -0.5], "d": [-2.0, 0.1, -2.0]}
+    assert choose(means)[0] == "c"  # d has the lowest mean but is worse on seed 1
+    assert choose({"a": [0.0, 0.0], "b": [0.0, -1.0]})[0] == "a"  # equal on a seed is not better
+    # one seed: the plain lowest mean
+    assert choose({"a": [0.0], "b": [-0.1]}) == ("b", {})
+    with pytest.raises(ValueError, match="'b' has 1 seed means"):
+        choose({"a": [0.0, 0.0], "b": [0.0]})
