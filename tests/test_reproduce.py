@@ -270,6 +270,40 @@ def test_full_run_fine_tunes_furuta_delan_and_augmented_delan_at_smaller_steps()
     assert training_config("furuta", rate, 0, "prop", "adln").learning_rate == 3e-3
 
 
+def test_full_run_gives_single_l_prop_models_their_own_quadrature_and_overrides_win(tmp_path):
+    """FULL_PROP_QUADRATURE names the full run's L_prop models with their own L_Iτ rule; every
+    other run (the baselines, whose Furuta scale fit takes the rule too, the other models,
+    --quick, an own schedule) keeps REPRODUCE_QUADRATURE, --quadrature sets every run's, and the
+    run record says which model used what."""
+    from furuta_gym.training.reproduce import (
+        FULL_PROP_QUADRATURE,
+        REPRODUCE_QUADRATURE,
+        _write_run_record,
+        training_config,
+    )
+
+    full = ReproduceConfig()
+    assert FULL_PROP_QUADRATURE
+    for (system, kind), rule in FULL_PROP_QUADRATURE.items():
+        assert rule != REPRODUCE_QUADRATURE
+        assert training_config(system, full, 0, "prop", kind).quadrature == rule
+        for loss in ("traj", "aph"):
+            assert training_config(system, full, 0, loss, kind).quadrature == REPRODUCE_QUADRATURE
+        for other in (ReproduceConfig(quick=True), ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})):
+            assert training_config(system, other, 0, "prop", kind).quadrature == REPRODUCE_QUADRATURE
+        forced = ReproduceConfig(train_overrides={"quadrature": "trapezoid"})
+        assert training_config(system, forced, 0, "prop", kind).quadrature == "trapezoid"
+    untouched = [(s, k) for s in ("furuta", "nmsd") for k in ("dln", "aph", "adln") if (s, k) not in FULL_PROP_QUADRATURE]
+    assert untouched
+    for system, kind in untouched:
+        assert training_config(system, full, 0, "prop", kind).quadrature == REPRODUCE_QUADRATURE
+    record = json.loads(_write_run_record(tmp_path / "run.json", full, "test", {}, {}).read_text())
+    assert record["quadrature"] == REPRODUCE_QUADRATURE
+    assert record["quadrature_by_model"] == {f"{s}/{k}": r for (s, k), r in FULL_PROP_QUADRATURE.items()}
+    record = json.loads(_write_run_record(tmp_path / "run.json", forced, "test", {}, {}).read_text())
+    assert record["quadrature"] == "trapezoid" and record["quadrature_by_model"] == {}
+
+
 def test_runs_record_the_augmentation_weight_they_used():
     """μ is written into each L_prop run's settings (not left to a None default), per system and
     kind; an explicit override wins; models without F_a and the baselines carry none."""

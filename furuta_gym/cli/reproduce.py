@@ -49,8 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--quadrature", choices=["trapezoid", "simpson", "hermite"], default=None,
-        help="L_Iτ's rule and the scale fit's (default: the reproduction's recipe, "
-             "furuta_gym.training.reproduce.REPRODUCE_QUADRATURE)",
+        help="L_Iτ's rule and the scale fit's, for every run (default: the reproduction's recipe, "
+             "furuta_gym.training.reproduce.REPRODUCE_QUADRATURE, and FULL_PROP_QUADRATURE for "
+             "the L_prop models named there)",
     )
     parser.add_argument("--no-figures", action="store_true", help="tables only")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")

@@ -168,10 +168,19 @@ PROP_LAMBDA = 1e-3
 #: L_Iτ's quadrature in the reproduction (and the Furuta's scale fit): Simpson's rule. The paper's
 #: trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit; Simpson's
 #: floor is ~7× lower (tests/test_lagrangian.py). "hermite" removes the floor (true model 2e-9
-#: against 1.1e-5 on the Furuta training data) but on validation data it moved the three Furuta
-#: L_prop models by −0.06 to +0.09 decade, within the seed spread, at ~3× the L_Iτ cost
-#: (results/quadrature/furuta.md), so Simpson stays. ``--quadrature`` / ``train_overrides`` choose.
+#: against 1.1e-5 on the Furuta training data) at ~3× the L_Iτ step's cost. On validation data over
+#: three model seeds (bench/select_option.py --seeds 3, which keeps the recipe's value unless
+#: another is better on every seed) it did not beat Simpson for the Furuta DeLaN (mean −1.030 →
+#: −1.084, seed 0 worse) or APHYNITY (−1.631 → −1.658, seed 1 worse): results/quadrature_seeds.
+#: ``--quadrature`` / ``train_overrides`` choose.
 REPRODUCE_QUADRATURE = "simpson"
+#: L_Iτ's quadrature for single L_prop models of a full run, where it is not
+#: :data:`REPRODUCE_QUADRATURE`. Furuta augmented DeLaN, on validation data over three model seeds
+#: (results/quadrature_adln_seeds): Simpson −1.145 → Hermite −1.387, better on every seed
+#: (−0.04 / −0.44 / −0.25) and on every validation cell. A one-run comparison with its former
+#: 12 000-epoch L_Iτ stage had put Hermite 0.06 behind (results/quadrature). Its training takes
+#: ~2× as long (2050 s against 965 s, the three seeds' mean).
+FULL_PROP_QUADRATURE = {("furuta", "adln"): "hermite"}
 #: Adam's step in the L_Iτ-alone stage of the L_prop runs (the trajectory stages keep 1e-3). The
 #: N-MSD's (64, 64) networks crawl at 1e-3: L_Iτ on the training data was still 0.025 after 4000
 #: epochs, against 3e-4 at 1e-2 (one run each); the Furuta's (16, 16) ones fit at 1e-3.
@@ -190,14 +199,18 @@ PROP_ITAU_LEARNING_RATE = {"nmsd": 1e-2, "furuta": 1e-3}
 #: (its M and V are the prior's, nothing of its fit was undone), so it keeps 1e-3. Once augmented
 #: DeLaN's L_Iτ stage ran 24 000 epochs (above), its step was chosen again from the model that
 #: stage makes (results/finetune_rate_itau24k): 3e-4 −1.139, 1e-4 −1.115, 3e-5 −1.123 — the free
-#: cells alike, the forced ones 0.03–0.05 better at 3e-4. Not in --quick, whose 300 L_Iτ epochs
+#: cells alike, the forced ones 0.03–0.05 better at 3e-4. Over three model seeds 1e-4 scored
+#: −1.178 against −1.145 but worse on seed 0 (results/finetune_rate_itau24k_seeds), a tie, so 3e-4
+#: stays; its Hermite runs (FULL_PROP_QUADRATURE) were chosen at 3e-4. DeLaN's 1e-6 held over three
+#: seeds against 1e-4 (results/finetune_rate_dln_seeds). Not in --quick, whose 300 L_Iτ epochs
 #: leave nothing converged to keep.
 FULL_PROP_FINETUNE_LEARNING_RATE = {("furuta", "dln"): 1e-6, ("furuta", "adln"): 3e-4}
 
 
 def _full_prop_recipe(config: ReproduceConfig) -> bool:
     """Whether the L_prop runs follow the full run's own recipe, so its per-model settings
-    (:data:`FULL_PROP_ITAU_EPOCHS`, :data:`FULL_PROP_FINETUNE_LEARNING_RATE`) apply: not --quick
+    (:data:`FULL_PROP_ITAU_EPOCHS`, :data:`FULL_PROP_FINETUNE_LEARNING_RATE`,
+    :data:`FULL_PROP_QUADRATURE`) apply: not --quick
     and no schedule of the caller's."""
     return not config.quick and config.prop_epochs is None
 
@@ -217,6 +230,16 @@ def epoch_schedule(system: str, config: ReproduceConfig, loss: str, kind: str | 
     return epochs
 
 
+def quadrature_rule(system: str, config: ReproduceConfig, loss: str, kind: str | None = None) -> str:
+    """L_Iτ's quadrature (and, on the Furuta, the scale fit's) for ``loss`` runs of ``kind`` on
+    ``system``, before the caller's overrides: :data:`REPRODUCE_QUADRATURE`, or a full run's
+    L_prop model's own (:data:`FULL_PROP_QUADRATURE`)."""
+    name = get_spec(system).name
+    if loss == "prop" and _full_prop_recipe(config):
+        return FULL_PROP_QUADRATURE.get((name, kind), REPRODUCE_QUADRATURE)
+    return REPRODUCE_QUADRATURE
+
+
 def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop", kind: str | None = None):
     """The :class:`~furuta_gym.training.TrainConfig` of one run of model ``kind`` on ``system``
     with ``loss``."""
@@ -233,7 +256,7 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
         seed=seed,
         progress=config.progress,
         checkpoint_every=0,
-        quadrature=REPRODUCE_QUADRATURE,
+        quadrature=quadrature_rule(name, config, loss, kind),
     )
     if config.quick:  # a few hundred steps per model: compiling them is most of the run
         overrides["fast_compile"] = True
@@ -837,6 +860,18 @@ def _prop_epochs_by_model(config: ReproduceConfig) -> dict[str, list[int]]:
     return out
 
 
+def _quadrature_by_model(config: ReproduceConfig) -> dict[str, str]:
+    """``{"system/kind": rule}`` of the L_prop runs whose L_Iτ rule is not the run's."""
+    default = (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE)
+    out = {}
+    for system in config.systems:
+        for kind, loss in config.pairs:
+            rule = training_config(system, config, 0, loss, kind).quadrature
+            if rule != default:
+                out[f"{system}/{kind}"] = rule
+    return out
+
+
 def _write_run_record(path: Path, config: ReproduceConfig, command, timings, data_meta) -> Path:
     from .. import __version__
     from .checkpoint import package_versions
@@ -850,6 +885,7 @@ def _write_run_record(path: Path, config: ReproduceConfig, command, timings, dat
         "prop_epochs": {s: list(epoch_schedule(s, config, "prop")) for s in config.systems},
         "prop_epochs_by_model": _prop_epochs_by_model(config),
         "quadrature": (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE),
+        "quadrature_by_model": _quadrature_by_model(config),
         "data": data_meta,
         "machine": _machine(),
         "packages": package_versions(),
