@@ -26,6 +26,7 @@ import csv
 import datetime
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -95,7 +96,12 @@ def main(argv=None) -> None:
     parser.add_argument("--python", default=sys.executable, help="interpreter of the code measured")
     parser.add_argument("--baseline-python", required=True, help="interpreter of the code compared against")
     parser.add_argument("--no-write", action="store_true", help="print the section, leave BENCHMARKS.md alone")
+    parser.add_argument("--keep", type=Path, default=None, metavar="DIR",
+                        help="copy the measured run's output (tables, figures, run.json, models) to DIR, "
+                             "which must not exist (e.g. to commit it as results/reproduce_quick)")
     args = parser.parse_args(argv)
+    if args.keep is not None and args.keep.exists():
+        parser.error(f"--keep {args.keep}: exists; give a new folder (nothing is overwritten)")
 
     header = f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, {machine()}"
     results = {}
@@ -103,6 +109,10 @@ def main(argv=None) -> None:
         for name, python in (("baseline", args.baseline_python), ("measured", args.python)):
             results[name] = (describe(python), *cold_quick(python, Path(tmp) / name))
             print(f"{name}: {results[name][0]}: {results[name][1]:.1f} s", flush=True)
+        if args.keep is not None:  # the datasets are regenerated from the manifest on reuse
+            shutil.copytree(Path(tmp) / "measured" / "out", args.keep,
+                            ignore=shutil.ignore_patterns("*.csv", "train_state.eqx", "history.json"))
+            shutil.copy2(Path(tmp) / "measured" / "out" / "tables.csv", args.keep / "tables.csv")
     (b_code, b_wall, b_total, b_rows), (m_code, m_wall, m_total, m_rows) = results["baseline"], results["measured"]
     same = compare_tables(b_rows, m_rows)
     text = "\n".join([

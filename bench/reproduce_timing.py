@@ -69,7 +69,8 @@ def section(records: list[tuple[Path, dict]]) -> str:
     lines += [
         "",
         "Machine: the run record's CPU (the shared machine changed from an AMD EPYC to an Intel Xeon, "
-        "both 2 logical cores, between 2026-11-22 and 2026-11-23: compare times on one machine only).",
+        "both 2 logical cores, between 2026-11-22 and 2026-11-23, and back to an AMD EPYC on "
+        "2026-11-25 evening: compare times on one machine only).",
         END,
     ]
     return "\n".join(lines)

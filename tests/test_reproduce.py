@@ -181,10 +181,11 @@ def test_a_pool_starts_the_longest_models_first():
         assert costs == sorted(costs, reverse=True)
         # the seeds of one model stay in the order given
         assert [t[3] for t in ordered if t[:3] == ordered[0][:3]] == [0, 1]
-    # the full run's longest are the N-MSD L_prop models, not the Furuta runs started first before
-    # (two seeds each: the first four tasks)
+    # the full run's longest are the Furuta augmented DeLaN's L_prop (the Hermite rule, 24 000 L_Iτ
+    # epochs) and the N-MSD DeLaN's, not the Furuta runs started first before (two seeds each: the
+    # first four tasks)
     longest = {t[:3] for t in _longest_first(tasks, ReproduceConfig())[:4]}
-    assert longest == {("nmsd", "dln", "prop"), ("nmsd", "adln", "prop")}
+    assert longest == {("furuta", "adln", "prop"), ("nmsd", "dln", "prop")}
 
 
 def test_evaluate_cli_on_the_trained_checkpoint(tiny_run, tmp_path):
