@@ -233,14 +233,15 @@ def test_config_rejects_pairs_the_paper_does_not_report():
         ReproduceConfig(systems=("cartpole",))
 
 
-def test_full_run_gives_furuta_augmented_delan_a_longer_itau_stage_and_overrides_win():
+def test_full_run_gives_single_models_a_longer_itau_stage_and_overrides_win():
     from furuta_gym.training.reproduce import FULL_PROP_EPOCHS, training_config
 
     full = ReproduceConfig()
     adln = training_config("furuta", full, 0, "prop", "adln")
     dln = training_config("furuta", full, 0, "prop", "dln")
     assert adln.epochs == (24000, *FULL_PROP_EPOCHS["furuta"][1:])
-    assert dln.epochs == FULL_PROP_EPOCHS["furuta"]
+    assert dln.epochs == (12000, *FULL_PROP_EPOCHS["furuta"][1:])
+    assert training_config("furuta", full, 0, "prop", "aph").epochs == FULL_PROP_EPOCHS["furuta"]
     assert training_config("nmsd", full, 0, "prop", "adln").epochs == FULL_PROP_EPOCHS["nmsd"]
     assert training_config("nmsd", full, 0, "prop", "dln").epochs == (8000, *FULL_PROP_EPOCHS["nmsd"][1:])
     # the baselines, --quick and an explicit schedule are not touched
@@ -406,10 +407,11 @@ def test_quick_runs_compile_their_steps_fast_and_full_runs_keep_their_records():
     for kind, loss in (("dln", "traj"), ("adln", "prop"), ("aph", "aph")):
         assert training_config("furuta", ReproduceConfig(quick=True), 0, loss, kind).fast_compile
         assert not training_config("furuta", ReproduceConfig(), 0, loss, kind).fast_compile
-    record = Path(__file__).resolve().parents[1] / "results/reproduce/runs/furuta/dln_prop/seed0/reproduce_config.json"
+    # a committed L_prop run trained before fast_compile existed (2026-11-23)
+    record = Path(__file__).resolve().parents[1] / "results/reproduce/runs/furuta/aph_prop/seed0/reproduce_config.json"
     saved = json.loads(record.read_text())
     assert "fast_compile" not in saved["train"]
-    current = _run_settings("furuta", "dln", "prop", 0, ReproduceConfig())
+    current = _run_settings("furuta", "aph", "prop", 0, ReproduceConfig())
     assert current["train"]["fast_compile"] is False
     assert _same_settings(saved, current)
     quick = dict(current, train=dict(current["train"], fast_compile=True))
