@@ -213,8 +213,7 @@ FULL_PROP_FINETUNE_LEARNING_RATE = {("furuta", "dln"): 1e-6, ("furuta", "adln"):
 def _full_prop_recipe(config: ReproduceConfig) -> bool:
     """Whether the L_prop runs follow the full run's own recipe, so its per-model settings
     (:data:`FULL_PROP_ITAU_EPOCHS`, :data:`FULL_PROP_FINETUNE_LEARNING_RATE`,
-    :data:`FULL_PROP_QUADRATURE`) apply: not --quick
-    and no schedule of the caller's."""
+    :data:`FULL_PROP_QUADRATURE`) apply: not --quick and no schedule of the caller's."""
     return not config.quick and config.prop_epochs is None
 
 
@@ -514,17 +513,15 @@ def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
 #: the order in which a pool of jobs starts the models reads them: longest first, so no job is
 #: left with a long model at the end while the others idle (LPT scheduling). Replayed on 2 jobs,
 #: the order used before (Furuta first, trajectory losses before L_prop) finished --quick's 12
-#: models in 280 s and longest first in 264 s. The full run's longest model is the Furuta
-#: augmented DeLaN's L_prop since it took the Hermite rule; that run started it third (the table
-#: still had its Simpson-rule time) and took 2617 s, where longest first replays to 2597 s (the
-#: bound, half the sum, is 2583 s). The Furuta DeLaN's L_prop is that run's 200 s plus the ~60 s
-#: its L_Iτ stage has taken since it runs 12 000 epochs (its selection's runs, trained alone).
+#: models in 280 s and longest first in 264 s. The full run's longest model has been the Furuta
+#: augmented DeLaN's L_prop since it took the Hermite rule: started first, the run took 2684 s,
+#: where these times replay to 2653 s on two jobs (the bound, half their sum, is 2649 s).
 EXPECTED_SECONDS = {
     "full": {
-        ("nmsd", "dln", "traj"): 376, ("nmsd", "dln", "prop"): 945, ("nmsd", "aph", "aph"): 83,
-        ("nmsd", "aph", "prop"): 193, ("nmsd", "adln", "aph"): 482, ("nmsd", "adln", "prop"): 893,
-        ("furuta", "dln", "traj"): 67, ("furuta", "dln", "prop"): 260, ("furuta", "aph", "aph"): 58,
-        ("furuta", "aph", "prop"): 138, ("furuta", "adln", "aph"): 96, ("furuta", "adln", "prop"): 1636,
+        ("nmsd", "dln", "traj"): 349, ("nmsd", "dln", "prop"): 953, ("nmsd", "aph", "aph"): 60,
+        ("nmsd", "aph", "prop"): 175, ("nmsd", "adln", "aph"): 449, ("nmsd", "adln", "prop"): 943,
+        ("furuta", "dln", "traj"): 55, ("furuta", "dln", "prop"): 297, ("furuta", "aph", "aph"): 42,
+        ("furuta", "aph", "prop"): 105, ("furuta", "adln", "aph"): 61, ("furuta", "adln", "prop"): 1808,
     },
     "quick": {
         ("nmsd", "dln", "traj"): 38, ("nmsd", "dln", "prop"): 56, ("nmsd", "aph", "aph"): 32,
