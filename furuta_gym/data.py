@@ -3,9 +3,10 @@
 The format (DEVELOPERS.md "Conventions"): long form, one row per sample, columns
 ``traj, t, <joints>, u`` — ``traj,t,alpha,beta,u`` for the Furuta, ``traj,t,p,u`` for the N-MSD —
 with optional velocity columns ``alpha_dot, beta_dot`` / ``p_dot``. CSV, NPZ (one array per
-column) and MAT (one variable per column) hold the same columns. Other names come in through a
-``column_map`` ({canonical: name in the file}), with per-column ``signs`` and ``offsets``
-applied as ``canonical = sign · raw + offset``. A file without a ``traj`` column is one trajectory.
+column) and MAT (one variable per column) hold the same columns; ``*.csv.gz`` is read as a
+gzip-compressed CSV. Other names come in through a ``column_map`` ({canonical: name in the
+file}), with per-column ``signs`` and ``offsets`` applied as ``canonical = sign · raw + offset``.
+A file without a ``traj`` column is one trajectory.
 
 Every check names the file and the column and says what was expected; loading never modifies
 the file, and saving refuses to overwrite unless asked.
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import gzip
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -70,14 +72,21 @@ def columns_for(spec: SystemSpec, velocities: bool = True) -> list[str]:
 
 def _read_columns(path: Path) -> dict[str, np.ndarray]:
     suffix = path.suffix.lower()
-    if suffix == ".csv":
-        with path.open(newline="") as fh:
-            reader = csv.reader(fh)
-            try:
-                header = [h.strip() for h in next(reader)]
-            except StopIteration:
-                raise DataError(f"{path}: the file is empty; expected a header row") from None
-            rows = [r for r in reader if r and any(c.strip() for c in r)]
+    gzipped = path.name.lower().endswith(".csv.gz")
+    if suffix == ".csv" or gzipped:
+        # ``*.csv.gz`` is a gzip-compressed CSV, parsed exactly like ``*.csv``.
+        try:
+            with gzip.open(path, "rt", newline="") if gzipped else path.open(newline="") as fh:
+                reader = csv.reader(fh)
+                try:
+                    header = [h.strip() for h in next(reader)]
+                except StopIteration:
+                    raise DataError(f"{path}: the file is empty; expected a header row") from None
+                rows = [r for r in reader if r and any(c.strip() for c in r)]
+        except (gzip.BadGzipFile, EOFError) as err:
+            raise DataError(
+                f"{path}: not a readable gzip file ({err}); expected a gzip-compressed CSV"
+            ) from None
         if not rows:
             raise DataError(f"{path}: no data rows after the header")
         out: dict[str, np.ndarray] = {}
@@ -102,7 +111,9 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
 
         m = loadmat(path, squeeze_me=True)
         return {k: np.ravel(np.asarray(v)) for k, v in m.items() if not k.startswith("__")}
-    raise DataError(f"{path}: unsupported file type {suffix!r}; expected .csv, .npz or .mat")
+    raise DataError(
+        f"{path}: unsupported file type {suffix!r}; expected .csv, .csv.gz, .npz or .mat"
+    )
 
 
 def _is_float(v: str) -> bool:
@@ -124,7 +135,8 @@ def load_trajectories(
     min_samples: int = 3,
     dt_tolerance: float = 1e-3,
 ) -> list[Trajectory]:
-    """Load trajectories of ``system`` from a CSV / NPZ / MAT file in the long format.
+    """Load trajectories of ``system`` from a CSV (or gzip-compressed ``.csv.gz``) / NPZ / MAT
+    file in the long format.
 
     Raises :class:`DataError` naming the file and column when a column is missing, holds NaN or
     non-numbers, time is not strictly increasing or not uniformly sampled (relative tolerance
