@@ -1,30 +1,52 @@
 """Measured-like datasets with a known undeclared effect, for tests, demos and benchmarks.
 
 The plant is the MuJoCo ground truth with the effects written into it
-(:class:`furuta_gym.envs._backends.MujocoBackend`, a plant variant; Coulomb friction as the exact
-sgn law) — or, with ``plant="analytic"``, the analytic model plus
-:class:`furuta_gym.effects.WithEffects` — integrated with RK4 and the input held over each sample
-period, as a digital controller drives hardware. An input delay is the plant seeing the command
-whole samples late. What the user would log is then produced:
-encoder-quantised angles at 500 Hz for the Furuta (2048 counts/rev), positions with small
-Gaussian noise at 100 Hz for the N-MSD; no velocities.
+(:class:`furuta_gym.envs._backends.MujocoBackend`, a plant variant; Coulomb friction and stiction
+as the exact sgn law, an actuator lag as MuJoCo's actuator dynamics) — or, with
+``plant="analytic"``, the analytic model plus :class:`furuta_gym.effects.WithEffects` (dry
+friction smoothed by tanh(v/1e-3)) and :class:`furuta_gym.effects.ActuatorLag` — integrated with
+RK4 and the input held over each sample period, as a digital controller drives hardware. An input
+delay is the plant seeing the command whole samples late. What the user would log is then
+produced: encoder-quantised angles at 500 Hz for the Furuta (2048 counts/rev), positions with
+small Gaussian noise at 100 Hz for the N-MSD; no velocities.
+
+Experiments (``excitation=``):
+
+* ``"chirp"`` (default): random initial states and a random chirp input (both systems).
+* ``"sine_sweep"`` (Furuta): from near rest, hanging, one open-loop sine of random amplitude and
+  frequency, switched off for rest periods: with dry friction against a cable spring the rotor
+  comes to rest off zero and sticks there.
+* ``"closed_loop_prbs"`` (Furuta): upright balancing as in the MIT rig logs: a PD controller on
+  the quantised angles tracking a rotor reference that ramps back and forth and a ±0.01 rad
+  pendulum reference, plus a ±0.5 V feed-forward, saturated at ±10 V. The logged u is the plant
+  input, so it correlates with the measurement (quantisation) noise, as closed-loop data do.
 """
 
 from __future__ import annotations
 
+import collections
+import math
 from typing import Sequence
 
 import jax
 import numpy as np
+from scipy.signal import lfilter
 
 from .._x64 import ensure_x64
 from ..data import Trajectory
-from ..effects import Effect, WithEffects
+from ..effects import ActuatorLag, Effect, WithEffects, actuator_lag_time
 from ..models import NMSD, Furuta
 from ..signals import chirp, quantize_encoder
-from ..simulate import rollout_zoh
+from ..simulate import rk4_zoh_step, rollout_zoh
 
-__all__ = ["measured_like"]
+__all__ = ["measured_like", "EXCITATIONS", "BALANCE_GAINS"]
+
+EXCITATIONS = ("chirp", "sine_sweep", "closed_loop_prbs")
+
+#: the MIT rig logs' balance gains (their alpha = 0 upright), V/rad and V·s/rad. In our convention
+#: u = kp_theta·α + kd_theta·α̇ − kp_alpha·(β − π) − kd_alpha·β̇: of the 16 sign patterns the only
+#: one whose linearised loop is stable (eigenvalues −10.6 ± 18.6j, −10.2, −7.3).
+BALANCE_GAINS = {"kp_theta": 6.0, "kd_theta": 1.8, "kp_alpha": 30.0, "kd_alpha": 2.5}
 
 
 def _inputs(system: str, t: np.ndarray, rng: np.random.Generator, forced: bool) -> np.ndarray:
@@ -41,6 +63,143 @@ def _inputs(system: str, t: np.ndarray, rng: np.random.Generator, forced: bool) 
     return offset + chirp(t, f0, f1, t[-1], amplitude=amp, phase=rng.uniform(0, 2 * np.pi))
 
 
+def _sine_with_rests(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """One sine (0.3–2 V, 0.2–3 Hz), on for 60–80 % of each 3–8 s cycle (at most the record)
+    and 0 V for the rest: in the pauses a rotor with dry friction against a cable spring stops
+    off zero and sticks, once the pendulum's swing no longer drags it (hence pauses of ~1–3 s).
+
+    The sine is switched at its zero crossings only (whole half-periods), so switching kicks
+    neither rotor nor pendulum: the rotor stops where the voltage left it, near its excursion.
+    """
+    amp, freq, phase = rng.uniform(0.3, 2.0), rng.uniform(0.2, 3.0), rng.uniform(0, 2 * np.pi)
+    cycle, duty = min(rng.uniform(3.0, 8.0), t[-1]), rng.uniform(0.6, 0.8)
+    angle = 2 * np.pi * freq * t + phase
+    half_start = np.maximum((np.floor(angle / np.pi) * np.pi - phase) / (2 * np.pi * freq), 0.0)
+    on = (half_start % cycle) < duty * cycle
+    return np.where(on, amp * np.sin(angle), 0.0)
+
+
+def _telegraph(n: int, dt: float, rng, level: float, unit: float, most: int) -> np.ndarray:
+    """±level, the sign switching after random holds of 1..``most`` × ``unit`` seconds."""
+    out, k, sign = np.empty(n), 0, rng.choice((-1.0, 1.0))
+    while k < n:
+        hold = int(rng.integers(1, most + 1)) * max(1, round(unit / dt))
+        out[k : k + hold] = sign * level
+        k, sign = k + hold, -sign
+    return out
+
+
+def _smoothed(x: np.ndarray, keep: float = 5.0 / 7.0) -> np.ndarray:
+    """The rig's first-order smoothing of its references and excitation (≈ 6 ms at 500 Hz)."""
+    return lfilter([1.0 - keep], [1.0, -keep], x)
+
+
+def _excitation(n: int, dt: float, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the MIT rig logs add to the balancing loop (read off the logs): a rotor reference
+    ramping at ±0.25 rad/s (direction held 0.25–1 s), a pendulum reference of ±0.01 rad and a
+    ±0.5 V feed-forward (each held 0.1–0.8 s / 0.1–0.6 s), all smoothed. Returns
+    (rotor reference, pendulum reference, feed-forward) per sample."""
+    ramp = _smoothed(_telegraph(n, dt, rng, 0.25, 0.25, 4))
+    rotor = np.cumsum(ramp) * dt
+    pendulum = _smoothed(_telegraph(n, dt, rng, 0.01, 0.1, 8))
+    feed = _smoothed(_telegraph(n, dt, rng, 0.5, 0.1, 6))
+    return rotor, pendulum, feed
+
+
+class _Plant:
+    """The plant behind its actuator (input delay of whole samples, actuator lag) at one sample
+    period ``dt``: rolled out open loop (:meth:`roll`) or stepped by a controller (:meth:`step`)."""
+
+    def __init__(
+        self, system: str, effects: Sequence[Effect], plant: str, dt: float, substeps: int, fine: bool
+    ):
+        self.dt = dt
+        self.shift = int(round(sum(e.coefficient for e in effects if e.name == "input_delay") / dt))
+        tau = actuator_lag_time(effects)
+        mem = [e for e in effects if e.name != "input_delay"]
+        self.backend, self.lag = None, None
+        if plant == "mujoco":
+            from ..envs._backends import MujocoBackend
+
+            # the lag is native. ``fine``: ``substeps`` RK4 steps per sample, as the analytic
+            # plant; else one MJCF step (2 ms / 10 ms), as the chirp data always had
+            n = substeps if fine else 1
+            self.backend = MujocoBackend(system, n, mem, timestep=dt / n if fine else None)
+            assert abs(self.backend.control_dt - dt) < 1e-12
+        elif plant == "analytic":
+            mem = [e for e in mem if e.name != "actuator_lag"]
+            base = Furuta() if system == "furuta" else NMSD()
+            model = WithEffects(base, mem, coulomb_smoothing=1e-3) if mem else base
+            self._rollout = jax.jit(lambda x0, us: rollout_zoh(model, x0, us, dt, substeps))
+            self._period = jax.jit(lambda x, u: rk4_zoh_step(model, x, u, dt, substeps))
+            self.lag = ActuatorLag(tau) if tau > 0 else None
+        else:
+            raise ValueError(f"plant must be 'mujoco' or 'analytic', got {plant!r}")
+
+    def roll(self, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """States at every sample time under the commanded samples ``u`` (T,); ``xs[0] = x0``."""
+        T, s = len(u), self.shift
+        u_plant = np.concatenate([np.full(s, u[0]), u[: T - s]]) if s else u
+        if self.backend is not None:
+            self.backend.reset(np.asarray(x0))
+            steps = [self.backend.step(np.asarray(u_k)) for u_k in u_plant[:-1, None]]
+            return np.stack([np.asarray(x0)] + steps)
+        if self.lag is not None:  # open loop: the lag's held means can be computed up front
+            self.lag.reset()
+            u_plant = np.array([self.lag.advance(u_k, self.dt)[0] for u_k in u_plant])
+        return np.asarray(self._rollout(x0, u_plant[:-1, None]))
+
+    def reset(self, x0: np.ndarray) -> None:
+        self.x, self._queue = np.asarray(x0, dtype=np.float64), None
+        if self.backend is not None:
+            self.backend.reset(self.x)
+        if self.lag is not None:
+            self.lag.reset()
+
+    def step(self, u: np.ndarray) -> np.ndarray:
+        """Hold the command ``u`` (shape (1,)) for one sample; return the next state."""
+        if self.shift:  # as in roll, the first command stands for the ones before the start
+            if self._queue is None:
+                self._queue = collections.deque([u] * self.shift)
+            self._queue.append(u)
+            u = self._queue.popleft()
+        if self.backend is not None:
+            self.x = self.backend.step(u)
+        else:
+            if self.lag is not None:
+                u = self.lag.advance(u, self.dt)
+            self.x = np.asarray(self._period(self.x, u))
+        return self.x
+
+
+def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, cutoff: float = 100.0):
+    """One closed-loop upright run: (quantised angles (T, 2), plant input (T,)).
+
+    The controller sees only the encoders, as on the rig: velocities are a first-order filtered
+    difference of the quantised angles (cut-off ``cutoff`` rad/s; a raw difference turns one
+    count into 1.5 rad/s). u = PD + PRBS, saturated at ±10 V and held until the next sample.
+    """
+    dt, g = t[1] - t[0], BALANCE_GAINS
+    x = np.array([rng.uniform(-0.1, 0.1), np.pi + rng.uniform(-0.05, 0.05),
+                  rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05)])
+    rotor_ref, pendulum_ref, feed = _excitation(len(t), dt, rng)
+    sim.reset(x)
+    smooth = 1.0 - math.exp(-cutoff * dt)
+    q_prev, v = quantize_encoder(x[:2]), np.zeros(2)
+    qs, us = np.empty((len(t), 2)), np.empty(len(t))
+    for k in range(len(t)):
+        q = quantize_encoder(x[:2])
+        v += smooth * ((q - q_prev) / dt - v)
+        q_prev = q
+        tilt = (q[1] - np.pi + np.pi) % (2 * np.pi) - np.pi  # β − π wrapped to [−π, π)
+        pd = (g["kp_theta"] * (q[0] - rotor_ref[k]) + g["kd_theta"] * v[0]
+              - g["kp_alpha"] * (tilt - pendulum_ref[k]) - g["kd_alpha"] * v[1])
+        qs[k], us[k] = q, np.clip(pd + feed[k], -10.0, 10.0)
+        if k + 1 < len(t):
+            x = sim.step(us[k : k + 1])
+    return qs, us
+
+
 def measured_like(
     system: str,
     effects: Sequence[Effect] = (),
@@ -52,52 +211,60 @@ def measured_like(
     noise: float | None = None,
     plant: str = "mujoco",
     substeps: int = 10,
+    excitation: str = "chirp",
 ) -> list[Trajectory]:
     """Trajectories of the pinned model with ``effects`` added, as a sensor would log them.
 
-    Random initial states (Furuta: α0 ~ U(−1, 1), β0 ~ U(−π, π), velocities ~ U(−3, 3); N-MSD:
-    p0 ~ U(−1, 1), ṗ0 ~ U(−3, 3)) and random chirp inputs. ``input_delay`` is applied as the
-    plant seeing the command ``round(d/dt)`` samples late.
+    ``excitation="chirp"`` (both systems; ``forced=False``: no input): random initial states
+    (Furuta: α0 ~ U(−1, 1), β0 ~ U(−π, π), velocities ~ U(−3, 3); N-MSD: p0 ~ U(−1, 1),
+    ṗ0 ~ U(−3, 3)) and random chirp inputs. Furuta only:
+
+    * ``"sine_sweep"``: near rest, hanging (α0 ~ U(−0.1, 0.1), β0 ~ U(−0.05, 0.05), velocities
+      ~ U(−0.01, 0.01)); one sine of 0.3–2 V at 0.2–3 Hz, on for 60–80 % of each 3–8 s cycle
+      (switched at zero crossings), 0 V in between.
+    * ``"closed_loop_prbs"``: upright balancing from β0 = π ± 0.05, α0 = ±0.1, velocities ±0.05;
+      PD on the encoder angles (:data:`BALANCE_GAINS`, filtered-difference velocities) tracking
+      references plus a ±0.5 V feed-forward as the MIT logs do (:func:`_excitation`), saturated
+      at ±10 V; u is the saturated command.
+
+    ``input_delay`` is applied as the plant seeing the command ``round(d/dt)`` samples late,
+    ``actuator_lag`` after it. The plant takes one MJCF step per sample for ``"chirp"`` (as it
+    always did) and ``substeps`` RK4 steps per sample otherwise (the analytic plant always).
     """
     ensure_x64()
-    rng = np.random.default_rng(seed)
+    if excitation not in EXCITATIONS:
+        raise ValueError(f"excitation must be one of {list(EXCITATIONS)}, got {excitation!r}")
     fur = system == "furuta"
+    if excitation != "chirp" and not fur:
+        raise ValueError(f"excitation={excitation!r} is a Furuta (QUBE) experiment; {system} has 'chirp'")
+    rng = np.random.default_rng(seed)
     dt = 0.002 if fur else 0.01
-    base = Furuta() if fur else NMSD()
-    delay = sum(e.coefficient for e in effects if e.name == "input_delay")
-    mem = [e for e in effects if e.name != "input_delay"]
     T = int(round(duration / dt)) + 1
     t = np.arange(T) * dt
-    if plant == "mujoco":
-        from ..envs._backends import MujocoBackend
-
-        backend = MujocoBackend(system, substeps=1, effects=mem)
-        assert abs(backend.control_dt - dt) < 1e-12
-
-        def roll(x0, us):
-            backend.reset(np.asarray(x0))
-            return np.stack([np.asarray(x0)] + [backend.step(np.asarray(u_k)) for u_k in us])
-
-    elif plant == "analytic":
-        model = WithEffects(base, mem, coulomb_smoothing=1e-3) if mem else base
-        roll = jax.jit(lambda x0, us: rollout_zoh(model, x0, us, dt, substeps))
-    else:
-        raise ValueError(f"plant must be 'mujoco' or 'analytic', got {plant!r}")
-    shift = int(round(delay / dt))
+    # the new experiments integrate MuJoCo finely too: under RK4 the sgn law lets a rotor held by
+    # dry friction against a spring creep at a rate ∝ the step (~3 mrad/s, one count per
+    # 0.3–0.5 s at 2 ms; ~0.3 mrad/s at 0.2 ms), where a real rotor sticks
+    sim = _Plant(system, effects, plant, dt, substeps, fine=excitation != "chirp")
     out = []
     for k in range(n_trajectories):
-        if fur:
-            x0 = np.array([rng.uniform(-1, 1), rng.uniform(-np.pi, np.pi), rng.uniform(-3, 3), rng.uniform(-3, 3)])
+        if excitation == "closed_loop_prbs":
+            q, u = _balance(sim, t, rng)
         else:
-            x0 = np.array([rng.uniform(-1, 1), rng.uniform(-3, 3)])
-        u = _inputs(system, t, rng, forced)
-        u_plant = np.concatenate([np.full(shift, u[0]), u[: T - shift]]) if shift else u
-        xs = np.asarray(roll(x0, u_plant[:-1, None]))
-        n = 2 if fur else 1
-        q = xs[:, :n]
-        if fur:
-            q = quantize_encoder(q)
-        else:
-            q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)
+            if excitation == "sine_sweep":
+                q0 = [rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05)]
+                x0 = np.array([*q0, *rng.uniform(-0.01, 0.01, 2)])
+                u = _sine_with_rests(t, rng)
+            elif fur:
+                x0 = np.array([rng.uniform(-1, 1), rng.uniform(-np.pi, np.pi), rng.uniform(-3, 3), rng.uniform(-3, 3)])
+                u = _inputs(system, t, rng, forced)
+            else:
+                x0 = np.array([rng.uniform(-1, 1), rng.uniform(-3, 3)])
+                u = _inputs(system, t, rng, forced)
+            xs = sim.roll(x0, u)
+            q = xs[:, : 2 if fur else 1]
+            if fur:
+                q = quantize_encoder(q)
+            else:
+                q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)
         out.append(Trajectory(t=t.copy(), q=q, u=u[:, None], qd=None, name=str(k)))
     return out

@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import abc
 import contextlib
+import math
 import os
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -27,7 +29,7 @@ import mujoco
 import numpy as np
 
 from ..assets import asset_path
-from ..effects import Effect
+from ..effects import STATEFUL_EFFECTS, Effect, actuator_lag_time
 from ..lagrangian import AbstractLagrangianSystem
 from ..systems import get_spec
 from ._parameters import default_parameters
@@ -63,6 +65,8 @@ class AbstractBackend(abc.ABC):
     system: str  # "furuta" or "nmsd"
     timestep: float  # seconds per RK4 step
     substeps: int  # RK4 steps per control period
+    #: whether the backend applies an ``actuator_lag`` effect itself (else the env does)
+    native_actuator_lag: bool = False
 
     @property
     def spec(self):
@@ -122,9 +126,62 @@ class AbstractBackend(abc.ABC):
 # ---------------------------------------------------------------------------------------------
 
 
-def load_mjcf(system: str) -> mujoco.MjModel:
-    """The shipped MJCF model of ``"furuta"`` or ``"nmsd"``."""
-    return mujoco.MjModel.from_xml_path(str(asset_path(f"{get_spec(system).name}.xml")))
+def load_mjcf(system: str, actuator_lag: bool = False) -> mujoco.MjModel:
+    """The shipped MJCF model of ``"furuta"`` or ``"nmsd"``.
+
+    With ``actuator_lag`` its actuator gets first-order dynamics τ·u̇_m = u − u_m: one activation
+    (``data.act`` = u_m, 0 after ``mj_resetData``) that the force uses instead of ``ctrl``; τ is
+    written into ``actuator_dynprm[0, 0]`` by :func:`apply_parameters`.
+    """
+    path = asset_path(f"{get_spec(system).name}.xml")
+    if not actuator_lag:
+        return mujoco.MjModel.from_xml_path(str(path))
+    # the activation changes the model's sizes (na), so it is added before compiling
+    root = ET.parse(path).getroot()
+    (actuator,) = list(root.find("actuator"))
+    if actuator.tag == "motor":  # <motor> is <general> with gain 1 and no bias, minus dyntype
+        actuator.tag = "general"
+    # 'filter', not 'filterexact': MuJoCo's RK4 integrates the activation with the state at every
+    # stage (exact to ~6e-6 at h = τ/5), whereas filterexact's update applied to RK4's combined
+    # derivative counts the decay twice (u_m 4 % short of 1 − 1/e at t = τ, h = τ/5)
+    actuator.set("dyntype", "filter")
+    actuator.set("dynprm", "1")
+    return mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+
+
+def _no_terms() -> list:
+    """Per-dof slots of the callback's forces (see :func:`apply_parameters`)."""
+    return [0.0, 0.0, 0.0, 0.0, 0.0, [], 0.0]
+
+
+def _gravity_force(model: mujoco.MjModel, scratch: mujoco.MjData, qpos, out: np.ndarray) -> np.ndarray:
+    """g(q) = ∂V_gravity/∂q as MuJoCo computes it, into ``out``: the bias force at zero velocity.
+
+    ``scratch`` is an MjData of ``model`` whose qvel (and so cvel, cdof_dot) is never set, i.e.
+    zero: then recursive Newton-Euler without acceleration is gravity alone. Kinematics and
+    com-frame quantities are all it needs (no mass matrix, no velocity stage).
+    """
+    scratch.qpos[:] = qpos
+    mujoco.mj_kinematics(model, scratch)
+    mujoco.mj_comPos(model, scratch)
+    mujoco.mj_rne(model, scratch, 0, out)
+    return out
+
+
+def _check_gravitational(model: mujoco.MjModel, system: str, joint: str, dof: int) -> None:
+    """``com_offset`` shifts MuJoCo's gravity potential only: refuse a joint gravity never acts on
+    (probed at random configurations), whose potential in the model is something else."""
+    scratch, out = mujoco.MjData(model), np.zeros(model.nv)
+    scale = float(np.sum(model.body_mass) * np.linalg.norm(model.opt.gravity))
+    for q in np.random.default_rng(0).uniform(-math.pi, math.pi, (8, model.nq)):
+        if abs(_gravity_force(model, scratch, q, out)[dof]) > 1e-12 * max(scale, 1e-300):
+            return
+    raise ValueError(
+        f"effect 'com_offset' on joint {joint!r}: gravity exerts no force on this joint of the "
+        f"{system} MuJoCo model, so its potential there is not gravitational and shifting "
+        f"MuJoCo's gravity cannot shift it; for a spring's neutral use "
+        f"Effect('spring', {joint!r}, k, reference=...)"
+    )
 
 
 def apply_parameters(
@@ -138,8 +195,10 @@ def apply_parameters(
 
     Returns the per-dof coefficients of the forces MuJoCo cannot express, which the passive
     callback applies: ``{dof: [cubic_stiffness, cubic_damping, coulomb, quadratic_drag,
-    constant]}``. Springs, viscous friction and the input gain are native (joint stiffness with
-    a combined rest position, joint damping, actuator gain and bias).
+    constant, [(stiction ΔF, v_s), ...], com_offset δ]}``. Springs, viscous friction, the input
+    gain and the actuator lag are native (joint stiffness with a combined rest position, joint
+    damping, actuator gain and bias, actuator dynamics: ``model`` must then come from
+    ``load_mjcf(system, actuator_lag=True)``).
     """
     spec = get_spec(system)
     n = spec.n_dof
@@ -166,22 +225,26 @@ def apply_parameters(
         damping[0] = p["b1"]
         motor_gain, motor_bias = 1.0, 0.0
         if p["k2"] != 0.0 or p["b2"] != 0.0:
-            extra[0] = [p["k2"], p["b2"], 0.0, 0.0, 0.0]
+            extra[0] = _no_terms()
+            extra[0][:2] = p["k2"], p["b2"]
     for e in effects:
         if e.name == "input_gain":
             gain += e.coefficient
             continue
-        if e.name == "input_delay":
-            continue  # lives in the env's input buffer
+        if e.name in ("input_delay", "actuator_lag"):
+            continue  # the env's input buffer; the actuator dynamics below
         j = e.joint_index(spec)
         if e.name == "spring":
             stiffness[j] += e.coefficient
             stiff_ref[j] += e.coefficient * e.reference
         elif e.name == "viscous_friction":
             damping[j] += e.coefficient
+        elif e.name == "stiction":
+            extra.setdefault(j, _no_terms())[5].append((e.coefficient, e.stribeck_velocity))
         else:
-            slot = {"coulomb_friction": 2, "quadratic_drag": 3, "constant_torque": 4}[e.name]
-            extra.setdefault(j, [0.0] * 5)[slot] += e.coefficient
+            slots = {"coulomb_friction": 2, "quadratic_drag": 3, "constant_torque": 4, "com_offset": 6}
+            slot = slots[e.name]
+            extra.setdefault(j, _no_terms())[slot] += e.coefficient
     # masses changed: refresh MuJoCo's derived constants (e.g. the constant mass of a body that
     # only slides, dof_M0, which the N-MSD uses instead of body_mass)
     mujoco.mj_setConst(model, mujoco.MjData(model) if data is None else data)
@@ -190,33 +253,62 @@ def apply_parameters(
     model.dof_damping[:] = damping
     model.actuator_gainprm[0, 0] = gain * motor_gain
     model.actuator_biasprm[0, :3] = (0.0, 0.0, gain * motor_bias)
+    tau = actuator_lag_time(effects)
+    if tau > 0:
+        if model.na != 1:
+            raise ValueError(
+                "an actuator_lag needs the actuator's activation: load the model with "
+                f"load_mjcf({system!r}, actuator_lag=True)"
+            )
+        model.actuator_dynprm[0, 0] = tau
+    for e in effects:
+        if e.name == "com_offset":
+            _check_gravitational(model, system, e.joint, e.joint_index(spec))
     return extra
 
 
-def _passive_callback(extra: dict[int, list[float]]):
+def _passive_callback(extra: dict[int, list], model: mujoco.MjModel):
     """MuJoCo passive-force callback adding the non-native forces (evaluated at every RK4 stage).
 
-    Per dof: −k3·q³ − b3·q̇³ − F·sgn(q̇) − c·q̇|q̇| + τ0. Coulomb friction is the honest
-    discontinuous sgn law (sgn(0) = 0), the same as :class:`furuta_gym.effects.WithEffects` with
-    no smoothing, so the model backend with the same effects matches it.
+    Per dof: −k3·q³ − b3·q̇³ − [F_c + Σ ΔF·exp(−(q̇/v_s)²)]·sgn(q̇) − c·q̇|q̇| + τ0, the laws of
+    :meth:`furuta_gym.effects.Effect.generalized_force` (dry friction as the honest
+    discontinuous sgn law, sgn(0) = 0, as :class:`~furuta_gym.effects.WithEffects` with no
+    smoothing, so the model backend with the same effects matches it). A ``com_offset`` Δ shifts
+    MuJoCo's own gravity potential, V(q) → V(q − Δ), generically: + g(q) − g(q − Δ), with
+    g = ∂V_gravity/∂q computed by MuJoCo on a scratch MjData of ``model``.
     """
-    terms = tuple((dof, *coefs) for dof, coefs in sorted(extra.items()))
+    terms = tuple((dof, *coefs[:5], tuple(coefs[5])) for dof, coefs in sorted(extra.items()))
+    shift = np.zeros(model.nv)
+    for dof, coefs in extra.items():
+        shift[dof] = coefs[6]
+    if shift.any() and model.nq != model.nv:
+        raise ValueError("com_offset needs hinge/slide joints only (qpos and qvel of equal size)")
+    scratch = mujoco.MjData(model) if shift.any() else None
+    g_here, g_shifted = np.zeros(model.nv), np.zeros(model.nv)
 
     def callback(model, data):
         qpos, qvel, qfrc = data.qpos, data.qvel, data.qfrc_passive
-        for dof, k3, b3, coulomb, drag, const in terms:
+        for dof, k3, b3, coulomb, drag, const, stiction in terms:
             q = qpos[dof]
             v = qvel[dof]
             f = const - k3 * q * q * q - b3 * v * v * v - drag * v * abs(v)
-            if coulomb and v != 0.0:
-                f -= coulomb if v > 0.0 else -coulomb
+            if v != 0.0 and (coulomb or stiction):
+                dry = coulomb
+                for dF, v_s in stiction:
+                    dry += dF * math.exp(-((v / v_s) ** 2))
+                f -= dry if v > 0.0 else -dry
             qfrc[dof] += f
+        if scratch is not None:
+            _gravity_force(model, scratch, qpos, g_here)
+            _gravity_force(model, scratch, qpos - shift, g_shifted)
+            qfrc += g_here - g_shifted
 
     return callback
 
 
 class MujocoBackend(AbstractBackend):
-    """Ground truth: the shipped MJCF model stepped by MuJoCo's RK4, ``substeps`` per period.
+    """Ground truth: the shipped MJCF model stepped by MuJoCo's RK4, ``substeps`` per period
+    (each of the MJCF's ``timestep``, unless ``timestep`` overrides it).
 
     ``effects`` (:class:`~furuta_gym.effects.Effect`) make a plant variant: springs, viscous
     friction and an input gain are written into the model; Coulomb friction (sgn law), quadratic
@@ -224,7 +316,16 @@ class MujocoBackend(AbstractBackend):
     added by a MuJoCo passive-force callback that is installed only around this backend's own
     ``mj_step`` calls and restored afterwards, so other MuJoCo models in the process are untouched.
     ``input_delay`` effects are ignored here (the env's input buffer applies them).
+
+    Stiction (the Stribeck term) joins Coulomb friction in the callback; ``com_offset`` adds
+    g(q) − g(q − Δ) there, g being MuJoCo's own gravity force (a joint gravity does not act on is
+    refused: its potential is not gravitational). ``actuator_lag`` is native actuator dynamics
+    (``dyntype="filter"``, ``dynprm[0]`` = τ): the activation ``data.act`` holds u_m and MuJoCo
+    integrates it with the state in every RK4 stage; :meth:`reset` sets it to 0 (the plant at rest
+    with no input), :attr:`state` stays (q, q̇) and :attr:`lagged_input` reads or sets u_m.
     """
+
+    native_actuator_lag = True
 
     def __init__(
         self,
@@ -232,13 +333,16 @@ class MujocoBackend(AbstractBackend):
         substeps: int = 1,
         effects: Sequence[Effect] = (),
         parameters: Mapping[str, float] | None = None,
+        timestep: float | None = None,
     ):
         self.system = get_spec(system).name
-        self.model = load_mjcf(self.system)
+        self.effects = tuple(effects)
+        self.model = load_mjcf(self.system, actuator_lag=actuator_lag_time(self.effects) > 0)
+        if timestep is not None:  # default: the MJCF's (what every env uses)
+            self.model.opt.timestep = float(timestep)
         self.data = mujoco.MjData(self.model)
         self.timestep = float(self.model.opt.timestep)
         self.substeps = int(substeps)
-        self.effects = tuple(effects)
         self._n = self.spec.n_dof
         self._callback = None
         self._bind_views()
@@ -255,8 +359,16 @@ class MujocoBackend(AbstractBackend):
         if unknown:
             raise ValueError(f"unknown {self.system} parameter(s) {unknown}; expected {list(nominal)}")
         self._parameters = {**nominal, **{k: float(v) for k, v in values.items()}}
-        extra = apply_parameters(self.model, self.system, self._parameters, self.effects, self.data)
-        self._callback = _passive_callback(extra) if extra else None
+        self._apply_parameters()
+
+    def _apply_parameters(self) -> None:
+        """Write parameters and effects into the model and rebuild the passive callback. The
+        state survives: mj_setConst works in ``self.data`` and leaves qpos at qpos0."""
+        d = self.data
+        saved = (d.qpos.copy(), d.qvel.copy(), d.act.copy(), d.time)
+        extra = apply_parameters(self.model, self.system, self._parameters, self.effects, d)
+        d.qpos[:], d.qvel[:], d.act[:], d.time = saved
+        self._callback = _passive_callback(extra, self.model) if extra else None
 
     def reset(self, x) -> None:
         mujoco.mj_resetData(self.model, self.data)
@@ -306,6 +418,16 @@ class MujocoBackend(AbstractBackend):
     def state(self) -> np.ndarray:
         return np.concatenate((self.data.qpos, self.data.qvel))
 
+    @property
+    def lagged_input(self) -> np.ndarray | None:
+        """u_m of an ``actuator_lag`` plant (the actuator's activation); None without a lag."""
+        return self.data.act.copy() if self.model.na else None
+
+    @lagged_input.setter
+    def lagged_input(self, u_m) -> None:
+        if self.model.na:
+            self.data.act[:] = u_m
+
     def _scene_data(self):
         return self.model, self.data
 
@@ -320,8 +442,7 @@ class MujocoBackend(AbstractBackend):
     def __setstate__(self, state):
         self.__dict__.update(state)
         self._bind_views()
-        extra = apply_parameters(self.model, self.system, self._parameters, self.effects, self.data)
-        self._callback = _passive_callback(extra) if extra else None
+        self._apply_parameters()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -506,8 +627,9 @@ class ModelBackend(AbstractBackend):
     """Any Lagrangian system in JAX: ``substeps`` RK4 steps of ``timestep`` per period, input held.
 
     ``effects`` (joint effects and ``input_gain``) are added with
-    :class:`furuta_gym.effects.WithEffects` (Coulomb as the exact sgn law, like the MuJoCo
-    backend). :meth:`set_parameters` works for the analytic models (their ``params`` pytree).
+    :class:`furuta_gym.effects.WithEffects` (Coulomb and stiction as the exact sgn law, like the
+    MuJoCo backend); ``input_delay`` and ``actuator_lag`` are left to the env's actuation path.
+    :meth:`set_parameters` works for the analytic models (their ``params`` pytree).
     Rendering poses the system's MJCF scene at the model's state.
 
     ``kernel`` chooses what runs the period step (the same JAX function either way):
@@ -542,7 +664,7 @@ class ModelBackend(AbstractBackend):
         self.base_model = model
         self.timestep = float(timestep)
         self.substeps = int(substeps)
-        self.effects = tuple(e for e in effects if e.name != "input_delay")
+        self.effects = tuple(e for e in effects if e.name not in STATEFUL_EFFECTS)
         self._n = self.spec.n_dof
         self._scene = None
         # the model's own parameter values (an analytic model may carry non-pinned ones)
