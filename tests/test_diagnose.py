@@ -84,7 +84,7 @@ def test_cable_spring_on_rotor_is_found_via_cli(tmp_path, capsys):
         assert {"trajectory_rmse", "residual_rms", "trajectory_rmse_per_joint"} <= set(doc[key])
     assert doc["error_before"]["trajectory_rmse"] >= 2 * doc["error_after"]["trajectory_rmse"]
     assert (rep / "residual_vs_effect.png").stat().st_size > 1000
-    assert (rep / "heldout_predictions.png").stat().st_size > 1000
+    assert (rep / "prediction_windows.png").stat().st_size > 1000
     # never overwrite existing outputs unless asked
     assert main(["diagnose", str(csv), "--system", "furuta", "--json", str(out)]) == 2
     assert "refusing to overwrite" in capsys.readouterr().err

@@ -29,8 +29,13 @@ def _pairs(text: str | None, what: str, convert=str) -> dict:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("data", metavar="DATA", nargs="+",
-                        help="measured data: CSV (long form), NPZ or MAT; several files are pooled")
+                        help="measured data: CSV (long form, .csv.gz too), NPZ or MAT; several files "
+                        "are pooled. 'qube:RUNS' (e.g. qube:1-5, qube:2,7, qube) takes the real "
+                        "QUBE-Servo runs shipped with the package, in this project's convention")
     parser.add_argument("--system", required=True, choices=["furuta", "nmsd"])
+    parser.add_argument("--test", metavar="TEST", nargs="+",
+                        help="logs never used for fitting (same format and options as DATA): "
+                        "errors before/after on them are reported beside the held-out split")
     parser.add_argument("--json", metavar="OUT", help="write the result as JSON (pinned schema)")
     parser.add_argument("--report", metavar="DIR", help="write figures into DIR")
     parser.add_argument("--overwrite", action="store_true", help="replace existing --json/--report outputs")
@@ -49,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fix", metavar="PARAM=VALUE,...",
                         help="lumped parameters held at known values (the scale anchor), e.g. K=0.005")
     parser.add_argument("--candidates", metavar="EFFECT:JOINT,...", help="restrict the library")
-    parser.add_argument("--max-effects", type=int, default=2)
+    parser.add_argument("--max-effects", type=int, help="at most this many effects are added (default 4)")
     parser.add_argument("--window", type=float, help="open-loop window for trajectory_rmse, s")
     parser.add_argument("--interval", type=float, help="equation-error interval, s (default 0.1)")
     parser.add_argument("--oe-windows", type=int, help="open-loop windows used by the output-error fit (default 24)")
@@ -57,18 +62,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="drop this many seconds at the start of every trajectory (start transients)")
 
 
-def run(args: argparse.Namespace) -> int:
+def _qube_runs(token: str) -> list[int] | None:
+    """Run numbers of a ``qube[:RUNS]`` token: ``qube`` (all), ``qube:1-5``, ``qube:2,7,9-11``."""
+    spec = token.partition(":")[2]
+    if not spec:
+        return None
+    runs = []
+    for part in spec.split(","):
+        lo, _, hi = part.partition("-")
+        if not lo.isdigit() or (hi and not hi.isdigit()):
+            raise ValueError(f"{token!r}: expected qube, qube:N, qube:N-M or qube:N,M,... (run numbers 1..15)")
+        runs += list(range(int(lo), int(hi or lo) + 1))
+    return runs
+
+
+def _load(paths, args):
+    """Trajectories of ``paths`` with the column map, signs and offsets, start skipped."""
     from pathlib import Path
 
     from ..data import Trajectory, load_trajectories
-    from ..diagnose import diagnose
-    from ..diagnose._report import write_figures, write_json
+    from ..datasets import load_qube_closed_loop
 
-    for out in (args.json,):
-        if out and Path(out).exists() and not args.overwrite:
-            raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
     trajs = []
-    for path in args.data:
+    for path in paths:
+        if path == "qube" or path.startswith("qube:"):
+            if args.system != "furuta":
+                raise ValueError(f"{path!r}: the shipped QUBE-Servo runs are Furuta data; got --system {args.system}")
+            trajs += load_qube_closed_loop(_qube_runs(path), skip_seconds=0.0)
+            continue
         for tr in load_trajectories(
             path,
             args.system,
@@ -76,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
             signs=_pairs(args.sign, "--sign", float),
             offsets=_pairs(args.offset, "--offset", float),
         ):
-            if len(args.data) > 1:
+            if len(paths) > 1:
                 tr.name = f"{Path(path).stem}:{tr.name}"
             trajs.append(tr)
     if args.skip > 0:
@@ -85,14 +106,29 @@ def run(args: argparse.Namespace) -> int:
             for tr in trajs
             for m in [tr.t >= tr.t[0] + args.skip]
         ]
-    overrides = {"velocity": args.velocity, "max_effects": args.max_effects}
-    for key, val in (("velocity_cutoff_hz", args.cutoff), ("window", args.window), ("interval", args.interval),
+    return trajs
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..diagnose import diagnose
+    from ..diagnose._report import write_figures, write_json
+
+    for out in (args.json,):
+        if out and Path(out).exists() and not args.overwrite:
+            raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
+    trajs = _load(args.data, args)
+    test = _load(args.test, args) if args.test else None
+    overrides = {"velocity": args.velocity}
+    for key, val in (("max_effects", args.max_effects), ("velocity_cutoff_hz", args.cutoff), ("window", args.window), ("interval", args.interval),
                      ("oe_max_windows", args.oe_windows)):
         if val is not None:
             overrides[key] = val
     res = diagnose(
         trajs,
         args.system,
+        test=test,
         fixed=_pairs(args.fix, "--fix", float) or None,
         candidates=args.candidates.split(",") if args.candidates else None,
         **overrides,

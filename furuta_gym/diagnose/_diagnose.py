@@ -10,13 +10,17 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from .._x64 import ensure_x64
 from ..data import DataError, Trajectory, load_trajectories
 from ..effects import Effect, WithEffects
 from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter, zero_phase_velocity
 from ..systems import get_spec
+
 from . import _fit
+from . import _trace as _trace_mod
+from ._problem import Problem, fit_equation_error, free_columns
 from ._library import (
     GAIN_PARAMETER,
     MECHANICAL_ANCHOR,
@@ -30,6 +34,8 @@ from ._library import (
 __all__ = ["diagnose", "DiagnosisResult", "EffectEvidence", "ErrorSummary", "DiagnosisSettings"]
 
 DELAY = Candidate("input_delay", "u")
+# effects between the logged input and the plant (not memoryless: applied to the input itself)
+INPUT_DYNAMICS = ("input_delay", "actuator_lag")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,10 +49,14 @@ class DiagnosisSettings:
     input_hold: str = "zoh"  # "zoh" (digital controller) or "linear"
     holdout_every: int = 3  # every k-th segment is held out for before/after errors
     segment_seconds: float | None = None  # cut trajectories into segments of about this length
-    z_threshold: float = 3.0  # one-sided signed-rank z over held-out blocks (p ≈ 0.0013)
+    z_threshold: float = 3.0  # t of per-block held-out log ratios (see _trace)
     min_improvement: float = 0.03  # minimum relative drop of held-out residual sum of squares
-    max_effects: int = 2
+    max_effects: int = 4
+    pair_pool: int = 4  # when no single effect passes, pairs among this many largest gains
+    member_z_threshold: float = 2.0  # each member of a pair, given the other
     block_seconds: float = 0.5
+    exclude_rest: bool = True  # leave a joint's equations out where its encoder does not move
+    identify_t: float = 3.0  # a base parameter whose nominal size moves the residual less is held
     max_delay: float = 0.05
     oe: bool = True
     oe_max_windows: int = 24
@@ -136,9 +146,17 @@ class DiagnosisResult:
     layout: ParameterLayout = dataclasses.field(repr=False)
     theta_before: np.ndarray = dataclasses.field(repr=False)
     theta_after: np.ndarray = dataclasses.field(repr=False)
-    delay_after: float = 0.0
+    input_dynamics: _fit.InputDynamics = _fit.NO_INPUT_DYNAMICS
+    test_before: ErrorSummary | None = None  # on logs never used by any fit or decision (``test=``)
+    test_after: ErrorSummary | None = None
     # kept for figures
     _segments: list = dataclasses.field(default_factory=list, repr=False)
+    _test_segments: list = dataclasses.field(default_factory=list, repr=False)
+
+    @property
+    def delay_after(self) -> float:
+        """The fitted input delay, s (0 unless an input delay was found)."""
+        return self.input_dynamics.seconds if self.input_dynamics.kind == "delay" else 0.0
 
     @property
     def significant(self) -> list[EffectEvidence]:
@@ -146,8 +164,18 @@ class DiagnosisResult:
 
     @property
     def found(self) -> list[Effect]:
-        """The significant effects in :mod:`furuta_gym.effects` vocabulary."""
-        return [Effect(e.name, e.joint, float(e.coefficient)) for e in self.significant]
+        """The significant effects in :mod:`furuta_gym.effects` vocabulary. A spring and a constant
+        torque on one joint are one spring with a rest position (−k·q + τ0 = −k·(q − τ0/k))."""
+        sig = {(e.name, e.joint): e for e in self.significant}
+        out = []
+        for e in self.significant:
+            torque = sig.get(("constant_torque", e.joint))
+            if e.name == "spring" and torque is not None and e.coefficient > 0:
+                out.append(Effect("spring", e.joint, float(e.coefficient),
+                                  reference=float(torque.coefficient) / float(e.coefficient)))
+            elif not (e.name == "constant_torque" and ("spring", e.joint) in sig and sig[("spring", e.joint)].coefficient > 0):
+                out.append(Effect(e.name, e.joint, float(e.coefficient)))
+        return out
 
     @property
     def model_before(self) -> LumpedModel:
@@ -159,7 +187,7 @@ class DiagnosisResult:
         """The declared model plus the found memoryless effects, as ``WithEffects``."""
         base_theta = np.array(self.theta_after, dtype=float)
         base_theta[len(self.layout.base) :] = 0.0
-        effects = [e for e in self.found if e.name != "input_delay"]
+        effects = [e for e in self.found if e.name not in INPUT_DYNAMICS]
         return WithEffects(LumpedModel(base_theta, self.system, coulomb_smoothing=0.0), effects)
 
     def to_json(self) -> dict:
@@ -171,6 +199,8 @@ class DiagnosisResult:
             "parameters_before": self.parameters_before,
             "parameters_after": self.parameters_after,
             "parameter_units": self.parameter_units,
+            "test_error_before": None if self.test_before is None else self.test_before.to_json(),
+            "test_error_after": None if self.test_after is None else self.test_after.to_json(),
             "fixed_parameters": self.fixed,
             "notes": self.notes,
             "settings": dataclasses.asdict(self.settings),
@@ -254,27 +284,31 @@ def _check_data(trajs: list[Trajectory], spec, settings: DiagnosisSettings) -> N
             )
 
 
-def _segments(trajs, qds, settings: DiagnosisSettings) -> list[_fit.Segment]:
+def _pieces(trajs, qds, settings: DiagnosisSettings):
+    """Trajectories cut into segments of about ``segment_seconds`` (ends trimmed)."""
     dt = trajs[0].dt
     trim = int(round(settings.trim_seconds / dt))
     seg_len = int(round(settings.segment_seconds / dt))
     min_len = int(round(settings.window / dt)) + 2
     pieces = []
     for tr, qd in zip(trajs, qds):
-        T = len(tr)
-        lo, hi = trim, T - trim
+        lo, hi = trim, len(tr) - trim
         if hi - lo < min_len:
             continue
         n_seg = max(1, (hi - lo) // seg_len)
         bounds = np.linspace(lo, hi, n_seg + 1).astype(int)
         for k in range(n_seg):
             a, b = bounds[k], bounds[k + 1]
-            pieces.append((f"{tr.name}[{k}]", tr.t[a:b], tr.q[a:b], qd[a:b], tr.u[a:b]))
-    segs = []
+            pieces.append((f"{tr.name}[{k}]", tr.t[a:b], tr.q[a:b], qd[a:b], np.asarray(tr.u[a:b], float)))
+    return pieces
+
+
+def _segments(trajs, qds, settings: DiagnosisSettings) -> list[_fit.Segment]:
+    """Fit and held-out segments: every ``holdout_every``-th segment is held out."""
+    dt = trajs[0].dt
     every = settings.holdout_every
-    for i, (name, t, q, qd, u) in enumerate(pieces):
-        held = (i % every) == (every - 1)
-        segs.append(_fit.Segment(name, t, q, qd, np.asarray(u, float), dt, i, held))
+    segs = [_fit.Segment(name, t, q, qd, u, dt, i, (i % every) == (every - 1))
+            for i, (name, t, q, qd, u) in enumerate(_pieces(trajs, qds, settings))]
     if not any(s.held_out for s in segs) and len(segs) > 1:
         segs[-1].held_out = True
     if sum(s.held_out for s in segs) == 0 or sum(not s.held_out for s in segs) < 2:
@@ -285,121 +319,22 @@ def _segments(trajs, qds, settings: DiagnosisSettings) -> list[_fit.Segment]:
     return segs
 
 
+def _test_segments(test, spec, settings, column_map, signs, offsets, dt) -> list[_fit.Segment]:
+    """Segments of the test logs (``diagnose(test=...)``): never fitted, only scored."""
+    if test is None:
+        return []
+    trajs = _as_trajectories(test, spec, column_map, signs, offsets)
+    if abs(trajs[0].dt - dt) > 1e-3 * dt:
+        raise DataError(f"test: sample period {trajs[0].dt:.6g} s differs from the fit data's {dt:.6g} s; expected one")
+    qds = [_velocities(tr, settings) for tr in trajs]
+    segs = [_fit.Segment(name, t, q, qd, u, dt, -1 - i, True)
+            for i, (name, t, q, qd, u) in enumerate(_pieces(trajs, qds, settings))]
+    if not segs:
+        raise DataError(f"test: too short; every test trajectory is shorter than one {settings.window} s window")
+    return segs
+
+
 # ----------------------------------------------------------------------------- the loop
-
-
-class _Problem:
-    """Stacked equation-error regressors of a set of segments."""
-
-    def __init__(self, segments, c_input):
-        self.segments = segments
-        self.R = np.concatenate([s.residual_jacobian(c_input) for s in segments])
-        self.D = np.concatenate([s.D for s in segments])
-        self.dU = np.concatenate([s.dU for s in segments])
-        self.c_input = c_input
-        keys = []
-        for k, s in enumerate(segments):
-            keys.append(np.stack([np.full(s.block.shape, k), s.block], 1))
-        self.block_key = np.concatenate(keys)
-        self.group = np.concatenate([np.full(s.A.shape[0], s.group) for s in segments])
-
-    def subset(self, mask):
-        sub = object.__new__(_Problem)
-        sub.R, sub.D, sub.dU, sub.c_input = self.R[mask], self.D[mask], self.dU[mask], self.c_input
-        sub.block_key, sub.group = self.block_key[mask], self.group[mask]
-        sub.segments = None
-        return sub
-
-    def delay_column(self, theta):
-        """(N, n, 1): ∂(Z̄ − Ā)/∂d at d = 0 for the current input gain."""
-        return (self.dU[:, None] * (self.c_input @ theta)[None, :])[:, :, None]
-
-
-def _columns(layout, chosen: list[Candidate], fixed_idx: set[int]):
-    free = np.ones(layout.size, bool)
-    free[len(layout.base) :] = False
-    for c in chosen:
-        if c.name != "input_delay":
-            free[layout.index(c.key)] = True
-    for i in fixed_idx:
-        free[i] = False
-    return free
-
-
-def _fit_ee(prob, layout, free, theta_fixed, weights, with_delay: bool, theta_for_delay=None):
-    scale = layout.typical_scale()
-    if not with_delay:
-        th, _ = _fit.ee_fit(prob.R, prob.D, free, theta_fixed, weights, scale)
-        return th, 0.0
-    th0, _ = _fit.ee_fit(prob.R, prob.D, free, theta_fixed, weights, scale)
-    ref = th0 if theta_for_delay is None else theta_for_delay
-    th, ex = _fit.ee_fit(prob.R, prob.D, free, theta_fixed, weights, scale, extra=prob.delay_column(ref))
-    return th, float(ex[0])
-
-
-def _ss_by_block(prob, theta, weights, delay_coef=0.0, theta_for_delay=None, norm=None):
-    """Per-block weighted residual sum of squares, divided by the model's ``norm`` (its mean
-    ‖W D θ‖² on the training data) so that a candidate cannot win by shrinking the scale."""
-    r = prob.R @ theta
-    if delay_coef:
-        r = r + prob.delay_column(theta if theta_for_delay is None else theta_for_delay)[:, :, 0] * delay_coef
-    ss = ((r * weights[None]) ** 2).sum(axis=1)
-    keys, inv = np.unique(prob.block_key, axis=0, return_inverse=True)
-    out = np.bincount(inv.ravel(), weights=ss, minlength=len(keys))
-    return out / (1.0 if norm is None else norm)
-
-
-def _momentum_norm(prob, theta, weights):
-    return float(np.mean(((prob.D @ theta) * weights[None]) ** 2))
-
-
-def _cv_compare(prob, layout, fixed_vals, fixed_idx, weights, chosen, candidate):
-    """Cross-validated (by segment) paired comparison of base+chosen vs base+chosen+candidate.
-
-    Returns (relative drop of the held-out normalised residual sum of squares, t statistic of
-    the per-block log ratios). Blocks are ``block_seconds`` long, much longer than the residual's
-    correlation time, and only blocks of held-out segments enter.
-    """
-    groups = np.unique(prob.group)
-    n_folds = min(len(groups), 6)
-    fold_of = {g: i % n_folds for i, g in enumerate(groups)}
-    fold = np.array([fold_of[g] for g in prob.group])
-    logs, diffs, s0, s1 = [], [], 0.0, 0.0
-    has_delay = any(c.name == "input_delay" for c in chosen)
-    cand_delay = candidate.name == "input_delay"
-    for f in range(n_folds):
-        tr, te = prob.subset(fold != f), prob.subset(fold == f)
-        free0 = _columns(layout, chosen, fixed_idx)
-        th0, d0 = _fit_ee(tr, layout, free0, fixed_vals, weights, has_delay)
-        free1 = _columns(layout, chosen + ([] if cand_delay else [candidate]), fixed_idx)
-        th1, d1 = _fit_ee(tr, layout, free1, fixed_vals, weights, has_delay or cand_delay, th0)
-        ss0 = _ss_by_block(te, th0, weights, d0, None, _momentum_norm(tr, th0, weights))
-        ss1 = _ss_by_block(te, th1, weights, d1, th0, _momentum_norm(tr, th1, weights))
-        logs.append(np.log(ss0 / ss1))
-        diffs.append(ss0 - ss1)
-        s0, s1 = s0 + ss0.sum(), s1 + ss1.sum()
-    logs, diffs = np.concatenate(logs), np.concatenate(diffs)
-    improvement = float(1.0 - s1 / s0)
-    return improvement, _signed_rank_z(diffs)
-
-
-def _signed_rank_z(d: np.ndarray) -> float:
-    """Wilcoxon signed-rank statistic of paired differences as a z score (normal approximation).
-
-    Robust to the heavy tails of per-block improvements (a spring helps most where the joint is
-    far from rest); positive when the candidate lowers the held-out residual.
-    """
-    d = d[d != 0]
-    n = d.size
-    if n < 2:
-        return 0.0
-    from scipy.stats import rankdata
-
-    ranks = rankdata(np.abs(d))
-    w = float(ranks[d > 0].sum())
-    mean = n * (n + 1) / 4.0
-    sd = np.sqrt(n * (n + 1) * (2 * n + 1) / 24.0)
-    return (w - mean) / sd
 
 
 def _in_span(prob, layout, free, candidate, fixed_idx) -> str | None:
@@ -427,50 +362,215 @@ def _in_span(prob, layout, free, candidate, fixed_idx) -> str | None:
     return None
 
 
-def diagnose(
-    data,
-    system: str,
-    *,
-    column_map: Mapping[str, str] | None = None,
-    signs: Mapping[str, float] | None = None,
-    offsets: Mapping[str, float] | None = None,
-    fixed: Mapping[str, float] | None = None,
-    candidates: Sequence[str] | None = None,
-    settings: DiagnosisSettings | None = None,
-    **overrides,
-) -> DiagnosisResult:
-    """Fit the declared model, trace its residual to a missing effect, add it, refit, report.
+class _Fitter:
+    """One dataset's fitting context: segments (fit / held-out / test), regressors, windows."""
 
-    ``data``: a CSV/NPZ/MAT path or a list of paths (long format, see
-    :func:`furuta_gym.data.load_trajectories`;
-    ``column_map``/``signs``/``offsets`` as there) or a list of :class:`~furuta_gym.data.Trajectory`.
-    ``system``: ``"furuta"`` or ``"nmsd"``. ``fixed``: lumped parameters held at known values
-    (the scale anchor; default: the pendulum's gravity term ``G`` = ½mp·g·Lp for the Furuta, the
-    input gain for the N-MSD; with free data the mass/gain is fixed too). ``candidates``: restrict
-    the library (keys ``"effect:joint"``). Other keyword arguments override
-    :class:`DiagnosisSettings` fields.
+    def __init__(self, spec, layout, segs, test_segs, theta_fixed, fixed_idx, settings, notes):
+        self.spec, self.layout, self.settings, self.notes = spec, layout, settings, notes
+        self.segs, self.test_segs = segs, test_segs
+        self.fit_segs = [s for s in segs if not s.held_out]
+        self.held_segs = [s for s in segs if s.held_out]
+        self.theta_fixed, self.fixed_idx = theta_fixed, set(fixed_idx)
+        self.declared_fixed_idx = set(fixed_idx)  # before any weakly identified parameter is held
+        dt = segs[0].dt
+        self.stride = max(1, int(round(settings.interval / dt)))
+        self.L = int(round(settings.window / dt))
+        self.substeps = 1 if spec.name == "furuta" else 2
+        self.smoothing = 0.02 if spec.name == "furuta" else 0.01
+        self.c_input = _fit.input_direction(layout, theta_fixed)
+        self.weights = np.ones(spec.n_dof)
+        self.build(_fit.NO_INPUT_DYNAMICS)
+        all_fit_win = _fit.make_windows(self.fit_segs, self.L)
+        if _fit.make_windows(self.held_segs, self.L) is None or all_fit_win is None:
+            raise DataError("too short: no complete open-loop window in the fit or held-out segments")
+        # fit-set windows: a random subset drives the output-error fit, the rest validates effects
+        order = np.random.default_rng(0).permutation(all_fit_win.x0.shape[0])
+        k = settings.oe_max_windows
+        self.oe_idx = np.sort(order[:k])
+        self.val_idx = np.sort(order[k:]) if order.size > k else self.oe_idx
 
-    Returns a :class:`DiagnosisResult`: effects ordered by held-out evidence (those marked
-    ``significant`` were added), held-out errors before/after, fitted parameters, notes.
-    """
-    ensure_x64()
-    spec = get_spec(system)
-    settings = dataclasses.replace(settings or DiagnosisSettings(), **overrides)
-    layout = layout_for(spec.name)
-    notes: list[str] = []
-    trajs = _as_trajectories(data, spec, column_map, signs, offsets)
-    dt = trajs[0].dt
-    settings = settings.resolved(spec.name, dt)
-    _check_data(trajs, spec, settings)
-    if any(tr.qd is None for tr in trajs):
-        notes.append(f"velocities estimated ({settings.velocity})")
-    qds = [_velocities(tr, settings) for tr in trajs]
-    segs = _segments(trajs, qds, settings)
+    def build(self, dynamics: _fit.InputDynamics, segs=None) -> None:
+        _fit.build_regressors(self.segs + self.test_segs if segs is None else segs, self.layout,
+                              self.theta_fixed, self.stride, self.settings.input_hold,
+                              self.settings.block_seconds, dynamics, self.settings.exclude_rest)
+        if segs is None:
+            self.fit_prob = Problem(self.fit_segs, self.c_input)
+            self.held_prob = Problem(self.held_segs, self.c_input)
+            self.dynamics = dynamics
 
-    # --- scale anchor -------------------------------------------------------------------------
+    def fit_ee(self, effects: list[Candidate]):
+        free = free_columns(self.layout, effects, self.fixed_idx)
+        th, _ = fit_equation_error(self.fit_prob, self.layout, free, self.theta_fixed, self.weights, False)
+        return th, free
+
+    def weakly_identified(self, theta, free) -> dict[str, float]:
+        """Free base parameters these data cannot pin down, with their t values: a change by
+        the parameter's nominal size moves the weighted residual, beyond what the other free
+        parameters can absorb, by less than ``identify_t`` residual standard deviations (near
+        upright the sin²β inertia term; a damping below what the data resolve)."""
+        X = (self.fit_prob.R * self.weights[None, :, None]).reshape(-1, self.layout.size)
+        sigma = float(np.std(X @ theta))
+        nominal = self.layout.nominal()
+        out = {}
+        for j in np.flatnonzero(free[: len(self.layout.base)]):
+            others = free.copy()
+            others[j] = False
+            A, c = X[:, others], X[:, j]
+            c_perp = c - A @ np.linalg.lstsq(A, c, rcond=None)[0]
+            t = abs(nominal[j]) * np.linalg.norm(c_perp) / max(sigma, 1e-300)
+            if t < self.settings.identify_t:
+                out[self.layout.base[j]] = float(t)
+        return out
+
+    def fit_windows(self, dynamics, idx) -> _fit.Windows:
+        w = _fit.make_windows(self.fit_segs, self.L, dynamics)
+        return _fit.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
+
+    def window_rmse(self, theta, win) -> float:
+        return _fit.window_errors(self.layout, theta, win, self.smoothing, self.substeps)[1]
+
+    def validation_rmse(self, theta, dynamics) -> float:
+        return self.window_rmse(theta, self.fit_windows(dynamics, self.val_idx))
+
+    def refine(self, theta0, free, dynamics, tag):
+        """Output-error refinement of an equation-error estimate, kept only if it also predicts
+        better on fit-set validation windows it did not see."""
+        if not self.settings.oe:
+            return theta0
+        win = self.fit_windows(dynamics, self.oe_idx)
+        # start from the equation-error estimate unless it is non-physical or predicts worse than
+        # the nominal model (closed-loop data: u correlates with the measurement noise, which
+        # biases the equation error far more than velocity noise does)
+        nb = len(self.layout.base)
+        nominal = theta0.copy()
+        nominal[:nb] = np.where(free[:nb], self.layout.nominal()[:nb], theta0[:nb])
+        start, label = theta0, "equation-error"
+        if not _physical(self.layout, theta0) or self.window_rmse(nominal, win) < self.window_rmse(theta0, win):
+            start, label = nominal, "nominal"
+            self.notes.append("the equation-error estimate was non-physical or predicted worse than the "
+                              f"nominal model ({tag}); output error started from the nominal parameters")
+        th, ok = _fit.oe_fit(self.layout, start, free, win, self.smoothing, self.substeps,
+                             max_nfev=self.settings.oe_max_nfev)
+        if not ok:
+            self.notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
+            return th
+        if _physical(self.layout, start) and self.validation_rmse(start, dynamics) < self.validation_rmse(th, dynamics):
+            self.notes.append(f"the {label} estimate predicts better on validation windows than the "
+                              f"output-error refinement; kept ({tag})")
+            return start
+        return th
+
+    def errors(self, theta, segs, prob) -> ErrorSummary:
+        r = prob.R @ theta
+        win = _fit.make_windows(segs, self.L, self.dynamics)
+        per_q, comb = _fit.window_errors(self.layout, theta, win, self.smoothing, self.substeps)
+        names = self.spec.joint_names
+        return ErrorSummary(
+            trajectory_rmse=comb,
+            trajectory_rmse_per_joint={j: float(v) for j, v in zip(names, per_q)},
+            residual_rms=float(np.sqrt(np.mean(r**2))),
+            residual_rms_per_joint={j: float(v) for j, v in zip(names, np.sqrt(np.mean(r**2, axis=0)))},
+            window_seconds=self.settings.window,
+            n_windows=int(win.x0.shape[0]),
+        )
+
+    def test_errors(self, theta) -> ErrorSummary | None:
+        if not self.test_segs:
+            return None
+        return self.errors(theta, self.test_segs, Problem(self.test_segs, self.c_input))
+
+
+def _physical(layout, theta) -> bool:
+    """Positive-definite mass matrix for every angle and non-negative declared damping."""
+    p = {b: theta[i] for i, b in enumerate(layout.base)}
+    if layout.system == "furuta":
+        ok = p["J1"] > 0 and p["J2"] > 0 and p["J1b"] >= 0 and p["J1"] * p["J2"] > p["Jc"] ** 2
+        return bool(ok and p["c_alpha"] >= 0 and p["c_beta"] >= 0 and p["Jc"] > 0)
+    return bool(p["m"] > 0 and p["b1"] >= 0 and p["k1"] >= 0)
+
+
+def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputDynamics:
+    """A delay or a first-order lag between the logged input and the plant (both share one
+    first-order signature, −d·u̇, in the linear test): each fitted with the input transformed
+    exactly, then compared by cross-validation like any two candidates; the lag replaces the
+    (simpler) delay only if it is significantly better."""
+    effects = [c for c in effects if c != DELAY]
+    free = free_columns(fx.layout, effects, fx.fixed_idx)
+    # search near the size the linear test measured (−d·u̇): on closed-loop logs a long lag
+    # refitted with the inertias can mimic the loop's phase and fit the equation error as well
+    _, linear = fit_equation_error(fx.fit_prob, fx.layout, free, fx.theta_fixed, fx.weights, True)
+    dt = fx.segs[0].dt
+    bound = min(fx.settings.max_delay, max(3.0 * linear, 4.0 * dt))
+
+    def problem(dyn):
+        fx.build(dyn, fx.fit_segs)
+        return Problem(fx.fit_segs, fx.c_input)
+
+    def cost(dyn):
+        prob = problem(dyn)
+        th, _ = fit_equation_error(prob, fx.layout, free, fx.theta_fixed, fx.weights, False)
+        return float((((prob.R @ th) * fx.weights[None]) ** 2).sum())
+
+    found = {}
+    # the cost is not unimodal on closed-loop logs (a long lag can mimic the loop's phase):
+    # a grid of half samples first, then a bounded refinement around its best point
+    step = 0.5 * dt
+    grid = np.arange(0.0, bound + 1e-12, step)
+    for kind in ("delay", "lag"):
+        costs = [cost(_fit.InputDynamics(kind, x)) for x in grid]
+        x0 = grid[int(np.argmin(costs))]
+        res = minimize_scalar(lambda x: cost(_fit.InputDynamics(kind, x)), method="bounded",
+                              bounds=(max(0.0, x0 - step), min(bound, x0 + step)), options={"xatol": 1e-5})
+        found[kind] = _fit.InputDynamics(kind, float(res.x) if res.fun < min(costs) else float(x0))
+    delay_prob = problem(found["delay"])
+    comparer = _trace_mod.Comparer(delay_prob, fx.layout, fx.theta_fixed, fx.fixed_idx, fx.weights)
+    ev = comparer.compare_problems(problem(found["lag"]), effects)
+    lag_wins = ev.passes(fx.settings.min_improvement, fx.settings.z_threshold)
+    dyn = found["lag"] if lag_wins else found["delay"]
+    other = found["delay"] if lag_wins else found["lag"]
+    fx.alternative = (f"{'input_delay' if other.kind == 'delay' else 'actuator_lag'} {other.seconds:.4g} s "
+                      f"{'fits worse' if lag_wins else 'fits as well'} (held-out gain of the lag over "
+                      f"the delay {ev.improvement:.1%}, t {ev.z:.1f})")
+    fx.notes.append(
+        f"input dynamics: delay {found['delay'].seconds:.4g} s or first-order lag {found['lag'].seconds:.4g} s; "
+        f"the lag's held-out gain over the delay {ev.improvement:.1%} (t {ev.z:.1f}): "
+        + ("the lag is kept" if lag_wins else "not significant, the delay is kept"))
+    if dyn.seconds > 0.95 * bound:
+        fx.notes.append(f"input {dyn.kind} estimate {dyn.seconds:.4g} s is at the search bound max_delay = "
+                        f"{bound} s: it stands in for something else")
+    return dyn
+
+
+def _confirm(fx: _Fitter, steps, theta_before, evidence):
+    """Add the search's steps in order, each kept only if the refitted model predicts better on
+    fit-set validation windows (the trace is an equation-error test; on closed-loop logs the input
+    correlates with the measurement noise). Returns (accepted candidates, θ, input dynamics)."""
+    accepted: list[Candidate] = []
+    theta, dyn = theta_before, _fit.NO_INPUT_DYNAMICS
+    v_best = fx.validation_rmse(theta, dyn)
+    for step in steps:
+        trial = accepted + list(step.members)
+        trial_dyn = _search_input_dynamics(fx, trial) if DELAY in step.members else dyn
+        fx.build(trial_dyn)
+        th_ee, free = fx.fit_ee(trial)
+        th = fx.refine(th_ee, free, trial_dyn, "with " + ", ".join(c.key for c in trial))
+        v = fx.validation_rmse(th, trial_dyn)
+        if v < v_best:
+            accepted, theta, dyn, v_best = trial, th, trial_dyn, v
+            continue
+        for c in step.members:
+            ev = evidence[c.key]
+            ev.significant, ev.status = False, "not confirmed"
+            ev.note = (f"equation-error evidence, but the refitted model predicts worse on fit-set "
+                       f"validation windows (rmse {v_best:.3g} -> {v:.3g})")
+            fx.notes.append(f"{c.key}: {ev.note}; dropped")
+    fx.build(dyn)
+    return accepted, theta, dyn
+
+
+def _anchor(spec, layout, fixed, forced, notes):
+    """The fixed lumped parameters (the scale anchor; with free data, the gain too)."""
     nom = nominal_base(spec.name)
-    u_all = np.concatenate([s.u[:, 0] for s in segs])
-    forced = bool(np.std(u_all) > 1e-9 * max(1.0, np.abs(u_all).max()) and np.abs(u_all).max() > 0)
     gain_name = GAIN_PARAMETER[spec.name]
     if fixed:
         fixed = {k: float(v) for k, v in fixed.items()}
@@ -488,235 +588,191 @@ def diagnose(
         if forced:
             notes.append("scale anchored on the input gain (u is a force in N)")
     if not forced:
-        if gain_name not in fixed:
-            fixed[gain_name] = nom[gain_name]
+        fixed.setdefault(gain_name, nom[gain_name])
         anchor = MECHANICAL_ANCHOR[spec.name]
-        if anchor not in fixed:
-            fixed[anchor] = nom[anchor]
+        fixed.setdefault(anchor, nom[anchor])
         notes.append(
             "free data (u = 0): the overall scale and the input gain are not identifiable from "
             f"motion alone; {anchor} fixed at its nominal value {nom[anchor]:.6g} and the input "
             "gain at nominal; input effects are not tested"
         )
+    return fixed
+
+
+def _untestable(fx: _Fitter, library, forced) -> dict[str, EffectEvidence]:
+    """Evidence entries for candidates that cannot be tested on these data, by key."""
+    out = {}
+    # the declared model's own regressors, including parameters held because the data cannot
+    # pin them down: an effect in their span is the declared model's, never a discovery
+    free_base = free_columns(fx.layout, [], fx.declared_fixed_idx)
+    for c in library:
+        why = _in_span(fx.fit_prob, fx.layout, free_base, c, fx.declared_fixed_idx)
+        if c.joint == "u" and not forced:
+            why = "not identifiable: no input excitation"
+        if why:
+            status = "absorbed" if why.startswith("absorbed") else "not identifiable"
+            out[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), False, None, None, status, why)
+    return out
+
+
+def _select(library, candidates):
+    if candidates is None:
+        return library
+    keys = {c.key for c in library}
+    bad = [k for k in candidates if k not in keys]
+    if bad:
+        raise ValueError(f"candidates: unknown {bad}; expected keys from {sorted(keys)}")
+    return [c for c in library if c.key in set(candidates)]
+
+
+def _trace(fx: _Fitter, testable, evidence):
+    """Run the search; record the accepted steps' evidence (each member given its partner)."""
+    s = fx.settings
+    comparer = _trace_mod.Comparer(fx.fit_prob, fx.layout, fx.theta_fixed, fx.fixed_idx, fx.weights)
+    same = _trace_mod.equivalent_pairs(fx.fit_prob, fx.layout, free_columns(fx.layout, [], fx.fixed_idx),
+                                       fx.weights, testable)
+    steps, _, _ = _trace_mod.search(comparer, testable, _trace_mod.SearchSettings(
+        s.z_threshold, s.min_improvement, s.max_effects, s.pair_pool, s.member_z_threshold), same)
+    for step in steps:
+        for other, member in step.equivalents.items():
+            c = next(x for x in testable if x.key == other)
+            evidence[other] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), False, None, None,
+                                             "equivalent", f"indistinguishable from {member} on these data")
+        for c in step.members:
+            ev = step.evidence[c.key]
+            partner = [o.key for o in step.members if o != c]
+            note = (f"significant only together with {partner[0]} (pair: held-out gain "
+                    f"{step.pair_evidence.improvement:.1%}, z {step.pair_evidence.z:.1f}); evidence given it"
+                    if partner else "")
+            evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), True,
+                                             ev.improvement, ev.z, "selected", note)
+    return steps
+
+
+def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
+    """Coefficients (the refit's for accepted effects; a fit with the accepted ones plus the
+    candidate for the rest) and, for untested-or-rejected candidates, evidence given the final model."""
+    comparer = _trace_mod.Comparer(fx.fit_prob, fx.layout, fx.theta_fixed, fx.fixed_idx, fx.weights)
+    for c in library:
+        ev = evidence.get(c.key)
+        if ev is not None and ev.status in ("absorbed", "not identifiable", "equivalent"):
+            continue
+        if c in accepted:
+            ev.coefficient = dyn.seconds if c == DELAY else float(theta[fx.layout.index(c.key)])
+            if c == DELAY:
+                ev.name = "actuator_lag" if dyn.kind == "lag" else "input_delay"
+                ev.note = "; ".join(x for x in (ev.note, getattr(fx, "alternative", "")) if x)
+            continue
+        given = [a for a in accepted if a != c]
+        score = comparer.compare(given, [c])
+        if ev is None:
+            ev = evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), False,
+                                                  score.improvement, score.z, "tested")
+        elif ev.status == "tested":
+            ev.improvement, ev.z_score = score.improvement, score.z
+        free = free_columns(fx.layout, given + [c], fx.fixed_idx)
+        with_delay = c == DELAY or DELAY in given
+        th, d = fit_equation_error(fx.fit_prob, fx.layout, free, fx.theta_fixed, fx.weights, with_delay)
+        ev.coefficient = d if c == DELAY else float(th[fx.layout.index(c.key)])
+    for c in accepted:  # a spring and a constant torque on one joint: a spring's rest position
+        spring = evidence.get(f"spring:{c.joint}")
+        if c.name == "constant_torque" and spring is not None and spring.status == "selected" and spring.coefficient > 0:
+            ev = evidence[c.key]
+            ev.note = "; ".join(x for x in (ev.note, f"with spring:{c.joint}: its rest position is "
+                                            f"{ev.coefficient / spring.coefficient:.3g} (tau0/k)") if x)
+    chosen = [evidence[c.key] for c in accepted]
+    rest = sorted((e for e in evidence.values() if e.status in ("tested", "not confirmed")),
+                  key=lambda e: -(e.improvement if e.improvement is not None else -np.inf))
+    return chosen + rest + [e for e in evidence.values() if e.status in ("equivalent", "absorbed", "not identifiable")]
+
+
+def _prepare(data, spec, settings, column_map, signs, offsets, test: bool = False):
+    trajs = _as_trajectories(data, spec, column_map, signs, offsets)
+    settings = settings.resolved(spec.name, trajs[0].dt)
+    if not test:
+        _check_data(trajs, spec, settings)
+    qds = [_velocities(tr, settings) for tr in trajs]
+    return trajs, qds, settings
+
+
+def diagnose(
+    data,
+    system: str,
+    *,
+    test=None,
+    column_map: Mapping[str, str] | None = None,
+    signs: Mapping[str, float] | None = None,
+    offsets: Mapping[str, float] | None = None,
+    fixed: Mapping[str, float] | None = None,
+    candidates: Sequence[str] | None = None,
+    settings: DiagnosisSettings | None = None,
+    **overrides,
+) -> DiagnosisResult:
+    """Fit the declared model, trace its residual to missing effects, add them, refit, report.
+
+    ``data``: a CSV/NPZ/MAT path or a list of paths (long format, see
+    :func:`furuta_gym.data.load_trajectories`; ``column_map``/``signs``/``offsets`` as there) or a
+    list of :class:`~furuta_gym.data.Trajectory`. ``test``: logs in the same form never used by
+    any fit or decision; errors before/after on them are reported beside the held-out split.
+    ``system``: ``"furuta"`` or ``"nmsd"``. ``fixed``: lumped parameters held at known values
+    (the scale anchor; default: the pendulum's gravity term ``G`` = ½mp·g·Lp for the Furuta, the
+    input gain for the N-MSD; with free data the mass/gain is fixed too). ``candidates``: restrict
+    the library (keys ``"effect:joint"``). Other keyword arguments override
+    :class:`DiagnosisSettings` fields.
+
+    Returns a :class:`DiagnosisResult`: effects ordered by held-out evidence (those marked
+    ``significant`` were added), held-out (and test) errors before/after, fitted parameters, notes.
+    """
+    ensure_x64()
+    spec = get_spec(system)
+    layout = layout_for(spec.name)
+    notes: list[str] = []
+    trajs, qds, settings = _prepare(data, spec, dataclasses.replace(settings or DiagnosisSettings(), **overrides),
+                                    column_map, signs, offsets)
+    if any(tr.qd is None for tr in trajs):
+        notes.append(f"velocities estimated ({settings.velocity})")
+    segs = _segments(trajs, qds, settings)
+    test_segs = _test_segments(test, spec, settings, column_map, signs, offsets, trajs[0].dt)
+    u_all = np.concatenate([s.u[:, 0] for s in segs])
+    forced = bool(np.std(u_all) > 1e-9 * max(1.0, np.abs(u_all).max()) and np.abs(u_all).max() > 0)
+    fixed = _anchor(spec, layout, fixed, forced, notes)
     fixed_idx = {layout.index(k) for k in fixed}
     theta_fixed = layout.nominal()
     for k, v in fixed.items():
         theta_fixed[layout.index(k)] = v
+    fx = _Fitter(spec, layout, segs, test_segs, theta_fixed, fixed_idx, settings, notes)
 
-    theta_nominal = layout.nominal()
-    stride = max(1, int(round(settings.interval / dt)))
-    _fit.build_regressors(segs, layout, theta_fixed, stride, settings.input_hold, settings.block_seconds)
-    c_input = _fit.input_direction(layout, theta_fixed)
-    fit_segs = [s for s in segs if not s.held_out]
-    held_segs = [s for s in segs if s.held_out]
-    fit_prob, held_prob = _Problem(fit_segs, c_input), _Problem(held_segs, c_input)
+    # the declared model: equation error (weights from its own residual), then output error;
+    # parameters these data cannot pin down are held at their nominal values
+    th_ee, free_base = fx.fit_ee([])
+    fx.weights = 1.0 / np.maximum(np.sqrt(np.mean((fx.fit_prob.R @ th_ee) ** 2, axis=0)), 1e-300)
+    th_ee, _ = fx.fit_ee([])
+    weak = fx.weakly_identified(th_ee, free_base)
+    if weak:
+        fx.fixed_idx |= {layout.index(k) for k in weak}
+        notes.append("not identifiable from these data, held at nominal: " + ", ".join(
+            f"{k} (t {t:.1f} < {settings.identify_t})" for k, t in weak.items()))
+        th_ee, free_base = fx.fit_ee([])
+    th_before = fx.refine(th_ee, free_base, _fit.NO_INPUT_DYNAMICS, "declared model")
+    before = fx.errors(th_before, fx.held_segs, fx.held_prob)
+    test_before = fx.test_errors(th_before)
 
-    # --- declared model: equation error then output error --------------------------------------
-    free_base = _columns(layout, [], fixed_idx)
-    th_ee, _ = _fit_ee(fit_prob, layout, free_base, theta_fixed, np.ones(spec.n_dof), False)
-    r = fit_prob.R @ th_ee
-    weights = 1.0 / np.maximum(np.sqrt(np.mean(r**2, axis=0)), 1e-300)
-    th_ee, _ = _fit_ee(fit_prob, layout, free_base, theta_fixed, weights, False)
-
-    L = int(round(settings.window / dt))
-    substeps = 1 if spec.name == "furuta" else 2
-    smoothing = 0.02 if spec.name == "furuta" else 0.01
-    all_fit_win = _fit.make_windows(fit_segs, L)
-    held_win = _fit.make_windows(held_segs, L)
-    if held_win is None or all_fit_win is None:
-        raise DataError("too short: no complete open-loop window in the fit or held-out segments")
-    # fit-set windows: a random subset drives the output-error fit, the rest validates effects
-    order = np.random.default_rng(0).permutation(all_fit_win.x0.shape[0])
-    oe_idx = np.sort(order[: settings.oe_max_windows])
-    val_idx = np.sort(order[settings.oe_max_windows :]) if order.size > settings.oe_max_windows else oe_idx
-
-    def fit_windows(delay, idx):
-        w = _fit.make_windows(fit_segs, L, delay)
-        return _fit.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, L)
-
-    fit_win = fit_windows(0.0, oe_idx)
-
-    def validation_rmse(theta, delay):
-        return _fit.window_errors(layout, theta, fit_windows(delay, val_idx), smoothing, substeps)[1]
-
-    def refine(theta0, free, delay, tag):
-        if not settings.oe:
-            return theta0
-        win = fit_win if delay == 0 else fit_windows(delay, oe_idx)
-        # start from the equation-error estimate unless it is non-physical or predicts worse than
-        # the nominal model (closed-loop data: u correlates with the measurement noise, which
-        # biases the equation error far more than velocity noise does)
-        start, label = theta0, "equation-error"
-        nominal = theta0.copy()
-        nominal[: len(layout.base)] = np.where(free[: len(layout.base)], theta_nominal[: len(layout.base)], theta0[: len(layout.base)])
-        cost = lambda th: _fit.window_errors(layout, th, win, smoothing, substeps)[1]  # noqa: E731
-        if not _physical(layout, theta0) or cost(nominal) < cost(theta0):
-            start, label = nominal, "nominal"
-            notes.append(
-                "the equation-error estimate was non-physical or predicted worse than the nominal "
-                f"model ({tag}); output error started from the nominal parameters"
-            )
-        th, ok = _fit.oe_fit(layout, start, free, win, smoothing, substeps, max_nfev=settings.oe_max_nfev)
-        if not ok:
-            notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
-            return th
-        # keep the output-error estimate only if it also predicts better on the validation
-        # windows it did not see (with few windows it can fit the velocity-estimate noise)
-        if _physical(layout, start) and validation_rmse(start, delay) < validation_rmse(th, delay):
-            notes.append(f"the {label} estimate predicts better on validation windows than the "
-                         f"output-error refinement; kept ({tag})")
-            return start
-        return th
-
-    th_before = refine(th_ee, free_base, 0.0, "declared model")
-    before = _errors(spec, layout, th_before, held_prob, held_segs, weights, L, 0.0, smoothing, substeps, settings)
-
-    # --- trace ----------------------------------------------------------------------------------
-    library = list(layout.candidates) + [DELAY]
-    if candidates is not None:
-        keys = {c.key for c in library}
-        bad = [k for k in candidates if k not in keys]
-        if bad:
-            raise ValueError(f"candidates: unknown {bad}; expected keys from {sorted(keys)}")
-        library = [c for c in library if c.key in set(candidates)]
-    evidence: dict[str, EffectEvidence] = {}
-    for c in library:
-        why = _in_span(fit_prob, layout, free_base, c, fixed_idx)
-        if c.name in ("input_gain", "input_delay") and not forced:
-            why = "not identifiable: no input excitation"
-        if why:
-            evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(spec), False, None, None,
-                                             "absorbed" if why.startswith("absorbed") else "not identifiable", why)
-    testable = [c for c in library if c.key not in evidence]
-    chosen: list[Candidate] = []
-    first_round: dict[str, tuple[float, float]] = {}
-    while testable and len(chosen) < settings.max_effects:
-        scores = {c.key: _cv_compare(fit_prob, layout, theta_fixed, fixed_idx, weights, chosen, c) for c in testable}
-        if not chosen:
-            first_round = dict(scores)
-        best = max(testable, key=lambda c: scores[c.key][0])
-        imp, t = scores[best.key]
-        if imp >= settings.min_improvement and t >= settings.z_threshold:
-            chosen.append(best)
-            testable.remove(best)
-            evidence[best.key] = EffectEvidence(best.name, best.joint, None, best.unit(spec), True, imp, t, "selected")
-        else:
-            break
-    for c in testable:
-        imp, t = first_round.get(c.key, (None, None))
-        evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(spec), False, imp, t, "tested")
-
-    # --- add and refit, confirmed by open-loop prediction on fit-set validation windows ------
-    # (the trace is an equation-error test; on closed-loop logs the input correlates with the
-    # measurement noise, so an effect is kept only if the refitted model also predicts better)
-    th_after, delay, after = th_before, 0.0, before
-    v_before = validation_rmse(th_before, 0.0) if chosen else None
-    accepted = list(chosen)
-    while accepted:
-        free_after = _columns(layout, accepted, fixed_idx)
-        delay = 0.0
-        if any(c.name == "input_delay" for c in accepted):
-            delay = _search_delay(segs, fit_segs, layout, theta_fixed, free_after, weights, stride, settings, c_input, notes)
-        _fit.build_regressors(segs, layout, theta_fixed, stride, settings.input_hold, settings.block_seconds, delay)
-        fit_prob, held_prob = _Problem(fit_segs, c_input), _Problem(held_segs, c_input)
-        th_ee_after, _ = _fit_ee(fit_prob, layout, free_after, theta_fixed, weights, False)
-        th_try = refine(th_ee_after, free_after, delay, "with " + ", ".join(c.key for c in accepted))
-        v_after = validation_rmse(th_try, delay)
-        if v_after < v_before:
-            th_after = th_try
-            after = _errors(spec, layout, th_after, held_prob, held_segs, weights, L, delay, smoothing, substeps, settings)
-            break
-        dropped = accepted.pop()
-        ev = evidence[dropped.key]
-        ev.significant, ev.status = False, "not confirmed"
-        ev.note = (f"equation-error evidence, but the refitted model predicts worse on fit-set "
-                   f"validation windows (rmse {v_before:.3g} -> {v_after:.3g})")
-        notes.append(f"{dropped.key}: {ev.note}; dropped")
-        delay = 0.0
-    if not accepted and chosen:
-        _fit.build_regressors(segs, layout, theta_fixed, stride, settings.input_hold, settings.block_seconds, 0.0)
-        fit_prob, held_prob = _Problem(fit_segs, c_input), _Problem(held_segs, c_input)
-    chosen = accepted
-
-    # coefficients: the refit for selected effects, a one-effect equation-error fit for the rest
-    for key, ev in evidence.items():
-        if ev.status == "selected":
-            ev.coefficient = delay if ev.name == "input_delay" else float(th_after[layout.index(key)])
-        elif ev.status in ("tested", "not confirmed"):
-            cand = next(c for c in library if c.key == key)
-            if cand.name == "input_delay":
-                _, d = _fit_ee(fit_prob, layout, free_base, theta_fixed, weights, True)
-                ev.coefficient = d
-            else:
-                th_c, _ = _fit_ee(fit_prob, layout, _columns(layout, [cand], fixed_idx), theta_fixed, weights, False)
-                ev.coefficient = float(th_c[layout.index(key)])
-    ordered = [evidence[c.key] for c in chosen]
-    rest = sorted((e for e in evidence.values() if e.status in ("tested", "not confirmed")),
-                  key=lambda e: -(e.improvement if e.improvement is not None else -np.inf))
-    ordered += rest + [e for e in evidence.values() if e.status not in ("selected", "tested", "not confirmed")]
-    if not chosen:
+    library = _select(list(layout.candidates) + [DELAY], candidates)
+    evidence = _untestable(fx, library, forced)
+    steps = _trace(fx, [c for c in library if c.key not in evidence], evidence)
+    accepted, th_after, dyn = _confirm(fx, steps, th_before, evidence) if steps else ([], th_before, fx.dynamics)
+    after = fx.errors(th_after, fx.held_segs, fx.held_prob) if accepted else before
+    test_after = fx.test_errors(th_after) if accepted else test_before
+    ordered = _finish_evidence(fx, library, accepted, th_after, dyn, evidence)
+    if not accepted:
         notes.append("no effect is significant on held-out data: none added")
 
     params = lambda th: {b: float(th[i]) for i, b in enumerate(layout.base)}  # noqa: E731
     return DiagnosisResult(
-        system=spec.name,
-        effects=ordered,
-        error_before=before,
-        error_after=after,
-        parameters_before=params(th_before),
-        parameters_after=params(th_after),
-        parameter_units=dict(zip(layout.base, layout.base_units)),
-        fixed=dict(fixed),
-        notes=notes,
-        settings=settings,
-        layout=layout,
-        theta_before=th_before,
-        theta_after=th_after,
-        delay_after=delay,
-        _segments=segs,
-    )
-
-
-def _physical(layout, theta) -> bool:
-    """Positive-definite mass matrix for every angle and non-negative declared damping."""
-    p = {b: theta[i] for i, b in enumerate(layout.base)}
-    if layout.system == "furuta":
-        ok = p["J1"] > 0 and p["J2"] > 0 and p["J1b"] >= 0 and p["J1"] * p["J2"] > p["Jc"] ** 2
-        return bool(ok and p["c_alpha"] >= 0 and p["c_beta"] >= 0 and p["Jc"] > 0)
-    return bool(p["m"] > 0 and p["b1"] >= 0 and p["k1"] >= 0)
-
-
-def _search_delay(segs, fit_segs, layout, theta_fixed, free, weights, stride, settings, c_input, notes):
-    """Delay by golden-section search of the equation-error cost with the input shifted exactly."""
-    from scipy.optimize import minimize_scalar
-
-    def cost(d):
-        _fit.build_regressors(fit_segs, layout, theta_fixed, stride, settings.input_hold, settings.block_seconds, d)
-        prob = _Problem(fit_segs, c_input)
-        th, _ = _fit_ee(prob, layout, free, theta_fixed, weights, False)
-        r = (prob.R @ th) * weights[None]
-        return float((r**2).sum())
-
-    res = minimize_scalar(cost, bounds=(0.0, settings.max_delay), method="bounded", options={"xatol": 1e-4})
-    d = float(res.x)
-    if d > 0.95 * settings.max_delay:
-        notes.append(
-            f"input delay estimate {d:.4g} s is at the search bound max_delay = {settings.max_delay} s: "
-            "the delay stands in for something else (e.g. unmodelled actuator dynamics)"
-        )
-    return d
-
-
-def _errors(spec, layout, theta, held_prob, held_segs, weights, L, delay, smoothing, substeps, settings):
-    r = held_prob.R @ theta
-    per_r = np.sqrt(np.mean(r**2, axis=0))
-    win = _fit.make_windows(held_segs, L, delay)
-    per_q, comb = _fit.window_errors(layout, theta, win, smoothing, substeps)
-    return ErrorSummary(
-        trajectory_rmse=comb,
-        trajectory_rmse_per_joint={j: float(v) for j, v in zip(spec.joint_names, per_q)},
-        residual_rms=float(np.sqrt(np.mean(r**2))),
-        residual_rms_per_joint={j: float(v) for j, v in zip(spec.joint_names, per_r)},
-        window_seconds=settings.window,
-        n_windows=int(win.x0.shape[0]),
+        system=spec.name, effects=ordered, error_before=before, error_after=after,
+        parameters_before=params(th_before), parameters_after=params(th_after),
+        parameter_units=dict(zip(layout.base, layout.base_units)), fixed=dict(fixed), notes=notes,
+        settings=settings, layout=layout, theta_before=th_before, theta_after=th_after,
+        input_dynamics=dyn, test_before=test_before, test_after=test_after,
+        _segments=segs, _test_segments=test_segs,
     )

@@ -20,12 +20,13 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.linalg import eigh
 from scipy.optimize import least_squares
+from scipy.signal import lfilter
 
 from ..lagrangian import interval_difference, interval_integral, momentum, potential_derived_force
 from ..simulate import rollout_zoh
 from ._library import LumpedModel, ParameterLayout
 
-__all__ = ["Segment", "build_regressors", "ee_fit", "oe_fit", "window_errors", "delay_input"]
+__all__ = ["Segment", "InputDynamics", "build_regressors", "ee_fit", "oe_fit", "window_errors", "delay_input", "lag_input"]
 
 _CHUNK = 2048
 
@@ -48,6 +49,7 @@ class Segment:
     Uint: np.ndarray | None = None  # (N,) ∫u over each interval
     dU: np.ndarray | None = None  # (N,) d/d(delay) of ∫u(t − d) at d = 0
     block: np.ndarray | None = None  # (N,) block index for paired held-out comparisons
+    rest: np.ndarray | None = None  # (N, n) True where a joint's measured position never changes
 
     def residual_jacobian(self, c_input: np.ndarray, u_int: np.ndarray | None = None) -> np.ndarray:
         """(N, n, P): Z̄ − Ā = R θ, with Z̄ = ∫u · c_input (c_input = ∂τ_u/∂θ at u = 1)."""
@@ -124,9 +126,49 @@ def delay_input(u: np.ndarray, delay: float, dt: float) -> np.ndarray:
     return (1.0 - phi) * shifted + phi * shifted_more
 
 
+def lag_input(u: np.ndarray, tau: float, dt: float) -> np.ndarray:
+    """The held input after a first-order lag τ·u̇_m = u − u_m, averaged over each sample period
+    (exact for an input held over the period; u_m starts at the first sample's value)."""
+    if tau <= 0:
+        return u
+    a = np.exp(-dt / tau)
+    um = np.empty_like(u, dtype=float)
+    um[0] = u[0]
+    if u.shape[0] > 1:  # u_m,k+1 = a·u_m,k + (1 − a)·u_k
+        um[1:] = lfilter([1.0 - a], [1.0, -a], u[:-1], axis=0, zi=a * u[:1])[0]
+    return u + (um - u) * (tau / dt) * (1.0 - a)
+
+
+@dataclasses.dataclass(frozen=True)
+class InputDynamics:
+    """What stands between the logged input and the plant: nothing, a delay or a first-order lag."""
+
+    kind: str = "none"  # "none", "delay" (input_delay) or "lag" (actuator_lag)
+    seconds: float = 0.0
+
+    def apply(self, u: np.ndarray, dt: float) -> np.ndarray:
+        if self.kind == "delay":
+            return delay_input(u, self.seconds, dt)
+        if self.kind == "lag":
+            return lag_input(u, self.seconds, dt)
+        return u
+
+
+NO_INPUT_DYNAMICS = InputDynamics()
+
+
 def _group(x: np.ndarray, stride: int) -> np.ndarray:
     n = (x.shape[0] // stride) * stride
     return x[:n].reshape((n // stride, stride) + x.shape[1:]).sum(axis=1)
+
+
+def _at_rest(q: np.ndarray, stride: int, n_intervals: int) -> np.ndarray:
+    """(N, n): the joint's logged position is identical at every sample of the interval (a
+    quantised encoder that did not move: the joint is at rest to within one count)."""
+    n = q.shape[1]
+    idx = np.arange(n_intervals)[:, None] * stride + np.arange(stride + 1)[None, :]
+    window = q[np.minimum(idx, q.shape[0] - 1)]  # (N, stride + 1, n)
+    return np.all(window == window[:, :1, :], axis=1).reshape(n_intervals, n)
 
 
 def build_regressors(
@@ -136,13 +178,14 @@ def build_regressors(
     stride: int,
     hold: str,
     block_seconds: float = 1.0,
-    delay: float = 0.0,
+    dynamics: InputDynamics = NO_INPUT_DYNAMICS,
+    exclude_rest: bool = True,
 ) -> None:
     """Fill each segment's Ā Jacobian, ∫u and delay regressor over intervals of ``stride``."""
     for seg in segments:
         jp, jf = _per_sample(layout.system, theta0, seg.q, seg.qd)
         a = np.asarray(interval_difference(jp)) - np.asarray(interval_integral(jf, seg.dt))
-        u = delay_input(seg.u, delay, seg.dt)
+        u = dynamics.apply(seg.u, seg.dt)
         ui = input_integral(u, seg.dt, hold)
         du_s = np.diff(u[:, 0], prepend=u[0, 0])
         du = -(du_s[:-1] if hold == "zoh" else du_s[1:])
@@ -150,6 +193,7 @@ def build_regressors(
         seg.D = _group(np.asarray(interval_difference(jp)), stride)
         seg.Uint = _group(ui, stride)
         seg.dU = _group(du, stride)
+        seg.rest = _at_rest(seg.q, stride, seg.A.shape[0]) if exclude_rest else np.zeros(seg.A.shape[:2], bool)
         per_block = max(1, int(round(block_seconds / (stride * seg.dt))))
         seg.block = np.arange(seg.A.shape[0]) // per_block
 
@@ -221,11 +265,12 @@ class Windows:
     length: int
 
 
-def make_windows(segments: list[Segment], length: int, delay: float = 0.0, max_windows=None, rng=None):
+def make_windows(segments: list[Segment], length: int, dynamics: InputDynamics = NO_INPUT_DYNAMICS,
+                 max_windows=None, rng=None):
     """Non-overlapping windows of ``length`` steps from each segment (start at measured states)."""
     x0, us, qs, seg_idx = [], [], [], []
     for i, s in enumerate(segments):
-        u = delay_input(s.u, delay, s.dt)
+        u = dynamics.apply(s.u, s.dt)
         for start in range(0, s.q.shape[0] - length, length):
             x0.append(np.concatenate([s.q[start], s.qd[start]]))
             us.append(u[start : start + length])
@@ -296,6 +341,8 @@ def oe_fit(
     Returns (θ, improved flag): the start is returned unchanged with ``False`` if it does not
     simulate or the fit does not lower the output error. Base parameters are bounded below by 0.
     """
+    if not np.any(free):
+        return theta_start, False
     scale = np.maximum(np.abs(theta_start), layout.typical_scale() * 1e-2)
     scale = np.where(free, scale, 1.0)
 

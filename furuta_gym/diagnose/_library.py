@@ -35,7 +35,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..effects import EFFECT_UNITS, INPUT_EFFECTS, JOINT_EFFECTS
+from ..effects import EFFECT_UNITS, INPUT_EFFECTS, JOINT_EFFECTS, STATEFUL_EFFECTS, Effect
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..models import FurutaParameters, NMSDParameters
 from ..systems import get_spec
@@ -70,6 +70,9 @@ BASE_UNITS = {
 # The base parameter that *is* the input gain, and the default mechanical scale anchor used
 # when the data carry no input excitation (free data leave the gain unidentifiable).
 GAIN_PARAMETER = {"furuta": "K", "nmsd": "gain"}
+# Joints whose declared potential is gravity: a centre-of-mass offset (``com_offset``) shifts it.
+# Elsewhere a shifted potential is a spring's neutral (``spring`` + ``constant_torque``).
+GRAVITY_JOINTS = {"furuta": ("beta",), "nmsd": ()}
 MECHANICAL_ANCHOR = {"furuta": "G", "nmsd": "m"}
 
 
@@ -134,6 +137,8 @@ class ParameterLayout:
             typical = {
                 "spring": 1e-3 if angular else 1.0,
                 "coulomb_friction": 1e-4 if angular else 0.1,
+                "stiction": 1e-4 if angular else 0.1,
+                "com_offset": 1e-3,
                 "viscous_friction": 1e-5 if angular else 0.1,
                 "quadratic_drag": 1e-6 if angular else 0.01,
                 "constant_torque": 1e-4 if angular else 0.1,
@@ -145,8 +150,16 @@ class ParameterLayout:
 def layout_for(system: str) -> ParameterLayout:
     """The lumped base parameters of ``system`` plus every memoryless library effect."""
     spec = get_spec(system)
-    cands = [Candidate(n, j) for j in spec.joint_names for n in JOINT_EFFECTS]
-    cands += [Candidate(n, "u") for n in INPUT_EFFECTS if n != "input_delay"]
+    # library order breaks ties between effects the data cannot tell apart: the catch-all
+    # constant torque comes after the specific mechanisms
+    # constant torque comes after the specific mechanisms, and on a joint loaded by gravity a
+    # shifted potential (a centre-of-mass offset) comes first
+    generic = [n for n in JOINT_EFFECTS if n not in ("constant_torque", "com_offset")] + ["constant_torque"]
+    cands = []
+    for j in spec.joint_names:
+        gravity = j in GRAVITY_JOINTS[spec.name]
+        cands += [Candidate(n, j) for n in (["com_offset"] if gravity else []) + generic]
+    cands += [Candidate(n, "u") for n in INPUT_EFFECTS if n not in STATEFUL_EFFECTS]
     return ParameterLayout(
         system=spec.name,
         base=BASE[spec.name],
@@ -177,6 +190,12 @@ class LumpedModel(AbstractLagrangianSystem):
         layout = layout_for(self.system)
         return self.theta[layout.index(f"{name}:{joint}")]
 
+    def _effects(self, names) -> list[Effect]:
+        """The library effects ``names`` on every joint, coefficients from ``theta`` (traced)."""
+        keys = {c.key for c in layout_for(self.system).candidates}
+        return [Effect(n, j, self._effect(n, j)) for j in self.spec.joint_names for n in names
+                if f"{n}:{j}" in keys]
+
     def mass_matrix(self, q):
         if self.system == "furuta":
             b = self._base
@@ -186,12 +205,17 @@ class LumpedModel(AbstractLagrangianSystem):
             return jnp.stack([jnp.stack([m11, m12]), jnp.stack([m12, b("J2") + 0.0 * m11])])
         return jnp.reshape(self._base("m"), (1, 1))
 
-    def potential(self, q):
+    def _declared_potential(self, q):
         b = self._base
         if self.system == "furuta":
-            v = b("G") * (1.0 - jnp.cos(q[1]))
-        else:
-            v = 0.5 * b("k1") * q[0] ** 2 + 0.25 * b("k2") * q[0] ** 4
+            return b("G") * (1.0 - jnp.cos(q[1]))
+        return 0.5 * b("k1") * q[0] ** 2 + 0.25 * b("k2") * q[0] ** 4
+
+    def potential(self, q):
+        # a com_offset shifts the declared potential's zero (linear in δ at δ = 0, which is where
+        # the equation-error regressors are taken); springs add ½k·q²
+        shift = sum((e.shift(self.spec) for e in self._effects(["com_offset"])), jnp.zeros_like(q))
+        v = self._declared_potential(q - shift)
         for j, name in enumerate(self.spec.joint_names):
             v = v + 0.5 * self._effect("spring", name) * q[j] ** 2
         return v
@@ -202,17 +226,12 @@ class LumpedModel(AbstractLagrangianSystem):
             tau = jnp.stack([-b("c_alpha") * qd[0], -b("c_beta") * qd[1]])
         else:
             tau = -b("b1") * qd - b("b2") * qd**3
+        names = ("coulomb_friction", "stiction", "viscous_friction", "quadratic_drag", "constant_torque")
         extra = []
         for j, name in enumerate(self.spec.joint_names):
-            v = qd[j]
-            sgn = jnp.sign(v) if self.coulomb_smoothing <= 0 else jnp.tanh(v / self.coulomb_smoothing)
-            e = lambda n: self._effect(n, name)  # noqa: E731
-            extra.append(
-                -e("coulomb_friction") * sgn
-                - e("viscous_friction") * v
-                - e("quadratic_drag") * v * jnp.abs(v)
-                + e("constant_torque")
-            )
+            forces = [e.generalized_force(q[j], qd[j], self.coulomb_smoothing)
+                      for e in self._effects(names) if e.joint == name]
+            extra.append(sum(forces, 0.0 * qd[j]))
         return tau + jnp.stack(extra)
 
     def input_force(self, q, qd, u):

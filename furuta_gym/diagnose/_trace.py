@@ -1,0 +1,226 @@
+"""Tracing the residual to library effects: cross-validated evidence and the search over candidates.
+
+Evidence for adding effects ``added`` to a model with effects ``chosen`` is measured by
+cross-validation over the fit segments: both models are fitted (equation error) on the other
+folds, and the normalised residual sum of squares of the left-out fold is compared block by block
+(``block_seconds`` long, much longer than the residual's correlation time). Two numbers decide:
+
+* the **size**: the relative drop of the total held-out sum, 1 − S₁/S₀ ≥ ``min_improvement``;
+* the **consistency**: the t statistic of the per-block log ratios log(S₀,b / S₁,b) ≥
+  ``z_threshold``. A log ratio keeps each block's size of improvement (a rank test throws it
+  away) in relative terms, so an effect that acts strongly in part of a log (a spring where the
+  rotor wanders, friction where it reverses) and little elsewhere still adds up, and its t grows
+  as √(blocks) with more data: more data never weakens a real effect's evidence.
+
+The search adds, round after round, the candidate with the strongest evidence (largest t) among
+those that pass and have a physical sign, and tests every remaining candidate again against the
+enlarged model. When no single candidate passes, pairs among the ``pair_pool`` largest-gain
+candidates are tested: a pair passes if the pair as a whole passes and each member still improves
+the model that holds the other (t ≥ ``member_z_threshold``) — effects that only help together,
+such as a cable spring whose pull only shows once the dry friction that holds the rotor is
+modelled. Candidates the data cannot tell apart are grouped (see :func:`equivalent_pairs`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+
+from ._library import Candidate
+from ._problem import block_sums, fit_equation_error, free_columns, momentum_norm
+
+__all__ = ["Evidence", "Comparer", "SearchSettings", "Step", "search", "log_ratio_t"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Evidence:
+    """Cross-validated evidence of adding effects: relative drop of the held-out normalised
+    residual sum of squares, the t statistic ``z`` of per-block log ratios, and the block count."""
+
+    improvement: float
+    z: float
+    n_blocks: int
+
+    def passes(self, min_improvement: float, z_threshold: float) -> bool:
+        return self.improvement >= min_improvement and self.z >= z_threshold
+
+
+@dataclasses.dataclass
+class Step:
+    """One accepted step of the search: one effect, or a pair found together."""
+
+    members: tuple[Candidate, ...]
+    evidence: dict[str, Evidence]  # per member: its evidence given the model before it (and its partner)
+    pair_evidence: Evidence | None = None
+    equivalents: dict[str, str] = dataclasses.field(default_factory=dict)  # other key -> member key
+
+
+def equivalent_pairs(prob, layout, free_base, weights, candidates, threshold: float = 0.99):
+    """{key: {keys}} of candidates these data cannot tell apart: their weighted regressor columns,
+    with the declared model's own free columns projected out, are correlated beyond ``threshold``
+    (a pendulum's centre-of-mass offset and a constant torque when the pendulum stays near one
+    angle). The input delay is not a column of θ and is never grouped."""
+    cols = [c for c in candidates if c.name != "input_delay"]
+    W = weights[None, :, None]
+    X = (prob.R[:, :, free_base] * W).reshape(-1, int(free_base.sum()))
+    Q, _ = np.linalg.qr(X / np.maximum(np.linalg.norm(X, axis=0), 1e-300))
+    out: dict[str, set[str]] = {c.key: set() for c in candidates}
+    if not cols:
+        return out
+    C = np.stack([(prob.R[:, :, layout.index(c.key)] * W[:, :, 0]).reshape(-1) for c in cols], 1)
+    C = C - Q @ (Q.T @ C)
+    norms = np.linalg.norm(C, axis=0)
+    ok = norms > 1e-12 * max(1.0, norms.max())
+    U = C / np.where(ok, norms, 1.0)
+    corr = np.abs(U.T @ U)
+    for i, a in enumerate(cols):
+        for k, b in enumerate(cols):
+            if i != k and ok[i] and ok[k] and corr[i, k] > threshold:
+                out[a.key].add(b.key)
+    return out
+
+
+def log_ratio_t(s0: np.ndarray, s1: np.ndarray) -> float:
+    """t statistic of the per-block log ratios log(s0/s1): positive when the candidate lowers the
+    held-out residual. Blocks whose sums are zero in both models (all joints at rest) are skipped."""
+    ok = (s0 > 0) & (s1 > 0)
+    r = np.log(s0[ok] / s1[ok])
+    if r.size < 3:
+        return 0.0
+    sd = float(np.std(r, ddof=1))
+    if sd == 0.0:
+        return 0.0 if float(np.mean(r)) == 0.0 else float(np.sign(np.mean(r)) * np.inf)
+    return float(np.mean(r) / (sd / np.sqrt(r.size)))
+
+
+class Comparer:
+    """Cross-validated comparisons on one problem (stacked fit-segment regressors)."""
+
+    def __init__(self, prob, layout, theta_fixed, fixed_idx, weights, n_folds: int = 6):
+        self.prob, self.layout = prob, layout
+        self.theta_fixed, self.fixed_idx, self.weights = theta_fixed, fixed_idx, weights
+        groups = np.unique(prob.group)
+        self.n_folds = min(len(groups), n_folds)
+        fold_of = {g: i % self.n_folds for i, g in enumerate(groups)}
+        self.fold = np.array([fold_of[g] for g in prob.group])
+
+    def _fit(self, train, effects: list[Candidate], theta_for_delay=None):
+        free = free_columns(self.layout, effects, self.fixed_idx)
+        with_delay = any(c.name == "input_delay" for c in effects)
+        return fit_equation_error(train, self.layout, free, self.theta_fixed, self.weights, with_delay,
+                                  theta_for_delay)
+
+    def physical_sign(self, base: list[Candidate], candidate: Candidate) -> bool:
+        """Whether ``candidate``, fitted on all fit data beside ``base``, has a physical sign."""
+        if candidate.name not in SIGNED:
+            return True
+        th, _ = self._fit(self.prob, base + [candidate])
+        return bool(th[self.layout.index(candidate.key)] > 0)
+
+    def compare_problems(self, other_prob, effects: list[Candidate]) -> Evidence:
+        """Evidence for the same model on ``other_prob`` (the same blocks with another input
+        transformation, e.g. a lag instead of a delay) against it on this problem."""
+        sums0, sums1 = [], []
+        w = self.weights
+        for f in range(self.n_folds):
+            for prob, sums in ((self.prob, sums0), (other_prob, sums1)):
+                train, test = prob.subset(self.fold != f), prob.subset(self.fold == f)
+                th, _ = self._fit(train, effects)
+                sums.append(block_sums(test, th, w, 0.0, None, momentum_norm(train, th, w)))
+        s0, s1 = np.concatenate(sums0), np.concatenate(sums1)
+        improvement = float(1.0 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
+        return Evidence(improvement, log_ratio_t(s0, s1), int(s0.size))
+
+    def compare(self, base: list[Candidate], added: list[Candidate]) -> Evidence:
+        """Evidence for ``base + added`` against ``base``."""
+        sums0, sums1 = [], []
+        for f in range(self.n_folds):
+            train, test = self.prob.subset(self.fold != f), self.prob.subset(self.fold == f)
+            th0, d0 = self._fit(train, base)
+            th1, d1 = self._fit(train, base + added, th0)
+            w = self.weights
+            sums0.append(block_sums(test, th0, w, d0, None, momentum_norm(train, th0, w)))
+            sums1.append(block_sums(test, th1, w, d1, th0, momentum_norm(train, th1, w)))
+        s0, s1 = np.concatenate(sums0), np.concatenate(sums1)
+        improvement = float(1.0 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
+        return Evidence(improvement, log_ratio_t(s0, s1), int(s0.size))
+
+
+@dataclasses.dataclass(frozen=True)
+class SearchSettings:
+    z_threshold: float
+    min_improvement: float
+    max_effects: int
+    pair_pool: int
+    member_z_threshold: float
+
+
+def _best_pair(comparer, chosen, scores, pool, s: SearchSettings):
+    """The passing pair with the largest z among the ``pool`` largest-gain candidates, or None."""
+    ranked = sorted((c for c in pool if scores[c.key].improvement > 0 and comparer.physical_sign(chosen, c)),
+                    key=lambda c: -scores[c.key].improvement)[: s.pair_pool]
+    best = None
+    for a, b in itertools.combinations(ranked, 2):
+        if {a.name, b.name} == {"input_delay"}:
+            continue
+        whole = comparer.compare(chosen, [a, b])
+        if not whole.passes(s.min_improvement, s.z_threshold):
+            continue
+        given_b = comparer.compare(chosen + [b], [a])
+        given_a = comparer.compare(chosen + [a], [b])
+        if min(given_b.z, given_a.z) < s.member_z_threshold or min(given_a.improvement, given_b.improvement) <= 0:
+            continue
+        if best is None or whole.z > best.pair_evidence.z:
+            best = Step((a, b), {a.key: given_b, b.key: given_a}, whole)
+    return best
+
+
+def _pick(passing, scores, remaining, equivalents):
+    """The passing candidate with the largest z; among candidates these data cannot tell apart
+    from it, the first in library order (the specific mechanism before the catch-all constant
+    torque). Returns (pick, {equivalent key: pick key})."""
+    best = max(passing, key=lambda c: scores[c.key].z)
+    group = [c for c in remaining if c == best or c.key in equivalents.get(best.key, ())]
+    pick = next(c for c in remaining if c in group and c in passing)
+    return pick, {c.key: pick.key for c in group if c != pick}
+
+
+# effects whose coefficient is positive when physical (restoring or dissipative)
+SIGNED = ("spring", "coulomb_friction", "stiction", "viscous_friction", "quadratic_drag")
+
+
+def search(comparer: Comparer, testable: list[Candidate], s: SearchSettings, equivalents=None):
+    """Forward selection that never stops at a failing candidate while another passes.
+
+    Returns (accepted steps, the first round's evidence per candidate key, the last round's
+    evidence per remaining candidate key given everything accepted).
+    """
+    chosen: list[Candidate] = []
+    steps: list[Step] = []
+    remaining = list(testable)
+    first_round: dict[str, Evidence] = {}
+    last_round: dict[str, Evidence] = {}
+    while remaining and len(chosen) < s.max_effects:
+        scores = {c.key: comparer.compare(chosen, [c]) for c in remaining}
+        first_round = first_round or dict(scores)
+        last_round = scores
+        passing = [c for c in remaining if scores[c.key].passes(s.min_improvement, s.z_threshold)
+                   and comparer.physical_sign(chosen, c)]
+        if passing:
+            best, same = _pick(passing, scores, remaining, equivalents or {})
+            steps.append(Step((best,), {best.key: scores[best.key]}, equivalents=same))
+            chosen.append(best)
+            remaining = [c for c in remaining if c != best and c.key not in same]
+            continue
+        if len(chosen) + 2 > s.max_effects:
+            break
+        pair = _best_pair(comparer, chosen, scores, remaining, s)
+        if pair is None:
+            break
+        steps.append(pair)
+        for c in pair.members:
+            chosen.append(c)
+            remaining.remove(c)
+    return steps, first_round, last_round

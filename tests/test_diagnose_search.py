@@ -1,0 +1,147 @@
+"""The trace's search and its evidence statistic, on hand-made evidence (no data, no fits).
+
+The search must not stop at the first candidate that fails while another passes (a spring with
+the largest gain hid a Coulomb friction on real logs), must find effects that only help together,
+must never add an effect fitted with a non-physical sign, and must prefer the specific mechanism
+among candidates the data cannot tell apart.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from furuta_gym.diagnose._library import Candidate
+from furuta_gym.diagnose._trace import Evidence, SearchSettings, log_ratio_t, search
+
+SPRING = Candidate("spring", "alpha")
+COULOMB = Candidate("coulomb_friction", "alpha")
+TORQUE = Candidate("constant_torque", "beta")
+COM = Candidate("com_offset", "beta")
+DRAG = Candidate("quadratic_drag", "beta")
+SETTINGS = SearchSettings(z_threshold=3.0, min_improvement=0.03, max_effects=4, pair_pool=4, member_z_threshold=2.0)
+
+
+class FakeComparer:
+    """Evidence from a table keyed by (frozenset(base), frozenset(added)); default: nothing."""
+
+    def __init__(self, table, negative=()):
+        self.table, self.negative, self.calls = table, set(negative), []
+
+    def compare(self, base, added):
+        self.calls.append((tuple(c.key for c in base), tuple(c.key for c in added)))
+        key = (frozenset(c.key for c in base), frozenset(c.key for c in added))
+        return self.table.get(key, Evidence(0.0, 0.0, 40))
+
+    def physical_sign(self, base, candidate):
+        return candidate.key not in self.negative
+
+
+def _ev(gain, z):
+    return Evidence(gain, z, 40)
+
+
+def _keys(steps):
+    return [tuple(c.key for c in s.members) for s in steps]
+
+
+def test_a_failing_largest_gain_does_not_stop_the_search():
+    # the spring has the largest gain but fails its test; Coulomb passes; with Coulomb in, the
+    # spring's remaining evidence passes too
+    table = {
+        (frozenset(), frozenset({SPRING.key})): _ev(0.40, 2.7),
+        (frozenset(), frozenset({COULOMB.key})): _ev(0.26, 6.6),
+        (frozenset({COULOMB.key}), frozenset({SPRING.key})): _ev(0.50, 5.0),
+    }
+    steps, first, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], SETTINGS)
+    assert _keys(steps) == [(COULOMB.key,), (SPRING.key,)]
+    assert first[SPRING.key].z == pytest.approx(2.7)
+
+
+def test_strongest_evidence_first_among_passing():
+    table = {
+        (frozenset(), frozenset({SPRING.key})): _ev(0.125, 3.5),
+        (frozenset(), frozenset({COULOMB.key})): _ev(0.11, 8.8),
+    }
+    steps, _, _ = search(FakeComparer(table), [SPRING, COULOMB], SETTINGS)
+    assert _keys(steps)[0] == (COULOMB.key,)
+
+
+def test_small_gain_or_weak_consistency_is_not_added():
+    table = {
+        (frozenset(), frozenset({SPRING.key})): _ev(0.02, 9.0),  # consistent but too small
+        (frozenset(), frozenset({COULOMB.key})): _ev(0.30, 2.9),  # large but not consistent
+    }
+    steps, _, _ = search(FakeComparer(table), [SPRING, COULOMB], SETTINGS)
+    assert steps == []
+
+
+def test_effects_that_only_help_together_are_found_as_a_pair():
+    table = {
+        (frozenset(), frozenset({SPRING.key})): _ev(0.10, 1.5),
+        (frozenset(), frozenset({COULOMB.key})): _ev(0.05, 1.0),
+        (frozenset(), frozenset({SPRING.key, COULOMB.key})): _ev(0.60, 7.0),
+        (frozenset({COULOMB.key}), frozenset({SPRING.key})): _ev(0.55, 6.0),
+        (frozenset({SPRING.key}), frozenset({COULOMB.key})): _ev(0.50, 4.0),
+    }
+    steps, _, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], SETTINGS)
+    assert _keys(steps) == [(SPRING.key, COULOMB.key)]
+    assert steps[0].evidence[SPRING.key].z == pytest.approx(6.0)  # each member given the other
+    assert steps[0].evidence[COULOMB.key].z == pytest.approx(4.0)
+    assert steps[0].pair_evidence.z == pytest.approx(7.0)
+
+
+def test_a_pair_whose_member_adds_nothing_is_refused():
+    table = {
+        (frozenset(), frozenset({SPRING.key})): _ev(0.10, 1.5),
+        (frozenset(), frozenset({DRAG.key})): _ev(0.01, 0.2),
+        (frozenset(), frozenset({SPRING.key, DRAG.key})): _ev(0.60, 7.0),
+        (frozenset({DRAG.key}), frozenset({SPRING.key})): _ev(0.55, 6.0),
+        (frozenset({SPRING.key}), frozenset({DRAG.key})): _ev(0.001, 0.5),  # passenger
+    }
+    steps, _, _ = search(FakeComparer(table), [SPRING, DRAG], SETTINGS)
+    assert steps == []
+
+
+def test_a_non_physical_sign_is_never_added():
+    table = {(frozenset(), frozenset({SPRING.key})): _ev(0.16, 7.3)}
+    steps, _, _ = search(FakeComparer(table, negative={SPRING.key}), [SPRING], SETTINGS)
+    assert steps == []
+
+
+def test_indistinguishable_candidates_resolve_to_the_specific_mechanism():
+    table = {
+        (frozenset(), frozenset({TORQUE.key})): _ev(0.08, 10.2),
+        (frozenset(), frozenset({COM.key})): _ev(0.08, 10.1),
+    }
+    same = {TORQUE.key: {COM.key}, COM.key: {TORQUE.key}}
+    steps, _, _ = search(FakeComparer(table), [COM, TORQUE], SETTINGS, same)
+    assert _keys(steps) == [(COM.key,)]
+    assert steps[0].equivalents == {TORQUE.key: COM.key}
+
+
+def test_max_effects_bounds_the_search():
+    table = {(frozenset(), frozenset({c.key})): _ev(0.2, 5.0) for c in (SPRING, COULOMB, DRAG)}
+    table.update({(frozenset({SPRING.key}), frozenset({c.key})): _ev(0.2, 5.0) for c in (COULOMB, DRAG)})
+    s = SearchSettings(3.0, 0.03, 1, 4, 2.0)
+    steps, _, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], s)
+    assert len(steps) == 1
+
+
+def test_log_ratio_t_weighs_size_and_grows_with_consistent_blocks():
+    rng = np.random.default_rng(0)
+    s0 = rng.uniform(1.0, 2.0, 40)
+    # an effect acting strongly in a quarter of the blocks, not at all elsewhere
+    s1 = s0.copy()
+    s1[:10] /= 5.0
+    s1[10:] *= np.exp(rng.normal(0.0, 0.01, 30))
+    t = log_ratio_t(s0, s1)
+    assert t > 3.0
+    # four times the blocks of the same kind: t doubles (more data never weakens it)
+    t4 = log_ratio_t(np.tile(s0, 4), np.concatenate([s1] * 4))
+    assert t4 == pytest.approx(2 * t, rel=0.05)
+    # no effect: noise only, t near zero
+    noise = s0 * np.exp(rng.normal(0.0, 0.05, 40))
+    assert abs(log_ratio_t(s0, noise)) < 3.0
+    # blocks where both models have nothing (joint at rest everywhere) are skipped
+    assert log_ratio_t(np.zeros(5), np.zeros(5)) == 0.0
