@@ -108,8 +108,15 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
             return {k: np.ravel(z[k]) for k in z.files}
     if suffix == ".mat":
         from scipy.io import loadmat
+        from scipy.io.matlab import MatReadError
 
-        m = loadmat(path, squeeze_me=True)
+        try:
+            m = loadmat(path, squeeze_me=True)
+        except NotImplementedError:  # scipy reads MAT v4-v7.2, not the HDF5-based v7.3
+            raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file, which cannot be read here; save it "
+                            "with save(..., '-v7') or export CSV") from None
+        except (ValueError, MatReadError) as err:
+            raise DataError(f"{path}: not a readable MAT file ({err})") from None
         return {k: np.ravel(np.asarray(v)) for k, v in m.items() if not k.startswith("__")}
     raise DataError(
         f"{path}: unsupported file type {suffix!r}; expected .csv, .csv.gz, .npz or .mat"

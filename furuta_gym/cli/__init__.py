@@ -48,6 +48,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def headless_gl_default(environ, platform: str) -> dict[str, str]:
+    """``{"MUJOCO_GL": "egl"}`` on a Linux machine without a display and no choice of the user's;
+    nothing elsewhere (macOS and Windows have no EGL backend: MuJoCo would refuse to import)."""
+    if "MUJOCO_GL" in environ or environ.get("DISPLAY") or not platform.startswith("linux"):
+        return {}
+    return {"MUJOCO_GL": "egl"}
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     # The CLI is an application, not a library: it owns the process, so it switches float64 on
@@ -57,8 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     enable_x64()
     # Headless by default: MuJoCo's offscreen rendering needs a GL backend chosen before it is
     # first imported; EGL works on a machine without a display (the user's choice wins).
-    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
-        os.environ["MUJOCO_GL"] = "egl"
+    os.environ.update(headless_gl_default(os.environ, sys.platform))
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
