@@ -1,7 +1,7 @@
 """furuta-gym: Lagrangian models, Gymnasium envs and controllers for underactuated systems.
 
-Importing this package registers the Gymnasium envs ``furuta_gym/Furuta-v0`` and
-``furuta_gym/NMSD-v0``. It never changes JAX's configuration at import; see
+Importing this package registers the Gymnasium envs ``furuta_gym/Furuta-v0``,
+``furuta_gym/NMSD-v0`` and the RL preset ``furuta_gym/FurutaSwingUp-v0``. It never changes JAX's configuration at import; see
 :func:`furuta_gym.ensure_x64` and the README section "Float64".
 """
 

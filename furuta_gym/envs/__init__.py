@@ -1,7 +1,8 @@
 """Gymnasium envs over interchangeable dynamics backends.
 
-``import furuta_gym`` registers ``furuta_gym/Furuta-v0`` (:class:`FurutaEnv`) and
-``furuta_gym/NMSD-v0`` (:class:`NMSDEnv`). The world is a backend (:class:`MujocoBackend`,
+``import furuta_gym`` registers ``furuta_gym/Furuta-v0`` (:class:`FurutaEnv`),
+``furuta_gym/NMSD-v0`` (:class:`NMSDEnv`) and the RL preset ``furuta_gym/FurutaSwingUp-v0``
+(:data:`SWINGUP_PRESET`). The world is a backend (:class:`MujocoBackend`,
 :class:`ModelBackend`, chosen by ``dynamics=``); the goal is a task (:class:`FurutaSwingUp`,
 :class:`NMSDReach`) whose reward/termination are pure functions usable on NumPy and JAX arrays.
 See docs/envs.md.
@@ -33,9 +34,21 @@ __all__ = [
     "default_parameters",
     "register_envs",
     "ENV_IDS",
+    "SWINGUP_ID",
+    "SWINGUP_PRESET",
+    "SWINGUP_EPISODE_STEPS",
 ]
 
 ENV_IDS = {"furuta": "furuta_gym/Furuta-v0", "nmsd": "furuta_gym/NMSD-v0"}
+
+#: The RL preset: Furuta-v0 at 50 Hz (10 RK4 steps of 2 ms per action), observations
+#: (cos α, sin α, cos β, sin β, α̇, β̇) in float32, actions in [−1, 1] scaled to ±max_voltage,
+#: 500 steps (10 s) per episode through Gymnasium's TimeLimit (``env.spec.max_episode_steps``).
+SWINGUP_ID = "furuta_gym/FurutaSwingUp-v0"
+SWINGUP_PRESET = dict(
+    frame_skip=10, observation="trig", normalize_action=True, dtype="float32", episode_seconds=None
+)
+SWINGUP_EPISODE_STEPS = 500
 
 
 def register_envs() -> None:
@@ -59,3 +72,12 @@ def register_envs() -> None:
             # episode length follows the control rate (frame_skip). gymnasium.make_vec goes to
             # the batched JAX env for model backends, Sync/Async vector envs for MuJoCo.
             gymnasium.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry)
+    if SWINGUP_ID not in gymnasium.registry:
+        # the batched JAX env keeps the raw float64 layout: make_vec of the preset steps copies of
+        # the single env (Gymnasium's sync/async vector envs)
+        gymnasium.register(
+            id=SWINGUP_ID,
+            entry_point="furuta_gym.envs.furuta:FurutaEnv",
+            max_episode_steps=SWINGUP_EPISODE_STEPS,
+            kwargs=dict(SWINGUP_PRESET),
+        )

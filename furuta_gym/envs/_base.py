@@ -30,6 +30,10 @@ from ._parameters import (
     randomize_parameters,
     resolve_effects,
 )
+from ._tasks import divergence_bounds, wrap_angle
+
+#: the accepted ``observation=`` values (see :meth:`LagrangianEnv._present`)
+OBSERVATIONS = ("raw", "wrapped", "trig")
 
 __all__ = ["LagrangianEnv", "EnvArgumentError"]
 
@@ -49,6 +53,27 @@ def _check_delay(seconds: float, timestep: float, what: str) -> int:
             f"{what} = {seconds} s is not a multiple of the simulation timestep {timestep} s"
         )
     return int(n)
+
+
+def _check_observation(observation: str, angular: Sequence[bool], system: str) -> str:
+    if observation not in OBSERVATIONS:
+        raise EnvArgumentError(f"observation must be one of {list(OBSERVATIONS)}, got {observation!r}")
+    if observation != "raw" and not any(angular):
+        raise EnvArgumentError(
+            f"observation={observation!r} wraps angles, but {system} has no angular joint; "
+            "use observation='raw'"
+        )
+    return observation
+
+
+def _check_dtype(dtype: Any) -> np.dtype:
+    try:
+        value = np.dtype(dtype)
+    except TypeError:
+        value = None
+    if value not in (np.dtype(np.float32), np.dtype(np.float64)):
+        raise EnvArgumentError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
+    return value
 
 
 class LagrangianEnv(gymnasium.Env):
@@ -72,6 +97,8 @@ class LagrangianEnv(gymnasium.Env):
     default_action_limit: ClassVar[float]
     #: task-specific keywords → defaults
     task_defaults: ClassVar[dict[str, Any]] = {}
+    #: other system-specific keywords → defaults, handed to :meth:`_configure`
+    extra_defaults: ClassVar[dict[str, Any]] = {}
     default_camera_config: ClassVar[dict[str, Any]] = {}
 
     def __init__(self, **kwargs):
@@ -93,8 +120,12 @@ class LagrangianEnv(gymnasium.Env):
             velocity="exact",
             actuation_delay=0.0,
             actuation_delay_steps=0,
+            observation="raw",
+            normalize_action=False,
+            dtype="float64",
             **{self.action_limit_name: self.default_action_limit},
             **self.task_defaults,
+            **self.extra_defaults,
         )
         unknown = sorted(set(kwargs) - set(common))
         if unknown:
@@ -189,8 +220,22 @@ class LagrangianEnv(gymnasium.Env):
             )
         self.velocity = cfg["velocity"]
         self._filter = DerivativeFilter(self.dt, n) if self.velocity == "filter" else None
+        self._exact_sensors = not self._quant.any() and not self._noise.any() and self._filter is None
+
+        # -- presentation: observation layout, dtype, action scale --
+        self.observation = _check_observation(cfg["observation"], self._spec.angular, self.system)
+        self.dtype = _check_dtype(cfg["dtype"])
+        if not isinstance(cfg["normalize_action"], (bool, np.bool_)):
+            raise EnvArgumentError(f"normalize_action must be a bool, got {cfg['normalize_action']!r}")
+        self.normalize_action = bool(cfg["normalize_action"])
+        self._action_high = 1.0 if self.normalize_action else self.max_action
+        # obs is the backend's state array itself: no sensor model, raw, float64
+        self._configure(**{k: cfg[k] for k in self.extra_defaults})
         self._exact_observation = (
-            not self._quant.any() and not self._noise.any() and self._filter is None
+            self._exact_sensors
+            and self.observation == "raw"
+            and self.dtype == np.float64
+            and not self._extra_observation_size()
         )
 
         # -- task --
@@ -198,8 +243,9 @@ class LagrangianEnv(gymnasium.Env):
         self.task = self._make_task(**self._task_kwargs)
 
         # -- spaces --
-        self.action_space = spaces.Box(-self.max_action, self.max_action, (1,), dtype=np.float64)
-        self.observation_space = spaces.Box(-np.inf, np.inf, (2 * n,), dtype=np.float64)
+        high = self._action_high
+        self.action_space = spaces.Box(-high, high, (1,), dtype=self.dtype)
+        self.observation_space = self._observation_space()
 
         # -- episode --
         seconds = cfg["episode_seconds"]
@@ -243,6 +289,8 @@ class LagrangianEnv(gymnasium.Env):
         # bound once: the step calls them without attribute lookups
         self._reward, self._terminated = task.reward, task.terminated
         self._state_bound = float(task.state_bound)
+        # angles are never bounded: a rotor may turn for ever (only a non-finite angle diverges)
+        self._bounds = divergence_bounds(task.state_bound, self._spec.angular)
 
     # ------------------------------------------------------------------ read-only settings
     # (what a batched copy of this env needs to know; see vector.py)
@@ -255,6 +303,18 @@ class LagrangianEnv(gymnasium.Env):
     def encoder_steps(self) -> np.ndarray:
         """Quantisation step of each measured joint position (0: exact), in rad or m."""
         return self._quant.copy()
+
+    def presentation_options(self) -> list[str]:
+        """The configured non-default observation / action presentation (``observation``,
+        ``dtype``, ``normalize_action``): what the batched JAX env does not reproduce."""
+        options = []
+        if self.observation != "raw":
+            options.append(f"observation={self.observation!r}")
+        if self.dtype != np.float64:
+            options.append(f"dtype={self.dtype.name!r}")
+        if self.normalize_action:
+            options.append("normalize_action=True")
+        return options
 
     @property
     def max_episode_steps(self) -> int | None:
@@ -308,6 +368,16 @@ class LagrangianEnv(gymnasium.Env):
 
     def _energy(self, x: Sequence[float]) -> float:
         raise NotImplementedError
+
+    def _configure(self, **extra) -> None:
+        """Validate and apply the :attr:`extra_defaults` keywords (none by default)."""
+
+    def _extra_observation_size(self) -> int:
+        """Components appended to the observation after the state (e.g. N-MSD's target)."""
+        return 0
+
+    def _extra_observation(self) -> list[float]:
+        return []
 
     def _update_scene(self, model, data) -> None:
         """Move purely visual elements (e.g. a target marker) before rendering."""
@@ -379,13 +449,13 @@ class LagrangianEnv(gymnasium.Env):
             self._lag.reset()  # u_m = 0, as MuJoCo's reset leaves the activation
         if self._filter is not None:
             self._filter.reset(self._measure_positions(self._x))
-        self._last_obs = self._x.copy()
+        self._last_obs = self._present(self._x.copy())
 
     def step(self, action):
         """Apply ``action`` (clipped to the limit) for one control period; see the class docs."""
         # Lean path: this runs at 500 Hz inside RL loops, so the common case (a float64 array of
         # shape (1,) within the limits) costs a few attribute reads and no allocation.
-        limit = self.max_action
+        limit = self._action_high
         if type(action) is np.ndarray and action.shape == (1,) and action.dtype == np.float64:
             u = action
             value = float(action[0])
@@ -405,6 +475,9 @@ class LagrangianEnv(gymnasium.Env):
                 )
             value = limit if value > 0 else -limit
             u = np.array([value])
+        if self.normalize_action:
+            value *= self.max_action
+            u = np.array([value])
         self._u = value
 
         x_prev = self._xl
@@ -419,10 +492,10 @@ class LagrangianEnv(gymnasium.Env):
             x = self.backend.step(u)
         self._steps += 1
         xl = x.tolist()
-        bound = self._state_bound
-        # fast accept: Σ|x| ≤ bound (False for NaN/inf); otherwise the exact per-component test
-        if not sum(map(abs, xl)) <= bound and not all(
-            math.isfinite(v) and -bound <= v <= bound for v in xl
+        # fast accept: Σ|x| ≤ bound (False for NaN/inf); otherwise the exact per-component test,
+        # which leaves the angles unbounded (finite is enough)
+        if not sum(map(abs, xl)) <= self._state_bound and not all(
+            math.isfinite(v) and -b <= v <= b for v, b in zip(xl, self._bounds)
         ):
             # a blown-up model: end the episode at the last good state, never leak NaN
             self._diverged = True
@@ -497,9 +570,15 @@ class LagrangianEnv(gymnasium.Env):
         return q
 
     def _observe(self, x: np.ndarray) -> np.ndarray:
+        """The observation of the true state ``x``: the sensor model, then the presentation."""
+        if self._exact_observation:
+            return x.copy()
+        return self._present(self._measure(x))
+
+    def _measure(self, x: np.ndarray) -> np.ndarray:
         """Sensor model: quantised, noisy positions; exact or derivative-filtered velocities
         (from the measured positions), plus velocity noise."""
-        if self._exact_observation:
+        if self._exact_sensors:
             return x.copy()
         n = self._n
         q = self._measure_positions(x)
@@ -507,6 +586,41 @@ class LagrangianEnv(gymnasium.Env):
         if self._noise[n:].any():
             qd = qd + self._noise[n:] * self.np_random.standard_normal(n)
         return np.concatenate((q, qd))
+
+    def _present(self, z: np.ndarray) -> np.ndarray:
+        """The measured state ``z`` = (q, q̇) in the ``observation`` layout and ``dtype``: "raw"
+        as is; "wrapped" with angles in (−π, π]; "trig" with each angle as (cos, sin). In the
+        last two, the other components are clipped to ±state_bound (beyond it the env diverges;
+        only sensor noise can reach it), so the observation is always in the bounded space."""
+        if self.observation == "raw":
+            if self._extra_observation_size():
+                z = np.concatenate((z, self._extra_observation()))
+            return z.astype(self.dtype, copy=False)
+        n, bound = self._n, self._state_bound
+        parts = []
+        for j, angular in enumerate(self._spec.angular):
+            if angular and self.observation == "trig":
+                parts += [math.cos(z[j]), math.sin(z[j])]
+            elif angular:
+                parts.append(wrap_angle(float(z[j])))
+            else:
+                parts.append(min(max(float(z[j]), -bound), bound))
+        parts += np.clip(z[n:], -bound, bound).tolist()
+        return np.array(parts + self._extra_observation(), dtype=self.dtype)
+
+    def _observation_space(self) -> spaces.Box:
+        """The Box of :meth:`_present`'s output."""
+        extra = self._extra_observation_size()
+        if self.observation == "raw":
+            return spaces.Box(-np.inf, np.inf, (2 * self._n + extra,), dtype=self.dtype)
+        bound, high = self._state_bound, []
+        for angular in self._spec.angular:
+            if angular and self.observation == "trig":
+                high += [1.0, 1.0]
+            else:
+                high.append(math.pi if angular else bound)
+        high = np.array(high + [bound] * self._n + [np.inf] * extra, dtype=self.dtype)
+        return spaces.Box(-high, high, dtype=self.dtype)
 
     # ------------------------------------------------------------------ rendering
     def render(self):

@@ -79,9 +79,19 @@ class Rollout(NamedTuple):
     done: Bool[Array, "N T"]
 
 
-def is_diverged(x: Float[Array, " 2n"], state_bound: float = DEFAULT_STATE_BOUND) -> Bool[Array, ""]:
-    """True when the state is non-finite or any component exceeds ``state_bound`` in magnitude."""
-    return jnp.logical_not(jnp.all(jnp.isfinite(x))) | jnp.any(jnp.abs(x) > state_bound)
+def is_diverged(x: Float[Array, " 2n"], state_bound=DEFAULT_STATE_BOUND) -> Bool[Array, ""]:
+    """True when the state is non-finite or any component exceeds ``state_bound`` in magnitude
+    (one bound, or a tuple of one per component: ``inf`` leaves a component, e.g. an angle, to
+    the finiteness test; see :func:`furuta_gym.envs._tasks.divergence_bounds`)."""
+    bound = jnp.asarray(state_bound, dtype=x.dtype)
+    return jnp.logical_not(jnp.all(jnp.isfinite(x))) | jnp.any(jnp.abs(x) > bound)
+
+
+def _static_bound(state_bound) -> float | tuple[float, ...]:
+    """A hashable (jit-static) form of a scalar or per-component state bound."""
+    if np.ndim(state_bound):
+        return tuple(float(b) for b in np.asarray(state_bound).ravel())
+    return float(state_bound)
 
 
 def _zero_reward(x, u, x_next):
@@ -201,7 +211,7 @@ def rollout(
         dt=float(dt),
         substeps=int(substeps),
         action_limit=None if action_limit is None else float(action_limit),
-        state_bound=float(state_bound),
+        state_bound=_static_bound(state_bound),
         reward_fn=reward_fn,
         terminated_fn=terminated_fn,
         observation_fn=observation_fn,

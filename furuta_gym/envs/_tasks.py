@@ -31,6 +31,8 @@ __all__ = [
     "NMSDReach",
     "DEFAULT_STATE_BOUND",
     "is_diverged",
+    "divergence_bounds",
+    "wrap_angle",
 ]
 
 #: A state component beyond this magnitude (rad, rad/s, m, m/s) is "absurd": the episode ends
@@ -85,12 +87,30 @@ def _never(x_next):
     return xp.zeros(x_next.shape[:-1], dtype=bool)
 
 
-def is_diverged(x, state_bound: float = DEFAULT_STATE_BOUND):
-    """True when a state (float sequence or array, last axis = state) is non-finite or absurd."""
+def wrap_angle(angle):
+    """``angle`` wrapped to (−π, π] (floats, NumPy and JAX arrays)."""
+    return math.pi - (math.pi - angle) % (2.0 * math.pi)
+
+
+def divergence_bounds(state_bound: float, angular) -> tuple[float, ...]:
+    """Per-component bound of a state (q, q̇) for :func:`is_diverged`: ``inf`` for angular
+    positions (a rotor may turn forever: only a non-finite angle is a divergence), ``state_bound``
+    for the velocities and the other positions. ``angular``: one bool per joint."""
+    bound = float(state_bound)
+    return tuple(math.inf if a else bound for a in angular) + (bound,) * len(angular)
+
+
+def is_diverged(x, state_bound=DEFAULT_STATE_BOUND):
+    """True when a state (float sequence or array, last axis = state) is non-finite or absurd.
+
+    ``state_bound``: one magnitude for every component, or one per component (see
+    :func:`divergence_bounds`, which leaves the angles unbounded)."""
     xp = _namespace(x)
     if xp is _SCALAR:
-        return not all(math.isfinite(v) and abs(v) <= state_bound for v in x)
-    return xp.logical_not(xp.all(xp.isfinite(x), axis=-1)) | xp.any(xp.abs(x) > state_bound, axis=-1)
+        bounds = state_bound if np.ndim(state_bound) else [state_bound] * len(x)
+        return not all(math.isfinite(v) and abs(v) <= b for v, b in zip(x, bounds))
+    bound = xp.asarray(state_bound)
+    return xp.logical_not(xp.all(xp.isfinite(x), axis=-1)) | xp.any(xp.abs(x) > bound, axis=-1)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,7 +120,8 @@ class FurutaSwingUp:
     reward = upright × centred × small_control × small_velocity, each in [0, 1]:
 
     * upright = (1 − cos β)/2: 0 hanging, 1 upright;
-    * centred = (1 + tolerance(α, margin=``alpha_margin``))/2 ∈ [0.5, 1];
+    * centred = (1 + tolerance(wrap(α), margin=``alpha_margin``))/2 ∈ [0.5, 1], on α wrapped to
+      (−π, π] (2π-periodic: a rotor one turn away is as centred as at 0);
     * small_control = (4 + tolerance(u/max_voltage, margin=1, quadratic))/5 ∈ [0.8, 1];
     * small_velocity = (1 + tolerance(β̇, margin=``velocity_margin``))/2 ∈ [0.5, 1].
 
@@ -118,7 +139,7 @@ class FurutaSwingUp:
         alpha, beta, _, beta_dot = _components(x_next, 4)
         (volts,) = _components(u, 1)
         upright = 0.5 * (1.0 - xp.cos(beta))
-        centred = 0.5 * (1.0 + tolerance(alpha, margin=self.alpha_margin, xp=xp))
+        centred = 0.5 * (1.0 + tolerance(wrap_angle(alpha), margin=self.alpha_margin, xp=xp))
         small_control = 0.2 * (
             4.0 + tolerance(volts / self.max_voltage, margin=1.0, sigmoid="quadratic", xp=xp)
         )

@@ -23,7 +23,9 @@ class FurutaEnv(LagrangianEnv):
     checkpoint, or any Lagrangian model — spaces, reward, ``info`` and rendering are the same.
 
     ## Action Space
-    ``Box(-max_voltage, max_voltage, (1,), float64)``
+    ``Box(-max_voltage, max_voltage, (1,), dtype)`` (``dtype`` default float64), or with
+    ``normalize_action=True`` ``Box(-1, 1, (1,), dtype)``: the action is a fraction of
+    ``max_voltage`` (clipped to [−1, 1], then scaled; ``info["action"]`` is in volts).
 
     | Num | Action        | Min          | Max         | Joint | Unit        |
     |-----|---------------|--------------|-------------|-------|-------------|
@@ -34,8 +36,12 @@ class FurutaEnv(LagrangianEnv):
     not silently become a voltage). Positive voltage drives positive α.
 
     ## Observation Space
-    ``Box(-inf, inf, (4,), float64)``: the raw state (no angle wrapping), unless sensor options
-    are set (then the measured state, see Arguments).
+    Chosen by ``observation=`` (in ``dtype``, default float64); always of the measured state
+    (the true state unless sensor options are set, see Arguments), while ``info["state"]`` is the
+    true raw (α, β, α̇, β̇).
+
+    ``observation="raw"`` (default): ``Box(-inf, inf, (4,))``, the state as integrated (α keeps
+    counting turns).
 
     | Num | Observation                 | Min  | Max | Joint | Unit                     |
     |-----|-----------------------------|------|-----|-------|--------------------------|
@@ -44,10 +50,33 @@ class FurutaEnv(LagrangianEnv):
     | 2   | rotor velocity α̇            | -Inf | Inf | alpha | angular velocity (rad/s) |
     | 3   | pendulum velocity β̇         | -Inf | Inf | beta  | angular velocity (rad/s) |
 
+    ``observation="wrapped"``: ``Box((4,))``, angles wrapped to (−π, π].
+
+    | Num | Observation       | Min  | Max | Unit    |
+    |-----|-------------------|------|-----|---------|
+    | 0   | α wrapped         | −π   | π   | rad     |
+    | 1   | β wrapped (0 = down, ±π = up) | −π | π | rad |
+    | 2   | α̇                 | −1e4 | 1e4 | rad/s   |
+    | 3   | β̇                 | −1e4 | 1e4 | rad/s   |
+
+    ``observation="trig"``: ``Box((6,))``, continuous across the wrap.
+
+    | Num | Observation | Min  | Max | Unit  |
+    |-----|-------------|------|-----|-------|
+    | 0   | cos α       | −1   | 1   |       |
+    | 1   | sin α       | −1   | 1   |       |
+    | 2   | cos β       | −1   | 1   | (−1 = up) |
+    | 3   | sin β       | −1   | 1   |       |
+    | 4   | α̇           | −1e4 | 1e4 | rad/s |
+    | 5   | β̇           | −1e4 | 1e4 | rad/s |
+
+    The velocity bounds are ``task.state_bound`` (a larger true velocity ends the episode as a
+    divergence; with sensor noise the observed velocity is clipped to them).
+
     ## Rewards
     dm_control style, a product of smooth factors in [0, 1] on the true next state
     (:class:`furuta_gym.envs.FurutaSwingUp`): upright (1 − cos β)/2 × centred
-    (1 + tol(α, margin π/2))/2 × small control (4 + tol(u/max_voltage))/5 × small velocity
+    (1 + tol(wrap(α), margin π/2))/2 with α wrapped to (−π, π] (2π-periodic) × small control (4 + tol(u/max_voltage))/5 × small velocity
     (1 + tol(β̇, margin 5 rad/s))/2. 1 only upright, at rest, centred, with no voltage; 0 hanging.
 
     ## Starting State
@@ -55,8 +84,9 @@ class FurutaEnv(LagrangianEnv):
     components (default 0.01), or exactly ``reset(options={"state": [α, β, α̇, β̇]})``.
 
     ## Episode End
-    * Termination: only on **divergence** — a non-finite state or a component beyond
-      ``task.state_bound`` = 1e4 (rad, rad/s): ``terminated=True``, ``info["diverged"]=True``,
+    * Termination: only on **divergence** — a non-finite state or a velocity beyond
+      ``task.state_bound`` = 1e4 rad/s (angles are not bounded: the rotor may turn for ever, only
+      a non-finite angle diverges): ``terminated=True``, ``info["diverged"]=True``,
       and the observation is the last good one (no NaN ever leaves the env; stepping further
       keeps returning it).
     * Truncation: after ``episode_seconds`` (default 10 s = 5 000 steps at 500 Hz).
@@ -84,12 +114,22 @@ class FurutaEnv(LagrangianEnv):
     | `velocity`              | str           | `"exact"`   | `"filter"`: velocities from the paper's derivative filter on measured angles |
     | `actuation_delay`       | float         | `0.0`       | input delay in s (a multiple of 2 ms) |
     | `actuation_delay_steps` | int           | `0`         | input delay in control periods |
+    | `observation`           | str           | `"raw"`     | `"raw"`, `"wrapped"` (angles in (−π, π]) or `"trig"` (cos, sin of each angle); see Observation Space |
+    | `normalize_action`      | bool          | `False`     | `True`: actions in [−1, 1], scaled to ±max_voltage |
+    | `dtype`                 | str           | `"float64"` | `"float32"` or `"float64"`: dtype of both spaces and of the observations (physics always float64) |
     | `render_mode`           | str / None    | `None`      | `"rgb_array"` or `"human"` |
     | `width`, `height`       | int           | `480`       | frame size |
 
-    Documented warnings of ``gymnasium.utils.env_checker.check_env``: the infinite observation
-    bounds (the raw state is unbounded) and "we recommend using a symmetric and normalized
-    space" (the action is in volts by design). ``render_mode="human"`` needs a display; without
+    Documented warnings of ``gymnasium.utils.env_checker.check_env`` with the defaults: the
+    infinite observation bounds (the raw state is unbounded) and "we recommend using a symmetric
+    and normalized space" (the action is in volts by design); ``observation="trig"`` (or
+    ``"wrapped"``) with ``normalize_action=True`` has none.
+
+    ## RL preset ``furuta_gym/FurutaSwingUp-v0``
+    This env with ``frame_skip=10`` (50 Hz, ``metadata["render_fps"]`` = 50, one frame per control
+    period), ``observation="trig"``, ``normalize_action=True``, ``dtype="float32"``, and a 500-step
+    (10 s) horizon through Gymnasium's ``max_episode_steps`` (``env.spec.max_episode_steps``;
+    the env itself has ``episode_seconds=None``). Any keyword above overrides it. ``render_mode="human"`` needs a display; without
     one (DISPLAY/WAYLAND_DISPLAY unset on Linux) the constructor raises a clear ValueError rather
     than letting GLFW abort the process, so run ``check_env(..., skip_render_check=True)``
     headless.

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
+import math
+from typing import Any, ClassVar
+
+import numpy as np
 
 from ._base import EnvArgumentError, LagrangianEnv
 from ._tasks import NMSDReach
 
-__all__ = ["NMSDEnv"]
+__all__ = ["NMSDEnv", "DEFAULT_TARGET_RANGE"]
+
+#: targets drawn by ``target="random"`` (m): the force limit holds the mass up to ~1.2 m
+DEFAULT_TARGET_RANGE = (-1.0, 1.0)
 
 
 class NMSDEnv(LagrangianEnv):
@@ -28,15 +34,19 @@ class NMSDEnv(LagrangianEnv):
     Out-of-range actions are clipped to ±``max_force`` (default 20 N); NaN/inf raises ValueError.
 
     ## Observation Space
-    ``Box(-inf, inf, (2,), float64)``:
+    ``Box(-inf, inf, (2,), dtype)`` (default float64), ``(3,)`` with ``observe_target=True``:
 
     | Num | Observation   | Min  | Max | Joint | Unit           |
     |-----|---------------|------|-----|-------|----------------|
     | 0   | position p    | -Inf | Inf | p     | position (m)   |
     | 1   | velocity ṗ    | -Inf | Inf | p     | velocity (m/s) |
+    | 2   | target (only with ``observe_target=True``) | -Inf | Inf | | position (m) |
 
-    The target is fixed per episode (``target`` kwarg or ``reset(options={"target": ...})``)
-    and not part of the observation.
+    The target is fixed per episode: ``target`` kwarg (a position in m; ``"random"``: uniform in
+    [−1, 1] m drawn at every reset from the env's seeded generator; ``(low, high)``: uniform in
+    that range per reset) or ``reset(options={"target": ...})`` (overrides the draw for that
+    episode). A random target needs ``observe_target=True`` for a policy to see it.
+    ``observation`` must be ``"raw"`` (no angle to wrap).
 
     ## Rewards
     :class:`furuta_gym.envs.NMSDReach`: at target tol(p − target, ±2 cm, margin 0.5 m) × small
@@ -60,7 +70,12 @@ class NMSDEnv(LagrangianEnv):
     ``"stiff_spring"``, ``"weak_actuator"``, ``"delay"`` —, ``effects``, ``randomize``,
     ``position_resolution`` (m), ``measurement_noise``, ``velocity``, ``actuation_delay``
     (a multiple of 10 ms), ``actuation_delay_steps``, ``render_mode``, ``width``, ``height``),
-    with ``max_force`` (N, default 20) instead of ``max_voltage``, and ``target`` (m, default 0.5).
+    with ``max_force`` (N, default 20) instead of ``max_voltage``, ``target`` (m, default 0.5;
+    ``"random"`` or ``(low, high)``: drawn per reset), ``observe_target`` (bool, default False:
+    append the target to the observation), ``normalize_action`` (actions in [−1, 1] × max_force)
+    and ``dtype`` (``"float32"`` / ``"float64"``). The batched JAX env (``make_vec`` with a model
+    backend) supports neither a random target nor ``observe_target``: use
+    ``vectorization_mode="sync"``.
     """
 
     system: ClassVar[str] = "nmsd"
@@ -69,6 +84,9 @@ class NMSDEnv(LagrangianEnv):
     action_limit_name: ClassVar[str] = "max_force"
     default_action_limit: ClassVar[float] = 20.0
     task_defaults: ClassVar[dict] = {"target": 0.5}
+    extra_defaults: ClassVar[dict] = {"observe_target": False}
+    #: (low, high) of a random target per reset, None for a fixed target
+    _target_range: tuple[float, float] | None = None
     reset_option_names: ClassVar[tuple[str, ...]] = ("state", "target")
     default_camera_config: ClassVar[dict] = {
         "distance": 2.8,
@@ -77,16 +95,41 @@ class NMSDEnv(LagrangianEnv):
         "lookat": (0.0, 0.0, 0.2),
     }
 
+    def _configure(self, observe_target: bool) -> None:
+        if not isinstance(observe_target, (bool, np.bool_)):
+            raise EnvArgumentError(f"observe_target must be a bool, got {observe_target!r}")
+        self.observe_target = bool(observe_target)
+
+    def _extra_observation_size(self) -> int:
+        return 1 if self.observe_target else 0
+
+    def _extra_observation(self) -> list[float]:
+        return [self.task.target] if self.observe_target else []
+
     def _make_task(self, target):
-        target = float(target)
-        if not abs(target) < 1e3:
-            raise EnvArgumentError(f"target must be a finite position in m, got {target!r}")
+        if isinstance(target, str) or (np.ndim(target) == 1 and not isinstance(target, (int, float))):
+            # a random target per reset: start from the middle of the range until the first reset
+            self._target_range = _target_range(target)
+            target = 0.5 * sum(self._target_range)
+        target = _check_target(target, "target")
         return NMSDReach(target=target, max_force=self.max_action)
 
     def _options(self, options):
-        if options.get("target") is not None:
-            self._task_kwargs = {"target": options["target"]}
+        target = options.get("target")
+        if target is None and self._target_range is not None:
+            target = float(self.np_random.uniform(*self._target_range))
+        if target is not None:
+            self._task_kwargs = {"target": _check_target(target, "options['target']")}
             self.task = self._make_task(**self._task_kwargs)
+
+    def per_episode_state_features(self) -> list[str]:
+        features = super().per_episode_state_features()
+        if self._target_range is not None:
+            features.append("a random target per reset (target='random' or a range)")
+        return features
+
+    def presentation_options(self) -> list[str]:
+        return super().presentation_options() + (["observe_target=True"] if self.observe_target else [])
 
     def _energy(self, x):
         if not hasattr(self, "_p"):
@@ -105,3 +148,29 @@ class NMSDEnv(LagrangianEnv):
 
     def _update_scene(self, model, data):
         model.site_pos[model.site("target").id, 0] = self.task.target
+
+
+def _check_target(target: Any, name: str) -> float:
+    try:
+        value = float(target)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not abs(value) < 1e3:
+        raise EnvArgumentError(f"{name} must be a finite position in m (|target| < 1000), got {target!r}")
+    return value
+
+
+def _target_range(target: Any) -> tuple[float, float]:
+    """``"random"`` → :data:`DEFAULT_TARGET_RANGE`; ``(low, high)`` → itself, checked."""
+    if isinstance(target, str):
+        if target != "random":
+            raise EnvArgumentError(
+                f"target must be a position in m, 'random' or a (low, high) range, got {target!r}"
+            )
+        return DEFAULT_TARGET_RANGE
+    if len(target) != 2:
+        raise EnvArgumentError(f"a target range must be (low, high) in m, got {target!r}")
+    low, high = (_check_target(t, "target range bound") for t in target)
+    if not low <= high:
+        raise EnvArgumentError(f"a target range must have low <= high, got {target!r}")
+    return (low, high)

@@ -40,6 +40,7 @@ from ._backends import ModelBackend
 from ._base import EnvArgumentError, LagrangianEnv
 from ._jax_rollout import Rollout, controlled_step, map_chunks, rollout
 from ._parameters import PARAMETER_CLASSES
+from ._tasks import divergence_bounds
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv
 
@@ -95,7 +96,7 @@ def _batched_step(
             dt=dt,
             substeps=substeps,
             action_limit=action_limit,
-            state_bound=task.state_bound,
+            state_bound=divergence_bounds(task.state_bound, system.spec.angular),
             reward_fn=task.reward,
             terminated_fn=task.terminated,
         )
@@ -368,7 +369,7 @@ class LagrangianVectorEnv(VectorEnv):
         return ENV_IDS[cls.env_class.system]
 
     def _check_supported(self, env: LagrangianEnv) -> None:
-        unsupported = env.per_episode_state_features()
+        unsupported = env.per_episode_state_features() + env.presentation_options()
         if not isinstance(env.backend, ModelBackend):
             unsupported.append(f"backend {type(env.backend).__name__}")
         if unsupported:
@@ -615,7 +616,7 @@ class LagrangianVectorEnv(VectorEnv):
             dt=self.dt,
             substeps=self.frame_skip,
             action_limit=self.max_action,
-            state_bound=self.task.state_bound,
+            state_bound=divergence_bounds(self.task.state_bound, self.spec_system.angular),
             reward_fn=self.task.reward,
             terminated_fn=self.task.terminated,
             observation_fn=self._quantizer if any(self._quantizer.steps) else None,
