@@ -145,3 +145,22 @@ def test_log_ratio_t_weighs_size_and_grows_with_consistent_blocks():
     assert abs(log_ratio_t(s0, noise)) < 3.0
     # blocks where both models have nothing (joint at rest everywhere) are skipped
     assert log_ratio_t(np.zeros(5), np.zeros(5)) == 0.0
+
+
+def test_a_pair_takes_the_specific_mechanism_of_an_indistinguishable_group():
+    delay = Candidate("input_delay", "u")
+    table = {
+        (frozenset(), frozenset({TORQUE.key})): _ev(0.08, 2.0),
+        (frozenset(), frozenset({COM.key})): _ev(0.08, 2.0),
+        (frozenset(), frozenset({delay.key})): _ev(0.06, 2.5),
+        (frozenset(), frozenset({COM.key, delay.key})): _ev(0.15, 4.0),
+        (frozenset(), frozenset({TORQUE.key, delay.key})): _ev(0.15, 4.0),
+        (frozenset({delay.key}), frozenset({COM.key})): _ev(0.08, 2.5),
+        (frozenset({COM.key}), frozenset({delay.key})): _ev(0.06, 2.2),
+        (frozenset({delay.key}), frozenset({TORQUE.key})): _ev(0.08, 2.5),
+        (frozenset({TORQUE.key}), frozenset({delay.key})): _ev(0.06, 2.2),
+    }
+    same = {TORQUE.key: {COM.key}, COM.key: {TORQUE.key}}
+    steps, _, _ = search(FakeComparer(table), [COM, TORQUE, delay], SETTINGS, same)
+    assert _keys(steps) == [(COM.key, delay.key)] or _keys(steps) == [(delay.key, COM.key)]
+    assert steps[0].equivalents == {TORQUE.key: COM.key}

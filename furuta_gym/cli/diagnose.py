@@ -9,22 +9,10 @@ from __future__ import annotations
 
 import argparse
 
+# the logs are read as train and evaluate read them (one helper); the old names stay
+from ._logs import load_logs as _load, pairs as _pairs, qube_runs as _qube_runs  # noqa: F401
+
 __all__ = ["add_arguments", "run"]
-
-
-def _pairs(text: str | None, what: str, convert=str) -> dict:
-    out = {}
-    if not text:
-        return out
-    for item in text.split(","):
-        if "=" not in item:
-            raise ValueError(f"{what}: expected NAME=VALUE[,NAME=VALUE...], got {item!r}")
-        k, v = item.split("=", 1)
-        try:
-            out[k.strip()] = convert(v.strip())
-        except ValueError:
-            raise ValueError(f"{what}: {k.strip()}={v.strip()!r} is not a number") from None
-    return out
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--test", metavar="TEST", nargs="+",
                         help="logs never used for fitting (same format and options as DATA): "
                         "errors before/after on them are reported beside the held-out split")
+    parser.add_argument("--model", metavar="CKPT",
+                        help="diagnose this trained model (a checkpoint of `furuta-gym train`) instead "
+                        "of the analytic one: it is kept as it is, the library's effects are fitted around it")
     parser.add_argument("--json", metavar="OUT", help="write the result as JSON (pinned schema)")
     parser.add_argument("--report", metavar="DIR", help="write figures into DIR")
     parser.add_argument("--overwrite", action="store_true", help="replace existing --json/--report outputs")
@@ -62,53 +53,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="drop this many seconds at the start of every trajectory (start transients)")
 
 
-def _qube_runs(token: str) -> list[int] | None:
-    """Run numbers of a ``qube[:RUNS]`` token: ``qube`` (all), ``qube:1-5``, ``qube:2,7,9-11``."""
-    spec = token.partition(":")[2]
-    if not spec:
-        return None
-    runs = []
-    for part in spec.split(","):
-        lo, _, hi = part.partition("-")
-        if not lo.isdigit() or (hi and not hi.isdigit()):
-            raise ValueError(f"{token!r}: expected qube, qube:N, qube:N-M or qube:N,M,... (run numbers 1..15)")
-        runs += list(range(int(lo), int(hi or lo) + 1))
-    return runs
-
-
-def _load(paths, args):
-    """Trajectories of ``paths`` with the column map, signs and offsets, start skipped."""
-    from pathlib import Path
-
-    from ..data import Trajectory, load_trajectories
-    from ..datasets import load_qube_closed_loop
-
-    trajs = []
-    for path in paths:
-        if path == "qube" or path.startswith("qube:"):
-            if args.system != "furuta":
-                raise ValueError(f"{path!r}: the shipped QUBE-Servo runs are Furuta data; got --system {args.system}")
-            trajs += load_qube_closed_loop(_qube_runs(path), skip_seconds=0.0)
-            continue
-        for tr in load_trajectories(
-            path,
-            args.system,
-            column_map=_pairs(args.column_map, "--column-map"),
-            signs=_pairs(args.sign, "--sign", float),
-            offsets=_pairs(args.offset, "--offset", float),
-        ):
-            if len(paths) > 1:
-                tr.name = f"{Path(path).stem}:{tr.name}"
-            trajs.append(tr)
-    if args.skip > 0:
-        trajs = [
-            Trajectory(t=tr.t[m], q=tr.q[m], u=tr.u[m], qd=None if tr.qd is None else tr.qd[m], name=tr.name)
-            for tr in trajs
-            for m in [tr.t >= tr.t[0] + args.skip]
-        ]
-    return trajs
-
-
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -129,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
         trajs,
         args.system,
         test=test,
+        model=args.model,
         fixed=_pairs(args.fix, "--fix", float) or None,
         candidates=args.candidates.split(",") if args.candidates else None,
         **overrides,

@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import jax
 import jax.numpy as jnp
@@ -24,7 +23,8 @@ from scipy.signal import lfilter
 
 from ..lagrangian import interval_difference, interval_integral, momentum, potential_derived_force
 from ..simulate import rollout_zoh
-from ._library import LumpedModel, ParameterLayout
+from ..systems import get_spec
+from ._library import ParameterLayout
 
 __all__ = ["Segment", "InputDynamics", "build_regressors", "ee_fit", "oe_fit", "window_errors", "delay_input", "lag_input"]
 
@@ -57,41 +57,45 @@ class Segment:
         return u_int[:, None, None] * c_input[None] - self.A
 
 
-@functools.lru_cache(maxsize=None)
-def _sample_jacobians(system: str):
+_COMPILED: dict = {}
+
+
+def _compiled(kind: str, layout: ParameterLayout, *args, build):
+    """One compiled function per (kind, layout's model family, args); the value keeps the layout
+    alive, so the id of a learned model in its key is never reused."""
+    key = (kind, layout.cache_key, *args)
+    if key not in _COMPILED:
+        _COMPILED[key] = (build(), layout)
+    return _COMPILED[key][0]
+
+
+def _sample_jacobians(layout: ParameterLayout):
     def per_sample(theta, q, qd):
         def p_of(th):
-            return momentum(LumpedModel(th, system), q, qd)
+            return momentum(layout.model(th), q, qd)
 
         def f_of(th):
-            m = LumpedModel(th, system)
+            m = layout.model(th)
             return potential_derived_force(m, q, qd) + m.nonconservative_force(q, qd)
 
         return jax.jacfwd(p_of)(theta), jax.jacfwd(f_of)(theta)
 
-    return jax.jit(jax.vmap(per_sample, in_axes=(None, 0, 0)))
-
-
-@functools.lru_cache(maxsize=None)
-def _input_direction(system: str):
-    def c(theta):
-        n_in = 1
-        return jax.jacfwd(
-            lambda th: LumpedModel(th, system).input_force(jnp.zeros(2), jnp.zeros(2), jnp.ones(n_in))
-        )(theta)
-
-    return jax.jit(c)
+    return _compiled("jacobians", layout, build=lambda: jax.jit(jax.vmap(per_sample, in_axes=(None, 0, 0))))
 
 
 def input_direction(layout: ParameterLayout, theta0: np.ndarray) -> np.ndarray:
     """∂τ_u/∂θ at u = 1 (n, P), linearised at ``theta0`` (the input gain effect is bilinear)."""
-    n = 2 if layout.system == "furuta" else 1
-    c = np.asarray(_input_direction(layout.system)(jnp.asarray(theta0)))
-    return c[:n]
+    spec = get_spec(layout.system)
+    n, m = spec.n_dof, len(spec.input_names)
+
+    def c(theta):
+        return jax.jacfwd(lambda th: layout.model(th).input_force(jnp.zeros(n), jnp.zeros(n), jnp.ones(m)))(theta)
+
+    return np.asarray(_compiled("input", layout, build=lambda: jax.jit(c))(jnp.asarray(theta0)))
 
 
-def _per_sample(system: str, theta0: np.ndarray, q: np.ndarray, qd: np.ndarray):
-    fn = _sample_jacobians(system)
+def _per_sample(layout: ParameterLayout, theta0: np.ndarray, q: np.ndarray, qd: np.ndarray):
+    fn = _sample_jacobians(layout)
     T = q.shape[0]
     outs_p, outs_f = [], []
     for s in range(0, T, _CHUNK):
@@ -183,7 +187,7 @@ def build_regressors(
 ) -> None:
     """Fill each segment's Ā Jacobian, ∫u and delay regressor over intervals of ``stride``."""
     for seg in segments:
-        jp, jf = _per_sample(layout.system, theta0, seg.q, seg.qd)
+        jp, jf = _per_sample(layout, theta0, seg.q, seg.qd)
         a = np.asarray(interval_difference(jp)) - np.asarray(interval_integral(jf, seg.dt))
         u = dynamics.apply(seg.u, seg.dt)
         ui = input_integral(u, seg.dt, hold)
@@ -289,16 +293,15 @@ def make_windows(segments: list[Segment], length: int, dynamics: InputDynamics =
 _BATCH = 16  # windows per compiled call: every window set reuses one compiled shape
 
 
-@functools.lru_cache(maxsize=None)
-def _predictor(system: str, dt: float, length: int, substeps: int, smoothing: float):
-    n = 2 if system == "furuta" else 1
+def _predictor(layout: ParameterLayout, dt: float, length: int, substeps: int, smoothing: float):
+    n = get_spec(layout.system).n_dof
 
     def predict(theta, x0, us):
-        model = LumpedModel(theta, system, coulomb_smoothing=smoothing)
+        model = layout.model(theta, coulomb_smoothing=smoothing)
         xs = jax.vmap(lambda x, u: rollout_zoh(model, x, u, dt, substeps))(x0, us)
         return xs[:, 1:, :n]
 
-    return jax.jit(predict)
+    return _compiled("predict", layout, dt, length, substeps, smoothing, build=lambda: jax.jit(predict))
 
 
 def _batches(win: "Windows"):
@@ -311,9 +314,16 @@ def _batches(win: "Windows"):
 
 
 def predict_windows(layout, theta, win: Windows, smoothing: float, substeps: int = 1) -> np.ndarray:
-    predict = _predictor(layout.system, win.dt, win.length, substeps, smoothing)
+    predict = _predictor(layout, win.dt, win.length, substeps, smoothing)
     out = [np.asarray(predict(jnp.asarray(theta), x0, us))[:k] for k, x0, us, _ in _batches(win)]
     return np.concatenate(out)
+
+
+def window_square_sums(layout, theta, win: Windows, smoothing: float, substeps: int = 1) -> np.ndarray:
+    """(W,) sum of squared position errors of each open-loop window (inf where it blew up)."""
+    err = predict_windows(layout, theta, win, smoothing, substeps) - win.q
+    ss = np.sum(err**2, axis=(1, 2))
+    return np.where(np.isfinite(ss), ss, np.inf)
 
 
 def window_errors(layout, theta, win: Windows, smoothing: float, substeps: int = 1):

@@ -40,7 +40,8 @@ from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..models import FurutaParameters, NMSDParameters
 from ..systems import get_spec
 
-__all__ = ["Candidate", "ParameterLayout", "LumpedModel", "layout_for", "nominal_base"]
+__all__ = ["Candidate", "ParameterLayout", "LumpedModel", "LearnedWithLibrary", "layout_for",
+           "nominal_base", "check_input_linear"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,6 +105,20 @@ class ParameterLayout:
     base: tuple[str, ...]
     base_units: tuple[str, ...]
     candidates: tuple[Candidate, ...]  # memoryless library effects (delay is handled apart)
+    # a learned (or any) Lagrangian model taken as the declared model: its one base parameter is
+    # an overall scale (held at 1), the library effects are added around it
+    learned: AbstractLagrangianSystem | None = dataclasses.field(default=None, compare=False, repr=False)
+
+    @property
+    def cache_key(self):
+        """What identifies this layout's compiled functions (the system, or the learned model)."""
+        return self.system if self.learned is None else ("learned", id(self.learned))
+
+    def model(self, theta, coulomb_smoothing: float = 0.0) -> AbstractLagrangianSystem:
+        """The Lagrangian system of parameters ``theta`` (declared model + library effects)."""
+        if self.learned is None:
+            return LumpedModel(theta, self.system, coulomb_smoothing)
+        return LearnedWithLibrary(theta, self.learned, coulomb_smoothing)
 
     @property
     def size(self) -> int:
@@ -122,7 +137,7 @@ class ParameterLayout:
         )
 
     def nominal(self) -> np.ndarray:
-        nom = nominal_base(self.system)
+        nom = nominal_base(self.system) if self.learned is None else {"scale": 1.0}
         return np.array([nom[b] for b in self.base] + [0.0] * len(self.candidates))
 
     def typical_scale(self) -> np.ndarray:
@@ -147,8 +162,9 @@ class ParameterLayout:
         return np.array(out)
 
 
-def layout_for(system: str) -> ParameterLayout:
-    """The lumped base parameters of ``system`` plus every memoryless library effect."""
+def layout_for(system: str, learned: AbstractLagrangianSystem | None = None) -> ParameterLayout:
+    """The lumped base parameters of ``system`` plus every memoryless library effect; with a
+    ``learned`` model, that model (scale 1) instead of the lumped declared model."""
     spec = get_spec(system)
     # library order breaks ties between effects the data cannot tell apart: the catch-all
     # constant torque comes after the specific mechanisms
@@ -160,12 +176,50 @@ def layout_for(system: str) -> ParameterLayout:
         gravity = j in GRAVITY_JOINTS[spec.name]
         cands += [Candidate(n, j) for n in (["com_offset"] if gravity else []) + generic]
     cands += [Candidate(n, "u") for n in INPUT_EFFECTS if n not in STATEFUL_EFFECTS]
+    if learned is not None:
+        return ParameterLayout(spec.name, ("scale",), ("1",), tuple(cands), learned)
     return ParameterLayout(
         system=spec.name,
         base=BASE[spec.name],
         base_units=BASE_UNITS[spec.name],
         candidates=tuple(cands),
     )
+
+
+def _library_effects(theta, system: str, n_base: int, names) -> list[Effect]:
+    """The library effects ``names`` with their coefficients in ``theta`` (jnp-traceable)."""
+    cands = layout_for(system).candidates
+    return [Effect(c.name, c.joint, theta[n_base + i]) for i, c in enumerate(cands) if c.name in names]
+
+
+def _library_potential(theta, system, n_base, q, declared_potential):
+    """The declared potential seen through the centre-of-mass offsets (linear in δ at δ = 0,
+    where the equation-error regressors are taken), plus the springs' ½k·q²."""
+    spec = get_spec(system)
+    effects = _library_effects(theta, system, n_base, ("com_offset", "spring"))
+    shift = sum((e.shift(spec) for e in effects if e.name == "com_offset"), jnp.zeros_like(q))
+    v = declared_potential(q - shift)
+    for e in effects:
+        if e.name == "spring":
+            v = v + 0.5 * e.coefficient * q[e.joint_index(spec)] ** 2
+    return v
+
+
+_FORCE_EFFECTS = ("coulomb_friction", "stiction", "viscous_friction", "quadratic_drag", "constant_torque")
+
+
+def _library_force(theta, system, n_base, q, qd, smoothing):
+    """Generalized force of the library's joint effects, the laws of :mod:`furuta_gym.effects`."""
+    spec = get_spec(system)
+    tau = [0.0 * qd[j] for j in range(spec.n_dof)]
+    for e in _library_effects(theta, system, n_base, _FORCE_EFFECTS):
+        j = e.joint_index(spec)
+        tau[j] = tau[j] + e.generalized_force(q[j], qd[j], smoothing)
+    return jnp.stack(tau)
+
+
+def _library_gain(theta, system, n_base):
+    return 1.0 + sum(e.coefficient for e in _library_effects(theta, system, n_base, ("input_gain",)))
 
 
 class LumpedModel(AbstractLagrangianSystem):
@@ -186,15 +240,9 @@ class LumpedModel(AbstractLagrangianSystem):
     def _base(self, name):
         return self.theta[BASE[self.system].index(name)]
 
-    def _effect(self, name, joint):
-        layout = layout_for(self.system)
-        return self.theta[layout.index(f"{name}:{joint}")]
-
-    def _effects(self, names) -> list[Effect]:
-        """The library effects ``names`` on every joint, coefficients from ``theta`` (traced)."""
-        keys = {c.key for c in layout_for(self.system).candidates}
-        return [Effect(n, j, self._effect(n, j)) for j in self.spec.joint_names for n in names
-                if f"{n}:{j}" in keys]
+    @property
+    def _n_base(self) -> int:
+        return len(BASE[self.system])
 
     def mass_matrix(self, q):
         if self.system == "furuta":
@@ -212,13 +260,7 @@ class LumpedModel(AbstractLagrangianSystem):
         return 0.5 * b("k1") * q[0] ** 2 + 0.25 * b("k2") * q[0] ** 4
 
     def potential(self, q):
-        # a com_offset shifts the declared potential's zero (linear in δ at δ = 0, which is where
-        # the equation-error regressors are taken); springs add ½k·q²
-        shift = sum((e.shift(self.spec) for e in self._effects(["com_offset"])), jnp.zeros_like(q))
-        v = self._declared_potential(q - shift)
-        for j, name in enumerate(self.spec.joint_names):
-            v = v + 0.5 * self._effect("spring", name) * q[j] ** 2
-        return v
+        return _library_potential(self.theta, self.system, self._n_base, q, self._declared_potential)
 
     def nonconservative_force(self, q, qd):
         b = self._base
@@ -226,16 +268,60 @@ class LumpedModel(AbstractLagrangianSystem):
             tau = jnp.stack([-b("c_alpha") * qd[0], -b("c_beta") * qd[1]])
         else:
             tau = -b("b1") * qd - b("b2") * qd**3
-        names = ("coulomb_friction", "stiction", "viscous_friction", "quadratic_drag", "constant_torque")
-        extra = []
-        for j, name in enumerate(self.spec.joint_names):
-            forces = [e.generalized_force(q[j], qd[j], self.coulomb_smoothing)
-                      for e in self._effects(names) if e.joint == name]
-            extra.append(sum(forces, 0.0 * qd[j]))
-        return tau + jnp.stack(extra)
+        return tau + _library_force(self.theta, self.system, self._n_base, q, qd, self.coulomb_smoothing)
 
     def input_force(self, q, qd, u):
-        gain = self._base(GAIN_PARAMETER[self.system]) * (1.0 + self._effect("input_gain", "u"))
+        gain = self._base(GAIN_PARAMETER[self.system]) * _library_gain(self.theta, self.system, self._n_base)
         if self.system == "furuta":
             return jnp.stack([gain * u[0], 0.0 * u[0]])
         return gain * u[:1]
+
+
+class LearnedWithLibrary(AbstractLagrangianSystem):
+    """A given Lagrangian model (e.g. a trained DeLaN) times an overall scale ``theta[0]``, plus
+    every library effect, coefficients in ``theta[1:]`` (as :class:`LumpedModel` lays them out).
+
+    The model's input force is split into its part at u = 0 (e.g. a back-EMF), which joins τ_NC,
+    and the part that grows with u, which must be B·u with a constant B (checked by
+    :func:`check_input_linear`): the equation-error fit integrates the input as ∫u·B.
+    """
+
+    theta: jnp.ndarray
+    base: AbstractLagrangianSystem
+    coulomb_smoothing: float = eqx.field(static=True, default=0.0)
+
+    spec: ClassVar = property(lambda self: self.base.spec)  # type: ignore[assignment]
+
+    def mass_matrix(self, q):
+        return self.theta[0] * self.base.mass_matrix(q)
+
+    def potential(self, q):
+        return _library_potential(self.theta, self.spec.name, 1, q,
+                                  lambda x: self.theta[0] * self.base.potential(x))
+
+    def nonconservative_force(self, q, qd):
+        zero_u = jnp.zeros(len(self.spec.input_names))
+        own = self.base.nonconservative_force(q, qd) + self.base.input_force(q, qd, zero_u)
+        return self.theta[0] * own + _library_force(self.theta, self.spec.name, 1, q, qd, self.coulomb_smoothing)
+
+    def input_force(self, q, qd, u):
+        zero_u = jnp.zeros_like(u)
+        driven = self.base.input_force(q, qd, u) - self.base.input_force(q, qd, zero_u)
+        return self.theta[0] * _library_gain(self.theta, self.spec.name, 1) * driven
+
+
+def check_input_linear(model: AbstractLagrangianSystem, seed: int = 0) -> None:
+    """Raise if ``model``'s input force is not B·u + f(q, q̇) with a constant B (what the
+    diagnosis of a learned model assumes), tested at random states and inputs."""
+    rng = np.random.default_rng(seed)
+    n, m = model.spec.n_dof, len(model.spec.input_names)
+    ref = None
+    for _ in range(8):
+        q, qd, u = (jnp.asarray(rng.normal(size=k)) for k in (n, n, m))
+        driven = np.asarray(model.input_force(q, qd, u) - model.input_force(q, qd, jnp.zeros(m)))
+        unit = np.asarray(model.input_force(q, qd, jnp.ones(m)) - model.input_force(q, qd, jnp.zeros(m)))
+        ref = unit if ref is None else ref
+        if not (np.allclose(driven, unit * np.asarray(u)[0], rtol=1e-8, atol=1e-12)
+                and np.allclose(unit, ref, rtol=1e-8, atol=1e-12)):
+            raise ValueError("model: its input force is not B·u + f(q, q̇) with a constant B; the "
+                             "diagnosis of a given model needs that form")

@@ -64,8 +64,8 @@ def equivalent_pairs(prob, layout, free_base, weights, candidates, threshold: fl
     angle). The input delay is not a column of θ and is never grouped."""
     cols = [c for c in candidates if c.name != "input_delay"]
     W = weights[None, :, None]
-    X = (prob.R[:, :, free_base] * W).reshape(-1, int(free_base.sum()))
-    Q, _ = np.linalg.qr(X / np.maximum(np.linalg.norm(X, axis=0), 1e-300))
+    X = (prob.R[:, :, free_base] * W).reshape(prob.R.shape[0] * prob.R.shape[1], int(free_base.sum()))
+    Q = np.linalg.qr(X / np.maximum(np.linalg.norm(X, axis=0), 1e-300))[0] if X.shape[1] else X
     out: dict[str, set[str]] = {c.key: set() for c in candidates}
     if not cols:
         return out
@@ -157,8 +157,20 @@ class SearchSettings:
     member_z_threshold: float
 
 
-def _best_pair(comparer, chosen, scores, pool, s: SearchSettings):
+def _representatives(pool, equivalents):
+    """``pool`` with each group of candidates the data cannot tell apart reduced to its first
+    member in library order (the specific mechanism), as a single pick would be."""
+    out = []
+    for c in pool:
+        first = next(o for o in pool if o == c or o.key in equivalents.get(c.key, ()))
+        if first == c:
+            out.append(c)
+    return out
+
+
+def _best_pair(comparer, chosen, scores, pool, s: SearchSettings, equivalents=None):
     """The passing pair with the largest z among the ``pool`` largest-gain candidates, or None."""
+    pool = _representatives(pool, equivalents or {})
     ranked = sorted((c for c in pool if scores[c.key].improvement > 0 and comparer.physical_sign(chosen, c)),
                     key=lambda c: -scores[c.key].improvement)[: s.pair_pool]
     best = None
@@ -173,7 +185,8 @@ def _best_pair(comparer, chosen, scores, pool, s: SearchSettings):
         if min(given_b.z, given_a.z) < s.member_z_threshold or min(given_a.improvement, given_b.improvement) <= 0:
             continue
         if best is None or whole.z > best.pair_evidence.z:
-            best = Step((a, b), {a.key: given_b, b.key: given_a}, whole)
+            same = {o: m.key for m in (a, b) for o in (equivalents or {}).get(m.key, ())}
+            best = Step((a, b), {a.key: given_b, b.key: given_a}, whole, same)
     return best
 
 
@@ -216,11 +229,10 @@ def search(comparer: Comparer, testable: list[Candidate], s: SearchSettings, equ
             continue
         if len(chosen) + 2 > s.max_effects:
             break
-        pair = _best_pair(comparer, chosen, scores, remaining, s)
+        pair = _best_pair(comparer, chosen, scores, remaining, s, equivalents)
         if pair is None:
             break
         steps.append(pair)
-        for c in pair.members:
-            chosen.append(c)
-            remaining.remove(c)
+        chosen += list(pair.members)
+        remaining = [c for c in remaining if c not in pair.members and c.key not in pair.equivalents]
     return steps, first_round, last_round

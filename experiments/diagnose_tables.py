@@ -1,0 +1,203 @@
+"""Docs tables of the diagnosis, generated from the committed result files (never typed by hand).
+
+Reads ``results/diagnose_sim/*.json`` (``experiments/diagnose_simulated.py``) and
+``results/diagnose_real/*.json`` (``experiments/diagnose_real_data.py``) and rewrites the blocks
+between ``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->`` in docs/diagnose.md and
+README.md. ``--check`` only compares (the test suite runs it: a quoted number that disagrees with
+its results file fails).
+
+    python experiments/diagnose_tables.py [--check]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SIM, REAL = ROOT / "results" / "diagnose_sim", ROOT / "results" / "diagnose_real"
+REAL_COMMAND = ("furuta-gym diagnose qube:1-5 --test qube:6-15 --system furuta --skip 0.5 "
+                "--window 0.1 --oe-windows 64")
+
+
+def _load(folder: Path) -> dict[str, dict]:
+    return {p.stem: json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))}
+
+
+def _found(doc) -> list[dict]:
+    return [e for e in doc["effects"] if e["significant"]]
+
+
+def _ratio(doc, key="error") -> float:
+    b, a = doc[f"{key}_before"], doc[f"{key}_after"]
+    return b["trajectory_rmse"] / a["trajectory_rmse"]
+
+
+def _expected(planted) -> list[tuple[str, str, float]]:
+    """What the diagnosis can report for the planted effects: a spring with a rest position is a
+    spring plus a constant torque k·q_ref (the same force)."""
+    out = []
+    for p in planted:
+        out.append((p["name"], p["joint"], p["coefficient"]))
+        if p["name"] == "spring" and p.get("reference"):
+            out.append(("constant_torque", p["joint"], p["coefficient"] * p["reference"]))
+    return out
+
+
+def _reported(found, name, joint):
+    """The reported coefficient of ``name:joint``; an actuator lag may be the input-dynamics
+    entry's equally good alternative (a delay and a lag share one first-order signature)."""
+    match = next((e for e in found if (e["name"], e["joint"]) == (name, joint)), None)
+    if match is not None:
+        return match["coefficient"]
+    if name == "actuator_lag":
+        alt = next((e for e in found if e["name"] == "input_delay"), None)
+        m = alt and re.search(r"actuator_lag ([0-9.e-]+) s fits as well", alt["note"])
+        return float(m.group(1)) if m else None
+    return None
+
+
+def _planted_ok(doc) -> tuple[bool, list[str]]:
+    """(every planted effect found and nothing else, coefficient errors) for one simulated log;
+    a missing effect shows as "missed"."""
+    found = _found(doc)
+    expected = _expected(doc["planted"])
+    errs = []
+    for name, joint, coef in expected:
+        got = _reported(found, name, joint)
+        errs.append("missed" if got is None else f"{got / coef - 1:+.0%}")
+    complete = "missed" not in errs and len(found) == len(expected)
+    return complete, errs
+
+
+def sim_table(docs: dict[str, dict]) -> str:
+    groups = defaultdict(list)
+    for d in docs.values():
+        groups[(d["excitation"], d["case"])].append(d)
+    rows = ["| experiment | planted | logs | false alarms / all found, nothing else | coefficient error per log | held-out error ratio (min–median) |",
+            "|---|---|---|---|---|---|"]
+    for (exc, case), ds in sorted(groups.items()):
+        planted = ", ".join(f"{p['name']}:{p['joint']} {p['coefficient']:g}" + (f" (rest {p['reference']:g})" if p.get("reference") else "")
+                            for p in ds[0]["planted"]) or "none"
+        ratios = sorted(_ratio(d) for d in ds)
+        med = ratios[len(ratios) // 2]
+        if not ds[0]["planted"]:
+            alarms = sum(bool(_found(d)) for d in ds)
+            rows.append(f"| {exc} | none | {len(ds)} | {alarms} false alarm(s) | - | {ratios[0]:.2f}–{med:.2f} |")
+            continue
+        checks = [_planted_ok(d) for d in ds]
+        good = sum(ok for ok, _ in checks)
+        names = [f"{n}:{j}" for n, j, _ in _expected(ds[0]["planted"])]
+        errs = "; ".join(f"{n} " + " ".join(e[k] for _, e in checks) for k, n in enumerate(names))
+        rows.append(f"| {exc} | {planted} | {len(ds)} | {good} of {len(ds)} | {errs} | {ratios[0]:.1f}–{med:.1f}× |")
+    return "\n".join(rows)
+
+
+def _effects_text(doc) -> str:
+    return "; ".join(f"{n}:{j} ({v})" for n, j, v in _merged(doc)) or "none"
+
+
+def real_table(docs: dict[str, dict]) -> str:
+    rows = ["| fit on | judged on (never fitted) | found (coefficient, t) | held-out windows: before → after | unseen runs: before → after |",
+            "|---|---|---|---|---|"]
+    for name, d in docs.items():
+        fit = f"runs {min(d['fit_runs'])}–{max(d['fit_runs'])}"
+        test = f"runs {', '.join(map(str, d['test_runs']))}" if d["test_runs"] else "-"
+        held = f"{d['error_before']['trajectory_rmse']:.4f} → {d['error_after']['trajectory_rmse']:.4f} rad ({_ratio(d):.2f}×)"
+        unseen = (f"{d['test_error_before']['trajectory_rmse']:.4f} → {d['test_error_after']['trajectory_rmse']:.4f} rad "
+                  f"({_ratio(d, 'test_error'):.2f}×)") if d.get("test_error_before") else "-"
+        rows.append(f"| {fit} ({name.split('_')[0]}) | {test if len(test) < 30 else 'the other ' + str(len(d['test_runs']))} | {_effects_text(d)} | {held} | {unseen} |")
+    return "\n".join(rows)
+
+
+def _merged(doc) -> list[tuple[str, str, str]]:
+    """(effect, joint, value text) of the found effects; a spring and a constant torque on one
+    joint are one spring with a rest position τ0/k (the same force)."""
+    found = _found(doc)
+    springs = {e["joint"]: e for e in found if e["name"] == "spring" and e["coefficient"] > 0}
+    out = []
+    for e in found:
+        if e["name"] == "constant_torque" and e["joint"] in springs:
+            continue
+        text = f"{e['coefficient']:.2g} {e['unit']}"
+        torque = next((t for t in found if t["name"] == "constant_torque" and t["joint"] == e["joint"]), None)
+        if e["name"] == "spring" and e["joint"] in springs and torque:
+            text += f", rest {torque['coefficient'] / e['coefficient']:+.2g} rad"
+        out.append((e["name"], e["joint"], text + f", t {e['evidence']['z_score']:.1f}"))
+    return out
+
+
+def _found_text(doc) -> str:
+    return ", ".join(f"{n.replace('_', ' ')} on {j} ({v.rsplit(', t', 1)[0]})" for n, j, v in _merged(doc)) or "nothing"
+
+
+def agreement_table(docs: dict[str, dict]) -> str:
+    """Each effect found on any independent split: its coefficient per split, and the spread."""
+    splits = {k: d for k, d in docs.items() if k.startswith("split_")}
+    keys = sorted({(n, j) for d in splits.values() for n, j, _ in _merged(d)})
+    rows = ["| effect | " + " | ".join(f"runs {min(d['fit_runs'])}–{max(d['fit_runs'])}" for d in splits.values())
+            + " | largest / smallest |", "|---" * (len(splits) + 2) + "|"]
+    for name, joint in keys:
+        vals = [next((e["coefficient"] for e in _found(d) if (e["name"], e["joint"]) == (name, joint)), None)
+                for d in splits.values()]
+        got = [abs(v) for v in vals if v is not None]
+        spread = f"{max(got) / min(got):.2f}" if len(got) > 1 else "-"
+        rows.append(f"| {name}:{joint} | " + " | ".join("not found" if v is None else f"{v:.2g}" for v in vals)
+                    + f" | {spread} |")
+    return "\n".join(rows)
+
+
+def readme_line(docs: dict[str, dict]) -> str:
+    d = docs["split_runs01-05"]
+    others = [docs[k] for k in ("split_runs06-10", "split_runs11-15") if k in docs]
+    text = (f"Fitted on runs 1–5 it finds {_found_text(d)}; on the 10 runs it never saw, the open-loop "
+            f"error (0.1 s windows) falls {d['test_error_before']['trajectory_rmse']:.4f} → "
+            f"{d['test_error_after']['trajectory_rmse']:.4f} rad (**{_ratio(d, 'test_error'):.2f}×**).")
+    for o in others:
+        text += (f" Fitted on runs {min(o['fit_runs'])}–{max(o['fit_runs'])}: {_found_text(o)}; "
+                 f"{_ratio(o, 'test_error'):.2f}× on the runs it never saw.")
+    return text
+
+
+def blocks() -> dict[str, str]:
+    sim, real = _load(SIM), _load(REAL)
+    out = {}
+    if sim:
+        out["diagnose-sim"] = sim_table(sim)
+    if real:
+        out["diagnose-real"] = real_table(real) + "\n\nAcross the independent splits:\n\n" + agreement_table(real)
+        out["diagnose-real-readme"] = readme_line(real)
+    return out
+
+
+def render(text: str, generated: dict[str, str]) -> str:
+    for name, body in generated.items():
+        pattern = re.compile(rf"(<!-- generated:{name} -->).*?(<!-- /generated:{name} -->)", re.S)
+        text = pattern.sub(lambda m: m.group(1) + "\n" + body + "\n" + m.group(2), text)
+    return text
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="compare only; exit 1 on a difference")
+    args = ap.parse_args()
+    generated, stale = blocks(), []
+    for path in (ROOT / "docs" / "diagnose.md", ROOT / "README.md"):
+        text = path.read_text()
+        new = render(text, generated)
+        if new != text:
+            stale.append(str(path.relative_to(ROOT)))
+            if not args.check:
+                path.write_text(new)
+    if args.check and stale:
+        print(f"out of date with results/: {stale}; run python experiments/diagnose_tables.py")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,139 @@
+"""Reading measured logs on the command line, one way for ``diagnose``, ``train`` and ``evaluate``.
+
+A DATA token is a file (CSV, ``.csv.gz``, NPZ, MAT; long form) read with a column map, signs and
+offsets, or ``qube[:RUNS]`` for the real QUBE-Servo runs shipped with the package
+(:mod:`furuta_gym.datasets`). ``train`` and ``evaluate`` then estimate absent velocities, drop the
+start and cut elementary trajectories (:func:`furuta_gym.measured.prepare_log`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+__all__ = ["pairs", "qube_runs", "read_logs", "load_logs", "add_log_arguments", "prepared_logs", "QUBE_SKIP"]
+
+#: Seconds dropped at the start of a vendored QUBE run unless --skip says otherwise: the balancing
+#: controller's start transient (furuta_gym.datasets.load_qube_closed_loop drops the same).
+QUBE_SKIP = 0.5
+
+
+def pairs(text: str | None, what: str, convert=str) -> dict:
+    out = {}
+    if not text:
+        return out
+    for item in text.split(","):
+        if "=" not in item:
+            raise ValueError(f"{what}: expected NAME=VALUE[,NAME=VALUE...], got {item!r}")
+        k, v = item.split("=", 1)
+        try:
+            out[k.strip()] = convert(v.strip())
+        except ValueError:
+            raise ValueError(f"{what}: {k.strip()}={v.strip()!r} is not a number") from None
+    return out
+
+
+def qube_runs(token: str) -> list[int] | None:
+    """Run numbers of a ``qube[:RUNS]`` token: ``qube`` (all), ``qube:1-5``, ``qube:2,7,9-11``."""
+    spec = token.partition(":")[2]
+    if not spec:
+        return None
+    runs = []
+    for part in spec.split(","):
+        lo, _, hi = part.partition("-")
+        if not lo.isdigit() or (hi and not hi.isdigit()):
+            raise ValueError(f"{token!r}: expected qube, qube:N, qube:N-M or qube:N,M,... (run numbers 1..15)")
+        runs += list(range(int(lo), int(hi or lo) + 1))
+    return runs
+
+
+def read_logs(paths, system: str, column_map=None, sign=None, offset=None) -> list[tuple[str, list]]:
+    """``(source, trajectories)`` per log of ``paths``, nothing skipped. ``source`` names the
+    log for error messages (a vendored run: its token and file). With several DATA tokens the
+    trajectories are named ``<file stem>:<name>``."""
+    from ..data import load_trajectories
+    from ..datasets import load_qube_closed_loop, qube_closed_loop_files
+
+    out = []
+    for path in paths:
+        if path == "qube" or path.startswith("qube:"):
+            if system != "furuta":
+                raise ValueError(f"{path!r}: the shipped QUBE-Servo runs are Furuta data; got --system {system}")
+            runs = qube_runs(path)
+            files = qube_closed_loop_files(runs)  # checks the run numbers
+            for run, file in zip(runs or range(1, len(files) + 1), files):
+                out.append((f"{path} (run {run}: {file})", load_qube_closed_loop([run], skip_seconds=0.0)))
+            continue
+        trajs = load_trajectories(
+            path,
+            system,
+            column_map=pairs(column_map, "--column-map"),
+            signs=pairs(sign, "--sign", float),
+            offsets=pairs(offset, "--offset", float),
+        )
+        if len(paths) > 1:
+            for tr in trajs:
+                tr.name = f"{Path(path).stem}:{tr.name}"
+        out.append((str(path), trajs))
+    return out
+
+
+def load_logs(paths, args):
+    """Trajectories of ``paths`` with the column map, signs and offsets, start skipped
+    (``furuta-gym diagnose``'s reading: velocities stay as logged)."""
+    from ..data import Trajectory
+
+    trajs = [tr for _, ts in read_logs(paths, args.system, args.column_map, args.sign, args.offset) for tr in ts]
+    if args.skip > 0:
+        trajs = [
+            Trajectory(t=tr.t[m], q=tr.q[m], u=tr.u[m], qd=None if tr.qd is None else tr.qd[m], name=tr.name)
+            for tr in trajs
+            for m in [tr.t >= tr.t[0] + args.skip]
+        ]
+    return trajs
+
+
+def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | None, split_help: str) -> None:
+    """The options of measured logs shared by ``train`` and ``evaluate``."""
+    parser.add_argument(
+        "--column-map", metavar="CANON=FILECOL,...",
+        help="columns under other names, e.g. alpha=theta,beta=alpha,u=plant_input",
+    )
+    parser.add_argument("--sign", metavar="CANON=±1,...", help="per-column sign, e.g. beta=-1")
+    parser.add_argument("--offset", metavar="CANON=VALUE,...", help="per-column offset, e.g. beta=3.14159")
+    parser.add_argument("--skip", type=float, metavar="SECONDS",
+                        help="drop this many seconds at the start of every log (start transients; "
+                        f"default {QUBE_SKIP} s for qube:RUNS, the controller catching the pendulum, 0 for files)")
+    parser.add_argument(
+        "--velocity", choices=["zero_phase", "derivative_filter"], default="zero_phase",
+        help="velocity estimate when a log has none: zero-phase (offline, no lag; default) or the "
+        "paper's causal derivative filter (ω0 = 100 rad/s, ξ = 0.8)",
+    )
+    parser.add_argument("--cutoff", type=float, help="zero-phase velocity cutoff in Hz (default min(25, 0.08·fs))")
+    parser.add_argument("--split", type=float, default=split_default, metavar="SECONDS", help=split_help)
+
+
+def prepared_logs(paths, args, *, split="measured", min_seconds: float = 0.0) -> tuple[list, list[str]]:
+    """Training / test trajectories of ``paths`` (:func:`furuta_gym.measured.prepare_log` per
+    log; ``args`` carries the :func:`add_log_arguments` options and ``system``) and notes on what
+    was estimated. ``split``: seconds per elementary trajectory, ``None`` whole logs, or
+    ``"measured"``: ``--split`` if given, else the paper's length for logs without velocities
+    (measured: :data:`furuta_gym.measured.SPLIT_SECONDS`) and whole trajectories for logs that
+    carry them (generated data, already cut as the paper's appendix cuts them)."""
+    from ..measured import SPLIT_SECONDS, prepare_log
+
+    out, estimated = [], []
+    for source, trajs in read_logs(paths, args.system, args.column_map, args.sign, args.offset):
+        is_qube = source.startswith("qube")
+        skip = args.skip if args.skip is not None else (QUBE_SKIP if is_qube else 0.0)
+        for tr in trajs:
+            seconds = split
+            if split == "measured":
+                seconds = args.split if args.split is not None else (
+                    SPLIT_SECONDS[args.system] if tr.qd is None else None)
+            if tr.qd is None:
+                estimated.append(tr.name)
+            out += prepare_log(tr, source, velocity=args.velocity, cutoff_hz=args.cutoff, skip=skip,
+                               split=seconds or None, min_seconds=min_seconds)
+    notes = [f"velocities estimated ({args.velocity}) for {len(estimated)} log(s)"] if estimated else []
+    return out, notes

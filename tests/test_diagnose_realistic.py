@@ -1,0 +1,115 @@
+"""The diagnosis on realistic logs (issue 24): QUBE-like experiments in simulation and the real
+QUBE-Servo runs shipped with the package.
+
+Simulated (MuJoCo plant variants, encoder-quantised angles, velocities estimated):
+* open-loop sine sweeps of a rotor held by dry friction against a cable spring — the spring only
+  pays once the friction is modelled: both must be found, coefficients within ±35 %, held-out
+  error ≥ 1.4× lower;
+* closed-loop balancing (PD + references + ±0.5 V feed-forward, like the MIT logs) with Coulomb
+  friction, a pendulum centre-of-mass offset and an actuator lag;
+* no-effect logs of both experiments: nothing reported.
+Real: the vendored MIT runs, fitted on some, judged on runs never fitted. The full grid over
+seeds is ``experiments/diagnose_simulated.py`` (results in results/diagnose_sim, docs table
+generated from them); ``-m slow`` runs more seeds here.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from furuta_gym.cli import main
+from furuta_gym.diagnose import diagnose, measured_like
+from furuta_gym.effects import Effect
+
+ROOT = Path(__file__).resolve().parents[1]
+LOG = dict(n_trajectories=6, duration=10.0)
+CLOSED_LOOP = dict(window=0.1, oe_max_windows=64)
+SPRING_FRICTION = [Effect("spring", "alpha", 1.5e-3), Effect("coulomb_friction", "alpha", 8e-4)]
+RIG = [Effect("coulomb_friction", "alpha", 3e-4), Effect("com_offset", "beta", 2e-3),
+       Effect("actuator_lag", "u", 5e-3)]
+
+
+def _coefficient(res, name, joint):
+    for e in res.significant:
+        if (e.name, e.joint) == (name, joint):
+            return e.coefficient
+        m = re.search(rf"{name} ([0-9.e-]+) s fits as well", e.note) if joint == "u" else None
+        if m and e.joint == "u":
+            return float(m.group(1))
+    raise AssertionError(f"{name}:{joint} not found\n{res.table()}")
+
+
+# the pendulum's centre-of-mass offset acts on a closed-loop log only as a small steady torque the
+# controller fights; its estimate scatters more than the others' (the table in docs/diagnose.md,
+# generated from results/diagnose_sim, shows by how much)
+TOLERANCE = {"com_offset": 0.5}
+
+
+def _check_planted(res, planted, min_ratio=1.4):
+    assert len(res.significant) == len(planted), res.table()
+    for p in planted:
+        rel = TOLERANCE.get(p.name, 0.35)
+        assert _coefficient(res, p.name, p.joint) == pytest.approx(p.coefficient, rel=rel), res.table()
+    assert res.error_before.trajectory_rmse >= min_ratio * res.error_after.trajectory_rmse, res.table()
+
+
+def test_spring_held_by_dry_friction_is_found_with_the_friction():
+    res = diagnose(measured_like("furuta", SPRING_FRICTION, excitation="sine_sweep", seed=100, **LOG), "furuta")
+    _check_planted(res, SPRING_FRICTION)
+    assert {e.status for e in res.effects[:2]} == {"selected"}
+
+
+@pytest.mark.parametrize("excitation", ["sine_sweep", "closed_loop_prbs"])
+def test_no_effect_logs_report_nothing(excitation):
+    kw = CLOSED_LOOP if excitation == "closed_loop_prbs" else {}
+    res = diagnose(measured_like("furuta", [], excitation=excitation, seed=100, **LOG), "furuta", **kw)
+    assert res.found == [], res.table()
+    assert res.error_after.trajectory_rmse == res.error_before.trajectory_rmse
+
+
+def test_closed_loop_rig_effects_are_found():
+    res = diagnose(measured_like("furuta", RIG, excitation="closed_loop_prbs", seed=100, **LOG), "furuta",
+                   **CLOSED_LOOP)
+    _check_planted(res, RIG)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(101, 106))
+@pytest.mark.parametrize("case", ["spring_friction", "rig"])
+def test_realistic_cases_over_seeds(case, seed):
+    effects, excitation, kw = ((SPRING_FRICTION, "sine_sweep", {}) if case == "spring_friction"
+                               else (RIG, "closed_loop_prbs", CLOSED_LOOP))
+    res = diagnose(measured_like("furuta", effects, excitation=excitation, seed=seed, **LOG), "furuta", **kw)
+    _check_planted(res, effects)
+
+
+def test_real_runs_fit_on_some_judged_on_others_via_cli(tmp_path, capsys):
+    out = tmp_path / "qube.json"
+    code = main(["diagnose", "qube:1-3", "--test", "qube:4,5", "--system", "furuta", "--skip", "0.5",
+                 "--window", "0.1", "--oe-windows", "64", "--json", str(out)])
+    assert code == 0
+    assert "test-log errors" in capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["test_error_before"]["n_windows"] > 300  # two unseen runs of 19.5 s in 0.1 s windows
+    # the rotor's dry friction is the consistent finding on these logs (docs/diagnose.md)
+    found = {(e["name"], e["joint"]) for e in doc["effects"] if e["significant"]}
+    assert ("coulomb_friction", "alpha") in found
+    assert doc["test_error_after"]["trajectory_rmse"] < doc["test_error_before"]["trajectory_rmse"]
+
+
+def test_qube_shorthand_rejects_bad_runs_and_other_systems():
+    assert main(["diagnose", "qube:0-3", "--system", "furuta"]) == 2
+    assert main(["diagnose", "qube:1-x", "--system", "furuta"]) == 2
+    assert main(["diagnose", "qube:1", "--system", "nmsd"]) == 2
+
+
+def test_published_diagnosis_numbers_match_their_result_files():
+    proc = subprocess.run([sys.executable, str(ROOT / "experiments" / "diagnose_tables.py"), "--check"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
