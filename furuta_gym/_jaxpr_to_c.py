@@ -16,6 +16,14 @@ are) so results agree with the jitted function to round-off; the tests compare t
 subexpressions are computed once and values known before the step runs (index arithmetic) are
 folded by JAX itself. Shared libraries are cached on disk by a hash of the C source and the
 compiler command.
+
+Nothing is trusted blindly: every new kernel is run against XLA on the example inputs and a few
+random ones near them, and one that disagrees is refused (a :class:`CKernelWarning`, then XLA);
+a primitive parameter the translation does not implement is refused, not ignored. The cache
+directory is made 0700 and a library is loaded only when it and its directory belong to this
+user and are not group- or world-writable (loading a library runs its code); a lock makes
+concurrent workers compile a kernel once, and only the newest :data:`MAX_CACHED_KERNELS` are
+kept. POSIX only: on Windows, or without a working compiler, the callers take XLA.
 """
 
 from __future__ import annotations
@@ -25,9 +33,12 @@ import ctypes
 import hashlib
 import math
 import os
+import shlex
 import shutil
+import stat
 import subprocess
 import tempfile
+import warnings
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -35,11 +46,16 @@ import numpy as np
 
 from ._paths import cache_root
 
-__all__ = ["CKernel", "CKernelError", "c_compiler"]
+__all__ = ["CKernel", "CKernelError", "CKernelWarning", "c_compiler"]
 
 
 class CKernelError(RuntimeError):
     """The function cannot be lowered to C or the C compiler failed."""
+
+
+class CKernelWarning(RuntimeWarning):
+    """A C kernel was built but not trusted (it disagrees with XLA, or its cached library is not
+    safely ours): the caller falls back to XLA."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -73,7 +89,10 @@ def _c_literal(value, dtype) -> str:
     if dtype == np.bool_:
         return "1" if bool(value) else "0"
     if np.issubdtype(dtype, np.integer):
-        return f"({_ctype(dtype)}){int(value)}LL"
+        value = int(value)
+        if value == -(1 << 63):  # 9223372036854775808LL itself does not fit a long long
+            return f"({_ctype(dtype)})(-9223372036854775807LL - 1)"
+        return f"({_ctype(dtype)}){value}{'ULL' if value >= 1 << 63 else 'LL'}"
     v = float(value)
     if math.isnan(v):
         return "NAN"
@@ -89,7 +108,8 @@ _PRELUDE = r"""
 /* max/min/sign as XLA computes them: a NaN operand gives NaN (C's fmax would drop it) */
 static inline double fg_max(double a, double b) { return a != a ? a : (b != b ? b : (a > b ? a : b)); }
 static inline double fg_min(double a, double b) { return a != a ? a : (b != b ? b : (a < b ? a : b)); }
-static inline double fg_sign(double a) { return a != a ? a : (double)((a > 0) - (a < 0)); }
+/* sign(±0) is ±0 in XLA (the zero itself), as is a NaN */
+static inline double fg_sign(double a) { return (a != a || a == 0) ? a : (a > 0 ? 1.0 : -1.0); }
 static inline double fg_logistic(double a) { return 1.0 / (1.0 + exp(-a)); }
 static inline double fg_rsqrt(double a) { return 1.0 / sqrt(a); }
 static inline double fg_round_even(double a) { return nearbyint(a); }
@@ -133,8 +153,6 @@ _UNARY = {
     "stop_gradient": "{0}",
     "copy_p": "{0}",
     "real": "{0}",
-    "reduce_precision": "{0}",
-    "optimization_barrier": "{0}",
 }
 
 _BINARY = {
@@ -224,6 +242,96 @@ _LINEAR_WITH_INDICES = {
 }
 
 
+def _any(value) -> bool:
+    return True
+
+
+def _is_none(value) -> bool:
+    return value is None
+
+
+def _is_false(value) -> bool:
+    return value is False or value == 0
+
+
+#: the parameters each translated primitive may carry, and which of their values the
+#: translation implements; any other parameter or value is refused (XLA steps the model)
+#: rather than silently ignored. A primitive not listed may carry no parameter at all.
+_ACCURACY = {"accuracy": _is_none}  # None: the default (libm-accurate) implementation
+_JAXPR_CALL = dict.fromkeys(("jaxpr", "name", "in_shardings", "out_shardings", "in_layouts", "out_layouts",
+                             "donated_invars", "ctx_mesh", "keep_unused", "inline", "compiler_options_kvs"), _any)
+_CUSTOM_CALL = dict.fromkeys(("call_jaxpr", "fun_jaxpr", "jvp_jaxpr_fun", "jvp_jaxpr_thunk", "fwd_jaxpr_thunk",
+                              "bwd", "num_consts", "out_trees", "symbolic_zeros"), _any)
+_REDUCE = {"axes": _any, "out_sharding": _is_none}
+_PARAMS = {
+    **{n: _ACCURACY for n in ("exp", "exp2", "expm1", "log", "log1p", "tanh", "sin", "cos", "tan",
+                               "sqrt", "rsqrt", "cbrt", "logistic")},
+    **{n: {"out_dtype": _is_none} for n in ("add", "sub", "mul", "div")},
+    "integer_pow": {"y": _any},
+    "convert_element_type": {"new_dtype": _any, "weak_type": _any, "sharding": _is_none},
+    "round": {"rounding_method": _any},
+    "reduce_precision": {"exponent_bits": _any, "mantissa_bits": _any},  # checked by the handler
+    "reshape": {"new_sizes": _any, "dimensions": _is_none, "sharding": _is_none},
+    "squeeze": {"dimensions": _any},
+    "expand_dims": {"dimensions": _any},
+    "slice": {"start_indices": _any, "limit_indices": _any, "strides": _any},
+    "broadcast_in_dim": {"shape": _any, "broadcast_dimensions": _any, "sharding": _is_none},
+    "transpose": {"permutation": _any},
+    "rev": {"dimensions": _any},
+    "concatenate": {"dimension": _any},
+    "stack": {"axis": _any},
+    "unstack": {"axis": _any},
+    "split": {"sizes": _any, "axis": _any},
+    "pad": {"padding_config": _any},
+    **{n: _REDUCE for n in ("reduce_sum", "reduce_max", "reduce_min", "reduce_prod")},
+    **{n: {"axis": _any, "reverse": _any} for n in ("cumsum", "cumprod", "cummax", "cummin")},
+    # precision only selects among float32-on-accelerator algorithms; the CPU computes exactly
+    "dot_general": {"dimension_numbers": _any, "precision": _any, "preferred_element_type": _any,
+                    "out_sharding": _is_none},
+    "pjit": _JAXPR_CALL, "jit": _JAXPR_CALL,
+    "closed_call": {"call_jaxpr": _any},
+    "custom_jvp_call": _CUSTOM_CALL, "custom_vjp_call": _CUSTOM_CALL, "custom_vjp_call_jaxpr": _CUSTOM_CALL,
+    "scan": {"jaxpr": _any, "length": _any, "reverse": _any, "num_consts": _any, "num_carry": _any,
+             "linear": _any, "unroll": _any, "_split_transpose": _is_false},
+    "while": {"cond_jaxpr": _any, "body_jaxpr": _any, "cond_nconsts": _any, "body_nconsts": _any},
+    "cond": {"branches": _any, "linear": _any},
+}
+
+
+def _check_params(name: str, params: dict) -> None:
+    allowed = _PARAMS.get(name, {})
+    for key, value in params.items():
+        accepts = allowed.get(key)
+        if accepts is None or not accepts(value):
+            raise CKernelError(f"the C kernel does not implement {name!r} with {key}={value!r}; "
+                               "use the XLA kernel for this model")
+
+
+def _extremum(which: str, dtype) -> tuple[str, str]:
+    """(combine template, initial value) of a max/min reduction in ``dtype``: integers compare
+    as integers (through a double, int64 above 2**53 would round), floats propagate NaN."""
+    dtype = np.dtype(dtype)
+    if np.issubdtype(dtype, np.floating):
+        return (f"fg_{which}({{0}}, {{1}})", "-INFINITY" if which == "max" else "INFINITY")
+    op = ">" if which == "max" else "<"
+    if dtype == np.bool_:
+        init = "0" if which == "max" else "1"
+    else:
+        info = np.iinfo(dtype)
+        init = _c_literal(info.min if which == "max" else info.max, dtype)
+    return f"({{0}} {op} {{1}} ? {{0}} : {{1}})", init
+
+
+def _saturating_cast(value: str, dtype) -> str:
+    """float → integer as XLA converts: NaN gives 0, out of range the nearest limit (C leaves
+    both undefined). Bounds are powers of two, exact in either float type."""
+    info = np.iinfo(dtype)
+    upper = float(info.max) + 1.0  # 2**bits (unsigned) or 2**(bits-1): the first value too large
+    return (f"({value} != {value} ? {_c_literal(0, dtype)} : {value} >= {upper.hex()} ? "
+            f"{_c_literal(info.max, dtype)} : {value} < {float(info.min).hex()} ? {_c_literal(info.min, dtype)} "
+            f": ({_ctype(dtype)}){value})")
+
+
 class _Var:
     """A C array holding one jaxpr value: its C name, shape and dtype."""
 
@@ -255,6 +363,8 @@ class _Translator:
         self.indent = 1
         self.common: dict = {}
         self.stack_bytes = 0
+        #: primitives translated to C (named when the kernel disagrees with XLA)
+        self.primitives: set[str] = set()
 
     # -- emission helpers ---------------------------------------------------------------------
     def emit(self, line: str) -> None:
@@ -412,6 +522,8 @@ class _Translator:
         return out
 
     def _translate_equation(self, name, p, ins, avals, eqn) -> list[_Var]:
+        self.primitives.add(name)
+        _check_params(name, p)
         handler = getattr(self, f"op_{name}", None)
         if handler is not None:
             return handler(ins, avals, **p)
@@ -434,6 +546,8 @@ class _Translator:
             template = _UNARY[name]
         else:
             template = _BINARY[name]
+        if name == "nextafter" and out.dtype == np.float32:
+            template = "nextafterf({0}, {1})"  # the float32 neighbour, not the double one rounded
         if name in ("max", "min") and integer:
             template = "({0} > {1} ? {0} : {1})" if name == "max" else "({0} < {1} ? {0} : {1})"
         if name in ("div", "rem") and integer:
@@ -476,9 +590,23 @@ class _Translator:
         cast = _ctype(new_dtype)
         if np.dtype(new_dtype) == np.bool_:
             self.loop(out.size, lambda i: f"{out.name}[{i}] = ({ins[0].at(i)} != 0);")
+        elif np.issubdtype(new_dtype, np.integer) and np.issubdtype(ins[0].dtype, np.floating):
+            self.loop(out.size, lambda i: f"{out.name}[{i}] = {_saturating_cast(ins[0].at(i), new_dtype)};")
         else:
             self.loop(out.size, lambda i: f"{out.name}[{i}] = ({cast}){ins[0].at(i)};")
         return [out]
+
+    def op_reduce_precision(self, ins, avals, exponent_bits, mantissa_bits):
+        info = np.finfo(ins[0].dtype)
+        if exponent_bits < info.nexp or mantissa_bits < info.nmant:
+            # rounding to a narrower format (bfloat16-like) is not implemented bit-exactly
+            raise CKernelError(f"the C kernel does not implement 'reduce_precision' to "
+                               f"{exponent_bits} exponent / {mantissa_bits} mantissa bits on "
+                               f"{ins[0].dtype}; use the XLA kernel for this model")
+        return [ins[0]]  # as wide as the type: exactly the identity
+
+    def op_optimization_barrier(self, ins, avals):
+        return list(ins)  # several operands, passed through (C has no reordering to prevent)
 
     def op_select_n(self, ins, avals):
         out = self.fresh(avals[0])
@@ -498,7 +626,8 @@ class _Translator:
     def op_clamp(self, ins, avals):
         out = self.fresh(avals[0])
         lo, x, hi = [self.broadcast_reader(v, out.shape) for v in ins]
-        self.loop(out.size, lambda i: f"{out.name}[{i}] = fg_min(fg_max({x(i)}, {lo(i)}), {hi(i)});")
+        upper, lower = _extremum("max", out.dtype)[0], _extremum("min", out.dtype)[0]
+        self.loop(out.size, lambda i: f"{out.name}[{i}] = {lower.format(upper.format(x(i), lo(i)), hi(i))};")
         return [out]
 
     def op_round(self, ins, avals, rounding_method, **_):
@@ -618,10 +747,10 @@ class _Translator:
         return self._reduce(ins, avals, axes, "({0} + {1})", "0")
 
     def op_reduce_max(self, ins, avals, axes, **_):
-        return self._reduce(ins, avals, axes, "fg_max({0}, {1})", "-INFINITY")
+        return self._reduce(ins, avals, axes, *_extremum("max", avals[0].dtype))
 
     def op_reduce_min(self, ins, avals, axes, **_):
-        return self._reduce(ins, avals, axes, "fg_min({0}, {1})", "INFINITY")
+        return self._reduce(ins, avals, axes, *_extremum("min", avals[0].dtype))
 
     def op_reduce_prod(self, ins, avals, axes, **_):
         return self._reduce(ins, avals, axes, "({0} * {1})", "1")
@@ -648,14 +777,18 @@ class _Translator:
         return self._cumulative(ins, avals, axis, reverse, "({0} * {1})")
 
     def op_cummax(self, ins, avals, axis, reverse):
-        return self._cumulative(ins, avals, axis, reverse, "fg_max({0}, {1})")
+        return self._cumulative(ins, avals, axis, reverse, _extremum("max", avals[0].dtype)[0])
 
     def op_cummin(self, ins, avals, axis, reverse):
-        return self._cumulative(ins, avals, axis, reverse, "fg_min({0}, {1})")
+        return self._cumulative(ins, avals, axis, reverse, _extremum("min", avals[0].dtype)[0])
 
-    def op_dot_general(self, ins, avals, dimension_numbers, **_):
+    def op_dot_general(self, ins, avals, dimension_numbers, preferred_element_type=None, **_):
         (lc, rc), (lb, rb) = dimension_numbers
         lhs, rhs = ins
+        if any(x.dtype != np.dtype(avals[0].dtype) for x in ins):
+            # mixed types accumulate in a wider type in XLA; C would multiply in the narrow one
+            raise CKernelError(f"the C kernel does not implement 'dot_general' of {lhs.dtype} x {rhs.dtype} "
+                               f"into {avals[0].dtype}; use the XLA kernel for this model")
         out = self.fresh(avals[0])
         lfree = [d for d in range(len(lhs.shape)) if d not in lc and d not in lb]
         rfree = [d for d in range(len(rhs.shape)) if d not in rc and d not in rb]
@@ -792,58 +925,253 @@ class _Aval:
 # Compiling and calling
 # ---------------------------------------------------------------------------------------------
 
+def _compiler_command() -> list[str] | None:
+    """``$CC`` (or ``cc``) as a command line, its program resolved on PATH; None when absent.
+    Parsed as a shell would: ``CC="ccache gcc"`` is a launcher and its compiler."""
+    try:
+        words = shlex.split(os.environ.get("CC") or "cc")
+    except ValueError:  # unbalanced quotes: no usable command
+        return None
+    program = shutil.which(words[0]) if words else None
+    return None if program is None else [program, *words[1:]]
+
+
 def c_compiler() -> str | None:
-    """The C compiler used (``$CC`` or ``cc``), or None when there is none on PATH."""
-    cc = os.environ.get("CC", "cc")
-    return shutil.which(cc)
+    """The C compiler command used (``$CC`` or ``cc``), or None when there is none on PATH."""
+    command = _compiler_command()
+    return None if command is None else shlex.join(command)
+
+
+def _require_compiler() -> list[str]:
+    """The compiler command, or the CKernelError saying why there is none (checked before the
+    step is translated: no work is wasted on a machine that cannot build it)."""
+    if os.name == "nt":  # the cache's ownership checks and the flags below are POSIX-only
+        raise CKernelError("the C kernel is built on POSIX systems only (not on Windows); "
+                           "kernel='xla' works everywhere")
+    command = _compiler_command()
+    if command is None:
+        raise CKernelError(
+            f"kernel='c' needs a C compiler: none found as {os.environ.get('CC', 'cc')!r} on PATH "
+            "(install gcc or clang, or set CC); kernel='xla' needs none"
+        )
+    return command
 
 
 #: the most stack one kernel call may use for its intermediates
 MAX_STACK_BYTES = 1 << 20
 
+#: compiled kernels kept in a cache directory (the most recently used); older ones are removed
+MAX_CACHED_KERNELS = 64
+
 _CFLAGS = ("-O2", "-std=c99", "-shared", "-fPIC", "-fno-math-errno", "-fopenmp-simd")
 
 
-def _cache_dir() -> Path:
-    path = cache_root() / "c_kernels"
+def _untrusted(path: Path, directory: bool) -> str | None:
+    """Why ``path`` may have been written by someone else (so loading code from it would run
+    their code), or None. POSIX: ours, not a symbolic link, not group- or world-writable."""
+    info = os.lstat(path)
+    if stat.S_ISLNK(info.st_mode):
+        return "is a symbolic link"
+    if directory != stat.S_ISDIR(info.st_mode) or (not directory and not stat.S_ISREG(info.st_mode)):
+        return "is not a " + ("directory" if directory else "regular file")
+    if info.st_uid != os.getuid():
+        return f"is owned by uid {info.st_uid}, not by this user (uid {os.getuid()})"
+    if info.st_mode & 0o022:
+        return f"is group- or world-writable (mode {stat.S_IMODE(info.st_mode):o})"
+    return None
+
+
+def _usable_dir(path: Path) -> bool:
+    """Make ``path`` (mode 0700) if needed; True when it is ours, private and writable."""
     try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / ".probe"
-        probe.touch()
-        probe.unlink()
-        return path
-    except OSError:  # read-only home: a per-user temporary directory
-        path = Path(tempfile.gettempdir()) / f"furuta_gym_c_kernels_{os.getuid()}"
-        path.mkdir(parents=True, exist_ok=True)
-        return path
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(FileExistsError):
+            path.mkdir(mode=0o700)
+        info = os.lstat(path)
+        if stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and info.st_mode & 0o077:
+            os.chmod(path, 0o700)  # ours, made loose by an older version: tighten, keep the kernels
+        problem = _untrusted(path, directory=True)
+        if problem:
+            warnings.warn(f"not using the C kernel cache {path}: it {problem}", CKernelWarning, stacklevel=4)
+            return False
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".probe-"):  # unique: no race on the name
+            pass
+        return True
+    except OSError:  # read-only or missing home, full disk
+        return False
 
 
-def _compile(source: str) -> Path:
-    cc = c_compiler()
-    if cc is None:
-        raise CKernelError(
-            f"kernel='c' needs a C compiler: none found as {os.environ.get('CC', 'cc')!r} on PATH "
-            "(install gcc or clang, or set CC); kernel='xla' needs none"
-        )
-    command = [cc, *_CFLAGS]
-    digest = hashlib.sha256((" ".join(command) + "\n" + source).encode()).hexdigest()[:24]
-    directory = _cache_dir()
-    library = directory / f"kernel_{digest}.so"
-    if library.exists():
-        return library
+_PRIVATE_DIR: Path | None = None
+
+
+def _private_dir() -> Path:
+    """A fresh directory only this process knows (mkdtemp: 0700, unpredictable name), removed at
+    exit: the last resort when no shared cache directory can be trusted."""
+    global _PRIVATE_DIR
+    if _PRIVATE_DIR is None:
+        import atexit
+
+        _PRIVATE_DIR = Path(tempfile.mkdtemp(prefix="furuta_gym_c_kernels_"))
+        atexit.register(shutil.rmtree, _PRIVATE_DIR, ignore_errors=True)
+    return _PRIVATE_DIR
+
+
+def _cache_dir() -> Path:
+    for path in (cache_root() / "c_kernels",
+                 Path(tempfile.gettempdir()) / f"furuta_gym_c_kernels_{os.getuid()}"):  # read-only home
+        if _usable_dir(path):
+            return path
+    return _private_dir()
+
+
+@contextlib.contextmanager
+def _locked(directory: Path):
+    """Hold the cache directory's lock: concurrent workers wanting the same kernel compile it
+    once (the others wait, then find it). Without fcntl there is no lock, only duplicate work."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    try:
+        fd = os.open(directory / ".lock", os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
+    except OSError:  # no lock file possible: correct still (atomic replace), maybe duplicate work
+        yield
+        return
+    try:
+        with contextlib.suppress(OSError):  # a file system without flock (some NFS): as above
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def _mtime(path: Path) -> float:
+    try:
+        return path.stat().st_mtime
+    except OSError:
+        return 0.0
+
+
+def _evict(directory: Path, keep: int | None = None) -> None:
+    """Keep the ``keep`` most recently used kernels (a hit refreshes its mtime). A library a
+    running process has loaded stays mapped in it after removal."""
+    keep = MAX_CACHED_KERNELS if keep is None else keep
+    kernels = sorted(directory.glob("kernel_*.so"), key=_mtime, reverse=True)
+    for old in kernels[keep:]:
+        for path in (old, old.with_suffix(".verified")):
+            with contextlib.suppress(OSError):
+                path.unlink()
+
+
+def _compiler_works(command: list[str], directory: Path) -> bool:
+    """Whether ``command`` compiles a trivial file (a stub ``cc``, as on a Mac without the
+    command line tools, does not)."""
+    with tempfile.TemporaryDirectory(dir=directory) as tmp:
+        c_file = Path(tmp) / "trial.c"
+        c_file.write_text("int fg_trial(int x) { return x + 1; }\n")
+        try:
+            result = subprocess.run([*command, *_CFLAGS, str(c_file), "-o", str(Path(tmp) / "trial.so")],
+                                    capture_output=True, timeout=120)
+        except (OSError, subprocess.SubprocessError):
+            return False
+        return result.returncode == 0
+
+
+def _build(command: list[str], source: str, directory: Path, library: Path) -> None:
+    cc = shlex.join(command)
     try:
         with tempfile.TemporaryDirectory(dir=directory) as tmp:
             c_file = Path(tmp) / "kernel.c"
             c_file.write_text(source)
             partial = Path(tmp) / "kernel.so"
-            result = subprocess.run([*command, str(c_file), "-o", str(partial), "-lm"],
+            result = subprocess.run([*command, *_CFLAGS, str(c_file), "-o", str(partial), "-lm"],
                                     capture_output=True, text=True, timeout=600)
             if result.returncode != 0:
-                raise CKernelError(f"the C compiler {cc} failed on the generated kernel:\n{result.stderr[-2000:]}")
-            os.replace(partial, library)  # atomic: a concurrent process sees all of it or none
+                # tell a broken compiler from a kernel it rejects
+                why = "" if _compiler_works(command, directory) else \
+                    " (it fails on a trivial test file too: not a working C compiler)"
+                raise CKernelError(f"the C compiler {cc} failed on the generated kernel{why}:\n"
+                                   f"{result.stderr[-2000:]}")
+            os.chmod(partial, 0o700)
+            os.replace(partial, library)  # atomic: a process without the lock sees all of it or none
     except (OSError, subprocess.SubprocessError) as exc:
         raise CKernelError(f"compiling the C kernel with {cc} failed: {type(exc).__name__}: {exc}") from exc
-    return library
+
+
+def _compile_and_load(source: str) -> tuple[Path, ctypes.CDLL]:
+    """The kernel's library (cached by a hash of the source and the compiler command), checked
+    to be ours and private before it is loaded: loading a library runs its code."""
+    command = _require_compiler()
+    digest = hashlib.sha256((" ".join([*command, *_CFLAGS]) + "\n" + source).encode()).hexdigest()[:24]
+    directory = _cache_dir()
+    library = directory / f"kernel_{digest}.so"
+    with _locked(directory):
+        if os.path.lexists(library):
+            with contextlib.suppress(OSError):
+                os.utime(library, follow_symlinks=False)  # recently used: eviction keeps it
+        else:
+            _build(command, source, directory, library)
+            _evict(directory)
+        try:
+            problem = _untrusted(library, directory=False)
+        except OSError as exc:  # removed under us by a process that ignored the lock
+            raise CKernelError(f"the compiled C kernel {library} vanished: {exc}") from exc
+        if problem:
+            message = f"refusing to load the cached C kernel {library}: it {problem}; XLA steps this model"
+            warnings.warn(message, CKernelWarning, stacklevel=4)
+            raise CKernelError(message)
+        try:
+            return library, ctypes.CDLL(str(library))
+        except OSError as exc:
+            raise CKernelError(f"loading the compiled C kernel {library} failed: {exc}") from exc
+
+
+#: library file names already checked against XLA in this process (same source, same function)
+_VERIFIED: set[str] = set()
+
+#: random input sets compared with XLA after the example inputs
+_VERIFY_TRIALS = 3
+
+#: (rtol, atol relative to the output's scale) when comparing C with XLA, by float type
+_TOLERANCES = {"float64": (1e-9, 1e-12), "float32": (1e-4, 1e-6)}
+
+
+def _verified_on_disk(marker: Path) -> bool:
+    try:
+        return _untrusted(marker, directory=False) is None
+    except OSError:  # none
+        return False
+
+
+def _trial_input(example, aval, rng) -> np.ndarray:
+    """The example input (rng None) or a random one near it: floats move by 5 % of their size,
+    or by N(0, 0.5) where zero (states and inputs are zeros in the examples; angles and rates
+    of order one are their typical range). Integers and booleans may be indices or loop
+    counts: kept as given."""
+    x = np.array(example, dtype=aval.dtype).reshape(aval.shape)
+    if rng is None or not np.issubdtype(x.dtype, np.floating):
+        return x
+    scale = np.where(x == 0, 0.5, 0.05 * np.abs(x))
+    noisy = x + rng.normal(size=x.shape) * np.nan_to_num(scale, nan=0.0, posinf=0.0)
+    return np.array(noisy, dtype=x.dtype)  # a fresh C-contiguous array, 0-d kept 0-d
+
+
+def _disagreement(got: np.ndarray, want: np.ndarray) -> str | None:
+    """Why ``got`` (C) is not ``want`` (XLA), or None when they agree to round-off."""
+    if got.shape != want.shape:
+        return f"shape {got.shape} vs {want.shape}"
+    if not np.issubdtype(want.dtype, np.inexact):
+        bad = got != want
+        return None if not bad.any() else f"{int(bad.sum())} element(s) differ exactly, e.g. {got[bad][0]} vs {want[bad][0]}"
+    rtol, atol = _TOLERANCES.get(want.dtype.name, (1e-4, 1e-6))
+    finite = np.abs(want[np.isfinite(want)])
+    atol *= max(1.0, float(finite.max()) if finite.size else 1.0)  # cancellation scales with the output
+    close = np.isclose(got, want, rtol=rtol, atol=atol, equal_nan=True)
+    if close.all():
+        return None
+    k = np.flatnonzero(~close.ravel())[0]
+    return f"{int((~close).sum())} element(s) differ, e.g. C {got.ravel()[k]!r} vs XLA {want.ravel()[k]!r}"
 
 
 class CKernel:
@@ -859,26 +1187,55 @@ class CKernel:
     def __init__(self, fn: Callable, *example_args: Any, name: str = "kernel"):
         import jax
 
+        _require_compiler()
         leaves, self.in_tree = jax.tree_util.tree_flatten(example_args)
         self.in_avals = [_Aval(np.shape(x), x.dtype if hasattr(x, "dtype") else np.asarray(x).dtype) for x in leaves]
 
         def flat_fn(*flat):
             return fn(*jax.tree_util.tree_unflatten(self.in_tree, flat))
 
+        self.name = name
         closed, out_shapes = jax.make_jaxpr(flat_fn, return_shape=True)(*leaves)  # one trace
+        # the traced types, not the examples': without jax_enable_x64 a float64 example is float32
+        self.in_avals = [_Aval(v.aval.shape, v.aval.dtype) for v in closed.jaxpr.invars]
         self.out_avals = [_Aval(v.aval.shape, v.aval.dtype) for v in closed.jaxpr.outvars]
         self.out_tree = jax.tree_util.tree_structure(out_shapes)
         self.source = self._translate(closed)
-        self.library_path = _compile(self.source)
-        try:
-            library = ctypes.CDLL(str(self.library_path))
-        except OSError as exc:
-            raise CKernelError(f"loading the compiled C kernel {self.library_path} failed: {exc}") from exc
+        self.library_path, library = _compile_and_load(self.source)
         self._function = library.fg_kernel
         self._function.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
         self._function.restype = None
         self._library = library
-        self.name = name
+        # checked once per library: when it is built, or loaded from a cache that never checked it
+        marker = self.library_path.with_suffix(".verified")
+        if self.library_path.name not in _VERIFIED and not _verified_on_disk(marker):
+            self._verify(flat_fn, leaves)
+            with contextlib.suppress(OSError):
+                marker.touch()
+        _VERIFIED.add(self.library_path.name)
+
+    def _verify(self, flat_fn, leaves) -> None:
+        """Run the C function and XLA on the example inputs and a few random ones near them: a
+        translation bug (or a primitive whose C semantics differ) must never silently change a
+        model's dynamics, so a kernel that disagrees is refused and the caller takes XLA."""
+        import jax
+
+        reference = jax.jit(flat_fn)
+        rng = np.random.default_rng(0)
+        for trial in range(1 + _VERIFY_TRIALS):
+            inputs = [_trial_input(x, a, rng if trial else None) for x, a in zip(leaves, self.in_avals)]
+            _, got = self.new_buffers()
+            self.bind(inputs, got)()
+            want = [np.asarray(w) for w in jax.tree_util.tree_leaves(reference(*inputs))]
+            for k, (g, w) in enumerate(zip(got, want)):
+                problem = _disagreement(g, w)
+                if problem:
+                    message = (f"the C kernel {self.name!r} disagrees with XLA on output {k} "
+                               f"({'example' if trial == 0 else 'random'} inputs, trial {trial}): "
+                               f"{problem}; primitives translated: {', '.join(sorted(self.primitives))}. "
+                               "Refusing it: XLA steps this model")
+                    warnings.warn(message, CKernelWarning, stacklevel=3)
+                    raise CKernelError(message)
 
     def _translate(self, closed) -> str:
         t = _Translator()
@@ -905,6 +1262,7 @@ class CKernel:
             t.indent -= 1
             t.emit("}")
         staged = "\n".join(t.lines)
+        self.primitives = t.primitives
         return (
             _PRELUDE + "\n".join(t.static_arrays) + "\n"
             + "void fg_kernel(void *const *ins, void *const *outs) {\n" + staged + "\n}\n"

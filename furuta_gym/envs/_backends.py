@@ -550,6 +550,7 @@ class _CStepper:
 
         self._n_state = n_state
         self._functions = _step_functions(static, rebuild, timestep, substeps)
+        self._model_name = type(static).__name__  # named when its C kernel is refused
         self._key = (treedef_key, timestep, substeps, n_inputs)
         self._leaves = [np.asarray(a) for a in jax.tree_util.tree_leaves(dynamic)]
         self._dynamic = dynamic
@@ -573,9 +574,9 @@ class _CStepper:
             x, u = np.zeros(self._n_state), np.zeros(self._n_inputs)
             try:
                 if which == "period":
-                    kernel = CKernel(period, self._dynamic, x, u, name="period")
+                    kernel = CKernel(period, self._dynamic, x, u, name=f"period step of {self._model_name}")
                 else:
-                    kernel = CKernel(split, self._dynamic, x, u, np.int64(0), u, name="split")
+                    kernel = CKernel(split, self._dynamic, x, u, np.int64(0), u, name=f"split step of {self._model_name}")
             except CKernelError as exc:
                 kernel = exc
             try:
