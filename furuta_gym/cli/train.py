@@ -6,6 +6,13 @@ Example::
     furuta-gym train --system furuta --model dln --loss prop --data free.csv \\
         --forced forced.csv --out runs/furuta_dln --epochs 200,20
     furuta-gym train ... --out runs/furuta_dln --resume      # continue a killed run
+    furuta-gym train --system furuta --model dln --loss prop --data qube:1-5 --out runs/real_dln \
+        --horizons itau,2,0.1s --epochs 2000,4,1               # measured logs (real QUBE runs)
+
+DATA is generated data or measured logs (``qube:RUNS`` for the real QUBE-Servo runs shipped with
+the package, or files read with ``--column-map/--sign/--offset``): absent velocities are estimated
+(``--velocity``), the start is dropped (``--skip``) and logs without velocities are cut into
+elementary trajectories of ``--split`` seconds (the paper's 1 s for its experimental Furuta data).
 
 Writes ``DIR/model.eqx`` (load with ``furuta_gym.training.checkpoint.load_model``), the
 resumable ``DIR/train_state.eqx``, periodic ``DIR/model_epoch*.eqx`` and ``DIR/history.json``.
@@ -15,6 +22,8 @@ from __future__ import annotations
 
 import argparse
 import json
+
+from ._logs import add_log_arguments, prepared_logs
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -55,9 +64,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="DeLaN, APHYNITY or augmented DeLaN")
     parser.add_argument("--loss", required=True, choices=["traj", "aph", "prop", "itau"],
                         help="L_traj, L_aph (‖F_a‖ + λL_traj), L_prop (L_Iτ + λL_traj), or L_Iτ alone")
-    parser.add_argument("--data", required=True, help="training trajectories (CSV/NPZ/MAT, long format)")
+    parser.add_argument("--data", required=True, nargs="+", metavar="DATA",
+                        help="training trajectories: CSV (.csv.gz too), NPZ or MAT in the long format, "
+                        "several pooled; 'qube:RUNS' (e.g. qube:1-5) takes the real QUBE-Servo runs "
+                        "shipped with the package")
     parser.add_argument("--forced", help="forced trajectory file for the overall-scale fit "
-                        "(needed after training on free, u = 0, data)")
+                        "(needed after training on free, u = 0, data; read like DATA, never split)")
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
     parser.add_argument("--paper", action="store_true",
@@ -80,17 +92,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, help="random seed (weights, shuffling)")
     parser.add_argument("--checkpoint-every", type=int, help="model snapshot every N epochs")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_log_arguments(
+        parser, None,
+        "cut each log into elementary trajectories of this many seconds (0: keep whole); default: "
+        "logs without velocities (measured) are cut as the paper cuts its experimental data, 1 s "
+        "Furuta (2 s N-MSD), and generated data carrying velocities are kept whole",
+    )
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..data import load_trajectories
-    from ..training.train import TrainConfig, train
+def _describe_data(args, trajs, notes) -> dict:
+    """Say what the logs became; the returned record goes beside the run as ``data.json`` (the
+    checkpoint's data hash identifies the data but cannot say where they came from)."""
+    dur = sorted({round(len(tr) * tr.dt, 3) for tr in trajs})
+    span = f"{dur[0]:g} s" if len(dur) == 1 else f"{dur[0]:g}-{dur[-1]:g} s"
+    print(f"training data: {len(trajs)} trajectories of {span} from {' '.join(args.data)}"
+          + "".join(f"; {n}" for n in notes))
+    return {"data": args.data, "forced": args.forced, "n_trajectories": len(trajs), "notes": notes,
+            **{k: getattr(args, k) for k in ("column_map", "sign", "offset", "skip", "velocity", "cutoff", "split")}}
 
-    trajs = load_trajectories(args.data, args.system, require_velocities=True)
-    forced = load_trajectories(args.forced, args.system, require_velocities=True) if args.forced else None
-    from ._cache import enable_compilation_cache
 
-    enable_compilation_cache()  # ~20 s of compiling once per machine, not once per run
+def _config(args):
+    """The TrainConfig the options ask for."""
+    from ..training.train import TrainConfig
+
     overrides = {}
     for name, key in [("epochs", "epochs"), ("horizons", "horizons"), ("lr", "learning_rate"),
                       ("weight_decay", "weight_decay"), ("lam", "lambda_traj"), ("lambda_step", "lambda_step"),
@@ -104,7 +128,21 @@ def run(args: argparse.Namespace) -> int:
         overrides["horizons"] = (2,)
     overrides["progress"] = not args.no_progress
     make = TrainConfig.paper if args.paper else TrainConfig.for_system
-    config = make(args.system, **overrides)
+    return make(args.system, **overrides)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..training.train import train
+
+    trajs, notes = prepared_logs(args.data, args)
+    forced = prepared_logs([args.forced], args, split=None)[0] if args.forced else None
+    data_info = _describe_data(args, trajs, notes)
+    from ._cache import enable_compilation_cache
+
+    enable_compilation_cache()  # ~20 s of compiling once per machine, not once per run
+    config = _config(args)
     hparams = {"hidden": args.hidden} if args.hidden else None
     try:
         model, history = train(args.model, args.system, args.loss, trajs, config, args.out,
@@ -114,6 +152,8 @@ def run(args: argparse.Namespace) -> int:
 
         print(f"furuta-gym train: {exc or 'interrupted'}", file=sys.stderr)
         return 130
+    # written once the run is this one's (a refused --out keeps the data record it had)
+    (Path(args.out) / "data.json").write_text(json.dumps(data_info, indent=1) + "\n")
     last = history[-1] if history else {}
     summary = {k: v for k, v in last.items() if k in ("epoch", "traj", "itau", "penalty", "lambda")}
     print(f"trained {args.system} {args.model} with L_{args.loss}: {json.dumps(summary)}")

@@ -1,0 +1,147 @@
+"""The docs table of ``experiments/real_models.py``, generated from its result files (never typed).
+
+Reads ``results/real_models/*.json`` and rewrites the block between
+``<!-- generated:real-models -->`` and ``<!-- /generated:real-models -->`` in docs/learning.md:
+per-state log10 RMSE and RMSE on the test runs, the winner (lowest mean log10 RMSE over the four
+states), what each learned model was trained with, and the command that makes it all. ``--check``
+only compares (exit 1 when the docs disagree with the results).
+
+    python experiments/real_models_table.py [--check]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "results" / "real_models"
+DOC = ROOT / "docs" / "learning.md"
+NAME = "real-models"
+ORDER = ("nominal", "fitted", "diagnosed", "dln_prop", "dln_traj", "adln_prop", "adln_aph")
+STATES = (("alpha", "α"), ("beta", "β"), ("alpha_dot", "α̇"), ("beta_dot", "β̇"))
+COMMAND = "python experiments/real_models.py && python experiments/real_models_table.py"
+
+
+def load(folder: Path = RESULTS) -> tuple[dict, list[dict]]:
+    summary = json.loads((folder / "summary.json").read_text())
+    docs = [json.loads((folder / f"{n}.json").read_text()) for n in ORDER if (folder / f"{n}.json").is_file()]
+    return summary, docs
+
+
+def mean_log10(doc) -> float:
+    """Mean of the four log10 RMSEs; a diverged model ("X") ranks last."""
+    cells = doc["test"]["log10_rmse"].values()
+    return float("inf") if any(isinstance(v, str) for v in cells) else sum(cells) / len(cells)
+
+
+def _cell(v, best) -> str:
+    if isinstance(v, str):
+        return v
+    return f"**{v:.3f}**" if v == best else f"{v:.3f}"
+
+
+def score_table(docs: list[dict]) -> str:
+    units = ("rad", "rad", "rad/s", "rad/s")
+    head = ("| model | " + " | ".join(f"{s} log10" for _, s in STATES) + " | mean log10 | "
+            + " | ".join(f"{s} RMSE ({u})" for (_, s), u in zip(STATES, units)) + " |")
+    rows = [head, "|---" * (2 + 2 * len(STATES)) + "|"]
+    finite = [d for d in docs if mean_log10(d) < float("inf")]
+    best = {k: min(d["test"]["log10_rmse"][k] for d in finite) for k, _ in STATES} if finite else {}
+    best_mean = min((mean_log10(d) for d in finite), default=None)
+    for d in docs:
+        lg, rm = d["test"]["log10_rmse"], d["test"]["rmse"]
+        m = mean_log10(d)
+        rows.append(f"| {d['label']} | " + " | ".join(_cell(lg[k], best.get(k)) for k, _ in STATES)
+                    + f" | {_cell(m, best_mean) if m < float('inf') else 'X'} | "
+                    + " | ".join("–" if rm[k] is None else f"{rm[k]:.4f}" for k, _ in STATES) + " |")
+    return "\n".join(rows)
+
+
+def shape_table(docs: list[dict]) -> str:
+    """The potential each model believes in, where the physics says what it must be."""
+    rows = ["| model | V(β = π) − V(0) (mJ) | ∂²V/∂β² at β = π (mN·m/rad) |", "|---|---|---|"]
+    for d in docs:
+        p = d["potential"]
+        rows.append(f"| {d['label']} | {1e3 * p['rise_to_top_J']:.1f} | {1e3 * p['curvature_at_top_Nm_per_rad']:.2f} |")
+    return "\n".join(rows)
+
+
+def training_table(docs: list[dict]) -> str:
+    rows = ["| model | epochs per stage | horizons | L_Iτ quadrature | learning rate | training s "
+            "| snapshot kept | its / the last one's validation mean log10 |",
+            "|---|---|---|---|---|---|---|---|"]
+    for d in docs:
+        tr = d.get("training")
+        if not tr:
+            continue
+        c = tr["config"]
+        hz = ", ".join("L_Iτ alone" if h is None else (f"{h} samples" if isinstance(h, int) else f"{h} s")
+                       for h in c["horizons"])
+        lr = c["learning_rate"]
+        lr = ", ".join(f"{v:g}" for v in lr) if isinstance(lr, list) else f"{lr:g}"
+        quad = c["quadrature"] if d["name"].endswith("_prop") else "–"  # L_Iτ's rule: L_prop only
+        rows.append(f"| {d['label']} | {', '.join(map(str, c['epochs']))} | {hz} | {quad} | {lr} "
+                    f"| {tr['training_seconds']:.0f} | {tr['selected']} "
+                    f"| {tr['validation'][tr['selected']]:.3f} / {tr['validation']['model.eqx']:.3f} |")
+    return "\n".join(rows)
+
+
+def block(summary: dict, docs: list[dict]) -> str:
+    ranked = sorted(docs, key=mean_log10)
+    winner, second = ranked[0], ranked[1]
+    test = docs[0]["test"]
+    fit, tst = summary["fit_runs"], summary["test_runs"]
+    diag = next((d["diagnose"] for d in docs if d.get("diagnose")), None)
+    train_min = sum(d["training"]["training_seconds"] for d in docs if d.get("training")) / 60
+    lines = [
+        f"Fitted / trained on runs {fit[0]}–{fit[-1]}, scored on runs {tst[0]}–{tst[-1]}: {test['n_windows']} "
+        f"open-loop windows of {summary['window_seconds']} s started from the measured state, input held; "
+        "log10 RMSE (lower is better; **bold**: best in its column) and RMSE in rad, rad/s.",
+        "", score_table(docs), "",
+        f"**Winner: {winner['label']}** (lowest mean log10 RMSE over the four states, {mean_log10(winner):.3f}; "
+        f"next {second['label']}, {mean_log10(second):.3f}: {mean_log10(second) - mean_log10(winner):.3f} "
+        "apart, one seed of each learned model).",
+    ]
+    if diag:
+        lines += ["", f"Diagnosis on runs {fit[0]}–{fit[-1]}: {diag['note']}."]
+    lines += ["", "Energy shape at α = 0 (the physical potential rises from hanging to upright and "
+              "has its maximum there; the logs only visit the neighbourhood of the top):", "",
+              shape_table(docs), "",
+              f"Learned models: {summary['n_train']} training and {summary['n_validation']} validation "
+              f"elementary trajectories of {summary['split_seconds']} s (every {summary['validation_every']}th "
+              f"held out), the script's schedules × {summary['budget']}:", "", training_table(docs), "",
+              f"Made by `{COMMAND}` ({train_min:.0f} min of training in all, {summary['date']}); figure: "
+              "[results/real_models/energy.png](../results/real_models/energy.png)."]
+    return "\n".join(lines)
+
+
+def render(text: str, body: str) -> str:
+    pattern = re.compile(rf"(<!-- generated:{NAME} -->).*?(<!-- /generated:{NAME} -->)", re.S)
+    if not pattern.search(text):
+        raise ValueError(f"{DOC}: no <!-- generated:{NAME} --> ... <!-- /generated:{NAME} --> markers")
+    return pattern.sub(lambda m: m.group(1) + "\n" + body + "\n" + m.group(2), text)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="compare only; exit 1 on a difference")
+    ap.add_argument("--results", type=Path, default=RESULTS, help="result folder (default results/real_models)")
+    args = ap.parse_args()
+    summary, docs = load(args.results)
+    text = DOC.read_text()
+    new = render(text, block(summary, docs))
+    if new != text:
+        if args.check:
+            print(f"{DOC.relative_to(ROOT)} is out of date with {args.results}; "
+                  "run python experiments/real_models_table.py")
+            return 1
+        DOC.write_text(new)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
