@@ -1,0 +1,88 @@
+"""Controllers designed on real-data models, run on the plant variant that matches the rig (issue 28).
+
+    python bench/control_real_models.py [--episodes 30] [--seed 0] [--no-write]
+
+Design models: the analytic model fitted by ``diagnose`` on the real QUBE runs 1–5 plus the
+effects it found (``model_after``), and the learned models trained on the same runs by
+``experiments/real_models.py`` (``results/real_models/runs/*/model.eqx``). Plant: the MuJoCo
+ground truth with the effects ``diagnose`` found written into it — the closest stand-in for the
+rig this package has (its masses and lengths stay nominal: MuJoCo takes physical parameters,
+the fit gives lumped ones). Swing-up + LQR (volts), 5 V, 500 Hz, 8 s episodes, x0 = 0 plus
+seeded starts near the hanging rest, as ``bench/control_benchmark.py``. Writes its section of
+BENCHMARKS.md unless ``--no-write``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from _benchmarks_md import machine, write_section
+from control_benchmark import SECONDS, TABLE_HEADER, _row
+
+ROOT = Path(__file__).resolve().parents[1]
+START, END = "<!-- control_real_models:start -->", "<!-- control_real_models:end -->"
+LEARNED = ("adln_aph", "dln_traj", "adln_prop", "dln_prop")
+
+
+def _designs(res, load_model):
+    """(label, design model) pairs: the diagnosed analytic model, then each real-data checkpoint."""
+    out = [("diagnosed analytic (runs 1–5)", res.model_after)]
+    for name in LEARNED:
+        path = ROOT / "results" / "real_models" / "runs" / name / "model.eqx"
+        if path.exists():
+            out.append((f"{name} trained on runs 1–5", load_model(path, expected_system="furuta")))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--episodes", type=int, default=30)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args(argv)
+    import furuta_gym
+
+    furuta_gym.enable_x64()
+    import gymnasium as gym
+
+    from furuta_gym.controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
+    from furuta_gym.datasets import load_qube_closed_loop
+    from furuta_gym.diagnose import diagnose
+    from furuta_gym.training.checkpoint import load_model
+
+    res = diagnose(load_qube_closed_loop(range(1, 6)), "furuta", window=0.1, oe_max_windows=64)
+    found = [e for e in res.found if e.name not in ("input_delay", "actuator_lag")]
+    plant = ", ".join(f"{e.name}:{e.joint} {e.coefficient:.2g}" for e in found) or "none"
+    starts = np.concatenate([np.zeros((1, 4)), near_rest_starts(args.episodes, args.seed, False)])
+    make_env = lambda: gym.make("furuta_gym/Furuta-v0", episode_seconds=None, effects=found)  # noqa: E731
+    rows, notes = [], []
+    for label, model in _designs(res, load_model):
+        try:
+            ctrl = SwingUpLQR.from_model(model, seed=args.seed)
+        except Exception as exc:  # a learned design can fail: say how, keep the table
+            notes.append(f"{label}: design failed — {type(exc).__name__}: {exc}.")
+            continue
+        t = time.perf_counter()
+        recs = evaluate_on_env(ctrl, make_env, starts, SECONDS, seed=args.seed)
+        rows.append(_row("swing-up + LQR (volts)", label, f"mujoco + {plant}", recs, time.perf_counter() - t))
+        print(rows[-1], flush=True)
+    stamp = f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC"
+    lines = [START, "### Designed on real-data models, run on the matching plant variant", "",
+             f"`python bench/control_real_models.py --episodes {args.episodes}` — {stamp}, {machine()}. "
+             f"Plant: MuJoCo + what `diagnose` found on runs 1–5 ({plant}); nominal masses and lengths.",
+             "", TABLE_HEADER, *rows, *[f"- {x}" for x in notes], END]
+    section = "\n".join(lines)
+    print(section)
+    if not args.no_write:
+        write_section(section, START, END)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
