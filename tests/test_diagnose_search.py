@@ -53,7 +53,7 @@ def test_a_failing_largest_gain_does_not_stop_the_search():
         (frozenset(), frozenset({COULOMB.key})): _ev(0.26, 6.6),
         (frozenset({COULOMB.key}), frozenset({SPRING.key})): _ev(0.50, 5.0),
     }
-    steps, first, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], SETTINGS)
+    steps, first = search(FakeComparer(table), [SPRING, COULOMB, DRAG], SETTINGS)
     assert _keys(steps) == [(COULOMB.key,), (SPRING.key,)]
     assert first[SPRING.key].z == pytest.approx(2.7)
 
@@ -63,7 +63,7 @@ def test_strongest_evidence_first_among_passing():
         (frozenset(), frozenset({SPRING.key})): _ev(0.125, 3.5),
         (frozenset(), frozenset({COULOMB.key})): _ev(0.11, 8.8),
     }
-    steps, _, _ = search(FakeComparer(table), [SPRING, COULOMB], SETTINGS)
+    steps, _ = search(FakeComparer(table), [SPRING, COULOMB], SETTINGS)
     assert _keys(steps)[0] == (COULOMB.key,)
 
 
@@ -72,7 +72,7 @@ def test_small_gain_or_weak_consistency_is_not_added():
         (frozenset(), frozenset({SPRING.key})): _ev(0.02, 9.0),  # consistent but too small
         (frozenset(), frozenset({COULOMB.key})): _ev(0.30, 2.9),  # large but not consistent
     }
-    steps, _, _ = search(FakeComparer(table), [SPRING, COULOMB], SETTINGS)
+    steps, _ = search(FakeComparer(table), [SPRING, COULOMB], SETTINGS)
     assert steps == []
 
 
@@ -84,7 +84,7 @@ def test_effects_that_only_help_together_are_found_as_a_pair():
         (frozenset({COULOMB.key}), frozenset({SPRING.key})): _ev(0.55, 6.0),
         (frozenset({SPRING.key}), frozenset({COULOMB.key})): _ev(0.50, 4.0),
     }
-    steps, _, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], SETTINGS)
+    steps, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], SETTINGS)
     assert _keys(steps) == [(SPRING.key, COULOMB.key)]
     assert steps[0].evidence[SPRING.key].z == pytest.approx(6.0)  # each member given the other
     assert steps[0].evidence[COULOMB.key].z == pytest.approx(4.0)
@@ -99,13 +99,13 @@ def test_a_pair_whose_member_adds_nothing_is_refused():
         (frozenset({DRAG.key}), frozenset({SPRING.key})): _ev(0.55, 6.0),
         (frozenset({SPRING.key}), frozenset({DRAG.key})): _ev(0.001, 0.5),  # passenger
     }
-    steps, _, _ = search(FakeComparer(table), [SPRING, DRAG], SETTINGS)
+    steps, _ = search(FakeComparer(table), [SPRING, DRAG], SETTINGS)
     assert steps == []
 
 
 def test_a_non_physical_sign_is_never_added():
     table = {(frozenset(), frozenset({SPRING.key})): _ev(0.16, 7.3)}
-    steps, _, _ = search(FakeComparer(table, negative={SPRING.key}), [SPRING], SETTINGS)
+    steps, _ = search(FakeComparer(table, negative={SPRING.key}), [SPRING], SETTINGS)
     assert steps == []
 
 
@@ -115,7 +115,7 @@ def test_indistinguishable_candidates_resolve_to_the_specific_mechanism():
         (frozenset(), frozenset({COM.key})): _ev(0.08, 10.1),
     }
     same = {TORQUE.key: {COM.key}, COM.key: {TORQUE.key}}
-    steps, _, _ = search(FakeComparer(table), [COM, TORQUE], SETTINGS, same)
+    steps, _ = search(FakeComparer(table), [COM, TORQUE], SETTINGS, same)
     assert _keys(steps) == [(COM.key,)]
     assert steps[0].equivalents == {TORQUE.key: COM.key}
 
@@ -124,7 +124,7 @@ def test_max_effects_bounds_the_search():
     table = {(frozenset(), frozenset({c.key})): _ev(0.2, 5.0) for c in (SPRING, COULOMB, DRAG)}
     table.update({(frozenset({SPRING.key}), frozenset({c.key})): _ev(0.2, 5.0) for c in (COULOMB, DRAG)})
     s = SearchSettings(3.0, 0.03, 1, 4, 2.0)
-    steps, _, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], s)
+    steps, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], s)
     assert len(steps) == 1
 
 
@@ -161,6 +161,6 @@ def test_a_pair_takes_the_specific_mechanism_of_an_indistinguishable_group():
         (frozenset({TORQUE.key}), frozenset({delay.key})): _ev(0.06, 2.2),
     }
     same = {TORQUE.key: {COM.key}, COM.key: {TORQUE.key}}
-    steps, _, _ = search(FakeComparer(table), [COM, TORQUE, delay], SETTINGS, same)
+    steps, _ = search(FakeComparer(table), [COM, TORQUE, delay], SETTINGS, same)
     assert _keys(steps) == [(COM.key, delay.key)] or _keys(steps) == [(delay.key, COM.key)]
     assert steps[0].equivalents == {TORQUE.key: COM.key}

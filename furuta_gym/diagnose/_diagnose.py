@@ -106,6 +106,15 @@ class EffectEvidence:
         }
 
 
+def _spring_rests(effects) -> dict[str, float]:
+    """{joint: rest position τ0/k} where ``effects`` hold a positive spring and a constant torque
+    on one joint: −k·q + τ0 is one spring whose rest position is not zero (a cable's neutral)."""
+    by = {(e.name, e.joint): e for e in effects}
+    return {j: float(by[("constant_torque", j)].coefficient) / float(e.coefficient)
+            for (name, j), e in by.items()
+            if name == "spring" and e.coefficient is not None and e.coefficient > 0 and ("constant_torque", j) in by}
+
+
 def _f(x):
     return None if x is None or not np.isfinite(x) else float(x)
 
@@ -169,14 +178,12 @@ class DiagnosisResult:
     def found(self) -> list[Effect]:
         """The significant effects in :mod:`furuta_gym.effects` vocabulary. A spring and a constant
         torque on one joint are one spring with a rest position (−k·q + τ0 = −k·(q − τ0/k))."""
-        sig = {(e.name, e.joint): e for e in self.significant}
+        rests = _spring_rests(self.significant)
         out = []
         for e in self.significant:
-            torque = sig.get(("constant_torque", e.joint))
-            if e.name == "spring" and torque is not None and e.coefficient > 0:
-                out.append(Effect("spring", e.joint, float(e.coefficient),
-                                  reference=float(torque.coefficient) / float(e.coefficient)))
-            elif not (e.name == "constant_torque" and ("spring", e.joint) in sig and sig[("spring", e.joint)].coefficient > 0):
+            if e.joint in rests and e.name == "spring":
+                out.append(Effect("spring", e.joint, float(e.coefficient), reference=rests[e.joint]))
+            elif not (e.joint in rests and e.name == "constant_torque"):
                 out.append(Effect(e.name, e.joint, float(e.coefficient)))
         return out
 
@@ -380,8 +387,8 @@ class _Fitter:
         dt = segs[0].dt
         self.stride = max(1, int(round(settings.interval / dt)))
         self.L = int(round(settings.window / dt))
-        self.substeps = 1 if spec.name == "furuta" else 2
-        self.smoothing = 0.02 if spec.name == "furuta" else 0.01
+        self.smoothing, self.substeps = _fit.PREDICTION[spec.name]
+        self.alternative = ""  # the input dynamics' other kind and how it fitted (a note)
         self.c_input = _fit.input_direction(layout, theta_fixed)
         self.weights = np.ones(spec.n_dof)
         self.build(_fit.NO_INPUT_DYNAMICS)
@@ -548,8 +555,7 @@ def _prediction_evidence(sums_before, sums_after) -> _trace_mod.Evidence:
     """How much better a refit predicts the validation windows (per-window log ratios)."""
     if not np.all(np.isfinite(sums_after)):
         return _trace_mod.Evidence(-np.inf, -np.inf, int(sums_after.size))
-    gain = float(1.0 - sums_after.sum() / sums_before.sum())
-    return _trace_mod.Evidence(gain, _trace_mod.log_ratio_t(sums_before, sums_after), int(sums_before.size))
+    return _trace_mod.Evidence.of_sums(sums_before, sums_after)
 
 
 def _confirm(fx: _Fitter, steps, theta_before, evidence):
@@ -647,7 +653,7 @@ def _trace(fx: _Fitter, testable, evidence):
     comparer = _trace_mod.Comparer(fx.fit_prob, fx.layout, fx.theta_fixed, fx.fixed_idx, fx.weights)
     same = _trace_mod.equivalent_pairs(fx.fit_prob, fx.layout, free_columns(fx.layout, [], fx.fixed_idx),
                                        fx.weights, testable)
-    steps, _, _ = _trace_mod.search(comparer, testable, _trace_mod.SearchSettings(
+    steps, _ = _trace_mod.search(comparer, testable, _trace_mod.SearchSettings(
         s.z_threshold, s.min_improvement, s.max_effects, s.pair_pool, s.member_z_threshold), same)
     for step in steps:
         for other, member in step.equivalents.items():
@@ -677,7 +683,7 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
             ev.coefficient = dyn.seconds if c == DELAY else float(theta[fx.layout.index(c.key)])
             if c == DELAY:
                 ev.name = "actuator_lag" if dyn.kind == "lag" else "input_delay"
-                ev.note = "; ".join(x for x in (ev.note, getattr(fx, "alternative", "")) if x)
+                ev.note = "; ".join(x for x in (ev.note, fx.alternative) if x)
             continue
         given = [a for a in accepted if a != c]
         score = comparer.compare(given, [c])
@@ -690,13 +696,10 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
         with_delay = c == DELAY or DELAY in given
         th, d = fit_equation_error(fx.fit_prob, fx.layout, free, fx.theta_fixed, fx.weights, with_delay)
         ev.coefficient = d if c == DELAY else float(th[fx.layout.index(c.key)])
-    for c in accepted:  # a spring and a constant torque on one joint: a spring's rest position
-        spring = evidence.get(f"spring:{c.joint}")
-        if c.name == "constant_torque" and spring is not None and spring.status == "selected" and spring.coefficient > 0:
-            ev = evidence[c.key]
-            ev.note = "; ".join(x for x in (ev.note, f"with spring:{c.joint}: its rest position is "
-                                            f"{ev.coefficient / spring.coefficient:.3g} (tau0/k)") if x)
     chosen = [evidence[c.key] for c in accepted]
+    for joint, rest in _spring_rests(chosen).items():
+        ev = evidence[f"constant_torque:{joint}"]
+        ev.note = "; ".join(x for x in (ev.note, f"with spring:{joint}: its rest position is {rest:.3g} (tau0/k)") if x)
     rest = sorted((e for e in evidence.values() if e.status in ("tested", "not confirmed")),
                   key=lambda e: -(e.improvement if e.improvement is not None else -np.inf))
     return chosen + rest + [e for e in evidence.values() if e.status in ("equivalent", "absorbed", "not identifiable")]
@@ -717,11 +720,10 @@ def _given_model(model, spec):
     return model
 
 
-def _prepare(data, spec, settings, column_map, signs, offsets, test: bool = False):
+def _prepare(data, spec, settings, column_map, signs, offsets):
     trajs = _as_trajectories(data, spec, column_map, signs, offsets)
     settings = settings.resolved(spec.name, trajs[0].dt)
-    if not test:
-        _check_data(trajs, spec, settings)
+    _check_data(trajs, spec, settings)
     qds = [_velocities(tr, settings) for tr in trajs]
     return trajs, qds, settings
 

@@ -290,6 +290,10 @@ def make_windows(segments: list[Segment], length: int, dynamics: InputDynamics =
     return w
 
 
+# (Coulomb smoothing ε, RK4 substeps per sample) of the open-loop predictions, per system: the
+# sgn law smoothed for the integrator; the N-MSD's 100 Hz samples take two RK4 steps
+PREDICTION = {"furuta": (0.02, 1), "nmsd": (0.01, 2)}
+
 _BATCH = 16  # windows per compiled call: every window set reuses one compiled shape
 
 

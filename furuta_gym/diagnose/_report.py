@@ -133,12 +133,6 @@ def _shown_segments(res):
     return [s for s in res._segments if s.held_out], "held-out segments"
 
 
-def _simulation(system: str):
-    """(coulomb smoothing, RK4 substeps) of the open-loop predictions; mirrors
-    ``_diagnose._Fitter.__init__`` (``self.smoothing``, ``self.substeps``): keep them equal."""
-    return (0.02, 1) if system == "furuta" else (0.01, 2)
-
-
 def _anchor(res):
     """The linearisation point of the regressors, as in ``diagnose``: nominal θ, fixed entries in."""
     theta = res.layout.nominal()
@@ -251,7 +245,7 @@ def _window_predictions(res, segs):
     from . import _fit
 
     L = int(round(res.settings.window / segs[0].dt))
-    smoothing, substeps = _simulation(res.system)
+    smoothing, substeps = _fit.PREDICTION[res.system]
     preds = []
     for theta, dyn in ((res.theta_before, _fit.NO_INPUT_DYNAMICS), (res.theta_after, res.input_dynamics)):
         win = _fit.make_windows(segs, L, dyn)

@@ -46,6 +46,12 @@ class Evidence:
     def passes(self, min_improvement: float, z_threshold: float) -> bool:
         return self.improvement >= min_improvement and self.z >= z_threshold
 
+    @classmethod
+    def of_sums(cls, s0: np.ndarray, s1: np.ndarray) -> "Evidence":
+        """Evidence of the per-block (or per-window) sums ``s1`` against ``s0``."""
+        improvement = float(1.0 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
+        return cls(improvement, log_ratio_t(s0, s1), int(s0.size))
+
 
 @dataclasses.dataclass
 class Step:
@@ -119,20 +125,6 @@ class Comparer:
         th, _ = self._fit(self.prob, base + [candidate])
         return bool(th[self.layout.index(candidate.key)] > 0)
 
-    def compare_problems(self, other_prob, effects: list[Candidate]) -> Evidence:
-        """Evidence for the same model on ``other_prob`` (the same blocks with another input
-        transformation, e.g. a lag instead of a delay) against it on this problem."""
-        sums0, sums1 = [], []
-        w = self.weights
-        for f in range(self.n_folds):
-            for prob, sums in ((self.prob, sums0), (other_prob, sums1)):
-                train, test = prob.subset(self.fold != f), prob.subset(self.fold == f)
-                th, _ = self._fit(train, effects)
-                sums.append(block_sums(test, th, w, 0.0, None, momentum_norm(train, th, w)))
-        s0, s1 = np.concatenate(sums0), np.concatenate(sums1)
-        improvement = float(1.0 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
-        return Evidence(improvement, log_ratio_t(s0, s1), int(s0.size))
-
     def compare(self, base: list[Candidate], added: list[Candidate]) -> Evidence:
         """Evidence for ``base + added`` against ``base``."""
         sums0, sums1 = [], []
@@ -143,9 +135,7 @@ class Comparer:
             w = self.weights
             sums0.append(block_sums(test, th0, w, d0, None, momentum_norm(train, th0, w)))
             sums1.append(block_sums(test, th1, w, d1, th0, momentum_norm(train, th1, w)))
-        s0, s1 = np.concatenate(sums0), np.concatenate(sums1)
-        improvement = float(1.0 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
-        return Evidence(improvement, log_ratio_t(s0, s1), int(s0.size))
+        return Evidence.of_sums(np.concatenate(sums0), np.concatenate(sums1))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,8 +165,6 @@ def _best_pair(comparer, chosen, scores, pool, s: SearchSettings, equivalents=No
                     key=lambda c: -scores[c.key].improvement)[: s.pair_pool]
     best = None
     for a, b in itertools.combinations(ranked, 2):
-        if {a.name, b.name} == {"input_delay"}:
-            continue
         whole = comparer.compare(chosen, [a, b])
         if not whole.passes(s.min_improvement, s.z_threshold):
             continue
@@ -207,18 +195,15 @@ SIGNED = ("spring", "coulomb_friction", "stiction", "viscous_friction", "quadrat
 def search(comparer: Comparer, testable: list[Candidate], s: SearchSettings, equivalents=None):
     """Forward selection that never stops at a failing candidate while another passes.
 
-    Returns (accepted steps, the first round's evidence per candidate key, the last round's
-    evidence per remaining candidate key given everything accepted).
+    Returns (accepted steps, the first round's evidence per candidate key).
     """
     chosen: list[Candidate] = []
     steps: list[Step] = []
     remaining = list(testable)
     first_round: dict[str, Evidence] = {}
-    last_round: dict[str, Evidence] = {}
     while remaining and len(chosen) < s.max_effects:
         scores = {c.key: comparer.compare(chosen, [c]) for c in remaining}
         first_round = first_round or dict(scores)
-        last_round = scores
         passing = [c for c in remaining if scores[c.key].passes(s.min_improvement, s.z_threshold)
                    and comparer.physical_sign(chosen, c)]
         if passing:
@@ -235,4 +220,4 @@ def search(comparer: Comparer, testable: list[Candidate], s: SearchSettings, equ
         steps.append(pair)
         chosen += list(pair.members)
         remaining = [c for c in remaining if c not in pair.members and c.key not in pair.equivalents]
-    return steps, first_round, last_round
+    return steps, first_round
