@@ -16,10 +16,10 @@ from .._x64 import ensure_x64
 from ..data import DataError, Trajectory, load_trajectories
 from ..effects import Effect, WithEffects
 from ..lagrangian import AbstractLagrangianSystem
-from ..training.checkpoint import load_model
-from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter, zero_phase_velocity
+from ..measured import estimate_velocities
+from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
-
+from ..training.checkpoint import load_model
 from . import _fit
 from . import _trace as _trace_mod
 from ._problem import Problem, fit_equation_error, free_columns
@@ -253,16 +253,8 @@ def _as_trajectories(data, spec, column_map, signs, offsets) -> list[Trajectory]
 
 
 def _velocities(tr: Trajectory, settings: DiagnosisSettings) -> np.ndarray:
-    if tr.qd is not None:
-        return np.asarray(tr.qd, dtype=float)
-    if settings.velocity == "zero_phase":
-        # default cutoff min(25 Hz, 0.08·fs): 25 Hz at 500 Hz, 8 Hz at 100 Hz — well above both
-        # benchmarks' motion bandwidth (≲ 5 Hz), well below the noise
-        cutoff = settings.velocity_cutoff_hz or min(25.0, 0.08 / tr.dt)
-        return zero_phase_velocity(tr.q, tr.dt, cutoff_hz=cutoff)
-    if settings.velocity == "derivative_filter":
-        return derivative_filter(tr.q, tr.dt)
-    raise ValueError(f"velocity must be 'zero_phase' or 'derivative_filter', got {settings.velocity!r}")
+    """Measured velocities, or estimated as train and evaluate estimate them."""
+    return np.asarray(estimate_velocities(tr, settings.velocity, settings.velocity_cutoff_hz).qd, dtype=float)
 
 
 def _check_data(trajs: list[Trajectory], spec, settings: DiagnosisSettings) -> None:
