@@ -60,7 +60,7 @@ def test_state_near_the_old_angle_bound_keeps_running(dynamics):
 
 
 def test_batched_env_does_not_diverge_on_angles_either():
-    venv = gym.make_vec(FURUTA_ID, num_envs=2, dynamics="analytic", frame_skip=10)
+    venv = gym.make_vec(FURUTA_ID, num_envs=2, dynamics="analytic", frame_skip=10, batched=True)
     x0s = np.array([[9999.0, 3.0, 0.0, 0.0], [-9999.5, 0.0, 0.0, 0.0]])
     out = venv.rollout(lambda obs: jnp.array([5.0]) * jnp.sign(obs[0]), 50, x0s=x0s)
     assert not np.any(np.asarray(out.diverged))
@@ -159,7 +159,11 @@ def test_observation_options_give_clear_errors():
     with pytest.raises(EnvArgumentError, match="no angular joint"):
         gym.make(NMSD_ID, observation="trig")
     with pytest.raises(EnvArgumentError, match="observation='trig'"):
-        gym.make_vec(FURUTA_ID, num_envs=2, dynamics="analytic", observation="trig")
+        gym.make_vec(FURUTA_ID, num_envs=2, dynamics="analytic", observation="trig", batched=True)
+    # by default make_vec picks the env that supports the options: 32 copies with trig -> sync
+    auto = gym.make_vec(FURUTA_ID, num_envs=32, dynamics="analytic", observation="trig")
+    assert isinstance(auto, gym.vector.SyncVectorEnv) and auto.observation_space.shape == (32, 6)
+    auto.close()
 
 
 def test_observation_with_sensors_and_pickle():
@@ -256,6 +260,11 @@ def test_nmsd_target_errors_pickle_and_vector():
     np.testing.assert_array_equal(clone.step(np.array([2.0]))[0], env.step(np.array([2.0]))[0])
     assert clone.reset(seed=9)[1]["target"] == env.reset(seed=9)[1]["target"]
     with pytest.raises(EnvArgumentError, match="random target"):
-        gym.make_vec(NMSD_ID, num_envs=2, dynamics="analytic", target="random")
+        gym.make_vec(NMSD_ID, num_envs=2, dynamics="analytic", target="random", batched=True)
     with pytest.raises(EnvArgumentError, match="observe_target"):
-        gym.make_vec(NMSD_ID, num_envs=2, dynamics="analytic", observe_target=True)
+        gym.make_vec(NMSD_ID, num_envs=2, dynamics="analytic", observe_target=True, batched=True)
+    auto = gym.make_vec(NMSD_ID, num_envs=20, dynamics="analytic", target="random", observe_target=True)
+    obs, info = auto.reset(seed=3)
+    assert obs.shape == (20, 3) and len(set(np.round(info["target"], 12))) == 20
+    auto.close()
+

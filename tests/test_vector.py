@@ -325,11 +325,12 @@ def test_learned_checkpoint_by_path_matches_single_envs(tmp_path):
 
 
 def test_make_vec_modes():
-    """make_vec: the vector entry point gives the batched env for a model backend and a
-    SyncVectorEnv for MuJoCo; vectorization_mode="sync" works for the MuJoCo ground truth."""
+    """make_vec: the vector entry point gives the batched env for a model backend from
+    BATCHED_FROM copies on (or when asked), a SyncVectorEnv below that and for MuJoCo;
+    vectorization_mode="sync" works for the MuJoCo ground truth."""
     import gymnasium as gym
 
-    from furuta_gym.envs.vector import FurutaVectorEnv, NMSDVectorEnv
+    from furuta_gym.envs.vector import BATCHED_FROM, FurutaVectorEnv, NMSDVectorEnv
 
     sync = gym.make_vec(FURUTA_ID, num_envs=2, vectorization_mode="sync")
     obs, _ = sync.reset(seed=0)
@@ -338,10 +339,25 @@ def test_make_vec_modes():
     sync.close()
 
     # the registered vector_entry_point: batched JAX for a model, Gymnasium's sync env for MuJoCo
-    env = gym.make_vec(FURUTA_ID, num_envs=3, dynamics="analytic")
-    assert isinstance(env.unwrapped, FurutaVectorEnv) and env.num_envs == 3
+    env = gym.make_vec(FURUTA_ID, num_envs=BATCHED_FROM, dynamics="analytic")
+    assert isinstance(env.unwrapped, FurutaVectorEnv) and env.num_envs == BATCHED_FROM
+    small = gym.make_vec(FURUTA_ID, num_envs=BATCHED_FROM - 1, dynamics="analytic")
+    assert isinstance(small, gym.vector.SyncVectorEnv)  # N kernel calls beat one XLA step here
+    # the same numbers either way: copy k is the single env reset with seed + k
+    big = gym.make_vec(FURUTA_ID, num_envs=BATCHED_FROM - 1, dynamics="analytic", batched=True)
+    assert isinstance(big.unwrapped, FurutaVectorEnv)
+    np.testing.assert_allclose(small.reset(seed=4)[0], big.reset(seed=4)[0], rtol=0, atol=0)
+    actions = np.linspace(-5.0, 5.0, BATCHED_FROM - 1)[:, None]
+    for _ in range(5):
+        a, b = small.step(actions)[0], big.step(actions)[0]
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+    assert np.abs(a - small.reset(seed=4)[0]).max() > 1e-3
+    small.close(), big.close()
+    with pytest.raises(ValueError, match="batched must be"):
+        gym.make_vec(FURUTA_ID, num_envs=2, dynamics="analytic", batched="yes")
     env = gym.make_vec(
-        NMSD_ID, num_envs=2, vectorization_mode="vector_entry_point", dynamics="analytic"
+        NMSD_ID, num_envs=2, vectorization_mode="vector_entry_point", dynamics="analytic",
+        batched=True,
     )
     assert isinstance(env.unwrapped, NMSDVectorEnv)
     obs, info = env.reset(seed=0, options={"target": -0.2})
@@ -430,7 +446,7 @@ def test_auto_chunks_and_bad_split_arguments():
         FurutaVectorEnv(4, dynamics="analytic", workers=-1)
     with pytest.raises(ValueError, match="pass one of the two"):
         FurutaVectorEnv(4, dynamics="analytic", workers=2, chunks=2)
-    with pytest.raises(ValueError, match="SyncVectorEnv, which takes neither"):
+    with pytest.raises(ValueError, match="SyncVectorEnv of single envs .* takes neither"):
         gym.make_vec(FURUTA_ID, num_envs=2, dynamics="mujoco", workers=2)
 
 

@@ -70,11 +70,12 @@ def register_envs() -> None:
         if env_id not in gymnasium.registry:
             # no max_episode_steps: the env truncates itself after `episode_seconds`, so the
             # episode length follows the control rate (frame_skip). gymnasium.make_vec goes to
-            # the batched JAX env for model backends, Sync/Async vector envs for MuJoCo.
+            # make_vector_env: batched JAX or SyncVectorEnv, whichever is faster and supports
+            # the options.
             gymnasium.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry)
     if SWINGUP_ID not in gymnasium.registry:
-        # the batched JAX env keeps the raw float64 layout: make_vec of the preset steps copies of
-        # the single env (Gymnasium's sync/async vector envs)
+        # no vector entry point: the batched JAX env keeps the raw float64 layout, so make_vec of
+        # the preset steps copies of the single env (Gymnasium's sync/async vector envs)
         gymnasium.register(
             id=SWINGUP_ID,
             entry_point="furuta_gym.envs.furuta:FurutaEnv",

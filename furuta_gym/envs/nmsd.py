@@ -73,9 +73,8 @@ class NMSDEnv(LagrangianEnv):
     with ``max_force`` (N, default 20) instead of ``max_voltage``, ``target`` (m, default 0.5;
     ``"random"`` or ``(low, high)``: drawn per reset), ``observe_target`` (bool, default False:
     append the target to the observation), ``normalize_action`` (actions in [−1, 1] × max_force)
-    and ``dtype`` (``"float32"`` / ``"float64"``). The batched JAX env (``make_vec`` with a model
-    backend) supports neither a random target nor ``observe_target``: use
-    ``vectorization_mode="sync"``.
+    and ``dtype`` (``"float32"`` / ``"float64"``). The batched JAX env supports neither a random
+    target nor ``observe_target``: with them ``make_vec`` gives a SyncVectorEnv of single envs.
     """
 
     system: ClassVar[str] = "nmsd"

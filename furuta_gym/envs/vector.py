@@ -710,28 +710,57 @@ class NMSDVectorEnv(LagrangianVectorEnv):
         return {"target": np.full(self.num_envs, float(self.task.target))}
 
 
-def make_vector_env(env_id: str, num_envs: int, dynamics: Any = "mujoco", **kwargs) -> VectorEnv:
-    """A vector env for ``env_id``: batched JAX (:class:`FurutaVectorEnv` / :class:`NMSDVectorEnv`)
-    for a model backend, a :class:`~gymnasium.vector.SyncVectorEnv` of single envs for
-    ``dynamics="mujoco"`` (or for options the batched env does not support)."""
+#: ``gymnasium.make_vec``'s default for a model backend: Gymnasium's SyncVectorEnv of single envs
+#: (each with its compiled step kernel) below this many copies, the batched JAX env from here on —
+#: where one vmapped XLA step overtakes N kernel calls (bench/vector_crossover.py).
+BATCHED_FROM = 16
+
+
+def make_vector_env(
+    env_id: str, num_envs: int, dynamics: Any = "mujoco", *, batched: bool | None = None, **kwargs
+) -> VectorEnv:
+    """A vector env for ``env_id`` (the registered ``vector_entry_point`` of ``gymnasium.make_vec``).
+
+    ``batched=True``: the batched JAX env (:class:`FurutaVectorEnv` / :class:`NMSDVectorEnv`, model
+    backends only); ``False``: a :class:`~gymnasium.vector.SyncVectorEnv` of single envs. ``None``
+    (default) picks the faster one that supports the options: sync for ``dynamics="mujoco"``, for
+    fewer than :data:`BATCHED_FROM` copies and for options the batched env does not reproduce
+    (sensor noise, delays, ``observation="trig"``, …); batched otherwise, and whenever
+    ``chunks=`` or ``workers=`` is given. Both give each copy the same numbers.
+    """
     from . import ENV_IDS
 
     classes = {ENV_IDS["furuta"]: FurutaVectorEnv, ENV_IDS["nmsd"]: NMSDVectorEnv}
     if env_id not in classes:
         raise ValueError(f"env_id must be one of {sorted(classes)}, got {env_id!r}")
+    if batched not in (None, True, False):
+        raise ValueError(f"batched must be True, False or None (choose by speed), got {batched!r}")
     autoreset_mode = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
-    if isinstance(dynamics, str) and dynamics == "mujoco":
-        given = sorted({"chunks", "workers"} & set(kwargs))
-        if given:
-            raise ValueError(
-                f"{', '.join(given)}= split(s) the batched JAX env of a model backend; "
-                "dynamics='mujoco' is vectorised with gymnasium's SyncVectorEnv, which takes neither"
-            )
-        return gymnasium.vector.SyncVectorEnv(
-            [lambda: gymnasium.make(env_id, dynamics=dynamics, **kwargs)] * int(num_envs),
-            autoreset_mode=autoreset_mode,
+    split = sorted({"chunks", "workers"} & set(kwargs))
+    if batched is None:
+        mujoco = isinstance(dynamics, str) and dynamics == "mujoco"
+        batched = not mujoco and (bool(split) or _batched_is_faster(env_id, int(num_envs), dynamics, kwargs))
+    if batched:
+        return classes[env_id](num_envs, dynamics=dynamics, autoreset_mode=autoreset_mode, **kwargs)
+    if split:
+        raise ValueError(
+            f"{', '.join(split)}= split(s) the batched JAX env of a model backend; "
+            "a SyncVectorEnv of single envs (dynamics='mujoco' or batched=False) takes neither"
         )
-    return classes[env_id](num_envs, dynamics=dynamics, autoreset_mode=autoreset_mode, **kwargs)
+    return gymnasium.vector.SyncVectorEnv(
+        [lambda: gymnasium.make(env_id, dynamics=dynamics, **kwargs)] * int(num_envs),
+        autoreset_mode=autoreset_mode,
+    )
+
+
+def _batched_is_faster(env_id: str, num_envs: int, dynamics: Any, kwargs: dict) -> bool:
+    """Whether the batched env is the default for a model backend: enough copies, options it supports."""
+    if num_envs < BATCHED_FROM:
+        return False
+    if kwargs.get("render_mode") is not None or kwargs.get("kernel", "auto") != "auto":
+        return False
+    template = gymnasium.make(env_id, dynamics=dynamics, **kwargs).unwrapped
+    return not (template.per_episode_state_features() + template.presentation_options())
 
 
 def furuta_vector_entry_point(num_envs: int = 1, **kwargs) -> VectorEnv:
