@@ -1,13 +1,14 @@
 """Choose μ, the weight of L_prop's minimum-norm term μ·P_a, per system and model kind on
 validation data: never on the test sets the reproduction reports.
 
-Each candidate μ trains the model with the full reproduction recipe (the same data, seed 0, the
-same epochs as ``furuta-gym reproduce``). Every trained model then predicts the trajectories of a
-*validation* draw: the test recipes (free and forced Furuta, chirp and square N-MSD) generated with
-another seed (``--validation-seed``, default 100; the test sets use 0). The criterion is what a
-user could measure on held-out data: the mean over validation sets and state variables of the
-open-loop prediction log10 RMSE (a diverged prediction counts as +2). The smallest wins; the
-choice goes into :data:`furuta_gym.training.train.AUGMENTATION_WEIGHT` by hand.
+Each candidate μ trains the model with the full reproduction recipe (the same training data,
+seed 0, the same epochs as ``furuta-gym reproduce``) as a *validation* run
+(``ReproduceConfig(split="validation")``): the Furuta scale is fitted on ``val_scale_fit`` and the
+model predicts the validation datasets only (``generate_validation``: their own excitation and
+initial states, no sample following a test trajectory; docs/reproduce.md) — no test set is
+generated, scored or stored. The criterion is what a user could measure on held-out data: the
+mean over validation sets and state variables of the open-loop prediction log10 RMSE (a diverged
+prediction counts as +2). The smallest wins; the choice goes into the recipe by hand.
 
     python bench/select_augmentation_weight.py --system furuta --kind adln --weights 0.01 0.1 1 10
 
@@ -27,14 +28,21 @@ from pathlib import Path
 DIVERGED_SCORE = 2.0
 
 
+def _config(system: str, kind: str, weight: float):
+    """The validation run of one candidate μ."""
+    from furuta_gym.training.reproduce import ReproduceConfig
+
+    return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), split="validation",
+                           train_overrides={"augmentation_weight": weight}, figures=False,
+                           progress=False, jobs=1)
+
+
 def _train(system: str, kind: str, weight: float, out: Path) -> None:
     import furuta_gym
-    from furuta_gym.training.reproduce import ReproduceConfig, reproduce
+    from furuta_gym.training.reproduce import reproduce
 
     furuta_gym.enable_x64()
-    cfg = ReproduceConfig(systems=(system,), pairs=((kind, "prop"),),
-                          train_overrides={"augmentation_weight": weight}, figures=False, progress=False, jobs=1)
-    reproduce(out, cfg, command=f"bench/select_augmentation_weight.py μ={weight!r}", log=lambda msg: None)
+    reproduce(out, _config(system, kind, weight), command=f"bench/select_augmentation_weight.py μ={weight!r}", log=lambda msg: None)
 
 
 def _run_dir(out: Path, system: str, kind: str, seed: int = 0) -> Path:
@@ -42,36 +50,31 @@ def _run_dir(out: Path, system: str, kind: str, seed: int = 0) -> Path:
     return out / "runs" / system / f"{kind}_prop" / f"seed{seed}"
 
 
-def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int,
-           seeds: tuple[int, ...] = (0,)) -> dict[float, dict]:
-    """Each candidate's validation score: per model seed the mean over sets and state variables,
-    then averaged over ``seeds`` (``"mean"``, the criterion; ``"seed_means"`` each seed's), a
-    diverged prediction counted as +2; the cells (``"sets"``) are means over the seeds."""
+def _score(system: str, kind: str, runs: dict, seeds: tuple[int, ...] = (0,)) -> dict:
+    """Each candidate's validation score, read from its validation runs' metrics.json: per model
+    seed the mean over sets and state variables, then averaged over ``seeds`` (``"mean"``, the
+    criterion; ``"seed_means"`` each seed's), a diverged prediction counted as +2; the cells
+    (``"sets"``) are means over the seeds."""
     import numpy as np
 
-    from furuta_gym.training.checkpoint import load_model
-    from furuta_gym.training.datagen import generate_datasets
-    from furuta_gym.training.metrics import DIVERGED, evaluate_model
-    from furuta_gym.training.reproduce import TEST_SETS
+    from furuta_gym.systems import get_spec
+    from furuta_gym.training.metrics import DIVERGED
+    from furuta_gym.training.reproduce import VALIDATION_SETS
 
-    data = generate_datasets(system, seed=validation_seed, ground_truth="mujoco")
+    names = get_spec(system).state_names
     scores = {}
     for key, out in runs.items():
         per_seed = []
         for seed in seeds:
-            model = load_model(_run_dir(out, system, kind, seed) / "model.eqx", expected_system=system)
-            per_set = {}
-            for label, name in TEST_SETS[system].items():
-                result = evaluate_model(model, data[name], physics=False)
-                per_set[label] = {k: result[k] for k in model.spec.state_names}
-            per_seed.append(per_set)
+            metrics = json.loads((_run_dir(out, system, kind, seed) / "metrics.json").read_text())
+            per_seed.append({label: {k: metrics[label][k] for k in names} for label in VALIDATION_SETS[system]})
 
         def value(v):
-            return DIVERGED_SCORE if v == DIVERGED else float(v)
+            return DIVERGED_SCORE if v in (DIVERGED, "fail") else float(v)
 
         # a cell shows DIVERGED if any seed's prediction diverged; the criterion counts it as +2
-        sets = {label: {k: DIVERGED if any(p[label][k] == DIVERGED for p in per_seed)
-                        else float(np.mean([p[label][k] for p in per_seed])) for k in per_seed[0][label]}
+        sets = {label: {k: DIVERGED if any(p[label][k] in (DIVERGED, "fail") for p in per_seed)
+                        else float(np.mean([float(p[label][k]) for p in per_seed])) for k in per_seed[0][label]}
                 for label in per_seed[0]}
         seed_means = [float(np.mean([value(v) for cells in p.values() for v in cells.values()])) for p in per_seed]
         scores[key] = {"mean": float(np.mean(seed_means)), "seed_means": seed_means, "sets": sets}
@@ -79,15 +82,10 @@ def _score(system: str, kind: str, runs: dict[float, Path], validation_seed: int
 
 
 def parse_selection_args(parser: argparse.ArgumentParser, argv, default_out: str) -> argparse.Namespace:
-    """The validation protocol's own arguments (shared by every selection script): the seed of the
-    validation draw, which may never be the test sets' seed 0, the output folder and the jobs."""
-    parser.add_argument("--validation-seed", type=int, default=100)
+    """The arguments every selection script shares: the output folder and the jobs."""
     parser.add_argument("--out", type=Path, default=Path(default_out))
     parser.add_argument("--jobs", type=int, default=2)
-    args = parser.parse_args(argv)
-    if args.validation_seed == 0:
-        parser.error("--validation-seed 0 is the test sets' seed; validation needs another")
-    return args
+    return parser.parse_args(argv)
 
 
 def main(argv=None) -> None:
@@ -110,7 +108,7 @@ def main(argv=None) -> None:
     # what each model cost when it was trained (a run reused from an earlier invocation included)
     seconds = {w: json.loads((_run_dir(out, args.system, args.kind) / "metrics.json").read_text())["_seconds"]["train"]
                for w, out in runs.items()}
-    scores = _score(args.system, args.kind, runs, args.validation_seed)
+    scores = _score(args.system, args.kind, runs)
     best = min(scores, key=lambda w: scores[w]["mean"])
     sets = list(next(iter(scores.values()))["sets"])
     names = list(next(iter(scores.values()))["sets"][sets[0]])
@@ -118,14 +116,13 @@ def main(argv=None) -> None:
         f"# μ for {args.kind} on {args.system}, chosen on validation data",
         "",
         f"`python bench/select_augmentation_weight.py --system {args.system} --kind {args.kind} "
-        f"--weights {' '.join(f'{w:g}' for w in args.weights)} --validation-seed {args.validation_seed}`, "
+        f"--weights {' '.join(f'{w:g}' for w in args.weights)}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', platform.machine())}, "
         f"{machine['cpu_count']} cores; training {round(sum(seconds.values()))} s summed over the candidates "
         "(times from each run's metrics.json).",
         "",
-        f"Open-loop prediction log10 RMSE on the validation draw (seed {args.validation_seed}; the "
-        "reported test sets are seed 0 and take no part in the choice). Lower is better; the mean is "
-        "the criterion.",
+        "Open-loop prediction log10 RMSE on the validation datasets (their own excitation; the "
+        "test sets are never generated or scored). Lower is better; the mean is the criterion.",
         "",
         "| μ | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean |",
         "|---|" + "---:|" * (len(sets) * len(names) + 1),
@@ -138,7 +135,7 @@ def main(argv=None) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     (args.out / f"{args.system}_{args.kind}.md").write_text("\n".join(lines) + "\n")
     (args.out / f"{args.system}_{args.kind}.json").write_text(json.dumps(
-        {"system": args.system, "kind": args.kind, "validation_seed": args.validation_seed, "chosen": best,
+        {"system": args.system, "kind": args.kind, "split": "validation", "chosen": best,
          "scores": {f"{w:g}": sc for w, sc in scores.items()}, "train_seconds": {f"{w:g}": s for w, s in seconds.items()}},
         indent=1) + "\n")
     print("\n".join(lines))

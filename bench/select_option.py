@@ -2,11 +2,12 @@
 reproduction reports: a training setting (``--train NAME VALUE …``, e.g. L_Iτ's quadrature) or a
 model option (``--model NAME VALUE …``, e.g. F_a's ``odd_in_velocity``).
 
-Every value trains each named L_prop model with the full reproduction recipe (the same data, model
-seed 0, epochs and μ as ``furuta-gym reproduce``; only that option differs). Every model then
-predicts the trajectories of the *validation* draw (the test recipes generated with seed 100; the
-test sets use 0), and the mean open-loop prediction log10 RMSE over sets and state variables is the
-criterion, as for μ (bench/select_augmentation_weight.py). ``--seeds N`` trains model seeds 0 … N−1
+Every value trains each named L_prop model with the full reproduction recipe (the same training
+data, model seed 0, epochs and μ as ``furuta-gym reproduce``; only that option differs) as a
+*validation* run (``split="validation"``: scale fitted on ``val_scale_fit``, scored on the
+validation datasets, which share no excitation with the test sets; no test set is generated,
+scored or stored), and the mean open-loop prediction log10 RMSE over sets and state variables is
+the criterion, as for μ (bench/select_augmentation_weight.py). ``--seeds N`` trains model seeds 0 … N−1
 of every candidate and takes the mean over them: one run each cannot tell options apart whose
 difference is smaller than the seeds' spread (the Furuta augmented DeLaN's validation means of
 three seeds, fine-tuned at 1e-3: −0.79, −0.79, −0.91).
@@ -20,16 +21,13 @@ rule when the Hermite rule's means were lower by 0.05 and 0.03 (results/quadratu
 choice goes into the code by hand.
 
     python bench/select_option.py --system furuta --kinds dln aph adln \
-        --train quadrature simpson hermite --reuse results/reproduce --out results/quadrature
+        --train quadrature simpson hermite --seeds 3 --out results/selection/quadrature
     python bench/select_option.py --system nmsd --kinds adln --model odd_in_velocity false true \
-        --reuse results/augmentation_weight/nmsd_adln/mu_0.01 --out results/force_parity
-    python bench/select_option.py --system furuta --kinds adln --train quadrature simpson hermite \
-        --seeds 3 --reuse results/reproduce_seeds --out results/quadrature_adln_seeds
+        --seeds 3 --out results/selection/force_parity
 
 Values are JSON where they parse (false, 0.1) and strings otherwise. ``--reuse DIR …``: a run of
-a DIR (a reproduction's output; the first that has one) whose recorded settings are exactly a
-candidate's, seed included, is copied in instead of trained again (the reproduction then reuses it
-as it would its own). Writes
+a DIR (another selection's output; the first that has one) whose recorded settings are exactly a
+candidate's, split and seed included, is copied in instead of trained again. Writes
 ``OUT/<system>.md`` / ``.json``; runs live under ``OUT/<system>_<kind>/<value>``.
 """
 
@@ -61,7 +59,7 @@ def _config(system: str, kind: str, where: str, name: str, value, seeds: int = 1
 
     override = {name: value}
     return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), seeds=tuple(range(seeds)),
-                           figures=False, progress=False, jobs=1,
+                           figures=False, progress=False, jobs=1, split="validation",
                            train_overrides=override if where == "train" else None,
                            model_overrides=override if where == "model" else None)
 
@@ -157,7 +155,7 @@ def main(argv=None) -> None:
     rows = {}
     for kind in args.kinds:
         runs = {text: out for k, text, _, out in candidates if k == kind}
-        scores = _score(args.system, kind, runs, args.validation_seed, seeds)
+        scores = _score(args.system, kind, runs, seeds)
         for text, out in runs.items():
             seconds = [json.loads((_run_dir(out, args.system, kind, seed) / "metrics.json").read_text())
                        ["_seconds"]["train"] for seed in seeds]
@@ -171,7 +169,7 @@ def main(argv=None) -> None:
         f"# {name} for the {args.system} L_prop runs, chosen on validation data",
         "",
         f"`python bench/select_option.py --system {args.system} --kinds {' '.join(args.kinds)} "
-        f"--{where} {name} {' '.join(texts)} --validation-seed {args.validation_seed}"
+        f"--{where} {name} {' '.join(texts)}"
         + (f" --seeds {args.seeds}" if args.seeds > 1 else "")
         + (f" --reuse {' '.join(map(str, args.reuse))}" if args.reuse else "") + f" --out {args.out}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', 'cpu')}, "
@@ -180,9 +178,8 @@ def main(argv=None) -> None:
         + (f"; cells, mean and seconds are means over model seeds {', '.join(map(str, seeds))}, "
            "whose own means follow (± their standard deviation)" if args.seeds > 1 else "") + ".",
         "",
-        f"Open-loop prediction log10 RMSE on the validation draw (seed {args.validation_seed}; the "
-        "reported test sets are seed 0 and take no part in the choice). Lower is better; the mean is "
-        "the criterion" + (f", and a value replaces the recipe's ({texts[0]}) only if it is lower on "
+        "Open-loop prediction log10 RMSE on the validation datasets (their own excitation; the test "
+        "sets are never generated or scored). Lower is better; the mean is the criterion" + (f", and a value replaces the recipe's ({texts[0]}) only if it is lower on "
                            "every model seed" if args.seeds > 1 else "") + ".",
         "",
         f"| model | {name} | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean |"
@@ -218,7 +215,7 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{args.system}.md").write_text("\n".join(lines) + "\n")
     (args.out / f"{args.system}.json").write_text(json.dumps(
-        {"system": args.system, "option": {where: name}, "validation_seed": args.validation_seed,
+        {"system": args.system, "option": {where: name}, "split": "validation",
          "lower": lowest, "chosen": chosen, "scores": rows}, indent=1) + "\n")
     print("\n".join(lines))
 

@@ -17,6 +17,8 @@ __all__ = [
     "ENCODER_COUNTS_PER_REV",
     "chirp",
     "square_pulse",
+    "multisine",
+    "random_steps",
     "quantize_encoder",
     "quantize_joints",
     "derivative_filter",
@@ -38,6 +40,27 @@ def square_pulse(t, start: float, width: float, amplitude: float = 1.0):
     """amplitude on [start, start + width), 0 elsewhere (the paper's N-MSD "square" test input)."""
     t = np.asarray(t, dtype=float)
     return np.where((t >= start) & (t < start + width), amplitude, 0.0)
+
+
+def multisine(t, f0: float, f1: float, n_tones: int, amplitude: float, rng: np.random.Generator):
+    """Sum of ``n_tones`` sines at log-spaced frequencies from f0 to f1 Hz with random phases
+    (drawn from ``rng``), scaled so that its peak over ``t`` is ``amplitude``."""
+    t = np.asarray(t, dtype=float)
+    freqs = np.geomspace(f0, f1, n_tones)
+    phases = rng.uniform(0.0, 2.0 * np.pi, n_tones)
+    y = np.sin(2.0 * np.pi * freqs[:, None] * t[None, :] + phases[:, None]).sum(axis=0)
+    return amplitude * y / max(np.abs(y).max(), 1e-12)
+
+
+def random_steps(t, hold_range: tuple[float, float], amplitude: float, rng: np.random.Generator):
+    """Piecewise-constant levels ~ U(−amplitude, amplitude), each held for a time
+    ~ U(*hold_range) s (drawn from ``rng``)."""
+    t = np.asarray(t, dtype=float)
+    edges = [float(t[0]) if t.size else 0.0]
+    while edges[-1] <= (t[-1] if t.size else 0.0):
+        edges.append(edges[-1] + rng.uniform(*hold_range))
+    levels = rng.uniform(-amplitude, amplitude, len(edges))
+    return levels[np.searchsorted(edges, t, side="right") - 1]
 
 
 def quantize_encoder(angle, counts_per_rev: int = ENCODER_COUNTS_PER_REV):

@@ -3,6 +3,7 @@ beside the paper's numbers, figures and a run record, reuses finished models, an
 (N/A, X, seeds) follows the paper's conventions."""
 
 import csv
+import dataclasses
 import json
 import math
 
@@ -416,3 +417,29 @@ def test_quick_runs_compile_their_steps_fast_and_full_runs_keep_their_records():
     assert _same_settings(saved, current)
     quick = dict(current, train=dict(current["train"], fast_compile=True))
     assert not _same_settings(saved, quick)
+
+
+def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path):
+    """A selection run (split="validation") trains on the same training data, fits the Furuta scale
+    on val_scale_fit and scores the validation sets only: no test file, no test label, no paper
+    value; its runs record the split, so a test run never reuses them (and vice versa)."""
+    config = ReproduceConfig(
+        quick=True, systems=("furuta",), pairs=(("dln", "prop"),),
+        prop_epochs={"furuta": (10, 1, 0)}, progress=False, ground_truth="analytic",
+        split="validation",
+    )
+    paths = reproduce(tmp_path, config, log=lambda msg: None)
+    data = tmp_path / "data" / "furuta"
+    assert sorted(p.name for p in data.glob("*.csv")) == [
+        "train.csv", "val_forced.csv", "val_free.csv", "val_scale_fit.csv"]
+    metrics = json.loads((tmp_path / "runs/furuta/dln_prop/seed0/metrics.json").read_text())
+    assert set(metrics) - {"_seconds"} == {"Free", "Forced"}
+    assert math.isfinite(float(metrics["Forced"]["beta"]))
+    record = json.loads((tmp_path / "runs/furuta/dln_prop/seed0/reproduce_config.json").read_text())
+    assert record["split"] == "validation"
+    rows = list(csv.DictReader(paths["tables.csv"].open()))
+    assert rows and all(r["paper"] == "" for r in rows) and not any(k.startswith("fig") for k in paths)
+    with pytest.raises(ValueError, match="split='validation'; this run wants .* split='test'"):
+        reproduce(tmp_path, dataclasses.replace(config, split="test"), log=lambda msg: None)
+    with pytest.raises(ValueError, match="split must be one of"):
+        ReproduceConfig(split="train")

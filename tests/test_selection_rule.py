@@ -28,3 +28,16 @@ def test_among_values_better_on_every_seed_the_lowest_mean_wins_and_ties_keep_th
     assert choose({"a": [0.0], "b": [-0.1]}) == ("b", {})
     with pytest.raises(ValueError, match="'b' has 1 seed means"):
         choose({"a": [0.0, 0.0], "b": [0.0]})
+
+
+def test_selection_candidates_are_validation_runs():
+    """Both selection scripts train their candidates as validation runs: scale fitted on
+    val_scale_fit, scored on the validation sets, no test set generated (tests/test_reproduce.py
+    checks what a validation run does)."""
+    import select_augmentation_weight
+    import select_option
+
+    config = select_option._config("furuta", "adln", "train", "quadrature", "hermite", seeds=3)
+    assert config.split == "validation" and config.seeds == (0, 1, 2) and not config.figures
+    config = select_augmentation_weight._config("nmsd", "adln", 0.1)
+    assert config.split == "validation" and config.train_overrides == {"augmentation_weight": 0.1}

@@ -48,13 +48,16 @@ from pathlib import Path
 from typing import Callable, Literal, Sequence
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..data import Trajectory, save_trajectories
 from ..signals import (
     ENCODER_COUNTS_PER_REV,
     chirp,
     derivative_filter,
+    multisine,
     quantize_encoder,
+    random_steps,
     square_pulse,
 )
 from ..systems import get_spec
@@ -73,6 +76,9 @@ __all__ = [
     "write_datasets",
     "generate",
     "DATASET_NAMES",
+    "VALIDATION_NAMES",
+    "generate_validation",
+    "sample_overlap",
 ]
 
 DATA_RATE_HZ = 100.0
@@ -81,6 +87,14 @@ DATA_RATE_HZ = 100.0
 DATASET_NAMES = {
     "nmsd": ("train", "test_chirp", "test_square"),
     "furuta": ("train", "test_free", "test_forced", "scale_fit"),
+}
+
+#: Validation datasets per system (:func:`generate_validation`): excitations and initial states of
+#: their own, inside the training distribution, so that no validation sample is close to a test
+#: sample (:func:`sample_overlap`). Recipe choices are scored on these, never on the test sets.
+VALIDATION_NAMES = {
+    "nmsd": ("val_multisine", "val_steps"),
+    "furuta": ("val_free", "val_forced", "val_scale_fit"),
 }
 
 
@@ -101,6 +115,15 @@ class NMSDRecipe:
     test_square_duration: float = 15.0
     pulse_start: float = 1.0
     pulse_width: float = 3.0
+    # validation (generate_validation): x0 inside the training trajectory's range
+    val_p0_range: float = 0.5
+    val_pd0_range: float = 2.5
+    n_val_multisine: int = 3
+    val_multisine_duration: float = 25.0
+    val_multisine_tones: int = 8
+    n_val_steps: int = 3
+    val_steps_duration: float = 15.0
+    val_steps_hold: tuple[float, float] = (1.0, 3.0)
 
     @classmethod
     def small(cls) -> "NMSDRecipe":
@@ -111,6 +134,10 @@ class NMSDRecipe:
             test_chirp_duration=10.0,
             n_test_square=1,
             test_square_duration=10.0,
+            n_val_multisine=1,
+            val_multisine_duration=10.0,
+            n_val_steps=1,
+            val_steps_duration=10.0,
         )
 
 
@@ -133,6 +160,18 @@ class FurutaRecipe:
     amplitude: float = 2.0  # V
     n_scale_fit: int = 1
     scale_fit_duration: float = 20.0
+    # "chirp": the test chirp (a scale-fit trajectory then follows the forced test trajectories
+    # once both forget their start); "steps": random ±amplitude steps of its own
+    scale_fit_input: Literal["chirp", "steps"] = "chirp"
+    # validation (generate_validation): x0 in the training ranges, inputs other than the chirp;
+    # free ones end before the pendulum settles (~3 s), where every free trajectory meets the others
+    n_val_free: int = 12
+    val_free_duration: float = 2.0
+    n_val_forced: int = 3
+    val_forced_duration: float = 20.0
+    val_multisine_tones: int = 12
+    val_scale_fit_duration: float = 20.0
+    val_steps_hold: tuple[float, float] = (0.25, 1.0)
 
     @classmethod
     def small(cls) -> "FurutaRecipe":
@@ -144,6 +183,10 @@ class FurutaRecipe:
             n_test_forced=1,
             test_forced_duration=10.0,
             scale_fit_duration=10.0,
+            n_val_free=4,
+            n_val_forced=1,
+            val_forced_duration=10.0,
+            val_scale_fit_duration=10.0,
         )
 
 
@@ -472,6 +515,12 @@ def _furuta_clean(recipe: FurutaRecipe, gt, seed, oversample) -> dict[str, list[
         oversample,
         [f"chirp{k}" for k in range(r.n_test_forced)],
     )
+    if r.scale_fit_input == "steps":
+        out["scale_fit"] = _run_each(
+            gt, "scale_fit_input", seed, r.n_scale_fit, train_ranges, r.scale_fit_duration,
+            lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng), oversample,
+        )
+        return out
     x0s = _uniform(_rng(seed, "scale_fit"), r.n_scale_fit, train_ranges)
     out["scale_fit"] = _run(
         gt,
@@ -482,6 +531,49 @@ def _furuta_clean(recipe: FurutaRecipe, gt, seed, oversample) -> dict[str, list[
         [f"scale{k}" for k in range(r.n_scale_fit)],
     )
     return out
+
+
+def _nmsd_validation(recipe: NMSDRecipe, gt, seed, oversample) -> dict[str, list[_Clean]]:
+    r = recipe
+    ranges = (r.val_p0_range, r.val_pd0_range)
+    out = {}
+    for name, n, duration, make_u in (
+        ("val_multisine", r.n_val_multisine, r.val_multisine_duration,
+         lambda rng: lambda t: multisine(t, r.chirp_f0, r.chirp_f1, r.val_multisine_tones, r.amplitude, rng)),
+        ("val_steps", r.n_val_steps, r.val_steps_duration,
+         lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng)),
+    ):
+        out[name] = _run_each(gt, name, seed, n, ranges, duration, make_u, oversample)
+    return out
+
+
+def _furuta_validation(recipe: FurutaRecipe, gt, seed, oversample) -> dict[str, list[_Clean]]:
+    r = recipe
+    ranges = (r.angle_range, r.angle_range, r.train_velocity_range, r.train_velocity_range)
+    free = _uniform(_rng(seed, "val_free"), r.n_val_free, ranges)
+    out = {"val_free": _run(gt, free, r.val_free_duration, np.zeros_like, oversample,
+                            [f"free{k}" for k in range(r.n_val_free)])}
+    out["val_forced"] = _run_each(
+        gt, "val_forced", seed, r.n_val_forced, ranges, r.val_forced_duration,
+        lambda rng: lambda t: multisine(t, r.chirp_f0, r.chirp_f1, r.val_multisine_tones, r.amplitude, rng),
+        oversample,
+    )
+    out["val_scale_fit"] = _run_each(
+        gt, "val_scale_fit", seed, 1, ranges, r.val_scale_fit_duration,
+        lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng), oversample,
+    )
+    return out
+
+
+def _run_each(gt, name, seed, n, ranges, duration, make_u, oversample) -> list[_Clean]:
+    """``n`` trajectories of dataset ``name``, each with its own x0 and its own draw of the input
+    signal ``make_u(rng)`` (one seeded stream per dataset)."""
+    rng = _rng(seed, name)
+    x0s = _uniform(rng, n, ranges)
+    return [
+        _run(gt, x0s[k : k + 1], duration, make_u(rng), oversample, [f"{name}{k}"])[0]
+        for k in range(n)
+    ]
 
 
 # --------------------------------------------------------------------------------------------
@@ -547,6 +639,40 @@ def generate_datasets(
     ``ground_truth`` is a name for :func:`default_ground_truth` or a callable
     ``(x0s (B, 2n), t (T,), us (B, T, m)) -> states (B, T, 2n)``.
     """
+    return _generate(system, "test", seed=seed, small=small, recipe=recipe, sensor=sensor,
+                     ground_truth=ground_truth)
+
+
+def generate_validation(
+    system: str,
+    *,
+    seed: int = 0,
+    small: bool = False,
+    recipe=None,
+    sensor: SensorOptions | None = None,
+    ground_truth: GroundTruth | str = "auto",
+) -> dict[str, list[Trajectory]]:
+    """The validation datasets of ``system`` (:data:`VALIDATION_NAMES`), with the arguments of
+    :func:`generate_datasets`. Furuta: ``val_free`` (12 × 2 s free from the *training* state
+    ranges, ending before the pendulum settles where all free trajectories meet), ``val_forced`` (3 × 20 s, a 12-tone multisine over the chirp's 0.5–6 Hz band, new
+    phases per trajectory) and ``val_scale_fit`` (20 s of random ±2 V steps held 0.25–1 s);
+    N-MSD: ``val_multisine`` (3 × 25 s, 8 tones over 0.1–1.1 Hz) and ``val_steps`` (3 × 15 s of
+    random ±5 N steps held 1–3 s), from x0 inside the training trajectory's range. Their overlap
+    with the test sets is measured by ``experiments/validation_overlap.py`` (docs/reproduce.md)."""
+    return _generate(system, "validation", seed=seed, small=small, recipe=recipe, sensor=sensor,
+                     ground_truth=ground_truth)
+
+
+_MAKERS = {
+    ("nmsd", "test"): _nmsd_clean,
+    ("furuta", "test"): _furuta_clean,
+    ("nmsd", "validation"): _nmsd_validation,
+    ("furuta", "validation"): _furuta_validation,
+}
+_NOISE_STREAM = {"test": 7919, "validation": 7927}  # sensor-noise streams, one per kind
+
+
+def _generate(system, kind, *, seed, small, recipe, sensor, ground_truth):
     spec = get_spec(system)
     sensor = sensor or SensorOptions()
     if sensor.quantize and not any(spec.angular):
@@ -559,13 +685,62 @@ def generate_datasets(
     if not isinstance(recipe, expected):
         raise ValueError(f"recipe for {spec.name} must be a {expected.__name__}, got {recipe!r}")
     gt = default_ground_truth(spec.name, ground_truth) if isinstance(ground_truth, str) else ground_truth
-    make = _nmsd_clean if spec.name == "nmsd" else _furuta_clean
-    clean = make(recipe, gt, seed, sensor.oversample)
+    clean = _MAKERS[spec.name, kind](recipe, gt, seed, sensor.oversample)
+    names = (DATASET_NAMES if kind == "test" else VALIDATION_NAMES)[spec.name]
     out = {}
     for name, trajs in clean.items():
-        rng = np.random.default_rng([seed, 7919, DATASET_NAMES[spec.name].index(name)])
+        rng = np.random.default_rng([seed, _NOISE_STREAM[kind], names.index(name)])
         out[name] = [_measure(c, spec.n_dof, spec.angular, sensor, rng) for c in trajs]
     return out
+
+
+def sample_overlap(
+    samples: Sequence[Trajectory],
+    reference: Sequence[Trajectory],
+    tolerances: Sequence[float],
+    angular: Sequence[bool] | None = None,
+    *,
+    same_time: bool = True,
+) -> float:
+    """Fraction of the samples of ``samples`` whose state is within ``tolerances`` (one per state
+    variable, ``inf`` to ignore one) of a sample of ``reference`` — how much of a validation set
+    repeats a test set. ``same_time=True``: the reference sample at the same time of some
+    reference trajectory (a trajectory that follows a test trajectory, as under a shared input);
+    ``False``: at any time (coverage of the same region of state space, which trajectories of one
+    damped system share whatever their excitation). Variables flagged in ``angular`` are compared
+    modulo 2π."""
+    tol = np.asarray(tolerances, dtype=float)
+    keep = np.isfinite(tol)
+    wrap = np.zeros(len(tol), bool) if angular is None else np.asarray(angular, bool)
+
+    def scaled(x):
+        return x[..., keep] / tol[keep]
+
+    hits = total = 0
+    if same_time:
+        for tr in samples:
+            a = scaled(tr.x)
+            found = np.zeros(len(a), bool)
+            for ref in reference:
+                n = min(len(a), len(ref.x))
+                found[:n] |= _aligned_close(a[:n], scaled(ref.x[:n]), wrap[keep], 2 * np.pi / tol[keep])
+            hits, total = hits + found.sum(), total + len(a)
+        return float(hits / max(total, 1))
+    a = np.concatenate([scaled(tr.x) for tr in samples])
+    b = np.concatenate([scaled(tr.x) for tr in reference])
+    # copies of the reference shifted by ±2π on each wrapped variable compare across the wrap
+    for i in np.flatnonzero(wrap[keep]):
+        shift = np.eye(b.shape[1])[i] * 2 * np.pi / tol[keep][i]
+        b = np.concatenate([b, b + shift, b - shift])
+    distance, _ = cKDTree(b).query(a, k=1, p=np.inf, distance_upper_bound=1.0)
+    return float(np.mean(np.isfinite(distance)))
+
+
+def _aligned_close(a, b, wrap, period) -> np.ndarray:
+    """Per sample: |a − b| ≤ 1 on every (scaled) variable, wrapped ones modulo their period."""
+    diff = np.abs(a - b)
+    diff = np.where(wrap, np.minimum(np.mod(diff, period), period - np.mod(diff, period)), diff)
+    return (diff <= 1.0).all(axis=1)
 
 
 def write_datasets(
@@ -620,8 +795,11 @@ def generate(
     sensor: SensorOptions | None = None,
     ground_truth: GroundTruth | str = "auto",
     overwrite: bool = False,
+    split: str = "test",
 ) -> dict[str, Path]:
-    """:func:`generate_datasets` then :func:`write_datasets`; returns ``{name: csv path}``."""
+    """:func:`generate_datasets` then :func:`write_datasets`; returns ``{name: csv path}``.
+    ``split="validation"``: the training set and the validation datasets
+    (:func:`generate_validation`) instead of the test sets, which are then never written."""
     from .. import __version__
 
     sensor = sensor or SensorOptions()
@@ -629,11 +807,17 @@ def generate(
     gt = default_ground_truth(spec.name, ground_truth) if isinstance(ground_truth, str) else ground_truth
     recipe = recipe_for(spec.name, small)
     t0 = time.perf_counter()
+    if split not in ("test", "validation"):
+        raise ValueError(f"split must be 'test' or 'validation', got {split!r}")
     datasets = generate_datasets(
         spec.name, seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=gt
     )
+    if split == "validation":
+        datasets = {"train": datasets["train"], **generate_validation(
+            spec.name, seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=gt)}
     metadata = {
         "seed": seed,
+        **({"split": split} if split != "test" else {}),
         "small": small,
         "rate_hz": DATA_RATE_HZ,
         "recipe": recipe,

@@ -62,6 +62,15 @@ TEST_SETS = {
     "nmsd": {"Chirp": "test_chirp", "Square": "test_square"},
     "furuta": {"Free": "test_free", "Forced": "test_forced"},
 }
+#: What a selection run (``split="validation"``) is scored on instead: the validation datasets
+#: (:func:`~furuta_gym.training.datagen.generate_validation`), which share no excitation with
+#: the test sets; the Furuta scale is then fitted on ``val_scale_fit``, not ``scale_fit``.
+VALIDATION_SETS = {
+    "nmsd": {"Multisine": "val_multisine", "Steps": "val_steps"},
+    "furuta": {"Free": "val_free", "Forced": "val_forced"},
+}
+EVALUATION_SETS = {"test": TEST_SETS, "validation": VALIDATION_SETS}
+SCALE_FIT_SET = {"test": "scale_fit", "validation": "val_scale_fit"}
 METRIC_COLUMNS = {
     "nmsd": ("p", "p_dot", "inertial", "coriolis", "potential", "energy"),
     "furuta": ("alpha", "beta", "alpha_dot", "beta_dot", "inertial", "coriolis", "potential", "energy"),
@@ -95,6 +104,9 @@ class ReproduceConfig:
     ``model_overrides``: model hyper-parameters (:func:`~furuta_gym.models.make_model` keywords)
     for every model of the run, recorded with its settings like the defaults (a key a model kind
     does not know is an error, so runs that override F_a options name only aph / adln pairs).
+    ``split``: ``"test"`` (the reproduction) or ``"validation"`` (a selection run: trained on the
+    same training data, scale-fitted and scored on the validation datasets only — no test set
+    is written or scored, no figure made).
     """
 
     quick: bool = False
@@ -111,8 +123,11 @@ class ReproduceConfig:
     figures: bool = True
     progress: bool = True
     jobs: int = 1
+    split: str = "test"
 
     def __post_init__(self):
+        if self.split not in EVALUATION_SETS:
+            raise ValueError(f"split must be one of {sorted(EVALUATION_SETS)}, got {self.split!r}")
         if int(self.jobs) < 1:
             raise ValueError(f"jobs must be at least 1, got {self.jobs}")
         for s in self.systems:
@@ -313,26 +328,27 @@ def _log(msg: str, stream=None) -> None:
 def _datasets(system: str, out: Path, config: ReproduceConfig):
     """Generate (or reuse) the datasets of ``system`` under ``out/data/<system>``."""
     from ..data import load_trajectories
-    from .datagen import DATASET_NAMES, generate
+    from .datagen import generate
 
     folder = out / "data" / system
     manifest = folder / "manifest.json"
     if manifest.exists():
         meta = json.loads(manifest.read_text())
-        if meta.get("seed") != config.data_seed or bool(meta.get("small")) != config.small:
+        held = (meta.get("seed"), bool(meta.get("small")), meta.get("split", "test"))
+        if held != (config.data_seed, config.small, config.split):
             raise ValueError(
-                f"{folder}: holds data generated with seed={meta.get('seed')}, "
-                f"small={meta.get('small')}; this run wants seed={config.data_seed}, "
-                f"small={config.small} — choose another --out"
+                f"{folder}: holds data generated with seed={held[0]}, small={held[1]}, "
+                f"split={held[2]!r}; this run wants seed={config.data_seed}, "
+                f"small={config.small}, split={config.split!r} — choose another --out"
             )
         missing = [name for name, f in meta.get("files", {}).items() if not (folder / f["path"]).exists()]
         if missing:
             _regenerate_data(system, folder, meta, missing)
     else:
         generate(system, folder, seed=config.data_seed, small=config.small,
-                 ground_truth=config.ground_truth, overwrite=True)
+                 ground_truth=config.ground_truth, overwrite=True, split=config.split)
     meta = json.loads(manifest.read_text())
-    data = {name: load_trajectories(folder / f"{name}.csv", system) for name in DATASET_NAMES[system]}
+    data = {name: load_trajectories(folder / f["path"], system) for name, f in meta["files"].items()}
     return data, meta
 
 
@@ -348,7 +364,8 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
 
     with tempfile.TemporaryDirectory() as tmp:
         generate(system, tmp, seed=meta.get("seed", 0), small=bool(meta.get("small")),
-                 ground_truth=meta.get("ground_truth", "auto"), overwrite=True)
+                 ground_truth=meta.get("ground_truth", "auto"), overwrite=True,
+                 split=meta.get("split", "test"))
         for name in missing:
             entry = meta["files"][name]
             fresh = Path(tmp) / entry["path"]
@@ -375,6 +392,8 @@ def _run_settings(system: str, kind: str, loss: str, seed: int, config: Reproduc
     train.pop("progress", None)
     settings = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": train,
                 "model_hparams": _default_hparams(system, kind, config.model_overrides)}
+    if config.split != "test":  # the scale is fitted on the split's own trajectory
+        settings["split"] = config.split
     return json.loads(json.dumps(settings))
 
 
@@ -462,7 +481,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     else:
         resume = (run_dir / STATE_FILE).exists()
         status = "resumed" if resume else "trained"
-        forced = data.get("scale_fit") if system == "furuta" else None
+        forced = data.get(SCALE_FIT_SET[config.split]) if system == "furuta" else None
         try:
             train(kind, system, loss, data["train"], tcfg, out_dir=run_dir, resume=resume,
                   forced_trajs=forced, hparams=config.model_overrides)
@@ -471,14 +490,15 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
             error = f"{type(exc).__name__}: {exc}"
         if error is not None:
             # recorded, never hidden: every cell of this model reads "fail" in the tables
-            metrics = {label: {m: FAILED for m in METRIC_COLUMNS[system]} for label in TEST_SETS[system]}
+            metrics = {label: {m: FAILED for m in METRIC_COLUMNS[system]}
+                       for label in EVALUATION_SETS[config.split][system]}
             metrics["_error"] = error
             metrics_path.write_text(json.dumps(metrics, indent=1) + "\n")
             return metrics, time.perf_counter() - t0, "failed"
         model = load_model(model_path, expected_system=system)
     t_train = time.perf_counter() - t0
     metrics = {}
-    for label, name in TEST_SETS[system].items():
+    for label, name in EVALUATION_SETS[config.split][system].items():
         m = evaluate_model(model, data[name], truth, physics=(kind != "aph"))
         metrics[label] = metrics_to_json(m)
     metrics["_seconds"] = {"train": round(t_train, 1), "evaluate": round(time.perf_counter() - t0 - t_train, 1)}
@@ -614,6 +634,8 @@ def reproduce(
     from ..models import analytic_model
 
     ensure_x64()
+    if config.split != "test":  # the figures show the test sets
+        config = dataclasses.replace(config, figures=False)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
@@ -690,10 +712,10 @@ def _aggregate(values: Sequence[Any]) -> tuple[str, float | None, float | None, 
 
 def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[dict]:
     """One row per (system, test set, model, loss, metric): ours (text, mean, std) and paper."""
-    paper = load_paper_table()
+    paper = load_paper_table() if config.split == "test" else {}  # no paper value for validation
     rows = []
     for system in config.systems:
-        for label in TEST_SETS[system]:
+        for label in EVALUATION_SETS[config.split][system]:
             for kind, loss in config.pairs:
                 per_seed = results.get((system, kind, loss), [])
                 for metric in METRIC_COLUMNS[system]:
