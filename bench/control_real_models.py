@@ -4,7 +4,8 @@
 
 Design models: the analytic model fitted by ``diagnose`` on the real QUBE runs 1–5 plus the
 effects it found (``model_after``), and the learned models trained on the same runs by
-``experiments/real_models.py`` (``results/real_models/runs/*/model.eqx``). Plant: the MuJoCo
+``experiments/real_models.py`` (``results/real_models/runs/*/selected.eqx``, the snapshot each
+run kept on validation and the docs/learning.md table scores). Plant: the MuJoCo
 ground truth with the effects ``diagnose`` found written into it — the closest stand-in for the
 rig this package has (its masses and lengths stay nominal: MuJoCo takes physical parameters,
 the fit gives lumped ones). Swing-up + LQR (volts), 5 V, 500 Hz, 8 s episodes, x0 = 0 plus
@@ -34,7 +35,7 @@ def _designs(res, load_model):
     """(label, design model) pairs: the diagnosed analytic model, then each real-data checkpoint."""
     out = [("diagnosed analytic (runs 1–5)", res.model_after)]
     for name in LEARNED:
-        path = ROOT / "results" / "real_models" / "runs" / name / "model.eqx"
+        path = ROOT / "results" / "real_models" / "runs" / name / "selected.eqx"
         if path.exists():
             out.append((f"{name} trained on runs 1–5", load_model(path, expected_system="furuta")))
     return out

@@ -32,6 +32,7 @@ import argparse
 import dataclasses
 import json
 import platform
+import shutil
 import time
 from pathlib import Path
 
@@ -92,6 +93,9 @@ def _validation_score(model, val) -> float:
     return float("inf") if any(isinstance(v, str) for v in cells) else float(np.mean(list(cells)))
 
 
+SELECTED = "selected.eqx"  # the snapshot chosen on validation, what the table scores
+
+
 def train_learned(kind: str, loss: str, train, val, out: Path, budget: float):
     """Train (or reuse a finished run in ``out``), keep the snapshot best on validation."""
     from furuta_gym.training.checkpoint import load_model
@@ -105,6 +109,8 @@ def train_learned(kind: str, loss: str, train, val, out: Path, budget: float):
     snaps = sorted(out.glob("model_epoch*.eqx")) + [out / "model.eqx"]
     scores = {p.name: _validation_score(load_model(p, expected_system="furuta"), val) for p in snaps}
     best = min(scores, key=scores.get)
+    # the scored model is committed as selected.eqx (the snapshots are not)
+    shutil.copyfile(out / best, out / SELECTED)
     info = {"config": config.to_json(), "training_seconds": round(seconds, 1),
             "wall_seconds_this_call": round(time.time() - t0, 1), "validation": scores, "selected": best,
             "final": {k: history[-1].get(k) for k in ("itau", "traj", "penalty", "lambda")}}
