@@ -2,6 +2,7 @@
 
     python experiments/validation_overlap.py            # writes results/validation_overlap/
     python experiments/validation_overlap.py --table    # rewrite the docs table from the file
+    python experiments/validation_overlap.py --check    # exit 1 if the docs table and file differ
 
 A sample "repeats" a test set when a test trajectory, at the same time, has a state within
 (``same time``, the measure that shows a validation trajectory following a test trajectory under
@@ -83,19 +84,26 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def write_docs(rows: list[dict]) -> None:
+PATTERN = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
+
+
+def documented(rows: list[dict]) -> str:
+    """docs/reproduce.md with its overlap block written from ``rows``."""
     text = DOCS.read_text()
-    block = f"{START}\n{table(rows)}\n{END}"
-    pattern = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
-    if not pattern.search(text):
+    if not PATTERN.search(text):
         raise SystemExit(f"{DOCS}: no {START} … {END} block to fill")
-    DOCS.write_text(pattern.sub(lambda _: block, text))
+    return PATTERN.sub(lambda _: f"{START}\n{table(rows)}\n{END}", text)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--table", action="store_true", help="only rewrite the docs table from the file")
+    ap.add_argument("--check", action="store_true", help="exit 1 if docs/reproduce.md is stale")
     args = ap.parse_args(argv)
+    if args.check:
+        stale = documented(json.loads(RESULT.read_text())["rows"]) != DOCS.read_text()
+        print(f"{DOCS}: {'stale, run --table' if stale else 'matches'} {RESULT}")
+        return int(stale)
     if not args.table:
         import furuta_gym
 
@@ -105,7 +113,7 @@ def main(argv=None) -> int:
         RESULT.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
     rows = json.loads(RESULT.read_text())["rows"]
     print(table(rows))
-    write_docs(rows)
+    DOCS.write_text(documented(rows))
     return 0
 
 

@@ -72,3 +72,14 @@ def test_validation_sets_do_not_follow_the_test_sets(system):
                                   recipe=dataclasses.replace(FurutaRecipe.small(), scale_fit_input="steps"))
         assert sample_overlap(steps["scale_fit"], test_trajs, tol, angular) < 0.01
         np.testing.assert_array_equal(steps["test_forced"][0].x, tests["test_forced"][0].x)
+
+
+def test_published_overlap_table_matches_its_result_file():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, str(root / "experiments" / "validation_overlap.py"), "--check"],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
