@@ -1,13 +1,11 @@
 """The measured-data loader/writer: formats, column maps, and one clear error per bad input."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from furuta_gym.data import DataError, Trajectory, load_trajectories, save_trajectories
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "qube_servo_closed_loop"
 
 
 def _trajs(n=2, T=50, dof=2, vel=True):
@@ -100,9 +98,10 @@ def test_text_in_a_numeric_column_is_named(tmp_path):
         load_trajectories(p, "nmsd")
 
 
-@pytest.mark.skipif(not REAL.is_dir(), reason="shared real QUBE logs not present")
 def test_real_qube_log_loads_through_a_column_map_with_sign_and_offset():
-    path = sorted(REAL.glob("*.csv"))[0]
+    from furuta_gym.datasets import qube_closed_loop_files
+
+    path = qube_closed_loop_files([1])[0]  # a vendored real run, as the user's own file
     (tr,) = load_trajectories(
         path, "furuta",
         column_map={"alpha": "theta", "beta": "alpha", "u": "plant_input"},

@@ -3,7 +3,7 @@
 * mass matrix (mj_fullM), bias force (Coriolis − ∂L/∂q), passive force (τ_NC, plus the N-MSD's
   springs) and actuator force (τ_u) at 1 000 random states, to ≤ 1e-9 relative;
 * MuJoCo trajectories (RK4, the shipped timesteps) against a 1e-10/1e-12-tolerance diffrax solution
-  of the analytic model with the same held inputs: ≤ 1e-4 rad / m RMS.
+  of the analytic model with the same held inputs: ≤ 2e-6 rad / m RMS.
 """
 
 import jax
@@ -145,7 +145,7 @@ def test_furuta_trajectory_matches_tight_diffrax(forced):
     assert control_dt == dt
     ref = _reference(Furuta(), x0, ts, us)
     rms = np.sqrt(np.mean((xs[:, :2] - ref[:, :2]) ** 2, axis=0))
-    assert np.all(rms <= 1e-4), rms
+    assert np.all(rms <= 2e-6), rms  # RK4 at the 2 ms control period against rtol 1e-10
     # the run is not trivial: the pendulum actually swings
     assert np.ptp(xs[:, 1]) > 0.5
 
@@ -159,5 +159,5 @@ def test_nmsd_chirp_trajectory_matches_tight_diffrax():
     assert control_dt == dt
     ref = _reference(NMSD(), x0, ts, us)
     rms = np.sqrt(np.mean((xs[:, 0] - ref[:, 0]) ** 2))
-    assert rms <= 1e-4, rms
+    assert rms <= 2e-6, rms
     assert np.max(np.abs(xs[:, 0])) > 0.5  # deep into the cubic spring

@@ -33,13 +33,3 @@ def test_cli_help_lists_subcommands():
     out = subprocess.run([sys.executable, "-m", "furuta_gym", "--help"], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert "furuta-gym" in out.stdout
-
-
-def test_shipped_paper_table_matches_the_shared_reference():
-    import pytest
-
-    shared = ROOT.parent / "shared" / "reference" / "paper_tables.csv"
-    if not shared.is_file():
-        pytest.skip("shared/ reference not beside this checkout")
-    shipped = ROOT / "furuta_gym" / "training" / "paper_tables.csv"
-    assert shipped.read_text() == shared.read_text()

@@ -20,3 +20,22 @@ def test_readme_python_blocks_run(tmp_path, monkeypatch, capsys):
     assert abs(np.cos(state[1]) + 1) < 1e-3
     printed = capsys.readouterr().out.strip().splitlines()
     assert float(printed[-1]) == 1.0
+
+
+def test_readme_is_a_five_minute_read_that_stays_inside_the_repo():
+    text = README.read_text()
+    assert len(text.encode()) <= 10_000
+    for link in re.findall(r"\]\(([^)#]+)", text):
+        assert not link.startswith(("../", "/")), link
+        if not link.startswith("http"):
+            assert (README.parent / link).exists(), link
+    assert "known_pitfalls" not in text and "shared/" not in text
+
+
+def test_readme_results_table_matches_the_reproduction_tables():
+    import subprocess
+    import sys
+
+    script = README.parent / "experiments" / "readme_results.py"
+    out = subprocess.run([sys.executable, str(script), "--check"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr

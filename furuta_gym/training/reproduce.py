@@ -80,12 +80,8 @@ PHYSICS_METRICS = ("inertial", "coriolis", "potential", "energy")
 FAILED = "fail"
 MODEL_LABELS = {"dln": "DLN", "aph": "APH", "adln": "ADLN"}
 LOSS_LABELS = {"traj": "L_traj", "aph": "L_aph", "prop": "L_prop"}
-# The package ships a copy of ../shared/reference/paper_tables.csv (tests check they agree), so
-# an installed furuta-gym reproduces without the repository's shared/ folder beside it.
-_PAPER_CSV_CANDIDATES = (
-    Path(__file__).resolve().parent / "paper_tables.csv",
-    Path(__file__).resolve().parents[2] / ".." / "shared" / "reference" / "paper_tables.csv",
-)
+# The paper's result tables, shipped with the package.
+_PAPER_CSV_CANDIDATES = (Path(__file__).resolve().parent / "paper_tables.csv",)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,96 @@
+"""The README's headline results table, written from the committed reproduction tables.
+
+    python experiments/readme_results.py           # rewrite the README block
+    python experiments/readme_results.py --check   # exit 1 if the README block is stale
+
+Reads the three-seed reproductions (``results/reproduce_seeds/tables.csv`` for the Furuta,
+``results/reproduce_seeds_nmsd/tables.csv`` for the N-MSD). Per system and model, with L_prop
+against the model's baseline loss (L_traj for DeLaN, L_aph for APHYNITY and augmented DeLaN):
+how many cells of each are at or below the paper's, and the force decomposition — the mean over
+both test sets of the inertial, Coriolis and potential-derived log10 RMSE (APHYNITY has none:
+its M and V are the prior's).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import re
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+TABLES = {"furuta": ROOT / "results" / "reproduce_seeds" / "tables.csv",
+          "nmsd": ROOT / "results" / "reproduce_seeds_nmsd" / "tables.csv"}
+START, END = "<!-- generated:readme-results -->", "<!-- /generated:readme-results -->"
+BASELINE = {"DLN": "traj", "APH": "aph", "ADLN": "aph"}
+LOSS = {"traj": "L_traj", "aph": "L_aph", "prop": "L_prop"}
+FORCES = ("inertial", "coriolis", "potential")
+SYSTEM = {"furuta": "Furuta", "nmsd": "N-MSD"}
+
+
+def _rows(system: str) -> list[dict]:
+    with TABLES[system].open() as f:
+        return list(csv.DictReader(f))
+
+
+def _cells(rows, model, loss) -> tuple[int, int]:
+    """(at or below the paper, cells with a paper value) of one model × loss."""
+    mine = [r for r in rows if r["model"] == model and r["loss"] == loss and r["better_or_equal"]]
+    return sum(r["better_or_equal"] == "yes" for r in mine), len(mine)
+
+
+def _forces(rows, model, loss) -> float | None:
+    values = [float(r["ours_mean"]) for r in rows
+              if r["model"] == model and r["loss"] == loss and r["metric"] in FORCES and r["ours_mean"]]
+    return float(np.mean(values)) if values else None
+
+
+def table() -> str:
+    lines = ["| system | model | cells at or below the paper: L_prop | baseline | "
+             "force decomposition, log10 RMSE: L_prop | baseline |", "|---|---|---|---|---|---|"]
+    seeds = set()
+    for system in TABLES:
+        rows = _rows(system)
+        seeds |= {r["n_seeds"] for r in rows}
+        for model, base in BASELINE.items():
+            prop, ref = _cells(rows, model, "prop"), _cells(rows, model, base)
+            fp, fb = _forces(rows, model, "prop"), _forces(rows, model, base)
+            force = "N/A (prior) | N/A" if fp is None else f"**{fp:.2f}** | {fb:.2f} ({LOSS[base]})"
+            lines.append(f"| {SYSTEM[system]} | {model} | {prop[0]} of {prop[1]} | "
+                         f"{ref[0]} of {ref[1]} ({LOSS[base]}) | {force} |")
+    note = (f"Means over {' / '.join(sorted(seeds))} model seeds; generated from "
+            "[results/reproduce_seeds](results/reproduce_seeds/tables.md) and "
+            "[results/reproduce_seeds_nmsd](results/reproduce_seeds_nmsd/tables.md) by "
+            "`experiments/readme_results.py`.")
+    return "\n".join(lines) + "\n\n" + note
+
+
+PATTERN = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
+
+
+def documented() -> str:
+    text = README.read_text()
+    if not PATTERN.search(text):
+        raise SystemExit(f"{README}: no {START} … {END} block to fill")
+    return PATTERN.sub(lambda _: f"{START}\n{table()}\n{END}", text)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="exit 1 if the README block is stale")
+    args = ap.parse_args(argv)
+    text = documented()
+    if args.check:
+        stale = text != README.read_text()
+        print(f"{README}: {'stale, run experiments/readme_results.py' if stale else 'up to date'}")
+        return int(stale)
+    README.write_text(text)
+    print(table())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
