@@ -1,11 +1,11 @@
-"""The rule bench/select_option.py applies to choose a recipe option over several model seeds."""
+"""The rule selection/select_option.py applies to choose a recipe option over several model seeds."""
 
 import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "selection"))
 from select_option import choose  # noqa: E402
 
 

@@ -183,7 +183,7 @@ PROP_LAMBDA = 1e-3
 #: trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit; Simpson's
 #: floor is ~7× lower (tests/test_lagrangian.py). "hermite" removes the floor (true model 2e-9
 #: against 1.1e-5 on the Furuta training data) at ~3× the L_Iτ step's cost. On validation data over
-#: three model seeds (bench/select_option.py --seeds 3, which keeps the recipe's value unless
+#: three model seeds (selection/select_option.py --seeds 3, which keeps the recipe's value unless
 #: another is better on every seed) it did not beat Simpson for the Furuta DeLaN (mean −1.030 →
 #: −1.084, seed 0 worse) or APHYNITY (−1.631 → −1.658, seed 1 worse): results/quadrature_seeds.
 #: ``--quadrature`` / ``train_overrides`` choose.

@@ -56,7 +56,7 @@ __all__ = ["TrainConfig", "train", "fit_scale", "data_hash", "LOSSES", "ScaleFit
 LOSSES = ("traj", "aph", "prop", "itau")
 #: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
 #: TrainConfig.augmentation_weight is None: each chosen among 1e-2 / 1e-1 / 1 (and 10) on
-#: validation trajectories, never the reported test sets (bench/select_augmentation_weight.py,
+#: validation trajectories, never the reported test sets (selection/select_augmentation_weight.py,
 #: results/augmentation_weight/, docs/reproduce.md "Training recipe"). P_a measures F_a beyond its
 #: per-joint viscous term (TrainConfig.augmentation_part). The Furuta's friction is viscous, so
 #: a large μ costs its fit nothing and keeps the networks from trading gravity or inertia for

@@ -10,7 +10,7 @@ generated, scored or stored. The criterion is what a user could measure on held-
 mean over validation sets and state variables of the open-loop prediction log10 RMSE (a diverged
 prediction counts as +2). The smallest wins; the choice goes into the recipe by hand.
 
-    python bench/select_augmentation_weight.py --system furuta --kind adln --weights 0.01 0.1 1 10
+    python selection/select_augmentation_weight.py --system furuta --kind adln --weights 0.01 0.1 1 10
 
 Writes ``OUT/<system>_<kind>.md`` (and ``.json``) with one row per μ; trained runs live under
 ``OUT/<system>_<kind>/mu_<μ>`` and are reused when the script runs again.
@@ -42,7 +42,7 @@ def _train(system: str, kind: str, weight: float, out: Path) -> None:
     from furuta_gym.training.reproduce import reproduce
 
     furuta_gym.enable_x64()
-    reproduce(out, _config(system, kind, weight), command=f"bench/select_augmentation_weight.py μ={weight!r}", log=lambda msg: None)
+    reproduce(out, _config(system, kind, weight), command=f"selection/select_augmentation_weight.py μ={weight!r}", log=lambda msg: None)
 
 
 def _run_dir(out: Path, system: str, kind: str, seed: int = 0) -> Path:
@@ -102,7 +102,6 @@ def main(argv=None) -> None:
     machine = _machine()
     folder = args.out / f"{args.system}_{args.kind}"
     runs = {w: folder / f"mu_{w:g}" for w in args.weights}
-    t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         list(pool.map(_train, [args.system] * len(runs), [args.kind] * len(runs), runs, runs.values()))
     # what each model cost when it was trained (a run reused from an earlier invocation included)
@@ -115,7 +114,7 @@ def main(argv=None) -> None:
     lines = [
         f"# μ for {args.kind} on {args.system}, chosen on validation data",
         "",
-        f"`python bench/select_augmentation_weight.py --system {args.system} --kind {args.kind} "
+        f"`python selection/select_augmentation_weight.py --system {args.system} --kind {args.kind} "
         f"--weights {' '.join(f'{w:g}' for w in args.weights)}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', platform.machine())}, "
         f"{machine['cpu_count']} cores; training {round(sum(seconds.values()))} s summed over the candidates "
