@@ -9,6 +9,7 @@ from ._augmented import AugmentedDeLaN
 from ._delan import DeLaN
 from ._factory import MODEL_KINDS, make_model
 from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
+from .checkpoint import CheckpointError, load_model, read_header, save_model
 
 __all__ = [
     "Furuta",
@@ -24,6 +25,10 @@ __all__ = [
     "MODEL_KINDS",
     "SYSTEM_DEFAULTS",
     "make_model",
+    "save_model",
+    "load_model",
+    "read_header",
+    "CheckpointError",
 ]
 
 

@@ -57,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..diagnose import diagnose
-    from ..diagnose._report import write_figures, write_json
+    from ..diagnose import write_report_figures as write_figures
+    from ..diagnose import write_report_json as write_json
 
     for out in (args.json,):
         if out and Path(out).exists() and not args.overwrite:

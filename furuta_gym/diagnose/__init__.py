@@ -8,6 +8,8 @@ refits and reports the held-out errors before and after. See ``docs/diagnose.md`
 
 from ._diagnose import DiagnosisResult, DiagnosisSettings, EffectEvidence, ErrorSummary, diagnose
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
+from ._report import write_figures as write_report_figures
+from ._report import write_json as write_report_json
 from ._synthetic import measured_like
 
 __all__ = [
@@ -21,4 +23,6 @@ __all__ = [
     "layout_for",
     "nominal_base",
     "measured_like",
+    "write_report_figures",
+    "write_report_json",
 ]

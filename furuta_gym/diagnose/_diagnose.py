@@ -19,7 +19,7 @@ from ..lagrangian import AbstractLagrangianSystem
 from ..measured import estimate_velocities
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
-from ..training.checkpoint import load_model
+from ..models.checkpoint import load_model
 from . import _fit
 from . import _trace as _trace_mod
 from ._problem import Problem, fit_equation_error, free_columns

@@ -119,7 +119,7 @@ class _Plant:
         mem = [e for e in effects if e.name != "input_delay"]
         self.backend, self.lag = None, None
         if plant == "mujoco":
-            from ..envs._backends import MujocoBackend
+            from ..envs import MujocoBackend
 
             # the lag is native. ``fine``: ``substeps`` RK4 steps per sample, as the analytic
             # plant; else one MJCF step (2 ms / 10 ms), as the chirp data always had

@@ -806,7 +806,7 @@ def load_checkpoint(path: str | os.PathLike, system: str | None = None) -> Abstr
     if not path.exists():
         raise FileNotFoundError(f"dynamics: checkpoint file {str(path)!r} not found; accepted: {_ACCEPTED}")
     try:
-        from ..training.checkpoint import load_model
+        from ..models.checkpoint import load_model
     except ImportError as exc:
         raise ValueError(
             f"dynamics: cannot load checkpoint {str(path)!r}: the checkpoint loader "

@@ -38,13 +38,14 @@ from ..signals import quantize_joints
 from ..simulate import small_kernel_compiler_options
 from ._backends import ModelBackend
 from ._base import EnvArgumentError, LagrangianEnv
-from ._jax_rollout import Rollout, controlled_step, map_chunks, rollout
+from ._jax_rollout import Rollout, controlled_step, map_chunks, rollout, scan_closed_loop
 from ._parameters import PARAMETER_CLASSES
 from ._tasks import divergence_bounds
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv
 
 __all__ = [
+    "scan_closed_loop",
     "LagrangianVectorEnv",
     "FurutaVectorEnv",
     "NMSDVectorEnv",

@@ -1,0 +1,97 @@
+"""The package's layers point one way (issue 26): a test that walks every import, at module level
+and inside functions, of every module of the installed package.
+
+* models (and the spine: lagrangian, systems, signals, effects, simulate) import no env, no
+  training, no diagnosis, no command line; envs import neither training nor diagnosis;
+* no module imports another subpackage's private module (``furuta_gym.envs._backends`` from
+  ``furuta_gym.diagnose``): packages talk through their public ``__init__``.
+"""
+
+import ast
+from pathlib import Path
+
+import furuta_gym
+
+ROOT = Path(furuta_gym.__file__).resolve().parent
+REPO = ROOT.parent
+# subpackage -> its folder (models/ and controllers/ are mapped into furuta_gym by package-dir)
+FOLDERS = {"furuta_gym": ROOT, "furuta_gym.models": REPO / "models",
+           "furuta_gym.controllers": REPO / "controllers"}
+FORBIDDEN = {
+    "models": {"envs", "training", "diagnose", "cli", "controllers", "demo"},
+    "spine": {"envs", "training", "diagnose", "cli", "controllers", "demo"},
+    "envs": {"training", "diagnose", "cli", "demo"},
+    "controllers": {"training", "diagnose", "cli", "demo"},
+    "training": {"diagnose", "cli", "demo"},
+}
+SPINE = {"lagrangian", "systems", "signals", "effects", "simulate", "data"}
+
+
+def _modules():
+    seen = {}
+    for package, folder in FOLDERS.items():
+        for path in folder.rglob("*.py"):
+            rel = path.relative_to(folder).with_suffix("")
+            if package == "furuta_gym" and rel.parts[0] in ("models", "controllers"):
+                continue
+            parts = [p for p in rel.parts if p != "__init__"]
+            seen[".".join([package, *parts])] = (path, path.name == "__init__.py")
+    return seen
+
+
+def _imports(name: str, path: Path, is_package: bool):
+    """Absolute names of every module ``name`` imports (``from x import y``: x, and x.y)."""
+    tree = ast.parse(path.read_text())
+    base = name.split(".") if is_package else name.split(".")[:-1]
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                anchor = base[: len(base) - node.level + 1]
+                mod = ".".join(anchor + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            out.append(mod)
+            out += [f"{mod}.{a.name}" for a in node.names]
+    return [m for m in out if m.startswith("furuta_gym")]
+
+
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    if len(parts) < 2:
+        return None
+    top = parts[1]
+    if top in SPINE or top.startswith("_"):
+        return "spine" if top in SPINE else None
+    return top
+
+
+def _owner(module: str) -> str:
+    """The subpackage a module belongs to (furuta_gym.envs._backends -> furuta_gym.envs)."""
+    parts = module.split(".")
+    return ".".join(parts[:2])
+
+
+def test_layers_point_one_way_and_packages_talk_through_public_names():
+    modules = _modules()
+    problems = []
+    for name, (path, is_package) in modules.items():
+        layer = _layer(name)
+        for target in _imports(name, path, is_package):
+            target_layer = _layer(target)
+            if target_layer in FORBIDDEN.get(layer, set()):
+                problems.append(f"{name} imports {target} ({layer} must not depend on {target_layer})")
+            private = any(p.startswith("_") and p != "__init__" for p in target.split(".")[2:3])
+            if private and _owner(target) != _owner(name) and target.split(".")[1] in {
+                    m.split(".")[1] for m in modules if m.count(".") >= 2}:
+                problems.append(f"{name} imports {target}, a private module of {_owner(target)}")
+    assert not problems, "\n".join(sorted(set(problems)))
+
+
+def test_the_walker_sees_function_level_and_relative_imports():
+    # a relative import inside a function resolves to its absolute name
+    found = _imports("furuta_gym.envs._backends", ROOT / "envs" / "_backends.py", False)
+    assert "furuta_gym.models" in found or any(f.startswith("furuta_gym.models") for f in found)
+    assert len(_modules()) > 50
