@@ -9,7 +9,7 @@ model so that a model with the other β sign still pumps), and u = PFL⁻¹(ū) 
 limit. Why it pumps: with α̈ = ū the pendulum's energy changes as dE_β/dt ≈ −M_βα β̇ ū, and
 V(β) − V(π) ≤ 0 below the upright, so ū always opposes sgn(M_βα β̇) and fades out as β → π.
 
-Two additions the paper leaves implicit (known_pitfalls.md, "Swing-up and LQR"):
+Two additions the paper leaves implicit:
 
 * **First push.** At exact rest sgn(cos β · β̇) = 0 and nothing would move; we define
   sgn(0) := ``push`` (+1 by default), i.e. at rest the rotor is pushed with the full energy-law

@@ -1,7 +1,7 @@
 """Automatic k_e pick by a short seeded closed-loop sweep on the design model itself.
 
 The paper's k_e values (400 … 7000) are tied to its units and plant and don't carry over
-(known_pitfalls.md: with 5 V the pump stalls at 60–75 % of the needed energy when k_e is small,
+(with 5 V the pump stalls at 60–75 % of the needed energy when k_e is small,
 and works over a wide range once above that threshold). The rule, using nothing but the design
 model:
 

@@ -11,7 +11,7 @@ Lagrangian-system protocol, with two extras the training code relies on:
 * ``hparams`` — the keyword arguments that rebuild the module's skeleton with
   :func:`furuta_gym.models.make_model` (checkpoints store them in their JSON header).
 
-Units (known_pitfalls.md, "Units"): in SI the Furuta potential is ~100× its mass-matrix entries,
+Units: in SI the Furuta potential is ~100× its mass-matrix entries,
 so networks output O(1) numbers multiplied by a physical magnitude per quantity
 (``mass_scale`` ≈ J1, ``potential_scale`` ≈ mp·g·Lp, ``force_scale`` ≈ friction torques).
 """

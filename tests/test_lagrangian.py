@@ -187,7 +187,7 @@ def test_hermite_removes_the_floor_where_the_pendulum_whirls():
     us = jnp.zeros((101, 1))
     simpson = _relative_floor(model, xs, us, dt, "simpson")
     hermite = _relative_floor(model, xs, us, dt, "hermite")
-    assert simpson > 1e-4, simpson  # the floor known_pitfalls.md measures (relative rms)
+    assert simpson > 1e-4, simpson  # the floor of the trapezoid and Simpson rules (relative rms)
     assert hermite < simpson / 100, (simpson, hermite)
     # still a test of the model: a pendulum damping 10 % off stands far above the new floor
     wrong = Furuta(params=FurutaParameters(c_p=1.1 * float(model.params.c_p)))

@@ -141,13 +141,13 @@ class ReproduceConfig:
 
 # Epoch schedules (stage 1: 2-step predictions, stage 2: the paper's long horizon, 1 s Furuta /
 # 2 s N-MSD). The paper's 50 k + 10 k (Furuta) and 5 k + 1 k (N-MSD) full-batch epochs cost hours
-# per model on this 2-core CPU (known_pitfalls.md, "Cost"); these fit the whole table in the
+# per model on this 2-core CPU; these fit the whole table in the
 # issue's budget. Minibatches of 256 windows make an epoch several optimiser steps.
 FULL_EPOCHS = {"nmsd": (100, 100), "furuta": (60, 200)}
 QUICK_EPOCHS = {"nmsd": (8, 2), "furuta": (4, 1)}
 # L_prop runs: (L_Iτ alone, 2-step, long horizon). The first stage has no ODE solve — an epoch
 # costs milliseconds where a trajectory epoch costs seconds — so thousands of its epochs fit in
-# minutes (known_pitfalls.md, "Cost"); the two L_Iτ + λ·L_traj stages follow, shorter than the
+# minutes; the two L_Iτ + λ·L_traj stages follow, shorter than the
 # baselines'. The runs still cost 0.9–2.8× their baseline's training time (docs/reproduce.md,
 # "Training recipe", where a conclusion's dependence on that is checked at equal budget).
 FULL_PROP_EPOCHS = {"nmsd": (4000, 30, 30), "furuta": (6000, 20, 60)}
@@ -295,7 +295,7 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
 def load_paper_table(path: str | Path | None = None) -> dict[tuple[str, str, str, str, str], str]:
     """The paper's cells ``{(system, test_set, MODEL, loss, metric): "value" | "N/A" | "X"}``.
 
-    Reads ``../shared/reference/paper_tables.csv`` (or the copy shipped beside this module).
+    Reads the copy of the paper's tables shipped beside this module.
     """
     candidates = [Path(path)] if path is not None else list(_PAPER_CSV_CANDIDATES)
     for p in candidates:

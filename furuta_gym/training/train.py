@@ -77,7 +77,7 @@ class TrainConfig:
     no ODE solve, so thousands of epochs cost what tens of trajectory epochs do; the reproduction
     starts every L_prop run with one). The defaults are a short run a 2-core CPU finishes in
     minutes; :meth:`paper` gives the paper's recipe (50 k + 10 k epochs Furuta, 5 k + 1 k N-MSD,
-    full batch), which costs hours on a CPU (known_pitfalls.md, "Cost").
+    full batch), which costs hours on a CPU.
 
     ``learning_rate`` Adam's step, one value or one per stage (an L_Iτ-alone stage tolerates a
     larger step than the trajectory stages after it). ``cosine_decay_to`` within each stage the
