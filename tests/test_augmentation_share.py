@@ -172,7 +172,7 @@ def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_p
     rebuilds the architecture it was trained with (back-EMF in the prior, no W, tanh)."""
     import json
 
-    from furuta_gym.training import checkpoint as ckpt
+    from furuta_gym.models import checkpoint as ckpt
 
     old = make_model("furuta", "aph", jax.random.PRNGKey(2), prior_back_emf=True, linear_velocity=False,
                      force_activation="tanh")
@@ -195,7 +195,7 @@ def test_checkpoints_from_before_damping_scale_keep_their_units_for_w(tmp_path):
     units: it must load with that scale, or its damping would change by 10x."""
     import equinox as eqx
 
-    from furuta_gym.training import checkpoint as ckpt
+    from furuta_gym.models import checkpoint as ckpt
 
     # models of that time had the full matrix W (per-joint W came later)
     old = make_model("furuta", "adln", jax.random.PRNGKey(2), damping_scale=1e-3 / 10.0, linear_velocity=True)

@@ -78,7 +78,7 @@ def test_rerun_reuses_finished_models_and_refuses_other_settings(tiny_run):
     cfg_path.write_text(json.dumps(saved))
     reproduce(out, TINY, log=logs.append)
     # without the record, the checkpoint's own header says which architecture was trained
-    from furuta_gym.training import checkpoint as ckpt
+    from furuta_gym.models import checkpoint as ckpt
 
     model_path = cfg_path.parent / "model.eqx"
     model_bytes = model_path.read_bytes()
@@ -443,3 +443,21 @@ def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path):
         reproduce(tmp_path, dataclasses.replace(config, split="test"), log=lambda msg: None)
     with pytest.raises(ValueError, match="split must be one of"):
         ReproduceConfig(split="train")
+
+
+def test_every_recipe_row_cites_rows_of_the_decision_log():
+    """The recipe is one table (furuta_gym.training.recipe); each of its choices names a row of
+    docs/reproduce.md's decision log, which must exist."""
+    from pathlib import Path
+
+    from furuta_gym.training.recipe import RECIPE
+
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "reproduce.md").read_text()
+    log = docs[docs.index("**Decision log.**"):]
+    log = log[: log.index("\n\n", log.index("| choice |"))]
+    choices = [line.split("|")[1].strip() for line in log.splitlines() if line.startswith("| ")]
+    assert len(RECIPE) == 12
+    for key, row in RECIPE.items():
+        assert row.decisions, key
+        for decision in row.decisions:
+            assert any(c.startswith(decision) for c in choices), (key, decision)

@@ -36,6 +36,16 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..systems import get_spec
+from .recipe import (
+    DEFAULT_LEARNING_RATE,
+    DEFAULT_QUADRATURE,
+    QUICK_EPOCHS,
+    QUICK_PROP_EPOCHS,
+    RECIPE,
+    SYSTEM_ROWS,
+    RunRecipe,
+    recipe_row,
+)
 
 __all__ = [
     "PAPER_PAIRS",
@@ -139,157 +149,68 @@ class ReproduceConfig:
         return self.quick if self.small_data is None else self.small_data
 
 
-# Epoch schedules (stage 1: 2-step predictions, stage 2: the paper's long horizon, 1 s Furuta /
-# 2 s N-MSD). The paper's 50 k + 10 k (Furuta) and 5 k + 1 k (N-MSD) full-batch epochs cost hours
-# per model on this 2-core CPU; these fit the whole table in the
-# issue's budget. Minibatches of 256 windows make an epoch several optimiser steps.
-FULL_EPOCHS = {"nmsd": (100, 100), "furuta": (60, 200)}
-QUICK_EPOCHS = {"nmsd": (8, 2), "furuta": (4, 1)}
-# L_prop runs: (L_Iτ alone, 2-step, long horizon). The first stage has no ODE solve — an epoch
-# costs milliseconds where a trajectory epoch costs seconds — so thousands of its epochs fit in
-# minutes; the two L_Iτ + λ·L_traj stages follow, shorter than the
-# baselines'. The runs still cost 0.9–2.8× their baseline's training time (docs/reproduce.md,
-# "Training recipe", where a conclusion's dependence on that is checked at equal budget).
-FULL_PROP_EPOCHS = {"nmsd": (4000, 30, 30), "furuta": (6000, 20, 60)}
-QUICK_PROP_EPOCHS = {"nmsd": (300, 8, 2), "furuta": (300, 4, 1)}
-#: A longer L_Iτ-alone stage for single models of the full run. Furuta augmented DeLaN's L_Iτ was
-#: still falling at epoch 6000 (6.0e-5 → 4.2e-5 over the last 1000 epochs, against DLN's 1.3e-5
-#: and APHYNITY's flat 1.5e-5): three networks, one of them a general F_a(q, q̇), fit slower. At
-#: 12 000 epochs it reached 2.2e-5 (one run; a training-loss diagnosis). Learning rates 3e-3 and
-#: 1e-2 instead reached 2.5e-5 and 3.2e-5. N-MSD DeLaN's was falling fast at epoch 4000
-#: (4.4e-4, the value its 4000-epoch runs ended near); by epoch 5400 it was at 1e-5. 8000 epochs
-#: took the chirp energy from −1.89 to −2.50 even though that run ended on a spike (1.4e-4; its
-#: best iterate, which keep_best_itau now hands on, was 2.1e-6; one run, 2026-11-23).
-#: Furuta augmented DeLaN then went from 12 000 to 24 000 on validation data (seed 100, one run
-#: each, results/adln_stage_epochs): mean prediction log10 RMSE −1.029 → −1.115, where longer
-#: trajectory stages (40 + 120) gave −0.989; its best L_Iτ 1.2e-5 → 8.2e-6, flattening (9.1e-6
-#: at 18 000). Furuta DeLaN, whose L_Iτ looked flat at epoch 6000 (1.3e-5, near the true model's
-#: Simpson floor of 1.1e-5), went on to 9.2e-6 by 12 000 and on validation data over three model
-#: seeds (results/dln_stage_epochs_seeds) its mean went −1.030 → −1.329, better on every seed
-#: (−0.20 / −0.20 / −0.50) and every validation cell, for ~60 s more training.
-FULL_PROP_ITAU_EPOCHS = {("furuta", "adln"): 24000, ("furuta", "dln"): 12000, ("nmsd", "dln"): 8000}
-#: λ of L_prop = L_Iτ + λ·L_traj (the paper writes λ_k and gives no value). Our L_Iτ is normalised
-#: (dimensionless, ~1e-5 once fitted), L_traj is a mean squared state error: with λ = 1 the 1 s
-#: Furuta stage let L_traj swamp L_Iτ and undid the fit (free α −1.52 → −0.67, forces −4.3 →
-#: −3.3, one run each), with λ = 1e-3 both stages keep it (α −1.59, forces −4.3). Checked again
-#: on validation data for the Furuta augmented DeLaN, whose damping the trajectory stages might
-#: have corrected: λ = 1e-2 and 1e-1 gave a mean of −0.33 against −0.80 at 1e-3, their L_Iτ
-#: ending 20–100× higher (results/lambda_traj/furuta.md, one run each); 1e-4 and 0 scored −0.82
-#: and −0.84, a tie within the seed spread (results/lambda_traj_small/furuta.md). With the
-#: fine-tuning step of 1e-4 (below) 1e-3 still wins: −1.029 against −0.919 (1e-2) and −0.992
-#: (1e-1) (results/lambda_finetuned/furuta.md).
-PROP_LAMBDA = 1e-3
-#: L_Iτ's quadrature in the reproduction (and the Furuta's scale fit): Simpson's rule. The paper's
-#: trapezoid leaves a floor of ~2 % of rms Δp at 100 Hz that the network learns to fit; Simpson's
-#: floor is ~7× lower (tests/test_lagrangian.py). "hermite" removes the floor (true model 2e-9
-#: against 1.1e-5 on the Furuta training data) at ~3× the L_Iτ step's cost. On validation data over
-#: three model seeds (selection/select_option.py --seeds 3, which keeps the recipe's value unless
-#: another is better on every seed) it did not beat Simpson for the Furuta DeLaN (mean −1.030 →
-#: −1.084, seed 0 worse) or APHYNITY (−1.631 → −1.658, seed 1 worse): results/quadrature_seeds.
-#: ``--quadrature`` / ``train_overrides`` choose.
-REPRODUCE_QUADRATURE = "simpson"
-#: L_Iτ's quadrature for single L_prop models of a full run, where it is not
-#: :data:`REPRODUCE_QUADRATURE`. Furuta augmented DeLaN, on validation data over three model seeds
-#: (results/quadrature_adln_seeds): Simpson −1.145 → Hermite −1.387, better on every seed
-#: (−0.04 / −0.44 / −0.25) and on every validation cell. A one-run comparison with its former
-#: 12 000-epoch L_Iτ stage had put Hermite 0.06 behind (results/quadrature). Its training takes
-#: ~2× as long (2050 s against 965 s, the three seeds' mean).
-FULL_PROP_QUADRATURE = {("furuta", "adln"): "hermite"}
-#: Adam's step in the L_Iτ-alone stage of the L_prop runs (the trajectory stages keep 1e-3). The
-#: N-MSD's (64, 64) networks crawl at 1e-3: L_Iτ on the training data was still 0.025 after 4000
-#: epochs, against 3e-4 at 1e-2 (one run each); the Furuta's (16, 16) ones fit at 1e-3.
-PROP_ITAU_LEARNING_RATE = {"nmsd": 1e-2, "furuta": 1e-3}
-#: Adam's step in the two L_Iτ + λ·L_traj stages of a full run's L_prop, for single models (the
-#: others keep 1e-3). These stages fine-tune a model whose L_Iτ fit has converged, and at 1e-3 they
-#: undid it: Furuta augmented DeLaN's L_Iτ went from its stage's best 1.1e-5 to 3.8e-5 at the last
-#: epoch — the same with λ = 0, so the step size and not L_traj moved it (results/lambda_traj_small/).
-#: At 1e-4 it ends at 1.2e-5 and its trajectory loss falls 0.024 → 0.009. Chosen on validation
-#: data (results/finetune_rate*/furuta.md, one run each; the 1e-3 augmented DeLaN's seed spread
-#: is −0.79 … −0.91): augmented DeLaN's mean −0.795 → −1.029 (3e-4: −0.970, 3e-5: −1.018).
-#: DeLaN's fell with every smaller step, −1.048 / −1.158 / −1.153 / −1.167 / −1.201 / −1.242 for
-#: 1e-3 / 3e-4 / 1e-4 / 3e-5 / 1e-5 / 1e-6 and rose again below it (1e-7: −1.209, 1e-8:
-#: −1.194); at 1e-6 the 1 s stage still lowers its trajectory loss by a quarter (2.3e-2 →
-#: 1.7e-2). APHYNITY's moved −1.583 → −1.574
-#: (its M and V are the prior's, nothing of its fit was undone), so it keeps 1e-3. Once augmented
-#: DeLaN's L_Iτ stage ran 24 000 epochs (above), its step was chosen again from the model that
-#: stage makes (results/finetune_rate_itau24k): 3e-4 −1.139, 1e-4 −1.115, 3e-5 −1.123 — the free
-#: cells alike, the forced ones 0.03–0.05 better at 3e-4. Over three model seeds 1e-4 scored
-#: −1.178 against −1.145 but worse on seed 0 (results/finetune_rate_itau24k_seeds), a tie, so 3e-4
-#: stays; its Hermite runs (FULL_PROP_QUADRATURE) were chosen at 3e-4. DeLaN's 1e-6 held over three
-#: seeds against 1e-4 (results/finetune_rate_dln_seeds). Not in --quick, whose 300 L_Iτ epochs
-#: leave nothing converged to keep.
-FULL_PROP_FINETUNE_LEARNING_RATE = {("furuta", "dln"): 1e-6, ("furuta", "adln"): 3e-4}
+# The full run's recipe is one table (:mod:`furuta_gym.training.recipe`, rows citing the decision
+# log in docs/reproduce.md); the names below are views of it.
+FULL_EPOCHS = {s: rows["baseline"].epochs for s, rows in SYSTEM_ROWS.items()}
+FULL_PROP_EPOCHS = {s: rows["prop"].epochs for s, rows in SYSTEM_ROWS.items()}
+PROP_LAMBDA = SYSTEM_ROWS["furuta"]["prop"].lambda_traj
+REPRODUCE_QUADRATURE = DEFAULT_QUADRATURE
+PROP_ITAU_LEARNING_RATE = {s: rows["prop"].itau_learning_rate for s, rows in SYSTEM_ROWS.items()}
+_PROP_ROWS = {(s, k): row for (s, k, loss), row in RECIPE.items() if loss == "prop"}
+FULL_PROP_ITAU_EPOCHS = {key: row.epochs[0] for key, row in _PROP_ROWS.items()
+                         if row.epochs[0] != FULL_PROP_EPOCHS[key[0]][0]}
+FULL_PROP_QUADRATURE = {key: row.quadrature for key, row in _PROP_ROWS.items()
+                        if row.quadrature != DEFAULT_QUADRATURE}
+FULL_PROP_FINETUNE_LEARNING_RATE = {key: row.finetune_learning_rate for key, row in _PROP_ROWS.items()
+                                    if row.finetune_learning_rate != DEFAULT_LEARNING_RATE}
 
 
-def _full_prop_recipe(config: ReproduceConfig) -> bool:
-    """Whether the L_prop runs follow the full run's own recipe, so its per-model settings
-    (:data:`FULL_PROP_ITAU_EPOCHS`, :data:`FULL_PROP_FINETUNE_LEARNING_RATE`,
-    :data:`FULL_PROP_QUADRATURE`) apply: not --quick and no schedule of the caller's."""
-    return not config.quick and config.prop_epochs is None
+def _run_recipe(system: str, config: ReproduceConfig, loss: str, kind: str | None) -> RunRecipe:
+    """The recipe row of one run: the full run's, or with ``--quick``'s / the caller's epochs."""
+    name = get_spec(system).name
+    if loss != "prop":
+        table = config.epochs or (QUICK_EPOCHS if config.quick else None)
+    else:
+        table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else None)
+    return recipe_row(name, kind, loss, None if table is None else tuple(table[name]))
 
 
 def epoch_schedule(system: str, config: ReproduceConfig, loss: str, kind: str | None = None) -> tuple[int, ...]:
-    """Epochs per stage of ``loss`` runs of model ``kind`` on ``system``: the config's override or
-    the quick / full table (L_prop: ``(L_Iτ alone, stage 1, stage 2)``, others ``(stage 1,
-    stage 2)``; a full run's L_prop takes :data:`FULL_PROP_ITAU_EPOCHS` for its first stage)."""
-    name = get_spec(system).name
-    if loss != "prop":
-        table = config.epochs or (QUICK_EPOCHS if config.quick else FULL_EPOCHS)
-        return tuple(table[name])
-    table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else FULL_PROP_EPOCHS)
-    epochs = tuple(table[name])
-    if _full_prop_recipe(config) and len(epochs) == 3:
-        epochs = (FULL_PROP_ITAU_EPOCHS.get((name, kind), epochs[0]), *epochs[1:])
-    return epochs
+    """Epochs per stage of ``loss`` runs of model ``kind`` on ``system`` (L_prop: ``(L_Iτ alone,
+    stage 1, stage 2)``, others ``(stage 1, stage 2)``)."""
+    return _run_recipe(system, config, loss, kind).epochs
 
 
 def quadrature_rule(system: str, config: ReproduceConfig, loss: str, kind: str | None = None) -> str:
     """L_Iτ's quadrature (and, on the Furuta, the scale fit's) for ``loss`` runs of ``kind`` on
-    ``system``, before the caller's overrides: :data:`REPRODUCE_QUADRATURE`, or a full run's
-    L_prop model's own (:data:`FULL_PROP_QUADRATURE`)."""
-    name = get_spec(system).name
-    if loss == "prop" and _full_prop_recipe(config):
-        return FULL_PROP_QUADRATURE.get((name, kind), REPRODUCE_QUADRATURE)
-    return REPRODUCE_QUADRATURE
+    ``system``, before the caller's overrides."""
+    return _run_recipe(system, config, loss, kind).quadrature
 
 
 def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop", kind: str | None = None):
     """The :class:`~furuta_gym.training.TrainConfig` of one run of model ``kind`` on ``system``
-    with ``loss``."""
-    from .train import AUGMENTATION_WEIGHT, TrainConfig
+    with ``loss``: its recipe row, then the caller's ``train_overrides``."""
+    from .train import TrainConfig
 
     name = get_spec(system).name
+    row = _run_recipe(name, config, loss, kind)
     horizons = tuple(TrainConfig.for_system(name).horizons)
-    epochs = epoch_schedule(name, config, loss, kind)
-    if loss == "prop" and len(epochs) == 3:  # a leading stage of L_Iτ alone
+    if loss == "prop" and len(row.epochs) == 3:  # a leading stage of L_Iτ alone
         horizons = (None, *horizons)
-    overrides = dict(
-        epochs=epochs,
-        horizons=horizons,
-        seed=seed,
-        progress=config.progress,
-        checkpoint_every=0,
-        quadrature=quadrature_rule(name, config, loss, kind),
-    )
+    overrides = dict(epochs=row.epochs, horizons=horizons, seed=seed, progress=config.progress,
+                     checkpoint_every=0, quadrature=row.quadrature)
     if config.quick:  # a few hundred steps per model: compiling them is most of the run
         overrides["fast_compile"] = True
     if loss == "prop":
-        overrides["lambda_traj"] = PROP_LAMBDA
-        if (name, kind) in AUGMENTATION_WEIGHT:
+        overrides["lambda_traj"] = row.lambda_traj
+        if row.augmentation_weight is not None:
             # written out, not left to the None default: the run record then says which μ it used
-            overrides["augmentation_weight"] = AUGMENTATION_WEIGHT[(name, kind)]
-        finetune = TrainConfig.learning_rate
-        if _full_prop_recipe(config):
-            finetune = FULL_PROP_FINETUNE_LEARNING_RATE.get((name, kind), finetune)
-        if len(epochs) == 3 and (PROP_ITAU_LEARNING_RATE[name], finetune) != (TrainConfig.learning_rate,) * 2:
-            overrides["learning_rate"] = (PROP_ITAU_LEARNING_RATE[name], finetune, finetune)
+            overrides["augmentation_weight"] = row.augmentation_weight
+        steps = (row.itau_learning_rate, row.finetune_learning_rate)
+        if len(row.epochs) == 3 and steps != (TrainConfig.learning_rate,) * 2:
+            overrides["learning_rate"] = (steps[0], steps[1], steps[1])
     overrides.update(config.train_overrides or {})
     return TrainConfig.for_system(name, **overrides)
-
-
-# --------------------------------------------------------------------------------------------
-# Paper table
-# --------------------------------------------------------------------------------------------
 
 
 def load_paper_table(path: str | Path | None = None) -> dict[tuple[str, str, str, str, str], str]:

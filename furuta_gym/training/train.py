@@ -50,19 +50,15 @@ from .losses import (
     resolve_normalization,
     trajectory_loss,
 )
+from .recipe import RECIPE
 
 __all__ = ["TrainConfig", "train", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
 
 LOSSES = ("traj", "aph", "prop", "itau")
 #: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
-#: TrainConfig.augmentation_weight is None: each chosen among 1e-2 / 1e-1 / 1 (and 10) on
-#: validation trajectories, never the reported test sets (selection/select_augmentation_weight.py,
-#: results/augmentation_weight/, docs/reproduce.md "Training recipe"). P_a measures F_a beyond its
-#: per-joint viscous term (TrainConfig.augmentation_part). The Furuta's friction is viscous, so
-#: a large μ costs its fit nothing and keeps the networks from trading gravity or inertia for
-#: F_a; the N-MSD's cubic damping is beyond linear, and a large μ works against it.
-AUGMENTATION_WEIGHT = {("furuta", "adln"): 10.0, ("nmsd", "adln"): 1e-2,
-                       ("furuta", "aph"): 0.1, ("nmsd", "aph"): 1e-2}
+#: TrainConfig.augmentation_weight is None: the recipe's (furuta_gym.training.recipe).
+AUGMENTATION_WEIGHT = {(s, k): row.augmentation_weight for (s, k, loss), row in RECIPE.items()
+                       if loss == "prop" and row.augmentation_weight is not None}
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
