@@ -268,3 +268,14 @@ def test_nmsd_target_errors_pickle_and_vector():
     assert obs.shape == (20, 3) and len(set(np.round(info["target"], 12))) == 20
     auto.close()
 
+
+
+def test_published_sac_comparison_matches_its_result_file():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "bench" / "sac_preset.py"
+    out = subprocess.run([sys.executable, str(script), "--check"], capture_output=True, text=True,
+                         cwd=script.parent)
+    assert out.returncode == 0, out.stdout + out.stderr
