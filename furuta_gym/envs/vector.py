@@ -714,7 +714,7 @@ class NMSDVectorEnv(LagrangianVectorEnv):
 #: ``gymnasium.make_vec``'s default for a model backend: Gymnasium's SyncVectorEnv of single envs
 #: (each with its compiled step kernel) below this many copies, the batched JAX env from here on —
 #: where one vmapped XLA step overtakes N kernel calls (bench/vector_crossover.py).
-BATCHED_FROM = 16
+BATCHED_FROM = 32
 
 
 def make_vector_env(
