@@ -18,6 +18,8 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
+from _generated import fill_block
+
 ROOT = Path(__file__).resolve().parents[1]
 SIM, REAL = ROOT / "results" / "diagnose_sim", ROOT / "results" / "diagnose_real"
 REAL_COMMAND = ("furuta-gym diagnose qube:1-5 --test qube:6-15 --system furuta --skip 0.5 "
@@ -175,9 +177,8 @@ def blocks() -> dict[str, str]:
 
 
 def render(text: str, generated: dict[str, str]) -> str:
-    for name, body in generated.items():
-        pattern = re.compile(rf"(<!-- generated:{name} -->).*?(<!-- /generated:{name} -->)", re.S)
-        text = pattern.sub(lambda m: m.group(1) + "\n" + body + "\n" + m.group(2), text)
+    for name, body in generated.items():  # each file holds some of the blocks
+        text = fill_block(text, name, body, required=False)
     return text
 
 

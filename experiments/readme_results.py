@@ -15,16 +15,16 @@ from __future__ import annotations
 
 import argparse
 import csv
-import re
 from pathlib import Path
 
 import numpy as np
+from _generated import fill_block, update
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 TABLES = {"furuta": ROOT / "results" / "reproduce_seeds" / "tables.csv",
           "nmsd": ROOT / "results" / "reproduce_seeds_nmsd" / "tables.csv"}
-START, END = "<!-- generated:readme-results -->", "<!-- /generated:readme-results -->"
+NAME = "readme-results"  # the README block this writes
 BASELINE = {"DLN": "traj", "APH": "aph", "ADLN": "aph"}
 LOSS = {"traj": "L_traj", "aph": "L_aph", "prop": "L_prop"}
 FORCES = ("inertial", "coriolis", "potential")
@@ -68,28 +68,15 @@ def table() -> str:
     return "\n".join(lines) + "\n\n" + note
 
 
-PATTERN = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
-
-
-def documented() -> str:
-    text = README.read_text()
-    if not PATTERN.search(text):
-        raise SystemExit(f"{README}: no {START} … {END} block to fill")
-    return PATTERN.sub(lambda _: f"{START}\n{table()}\n{END}", text)
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="exit 1 if the README block is stale")
     args = ap.parse_args(argv)
-    text = documented()
-    if args.check:
-        stale = text != README.read_text()
-        print(f"{README}: {'stale, run experiments/readme_results.py' if stale else 'up to date'}")
-        return int(stale)
-    README.write_text(text)
-    print(table())
-    return 0
+    text = fill_block(README.read_text(), NAME, table(), where=README)
+    status = update(README, text, args.check, "run python experiments/readme_results.py")
+    if not args.check:
+        print(table())
+    return status
 
 
 if __name__ == "__main__":

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
+
+from _generated import fill_block, update
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "real_models"
@@ -119,28 +120,14 @@ def block(summary: dict, docs: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def render(text: str, body: str) -> str:
-    pattern = re.compile(rf"(<!-- generated:{NAME} -->).*?(<!-- /generated:{NAME} -->)", re.S)
-    if not pattern.search(text):
-        raise ValueError(f"{DOC}: no <!-- generated:{NAME} --> ... <!-- /generated:{NAME} --> markers")
-    return pattern.sub(lambda m: m.group(1) + "\n" + body + "\n" + m.group(2), text)
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="compare only; exit 1 on a difference")
     ap.add_argument("--results", type=Path, default=RESULTS, help="result folder (default results/real_models)")
     args = ap.parse_args()
     summary, docs = load(args.results)
-    text = DOC.read_text()
-    new = render(text, block(summary, docs))
-    if new != text:
-        if args.check:
-            print(f"{DOC.relative_to(ROOT)} is out of date with {args.results}; "
-                  "run python experiments/real_models_table.py")
-            return 1
-        DOC.write_text(new)
-    return 0
+    text = fill_block(DOC.read_text(), NAME, block(summary, docs), where=DOC)
+    return update(DOC, text, args.check, "run python experiments/real_models_table.py")
 
 
 if __name__ == "__main__":

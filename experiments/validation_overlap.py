@@ -24,15 +24,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 
 import numpy as np
+from _generated import fill_block, update
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULT = ROOT / "results" / "validation_overlap" / "overlap.json"
 DOCS = ROOT / "docs" / "reproduce.md"
-START, END = "<!-- generated:validation-overlap -->", "<!-- /generated:validation-overlap -->"
+NAME = "validation-overlap"  # the docs/reproduce.md block this writes
 OLD_VALIDATION_SEED = 100
 
 
@@ -84,15 +84,9 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-PATTERN = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
-
-
 def documented(rows: list[dict]) -> str:
     """docs/reproduce.md with its overlap block written from ``rows``."""
-    text = DOCS.read_text()
-    if not PATTERN.search(text):
-        raise SystemExit(f"{DOCS}: no {START} … {END} block to fill")
-    return PATTERN.sub(lambda _: f"{START}\n{table(rows)}\n{END}", text)
+    return fill_block(DOCS.read_text(), NAME, table(rows), where=DOCS)
 
 
 def main(argv=None) -> int:
@@ -101,9 +95,8 @@ def main(argv=None) -> int:
     ap.add_argument("--check", action="store_true", help="exit 1 if docs/reproduce.md is stale")
     args = ap.parse_args(argv)
     if args.check:
-        stale = documented(json.loads(RESULT.read_text())["rows"]) != DOCS.read_text()
-        print(f"{DOCS}: {'stale, run --table' if stale else 'matches'} {RESULT}")
-        return int(stale)
+        return update(DOCS, documented(json.loads(RESULT.read_text())["rows"]), True,
+                      "run python experiments/validation_overlap.py --table")
     if not args.table:
         import furuta_gym
 
@@ -113,8 +106,7 @@ def main(argv=None) -> int:
         RESULT.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
     rows = json.loads(RESULT.read_text())["rows"]
     print(table(rows))
-    DOCS.write_text(documented(rows))
-    return 0
+    return update(DOCS, documented(rows), False, "")
 
 
 if __name__ == "__main__":
