@@ -59,7 +59,7 @@ def _score(system: str, kind: str, runs: dict, seeds: tuple[int, ...] = (0,)) ->
 
     from furuta_gym.systems import get_spec
     from furuta_gym.training.metrics import DIVERGED
-    from furuta_gym.training.reproduce import VALIDATION_SETS
+    from furuta_gym.training.reproduce import FAILED, VALIDATION_SETS
 
     names = get_spec(system).state_names
     scores = {}
@@ -70,10 +70,10 @@ def _score(system: str, kind: str, runs: dict, seeds: tuple[int, ...] = (0,)) ->
             per_seed.append({label: {k: metrics[label][k] for k in names} for label in VALIDATION_SETS[system]})
 
         def value(v):
-            return DIVERGED_SCORE if v in (DIVERGED, "fail") else float(v)
+            return DIVERGED_SCORE if v in (DIVERGED, FAILED) else float(v)
 
         # a cell shows DIVERGED if any seed's prediction diverged; the criterion counts it as +2
-        sets = {label: {k: DIVERGED if any(p[label][k] in (DIVERGED, "fail") for p in per_seed)
+        sets = {label: {k: DIVERGED if any(p[label][k] in (DIVERGED, FAILED) for p in per_seed)
                         else float(np.mean([float(p[label][k]) for p in per_seed])) for k in per_seed[0][label]}
                 for label in per_seed[0]}
         seed_means = [float(np.mean([value(v) for cells in p.values() for v in cells.values()])) for p in per_seed]

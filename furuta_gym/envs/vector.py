@@ -370,9 +370,7 @@ class LagrangianVectorEnv(VectorEnv):
         return ENV_IDS[cls.env_class.system]
 
     def _check_supported(self, env: LagrangianEnv) -> None:
-        unsupported = env.per_episode_state_features() + env.presentation_options()
-        if not isinstance(env.backend, ModelBackend):
-            unsupported.append(f"backend {type(env.backend).__name__}")
+        unsupported = _unsupported_options(env)
         if unsupported:
             raise EnvArgumentError(
                 f"{type(self).__name__} does not support {', '.join(unsupported)}; these need "
@@ -761,7 +759,15 @@ def _batched_is_faster(env_id: str, num_envs: int, dynamics: Any, kwargs: dict) 
     if kwargs.get("render_mode") is not None or kwargs.get("kernel", "auto") != "auto":
         return False
     template = gymnasium.make(env_id, dynamics=dynamics, **kwargs).unwrapped
-    return not (template.per_episode_state_features() + template.presentation_options())
+    return not _unsupported_options(template)
+
+
+def _unsupported_options(env: LagrangianEnv) -> list[str]:
+    """What of a single env's configuration the batched env cannot reproduce (empty: all of it)."""
+    unsupported = env.per_episode_state_features() + env.presentation_options()
+    if not isinstance(env.backend, ModelBackend):
+        unsupported.append(f"backend {type(env.backend).__name__}")
+    return unsupported
 
 
 def furuta_vector_entry_point(num_envs: int = 1, **kwargs) -> VectorEnv:

@@ -151,14 +151,9 @@ class ReproduceConfig:
 
 # The full run's recipe is one table (:mod:`furuta_gym.training.recipe`, rows citing the decision
 # log in docs/reproduce.md); the names below are views of it.
-FULL_EPOCHS = {s: rows["baseline"].epochs for s, rows in SYSTEM_ROWS.items()}
 FULL_PROP_EPOCHS = {s: rows["prop"].epochs for s, rows in SYSTEM_ROWS.items()}
-PROP_LAMBDA = SYSTEM_ROWS["furuta"]["prop"].lambda_traj
 REPRODUCE_QUADRATURE = DEFAULT_QUADRATURE
-PROP_ITAU_LEARNING_RATE = {s: rows["prop"].itau_learning_rate for s, rows in SYSTEM_ROWS.items()}
 _PROP_ROWS = {(s, k): row for (s, k, loss), row in RECIPE.items() if loss == "prop"}
-FULL_PROP_ITAU_EPOCHS = {key: row.epochs[0] for key, row in _PROP_ROWS.items()
-                         if row.epochs[0] != FULL_PROP_EPOCHS[key[0]][0]}
 FULL_PROP_QUADRATURE = {key: row.quadrature for key, row in _PROP_ROWS.items()
                         if row.quadrature != DEFAULT_QUADRATURE}
 FULL_PROP_FINETUNE_LEARNING_RATE = {key: row.finetune_learning_rate for key, row in _PROP_ROWS.items()
