@@ -550,33 +550,52 @@ def _prediction_evidence(sums_before, sums_after) -> _trace_mod.Evidence:
     return _trace_mod.Evidence.of_sums(sums_before, sums_after)
 
 
+def _try_step(fx: _Fitter, accepted, dyn, sums, step):
+    """Refit with ``step`` added to ``accepted``; returns (evidence on the fit-set validation
+    windows against ``sums``, θ, input dynamics, the refit's per-window sums)."""
+    trial = accepted + list(step.members)
+    trial_dyn = _search_input_dynamics(fx, trial) if DELAY in step.members else dyn
+    fx.build(trial_dyn)
+    th_ee, free = fx.fit_ee(trial)
+    th = fx.refine(th_ee, free, trial_dyn, "with " + ", ".join(c.key for c in trial))
+    trial_sums = fx.validation_sums(th, trial_dyn)
+    return _prediction_evidence(sums, trial_sums), th, trial_dyn, trial_sums
+
+
 def _confirm(fx: _Fitter, steps, theta_before, evidence):
     """Add the search's steps in order and refit; a step is vetoed if the refitted model predicts
     the fit-set validation windows significantly worse (t of per-window log ratios ≤
     −``veto_t``): the trace is an equation-error test, and on closed-loop logs the input correlates
-    with the measurement noise. Returns (accepted candidates, θ, input dynamics)."""
-    accepted: list[Candidate] = []
-    theta, dyn = theta_before, _fit.NO_INPUT_DYNAMICS
-    sums = fx.validation_sums(theta, dyn)
-    for step in steps:
-        trial = accepted + list(step.members)
-        trial_dyn = _search_input_dynamics(fx, trial) if DELAY in step.members else dyn
-        fx.build(trial_dyn)
-        th_ee, free = fx.fit_ee(trial)
-        th = fx.refine(th_ee, free, trial_dyn, "with " + ", ".join(c.key for c in trial))
-        trial_sums = fx.validation_sums(th, trial_dyn)
-        ev = _prediction_evidence(sums, trial_sums)
-        if ev.z > -fx.settings.veto_t:
-            accepted, theta, dyn, sums = trial, th, trial_dyn, trial_sums
-            continue
+    with the measurement noise. A vetoed step is tried once more after the others: an effect can
+    predict worse only while another one is missing (a pendulum's centre-of-mass offset before the
+    rotor's friction and the input lag). Returns (accepted candidates, θ, input dynamics)."""
+    state = dict(accepted=[], theta=theta_before, dyn=_fit.NO_INPUT_DYNAMICS)
+    state["sums"] = fx.validation_sums(theta_before, state["dyn"])
+
+    def add(todo):
+        vetoed = []
+        for step in todo:
+            ev, th, dyn, sums = _try_step(fx, state["accepted"], state["dyn"], state["sums"], step)
+            if ev.z > -fx.settings.veto_t:
+                state.update(accepted=state["accepted"] + list(step.members), theta=th, dyn=dyn, sums=sums)
+            else:
+                vetoed.append((step, ev))
+        return vetoed
+
+    vetoed = add(steps)
+    if vetoed and len(vetoed) < len(steps):  # something was added after a veto: try again
+        vetoed = add([step for step, _ in vetoed])
+    for step, ev in vetoed:
         for c in step.members:
             bad = evidence[c.key]
             bad.significant, bad.status = False, "not confirmed"
             bad.note = (f"equation-error evidence, but the refitted model predicts the fit-set validation "
                         f"windows significantly worse (error {-ev.improvement:+.1%}, t {ev.z:.1f})")
             fx.notes.append(f"{c.key}: {bad.note}; dropped")
+    accepted, theta, dyn = state["accepted"], state["theta"], state["dyn"]
     fx.build(dyn)
     return accepted, theta, dyn
+
 
 def _anchor(spec, layout, fixed, forced, notes):
     """The fixed lumped parameters (the scale anchor; with free data, the gain too)."""
