@@ -597,6 +597,45 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
     return accepted, theta, dyn
 
 
+def _stiction_start(fx: _Fitter, theta, c: Candidate) -> np.ndarray:
+    """The output-error start of a stiction candidate: the model so far with ΔF at the joint's
+    Coulomb level (the EE estimate is meaningless: it rests on velocities near zero, which the
+    estimates do not resolve, in intervals the equation error mostly leaves out)."""
+    start = theta.copy()
+    start[fx.layout.index(c.key)] = theta[fx.layout.index(f"coulomb_friction:{c.joint}")]
+    return start
+
+
+def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence):
+    """Stiction acts only where a joint nearly stops, which the equation error cannot see, but a
+    joint that sticks shows in open-loop predictions. With a joint's Coulomb friction accepted, its
+    stiction is fitted by output error on the output-error windows and judged on the fit-set
+    validation windows by the trace's rule (gain ≥ ``min_improvement``, t ≥ ``z_threshold``),
+    ΔF > 0. Returns (accepted, θ)."""
+    s = fx.settings
+    for c in library:
+        coulomb = f"coulomb_friction:{c.joint}"
+        if c.name != "stiction" or c in accepted or coulomb not in {a.key for a in accepted}:
+            continue
+        if evidence.get(c.key) is not None and evidence[c.key].status != "tested":
+            continue
+        trial = accepted + [c]
+        th, _ = _fit.oe_fit(fx.layout, _stiction_start(fx, theta, c), free_columns(fx.layout, trial, fx.fixed_idx),
+                            fx.fit_windows(dyn, fx.oe_idx), fx.smoothing, fx.substeps, max_nfev=s.oe_max_nfev)
+        ev = _prediction_evidence(fx.validation_sums(theta, dyn), fx.validation_sums(th, dyn))
+        coef = float(th[fx.layout.index(c.key)])
+        if coef > 0 and _physical(fx.layout, th) and ev.passes(s.min_improvement, s.z_threshold):
+            accepted, theta = trial, th
+            evidence[c.key] = EffectEvidence(
+                c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z, "selected",
+                "found by prediction, given the joint's Coulomb friction: gain and t on the fit-set "
+                "validation windows")
+        else:
+            fx.notes.append(f"{c.key}: tested by prediction given {coulomb}: ΔF {coef:.3g}, validation "
+                            f"gain {ev.improvement:.1%}, t {ev.z:.1f}; not added")
+    return accepted, theta
+
+
 def _anchor(spec, layout, fixed, forced, notes):
     """The fixed lumped parameters (the scale anchor; with free data, the gain too)."""
     if layout.learned is not None:
@@ -808,6 +847,7 @@ def diagnose(
     evidence = _untestable(fx, library, forced)
     steps = _trace(fx, [c for c in library if c.key not in evidence], evidence)
     accepted, th_after, dyn = _confirm(fx, steps, th_before, evidence) if steps else ([], th_before, fx.dynamics)
+    accepted, th_after = _stiction_by_prediction(fx, library, accepted, th_after, dyn, evidence)
     after = fx.errors(th_after, fx.held_segs, fx.held_prob) if accepted else before
     test_after = fx.test_errors(th_after) if accepted else test_before
     ordered = _finish_evidence(fx, library, accepted, th_after, dyn, evidence)
