@@ -154,29 +154,46 @@ def load_trajectories(
     spec = get_spec(system) if isinstance(system, str) else system
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such data file")
-    column_map = dict(column_map or {})
-    signs = dict(signs or {})
-    offsets = dict(offsets or {})
+    column_map, signs, offsets = dict(column_map or {}), dict(signs or {}), dict(offsets or {})
+    _check_mapping_names(path, spec, [*column_map, *signs, *offsets])
+    raw = _read_columns(path)
+    source = lambda name: column_map.get(name, name)  # noqa: E731
+    has_vel = _check_columns_present(path, spec, raw, source, require_velocities)
+
+    def column(name: str) -> np.ndarray:
+        return signs.get(name, 1.0) * _finite_column(path, raw, source(name)) + offsets.get(name, 0.0)
+
+    t = column("t")
+    q = np.stack([column(j) for j in spec.joint_names], axis=1)
+    u = np.stack([column(c) for c in spec.input_names], axis=1)
+    qd = np.stack([column(f"{j}_dot") for j in spec.joint_names], axis=1) if has_vel else None
+    labels = raw[source("traj")] if source("traj") in raw else np.zeros(t.shape[0])
+    trajectories = []
+    for label in _unique_in_order(labels):
+        idx = np.flatnonzero(labels == label)
+        name = _label_name(label)
+        _check_time(path, source("t"), name, t[idx], idx, min_samples, dt_tolerance)
+        trajectories.append(Trajectory(t=t[idx], q=q[idx], u=u[idx], qd=None if qd is None else qd[idx], name=name))
+    return trajectories
+
+
+def _check_mapping_names(path: Path, spec: SystemSpec, keys) -> None:
     canonical = columns_for(spec, velocities=True)
-    for key in list(column_map) + list(signs) + list(offsets):
+    for key in keys:
         if key not in canonical:
             raise DataError(
                 f"{path}: column map / sign / offset names unknown column {key!r}; "
                 f"{spec.name} columns are {canonical}"
             )
-    raw = _read_columns(path)
 
-    def source(name: str) -> str:
-        return column_map.get(name, name)
 
+def _check_columns_present(path: Path, spec: SystemSpec, raw, source, require_velocities: bool) -> bool:
+    """Raise unless the system's columns are there (hinting at the other system's file); True
+    if the velocity columns are there too."""
     required = ["t", *spec.joint_names, *spec.input_names]
     missing = [c for c in required if source(c) not in raw]
     if missing:
-        other = [
-            s.name
-            for s in SYSTEMS.values()
-            if s.name != spec.name and all(j in raw for j in s.joint_names)
-        ]
+        other = [s.name for s in SYSTEMS.values() if s.name != spec.name and all(j in raw for j in s.joint_names)]
         hint = f"; it looks like a {other[0]} file" if other else ""
         mapped = {c: source(c) for c in missing if source(c) != c}
         raise DataError(
@@ -188,63 +205,42 @@ def load_trajectories(
     vel_names = [f"{j}_dot" for j in spec.joint_names]
     has_vel = all(source(c) in raw for c in vel_names)
     if require_velocities and not has_vel:
+        raise DataError(f"{path}: velocity columns {[source(c) for c in vel_names]} are required here")
+    return has_vel
+
+
+def _finite_column(path: Path, raw, name: str) -> np.ndarray:
+    values = np.asarray(raw[name], dtype=float)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        rows = np.flatnonzero(bad)
         raise DataError(
-            f"{path}: velocity columns {[source(c) for c in vel_names]} are required here"
+            f"{path}: column {name!r} has {bad.sum()} non-finite value(s) "
+            f"(NaN/inf), first at data row {rows[0] + 1}; expected finite numbers"
         )
+    return values
 
-    def column(name: str) -> np.ndarray:
-        values = np.asarray(raw[source(name)], dtype=float)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            rows = np.flatnonzero(bad)
-            raise DataError(
-                f"{path}: column {source(name)!r} has {bad.sum()} non-finite value(s) "
-                f"(NaN/inf), first at data row {rows[0] + 1}; expected finite numbers"
-            )
-        return signs.get(name, 1.0) * values + offsets.get(name, 0.0)
 
-    t = column("t")
-    q = np.stack([column(j) for j in spec.joint_names], axis=1)
-    u = np.stack([column(c) for c in spec.input_names], axis=1)
-    qd = np.stack([column(c) for c in vel_names], axis=1) if has_vel else None
-    traj_col = source("traj")
-    labels = raw[traj_col] if traj_col in raw else np.zeros(t.shape[0])
-
-    trajectories = []
-    for label in _unique_in_order(labels):
-        idx = np.flatnonzero(labels == label)
-        name = _label_name(label)
-        if idx.size < min_samples:
-            raise DataError(
-                f"{path}: trajectory {name!r} has {idx.size} sample(s); expected at least "
-                f"{min_samples}"
-            )
-        tt = t[idx]
-        steps = np.diff(tt)
-        if np.any(steps <= 0):
-            row = idx[1:][steps <= 0][0]
-            raise DataError(
-                f"{path}: column {source('t')!r} is not strictly increasing in trajectory "
-                f"{name!r} (data row {row + 1}); expected increasing time"
-            )
-        dt = np.median(steps)
-        if np.max(np.abs(steps - dt)) > dt_tolerance * dt + 1e-12:
-            row = idx[1:][np.argmax(np.abs(steps - dt))]
-            raise DataError(
-                f"{path}: column {source('t')!r} is not uniformly sampled in trajectory "
-                f"{name!r} (step {steps.max():.6g} s vs median {dt:.6g} s near data row "
-                f"{row + 1}); expected a constant sample period — resample first"
-            )
-        trajectories.append(
-            Trajectory(
-                t=tt,
-                q=q[idx],
-                u=u[idx],
-                qd=None if qd is None else qd[idx],
-                name=name,
-            )
+def _check_time(path: Path, t_name: str, name: str, tt: np.ndarray, idx: np.ndarray,
+                min_samples: int, dt_tolerance: float) -> None:
+    """One trajectory's time column: enough samples, strictly increasing, uniformly sampled."""
+    if idx.size < min_samples:
+        raise DataError(f"{path}: trajectory {name!r} has {idx.size} sample(s); expected at least {min_samples}")
+    steps = np.diff(tt)
+    if np.any(steps <= 0):
+        row = idx[1:][steps <= 0][0]
+        raise DataError(
+            f"{path}: column {t_name!r} is not strictly increasing in trajectory "
+            f"{name!r} (data row {row + 1}); expected increasing time"
         )
-    return trajectories
+    dt = np.median(steps)
+    if np.max(np.abs(steps - dt)) > dt_tolerance * dt + 1e-12:
+        row = idx[1:][np.argmax(np.abs(steps - dt))]
+        raise DataError(
+            f"{path}: column {t_name!r} is not uniformly sampled in trajectory "
+            f"{name!r} (step {steps.max():.6g} s vs median {dt:.6g} s near data row "
+            f"{row + 1}); expected a constant sample period — resample first"
+        )
 
 
 def _unique_in_order(labels: np.ndarray) -> list:
