@@ -755,6 +755,21 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
     return chosen + rest + [e for e in evidence.values() if e.status in ("equivalent", "absorbed", "not identifiable")]
 
 
+def _fit_declared(fx: _Fitter) -> np.ndarray:
+    """The declared model: equation error (weights from its own residual), then output error;
+    parameters these data cannot pin down are held at their nominal values."""
+    th_ee, free_base = fx.fit_ee([])
+    fx.weights = 1.0 / np.maximum(np.sqrt(np.mean((fx.fit_prob.R @ th_ee) ** 2, axis=0)), 1e-300)
+    th_ee, _ = fx.fit_ee([])
+    weak = fx.weakly_identified(th_ee, free_base)
+    if weak:
+        fx.fixed_idx |= {fx.layout.index(k) for k in weak}
+        fx.notes.append("not identifiable from these data, held at nominal: " + ", ".join(
+            f"{k} (t {t:.1f} < {fx.settings.identify_t})" for k, t in weak.items()))
+        th_ee, free_base = fx.fit_ee([])
+    return fx.refine(th_ee, free_base, _fit.NO_INPUT_DYNAMICS, "declared model")
+
+
 def _given_model(model, spec):
     """The model to diagnose instead of the analytic one: None, a Lagrangian system or a
     checkpoint path; checked against ``spec`` and for an input force the fit can integrate."""
@@ -827,19 +842,7 @@ def diagnose(
     for k, v in fixed.items():
         theta_fixed[layout.index(k)] = v
     fx = _Fitter(spec, layout, segs, test_segs, theta_fixed, fixed_idx, settings, notes)
-
-    # the declared model: equation error (weights from its own residual), then output error;
-    # parameters these data cannot pin down are held at their nominal values
-    th_ee, free_base = fx.fit_ee([])
-    fx.weights = 1.0 / np.maximum(np.sqrt(np.mean((fx.fit_prob.R @ th_ee) ** 2, axis=0)), 1e-300)
-    th_ee, _ = fx.fit_ee([])
-    weak = fx.weakly_identified(th_ee, free_base)
-    if weak:
-        fx.fixed_idx |= {layout.index(k) for k in weak}
-        notes.append("not identifiable from these data, held at nominal: " + ", ".join(
-            f"{k} (t {t:.1f} < {settings.identify_t})" for k, t in weak.items()))
-        th_ee, free_base = fx.fit_ee([])
-    th_before = fx.refine(th_ee, free_base, _fit.NO_INPUT_DYNAMICS, "declared model")
+    th_before = _fit_declared(fx)
     before = fx.errors(th_before, fx.held_segs, fx.held_prob)
     test_before = fx.test_errors(th_before)
 
