@@ -70,15 +70,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     import matplotlib
 
     matplotlib.use("Agg")
-    import gymnasium as gym
-
     from . import ensure_x64
-    from .controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
-    from .data import save_trajectories
-    from .diagnose import diagnose, measured_like
-    from .effects import Effect
-    from .training.datagen import FurutaRecipe, generate_datasets, write_datasets
-    from .training.train import TrainConfig, train
 
     ensure_x64()
     cfg = config or DemoConfig()
@@ -91,8 +83,32 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     timings: dict[str, float] = {}
     summary: dict = {"config": dataclasses.asdict(cfg), "out_dir": str(out)}
 
-    # 1. data ------------------------------------------------------------------------------
-    t0 = time.perf_counter()
+    def timed(name, stage, *args):
+        t0 = time.perf_counter()
+        result = stage(*args)
+        timings[name] = time.perf_counter() - t0
+        return result
+
+    datasets = timed("generate", _generate, cfg, out, progress, overwrite)
+    models = {loss: timed(f"train_{loss}", _train, cfg, out, datasets, loss, progress, overwrite)
+              for loss in ("prop", "traj")}
+    t_fine, tracks, summary["tracking"] = timed("swap", _swap_into_env, cfg, models, progress)
+    records, summary["control"] = timed("control", _control, cfg, models["prop"], progress)
+    summary["diagnose"] = timed("diagnose", _diagnose_log, cfg, out, progress, overwrite)
+    summary["video"] = timed("report", _report, cfg, out, t_fine, tracks, records[0], progress)
+    summary["timings_s"] = timings
+    summary["table"] = summary_table(summary)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    print(summary["table"])
+    video = ", swing_up.mp4" if summary["video"] and not summary["video"].startswith("skipped") else ""
+    print(f"\nWrote {out}/summary.json, tracking.png, swing_up.png{video}, data/, models/, diagnose/")
+    return summary
+
+
+def _generate(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> dict:
+    """1. A small Furuta training set (and a held-out trajectory) from the MuJoCo ground truth."""
+    from .training.datagen import FurutaRecipe, generate_datasets, write_datasets
+
     with _bar(1, "1/6 generate data (MuJoCo)", progress) as bar:
         recipe = dataclasses.replace(
             FurutaRecipe.small(), n_train=cfg.n_train, n_test_free=1,
@@ -103,66 +119,75 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         write_datasets(out / "data", datasets, "furuta", metadata={"seed": cfg.seed},
                        overwrite=overwrite)
         bar.update(1)
-    timings["generate"] = time.perf_counter() - t0
+    return datasets
 
-    # 2. train -----------------------------------------------------------------------------
-    models = {}
-    for loss in ("prop", "traj"):
-        t0 = time.perf_counter()
-        tc = TrainConfig.for_system("furuta", epochs=cfg.epochs, seed=cfg.seed,
-                                    progress=progress, checkpoint_every=10**9)
-        run_dir = out / "models" / f"dln_{loss}"
-        if run_dir.exists() and overwrite:
-            import shutil
 
-            shutil.rmtree(run_dir)
-        print(f"2/6 train DeLaN with L_{loss}")
-        model, _ = train("dln", "furuta", loss, datasets["train"], tc, out_dir=run_dir,
-                         forced_trajs=datasets["scale_fit"])
-        models[loss] = model
-        timings[f"train_{loss}"] = time.perf_counter() - t0
+def _train(cfg: DemoConfig, out: Path, datasets: dict, loss: str, progress: bool, overwrite: bool):
+    """2. A DeLaN trained with ``loss`` on the demo's data."""
+    import shutil
 
-    # 3. swap into the env -----------------------------------------------------------------
-    # A held-out start from the training distribution (angles ~ U(−π, π), velocities ~ U(−5, 5)),
-    # run free for ``tracking_seconds`` in the env at 500 Hz: in-distribution generalisation.
-    t0 = time.perf_counter()
+    from .training.train import TrainConfig, train
+
+    tc = TrainConfig.for_system("furuta", epochs=cfg.epochs, seed=cfg.seed,
+                                progress=progress, checkpoint_every=10**9)
+    run_dir = out / "models" / f"dln_{loss}"
+    if run_dir.exists() and overwrite:
+        shutil.rmtree(run_dir)
+    print(f"2/6 train DeLaN with L_{loss}")
+    model, _ = train("dln", "furuta", loss, datasets["train"], tc, out_dir=run_dir,
+                     forced_trajs=datasets["scale_fit"])
+    return model
+
+
+def _free_run(dynamics, x0, steps: int, seed: int) -> np.ndarray:
+    """States of ``Furuta-v0`` with ``dynamics`` run free from ``x0`` for ``steps`` control
+    periods; a model that diverges is padded with its last finite state."""
+    import gymnasium as gym
+
+    env = gym.make("furuta_gym/Furuta-v0", dynamics=dynamics)
+    obs, info = env.reset(seed=seed, options={"state": x0})
+    xs = [info["state"]]
+    for _ in range(steps):
+        obs, _, term, trunc, info = env.step(np.zeros(1))
+        xs.append(info["state"])
+        if term or trunc:
+            break
+    env.close()
+    xs = np.asarray(xs)
+    if len(xs) < steps + 1:
+        xs = np.vstack([xs, np.repeat(xs[-1:], steps + 1 - len(xs), axis=0)])
+    return xs
+
+
+def _swap_into_env(cfg: DemoConfig, models: dict, progress: bool):
+    """3. Each learned model as the env's dynamics against MuJoCo, from a held-out start of the
+    training distribution (angles ~ U(−π, π), velocities ~ U(−5, 5)), run free at 500 Hz:
+    in-distribution generalisation. Returns (times, states per backend, RMSE per loss)."""
     rng = np.random.default_rng([cfg.seed, 2024])
     x0 = np.concatenate([rng.uniform(-np.pi, np.pi, 2), rng.uniform(-5.0, 5.0, 2)])
     steps = int(round(cfg.tracking_seconds * 500))
-    t_fine = np.arange(steps) / 500.0
     tracks = {}
     with _bar(3, "3/6 swap learned dynamics into Furuta-v0", progress) as bar:
         for name, dyn in (("mujoco", "mujoco"), ("prop", models["prop"]), ("traj", models["traj"])):
-            env = gym.make("furuta_gym/Furuta-v0", dynamics=dyn)
-            obs, info = env.reset(seed=cfg.seed, options={"state": x0})
-            xs = [info["state"]]
-            for _ in range(steps):
-                obs, _, term, trunc, info = env.step(np.zeros(1))
-                xs.append(info["state"])
-                if term or trunc:
-                    break
-            env.close()
-            xs = np.asarray(xs)
-            if len(xs) < steps + 1:  # a diverged learned model: pad with its last finite state
-                xs = np.vstack([xs, np.repeat(xs[-1:], steps + 1 - len(xs), axis=0)])
-            tracks[name] = xs
+            tracks[name] = _free_run(dyn, x0, steps, cfg.seed)
             bar.update(1)
-    truth = tracks["mujoco"]
     tracking = {}
     for loss in ("prop", "traj"):
-        err = tracks[loss] - truth
+        err = tracks[loss] - tracks["mujoco"]
         beta_err = np.angle(np.exp(1j * err[:, 1]))  # a full turn of the pendulum is no error
-        tracking[loss] = {
-            "rmse_alpha": float(np.sqrt(np.mean(err[:, 0] ** 2))),
-            "rmse_beta": float(np.sqrt(np.mean(beta_err**2))),
-        }
-    summary["tracking"] = tracking
-    timings["swap"] = time.perf_counter() - t0
+        tracking[loss] = {"rmse_alpha": float(np.sqrt(np.mean(err[:, 0] ** 2))),
+                          "rmse_beta": float(np.sqrt(np.mean(beta_err**2)))}
+    return np.arange(steps) / 500.0, tracks, tracking
 
-    # 4. control ---------------------------------------------------------------------------
-    t0 = time.perf_counter()
+
+def _control(cfg: DemoConfig, model, progress: bool):
+    """4. Swing-up + LQR designed on ``model``, run on MuJoCo from rest and seeded starts near it."""
+    import gymnasium as gym
+
+    from .controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
+
     with _bar(2, "4/6 swing-up + LQR from the learned model on MuJoCo", progress) as bar:
-        ctrl = SwingUpLQR.from_model(models["prop"])
+        ctrl = SwingUpLQR.from_model(model)
         bar.update(1)
         starts = near_rest_starts(cfg.control_starts + 1, seed=cfg.seed, include_rest=True)
         records = evaluate_on_env(
@@ -170,20 +195,23 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
             starts, cfg.control_seconds, seed=cfg.seed,
         )
         bar.update(1)
-    successes = [r.metrics.success for r in records]
     times = [r.metrics.time_to_upright for r in records if r.metrics.success]
-    summary["control"] = {
+    return records, {
         "episodes": len(records),
-        "success_rate": float(np.mean(successes)),
+        "success_rate": float(np.mean([r.metrics.success for r in records])),
         "from_rest_success": bool(records[0].metrics.success),
         "median_time_to_upright": float(np.median(times)) if times else None,
         "peak_voltage": float(max(r.metrics.peak_voltage for r in records)),
         "peak_abs_alpha": float(max(r.metrics.peak_abs_alpha for r in records)),
     }
-    timings["control"] = time.perf_counter() - t0
 
-    # 5. diagnose --------------------------------------------------------------------------
-    t0 = time.perf_counter()
+
+def _diagnose_log(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> dict:
+    """5. A measured-like log of a plant with an undeclared rotor cable spring, diagnosed."""
+    from .data import save_trajectories
+    from .diagnose import diagnose, measured_like
+    from .effects import Effect
+
     with _bar(1, "5/6 diagnose a log with an undeclared cable spring", progress) as bar:
         log = measured_like("furuta", [Effect("spring", "alpha", cfg.spring)],
                             n_trajectories=cfg.diagnose_trajectories,
@@ -194,7 +222,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         result = diagnose(log_path, "furuta")
         bar.update(1)
     diagnosis = result.to_json()
-    summary["diagnose"] = {
+    (out / "diagnose" / "diagnosis.json").write_text(json.dumps(diagnosis, indent=2) + "\n")
+    return {
         "log": str(log_path),
         "true_effect": {"name": "spring", "joint": "alpha", "coefficient": cfg.spring},
         "found": [f"{e['name']}:{e['joint']}" for e in diagnosis["effects"] if e["significant"]],
@@ -202,33 +231,26 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         "error_before": diagnosis["error_before"],
         "error_after": diagnosis["error_after"],
     }
-    (out / "diagnose" / "diagnosis.json").write_text(json.dumps(diagnosis, indent=2) + "\n")
-    timings["diagnose"] = time.perf_counter() - t0
 
-    # 6. report ----------------------------------------------------------------------------
-    t0 = time.perf_counter()
+
+def _report(cfg: DemoConfig, out: Path, t_fine, tracks, record, progress: bool) -> str | None:
+    """6. Figures and (optionally) the swing-up video; returns the video's path, why it was
+    skipped, or None."""
+    video = None
     with _bar(3 if cfg.video else 2, "6/6 figures and video", progress) as bar:
         _plot_tracking(out / "tracking.png", t_fine, tracks)
         bar.update(1)
-        _plot_control(out / "swing_up.png", records[0])
+        _plot_control(out / "swing_up.png", record)
         bar.update(1)
-        summary["video"] = None
         if cfg.video:
             try:
-                _video(out / "swing_up.mp4", records[0].xs)
-                summary["video"] = str(out / "swing_up.mp4")
+                _video(out / "swing_up.mp4", record.xs)
+                video = str(out / "swing_up.mp4")
             except Exception as exc:  # headless machine without GL: keep everything else
-                summary["video"] = f"skipped: {type(exc).__name__}: {exc}"
-                print(f"warning: no video ({summary['video']}); set MUJOCO_GL=egl or osmesa")
+                video = f"skipped: {type(exc).__name__}: {exc}"
+                print(f"warning: no video ({video}); set MUJOCO_GL=egl or osmesa")
             bar.update(1)
-    timings["report"] = time.perf_counter() - t0
-    summary["timings_s"] = timings
-    summary["table"] = summary_table(summary)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    print(summary["table"])
-    video = ", swing_up.mp4" if summary["video"] and not summary["video"].startswith("skipped") else ""
-    print(f"\nWrote {out}/summary.json, tracking.png, swing_up.png{video}, data/, models/, diagnose/")
-    return summary
+    return video
 
 
 def summary_table(summary: dict) -> str:
