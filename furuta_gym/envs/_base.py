@@ -43,6 +43,18 @@ class EnvArgumentError(ValueError, TypeError):
     keyword error, a TypeError)."""
 
 
+def check_int(name: str, value: Any, minimum: int, maximum: int | None = None, what: str = "") -> int:
+    """``value`` as an int in [minimum, maximum] (bools refused), or an EnvArgumentError naming
+    ``name`` and ``what`` it means."""
+    ok = not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= minimum
+    if ok and maximum is not None:
+        ok = value <= maximum
+    if not ok:
+        bound = f">= {minimum}" if maximum is None else f"from {minimum} to {maximum}"
+        raise EnvArgumentError(f"{name} must be an integer {bound}{what}, got {value!r}")
+    return int(value)
+
+
 def _check_delay(seconds: float, timestep: float, what: str) -> int:
     """Delay in seconds → whole RK4 substeps (it must be a multiple of the timestep)."""
     if not (np.isfinite(seconds) and seconds >= 0):
@@ -136,14 +148,24 @@ class LagrangianEnv(gymnasium.Env):
         cfg = {**common, **kwargs}
         self._init_kwargs = dict(kwargs)  # for pickling: rebuilt from the constructor keywords
         self._spec = get_spec(self.system)
-        n = self._spec.n_dof
-        self._n = n
+        self._n = self._spec.n_dof
+        self._init_control(cfg)
+        self._init_physics(cfg)
+        self._init_actuation(cfg)
+        self._init_sensors(cfg)
+        self._init_presentation(cfg)
+        self._task_kwargs = {k: cfg[k] for k in self.task_defaults}
+        self.task = self._make_task(**self._task_kwargs)
+        self.action_space = spaces.Box(-self._action_high, self._action_high, (1,), dtype=self.dtype)
+        self.observation_space = self._observation_space()
+        self._init_episode(cfg)
+        self._init_rendering(cfg)
+        self._zero_action = np.zeros(1)
+        self._reset_episode(self._initial_state(None))
 
-        # -- control rate and limits --
-        frame_skip = cfg["frame_skip"]
-        if isinstance(frame_skip, bool) or not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
-            raise EnvArgumentError(f"frame_skip must be a positive integer, got {frame_skip!r}")
-        self.frame_skip = int(frame_skip)
+    def _init_control(self, cfg) -> None:
+        """Control rate and limits."""
+        self.frame_skip = check_int("frame_skip", cfg["frame_skip"], 1)
         self.max_action = float(cfg[self.action_limit_name])
         if not (np.isfinite(self.max_action) and self.max_action > 0):
             raise EnvArgumentError(
@@ -155,7 +177,8 @@ class LagrangianEnv(gymnasium.Env):
                 f"reset_noise_scale must be >= 0, got {cfg['reset_noise_scale']!r}"
             )
 
-        # -- physics --
+    def _init_physics(self, cfg) -> None:
+        """The plant's effects, its randomisation and the dynamics backend."""
         self.effects: tuple[Effect, ...] = resolve_effects(self.system, cfg["plant"], cfg["effects"])
         self._randomize = parse_randomization(self.system, cfg["randomize"])
         self.backend: AbstractBackend = make_backend(
@@ -167,19 +190,18 @@ class LagrangianEnv(gymnasium.Env):
         self.dt = self.backend.control_dt
         self.timestep = self.backend.timestep
 
-        # -- actuation delay (whole RK4 substeps) --
-        steps = cfg["actuation_delay_steps"]
-        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
-            raise EnvArgumentError(f"actuation_delay_steps must be an integer >= 0, got {steps!r}")
+    def _init_actuation(self, cfg) -> None:
+        """Actuation delay (whole RK4 substeps) and actuator lag."""
+        steps = check_int("actuation_delay_steps", cfg["actuation_delay_steps"], 0)
         delay = _check_delay(float(cfg["actuation_delay"]), self.timestep, "actuation_delay")
-        delay += int(steps) * self.frame_skip
+        delay += steps * self.frame_skip
         for e in self.effects:
             if e.name == "input_delay":
                 delay += _check_delay(e.coefficient, self.timestep, "effect input_delay")
         self._delay_periods, self._delay_substeps = divmod(delay, self.frame_skip)
         self._has_delay = delay > 0
-        # -- actuator lag: MuJoCo integrates it (actuator dynamics); for a model backend this env
-        # applies it after the delay, exactly per (part of a) period: see _actuate
+        # MuJoCo integrates the lag (actuator dynamics); for a model backend this env applies it
+        # after the delay, exactly per (part of a) period: see _actuate
         self._lag_tau = actuator_lag_time(self.effects)
         self._lag = (
             ActuatorLag(self._lag_tau, len(self._spec.input_names))
@@ -187,12 +209,12 @@ class LagrangianEnv(gymnasium.Env):
             else None
         )
 
-        # -- sensors --
+    def _init_sensors(self, cfg) -> None:
+        """Encoder quantisation, measurement noise and the velocity the observation carries."""
+        n = self._n
         self._quant = np.zeros(n)  # quantisation step per joint (0: exact)
         if cfg["encoder_counts"] is not None:
-            counts = cfg["encoder_counts"]
-            if not isinstance(counts, (int, np.integer)) or counts < 1:
-                raise EnvArgumentError(f"encoder_counts must be a positive integer, got {counts!r}")
+            counts = check_int("encoder_counts", cfg["encoder_counts"], 1)
             if not any(self._spec.angular):
                 raise EnvArgumentError(
                     f"encoder_counts quantises angles, but {self.system} has no angular joint; "
@@ -222,15 +244,16 @@ class LagrangianEnv(gymnasium.Env):
         self._filter = DerivativeFilter(self.dt, n) if self.velocity == "filter" else None
         self._exact_sensors = not self._quant.any() and not self._noise.any() and self._filter is None
 
-        # -- presentation: observation layout, dtype, action scale --
+    def _init_presentation(self, cfg) -> None:
+        """Observation layout, dtype, action scale and the system's own keywords."""
         self.observation = _check_observation(cfg["observation"], self._spec.angular, self.system)
         self.dtype = _check_dtype(cfg["dtype"])
         if not isinstance(cfg["normalize_action"], (bool, np.bool_)):
             raise EnvArgumentError(f"normalize_action must be a bool, got {cfg['normalize_action']!r}")
         self.normalize_action = bool(cfg["normalize_action"])
         self._action_high = 1.0 if self.normalize_action else self.max_action
-        # obs is the backend's state array itself: no sensor model, raw, float64
         self._configure(**{k: cfg[k] for k in self.extra_defaults})
+        # obs is the backend's state array itself: no sensor model, raw, float64
         self._exact_observation = (
             self._exact_sensors
             and self.observation == "raw"
@@ -238,23 +261,14 @@ class LagrangianEnv(gymnasium.Env):
             and not self._extra_observation_size()
         )
 
-        # -- task --
-        self._task_kwargs = {k: cfg[k] for k in self.task_defaults}
-        self.task = self._make_task(**self._task_kwargs)
-
-        # -- spaces --
-        high = self._action_high
-        self.action_space = spaces.Box(-high, high, (1,), dtype=self.dtype)
-        self.observation_space = self._observation_space()
-
-        # -- episode --
+    def _init_episode(self, cfg) -> None:
         seconds = cfg["episode_seconds"]
         if seconds is not None and not (np.isfinite(seconds) and seconds > 0):
             raise EnvArgumentError(f"episode_seconds must be > 0 or None, got {seconds!r}")
         self.episode_seconds = seconds
         self._max_steps = None if seconds is None else int(round(seconds / self.dt))
 
-        # -- rendering --
+    def _init_rendering(self, cfg) -> None:
         render_mode = cfg["render_mode"]
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise EnvArgumentError(
@@ -274,9 +288,6 @@ class LagrangianEnv(gymnasium.Env):
         self.width, self.height = int(cfg["width"]), int(cfg["height"])
         self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.dt))}
         self._renderer = None
-
-        self._zero_action = np.zeros(1)
-        self._reset_episode(self._initial_state(None))
 
     @property
     def task(self):
