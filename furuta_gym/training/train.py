@@ -20,6 +20,7 @@ one forced trajectory (``forced_trajs``) and the scale is fitted after training 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -450,10 +451,95 @@ def train(
     """
     ensure_x64()
     spec = get_spec(system)
-    if loss not in LOSSES:
-        raise ValueError(f"loss must be one of {LOSSES}, got {loss!r}")
     config = config or TrainConfig.for_system(spec.name)
     trajs = list(train_trajs)
+    model = _prepared_model(spec, model_kind, loss, trajs, config, hparams, model)
+    augmentation_weight = _augmentation_weight(config, spec, model, model_kind)
+    dt = float(np.median([tr.dt for tr in trajs]))
+    shortest = min(len(tr) for tr in trajs)
+    dhash = data_hash(trajs)
+    int_windows, normalization = _integral_windows(trajs, config, loss, shortest)
+    stage_windows: dict[int, Windows] = {}
+
+    def windows_for(stage: int) -> Windows:
+        if stage not in stage_windows:
+            h = min(_horizon_samples(config.horizons[stage], dt), shortest - 1)
+            stage_windows[stage] = make_windows(trajs, h + 1, stride=1)
+        return stage_windows[stage]
+
+    optimizer, trainable, params = _build_optimizer(model, config)
+    _, static = eqx.partition(model, trainable)
+    run = _RunState(params=params, opt_state=optimizer.init(params), lam=float(config.lambda_traj))
+    lam_step = config.lambda_step if config.lambda_step is not None else (1000.0 if loss == "aph" else 0.0)
+    out = Path(out_dir) if out_dir is not None else None
+    run_info = {"model_kind": model_kind, "system": spec.name, "loss": loss, "data_hash": dhash,
+                "config": config.to_json()}
+    if out is not None:
+        static = _open_run_dir(out, resume, model, trainable, run, run_info, static)
+    bounds = np.cumsum(config.epochs)
+
+    def stage_loss(stage: int) -> str:
+        # a stage without a horizon is L_Iτ alone: no ODE solve, an epoch costs milliseconds
+        return "itau" if config.horizons[stage] is None else loss
+
+    steps_by_loss: dict[str, Any] = {}
+
+    def step_for(stage: int):
+        name = stage_loss(stage)
+        if name not in steps_by_loss:
+            steps_by_loss[name] = _make_step(static, optimizer, name, config, normalization, augmentation_weight)
+        return steps_by_loss[name]
+
+    with _polite_stop(out, run) as stop, _progress_bar(config, run.start_epoch, f"{model_kind}/{loss}") as bar:
+        for epoch in range(run.start_epoch, config.total_epochs):
+            t0 = time.perf_counter()
+            stage = int(np.searchsorted(bounds, epoch, side="right"))
+            loss_now = stage_loss(stage)
+            traj_batches, int_batches = _epoch_batches(
+                np.random.default_rng([config.seed, epoch]), None if loss_now == "itau" else windows_for(stage),
+                int_windows, config)
+            params_before = run.params
+            means, skipped = _run_steps(step_for(stage), run, traj_batches, int_batches,
+                                        config.epoch_learning_rate(epoch))
+            record_best = {}
+            # one full-batch step: its loss is exactly the loss of the parameters it started from
+            if config.keep_best_itau and loss_now == "itau" and len(int_batches) == 1:
+                record_best = _keep_best_itau(run, step_for(stage), stage, epoch, bounds, means, params_before,
+                                              int_batches[0], ok=len(traj_batches) > skipped)
+            if lam_step and "traj" in means:
+                run.lam = run.lam + lam_step * means["traj"]
+            record = {
+                "epoch": epoch + 1, "stage": stage,
+                "horizon": None if loss_now == "itau" else windows_for(stage).length - 1,
+                **means, "lambda": run.lam, "steps": len(traj_batches), "skipped": skipped, **record_best,
+                "seconds": time.perf_counter() - t0,
+            }
+            run.history.append(record)
+            _save_epoch(out, record, eqx.combine(run.params, static), run, static, run_info, config, loss)
+            _show_epoch(bar, means, loss, run.lam, skipped, epoch, len(traj_batches))
+            if stop["flag"]:
+                raise _StopRequested
+    return _finish(eqx.combine(run.params, static), run.history, config, loss, dhash, trajs, forced_trajs, out)
+
+
+@dataclasses.dataclass
+class _RunState:
+    """What a training run changes from epoch to epoch (and a resumed run restores)."""
+
+    params: Any
+    opt_state: Any
+    lam: float
+    start_epoch: int = 0
+    history: list = dataclasses.field(default_factory=list)
+    # the lowest-loss iterate of the running full-batch L_Iτ stage (keep_best_itau):
+    # {"stage", "after" (epochs run before it, counted over all stages), "total", "params"}
+    best: dict | None = None
+
+
+def _prepared_model(spec, model_kind: str, loss: str, trajs, config: TrainConfig, hparams, model):
+    """The model to train (a new one unless given), after checking it fits the data and the loss."""
+    if loss not in LOSSES:
+        raise ValueError(f"loss must be one of {LOSSES}, got {loss!r}")
     if not trajs:
         raise ValueError("train_trajs is empty")
     for tr in trajs:
@@ -475,111 +561,171 @@ def train(
         )
     if loss == "aph" and not model.has_augmentation:
         raise ValueError(f"loss 'aph' needs a model with a data-driven force F_a (aph or adln), not {model_kind!r}")
+    return model
+
+
+def _augmentation_weight(config: TrainConfig, spec, model, model_kind: str) -> float:
+    """μ of the minimum-norm term: the config's, or the recipe's for models with F_a."""
     if config.augmentation_weight is None:
-        augmentation_weight = AUGMENTATION_WEIGHT.get((spec.name, model.kind), 0.0) if model.has_augmentation else 0.0
-    elif config.augmentation_weight and not model.has_augmentation:
+        return AUGMENTATION_WEIGHT.get((spec.name, model.kind), 0.0) if model.has_augmentation else 0.0
+    if config.augmentation_weight and not model.has_augmentation:
         raise ValueError(
             f"augmentation_weight={config.augmentation_weight!r} weighs a data-driven force F_a, which a "
             f"{model_kind!r} model does not have (only aph and adln do); leave it None or 0"
         )
-    else:
-        augmentation_weight = float(config.augmentation_weight)
-    dt = float(np.median([tr.dt for tr in trajs]))
-    shortest = min(len(tr) for tr in trajs)
-    dhash = data_hash(trajs)
+    return float(config.augmentation_weight)
 
-    # -- data: integral windows once; trajectory windows per stage --------------------------
-    int_windows = None
-    normalization = config.normalize
-    if loss in ("prop", "itau"):
-        w = min(config.integral_window, shortest)
-        if config.quadrature == "simpson" and w % 2 == 0:
-            w -= 1  # Simpson pairs intervals: an odd number of samples uses them all
-        int_windows = make_windows(trajs, w, stride=w - 1, cover_end=True)
-        if normalization == "auto":
-            normalization = resolve_normalization(int_windows)
-    stage_windows: dict[int, Windows] = {}
 
-    def windows_for(stage: int) -> Windows:
-        if stage not in stage_windows:
-            h = min(_horizon_samples(config.horizons[stage], dt), shortest - 1)
-            stage_windows[stage] = make_windows(trajs, h + 1, stride=1)
-        return stage_windows[stage]
+def _integral_windows(trajs, config: TrainConfig, loss: str, shortest: int):
+    """L_Iτ's windows (made once; None without L_Iτ) and the resolved normalisation."""
+    if loss not in ("prop", "itau"):
+        return None, config.normalize
+    w = min(config.integral_window, shortest)
+    if config.quadrature == "simpson" and w % 2 == 0:
+        w -= 1  # Simpson pairs intervals: an odd number of samples uses them all
+    int_windows = make_windows(trajs, w, stride=w - 1, cover_end=True)
+    normalization = resolve_normalization(int_windows) if config.normalize == "auto" else config.normalize
+    return int_windows, normalization
 
-    optimizer, trainable, params = _build_optimizer(model, config)
-    _, static = eqx.partition(model, trainable)
-    opt_state = optimizer.init(params)
-    lam = float(config.lambda_traj)
-    lam_step = config.lambda_step if config.lambda_step is not None else (1000.0 if loss == "aph" else 0.0)
-    history: list[dict] = []
-    start_epoch = 0
-    # the lowest-loss iterate of the running full-batch L_Iτ stage (keep_best_itau):
-    # {"stage", "after" (epochs run before it, counted over all stages), "total", "params"}
-    best: dict | None = None
 
-    out = Path(out_dir) if out_dir is not None else None
-    run_info = {
-        "model_kind": model_kind,
-        "system": spec.name,
-        "loss": loss,
-        "data_hash": dhash,
-        "config": config.to_json(),
-    }
-    if out is not None:
-        state_path = out / STATE_FILE
-        if state_path.exists() and not resume:
-            raise FileExistsError(
-                f"{out}: holds a training run already ({STATE_FILE}); resume it (resume=True / "
-                "--resume) or choose another output directory"
-            )
-        if resume and state_path.exists():
-            m0, opt_state, header, best_model = ckpt.load_training_state(state_path, model, opt_state,
+def _open_run_dir(out: Path, resume: bool, model, trainable, run: _RunState, run_info: dict, static):
+    """Refuse a directory holding a run unless resuming; on resume, restore ``run`` from its
+    training state (same model, data and settings). Returns the model's static part."""
+    state_path = out / STATE_FILE
+    if state_path.exists() and not resume:
+        raise FileExistsError(
+            f"{out}: holds a training run already ({STATE_FILE}); resume it (resume=True / "
+            "--resume) or choose another output directory"
+        )
+    if resume and state_path.exists():
+        m0, run.opt_state, header, best_model = ckpt.load_training_state(state_path, model, run.opt_state,
                                                                          with_best=True)
-            st = header["state"]
-            for key in ("model_kind", "system", "loss", "data_hash"):
-                if st["run"][key] != run_info[key]:
-                    raise ValueError(
-                        f"{state_path}: cannot resume: the saved run has {key}={st['run'][key]!r}, "
-                        f"this one {run_info[key]!r}"
-                    )
-            _check_resumable_config(state_path, st["run"].get("config"), run_info["config"])
-            model = m0
-            params, static = eqx.partition(model, trainable)
-            start_epoch = int(st["epoch"])
-            lam = float(st["lambda"])
-            if best_model is not None:
-                best = {**st["best_itau"], "params": eqx.partition(best_model, trainable)[0]}
-            history = _read_history(out / HISTORY_FILE, start_epoch)
-        out.mkdir(parents=True, exist_ok=True)
+        st = header["state"]
+        for key in ("model_kind", "system", "loss", "data_hash"):
+            if st["run"][key] != run_info[key]:
+                raise ValueError(
+                    f"{state_path}: cannot resume: the saved run has {key}={st['run'][key]!r}, "
+                    f"this one {run_info[key]!r}"
+                )
+        _check_resumable_config(state_path, st["run"].get("config"), run_info["config"])
+        run.params, static = eqx.partition(m0, trainable)
+        run.start_epoch = int(st["epoch"])
+        run.lam = float(st["lambda"])
+        if best_model is not None:
+            run.best = {**st["best_itau"], "params": eqx.partition(best_model, trainable)[0]}
+        run.history = _read_history(out / HISTORY_FILE, run.start_epoch)
+    out.mkdir(parents=True, exist_ok=True)
+    return static
 
-    total_epochs = config.total_epochs
-    bounds = np.cumsum(config.epochs)
 
-    def stage_loss(stage: int) -> str:
-        # a stage without a horizon is L_Iτ alone: no ODE solve, an epoch costs milliseconds
-        return "itau" if config.horizons[stage] is None else loss
+def _epoch_batches(rng, traj_windows: Windows | None, int_windows: Windows | None, config: TrainConfig):
+    """One epoch's minibatches: trajectory windows (None in an L_Iτ-alone stage) in a random
+    order, each paired with L_Iτ windows (all of them, or random batches; None without L_Iτ)."""
+    traj_batches: list[Windows | None] = [None]
+    if traj_windows is not None:
+        nw = traj_windows.n_windows
+        bs = nw if config.batch_size is None else min(config.batch_size, nw)
+        perm = rng.permutation(nw)
+        traj_batches = [traj_windows.take(perm[k * bs : (k + 1) * bs]) for k in range(nw // bs)]
+    int_batches: list[Windows | None] = [None] * len(traj_batches)
+    if int_windows is not None:
+        ni = int_windows.n_windows
+        ib = ni if config.integral_batch_size is None else min(config.integral_batch_size, ni)
+        if ib == ni and traj_windows is not None:
+            int_batches = [int_windows] * len(traj_batches)
+        else:
+            n_steps = len(traj_batches) if traj_windows is not None else max(1, ni // ib)
+            perm = np.concatenate([rng.permutation(ni) for _ in range(math.ceil(n_steps * ib / ni) + 1)])
+            int_batches = [int_windows.take(perm[k * ib : (k + 1) * ib]) for k in range(n_steps)]
+            if traj_windows is None:
+                traj_batches = [None] * n_steps
+    return traj_batches, int_batches
 
-    steps_by_loss: dict[str, Any] = {}
 
-    def step_for(stage: int):
-        name = stage_loss(stage)
-        if name not in steps_by_loss:
-            steps_by_loss[name] = _make_step(static, optimizer, name, config, normalization, augmentation_weight)
-        return steps_by_loss[name]
+def _run_steps(step, run: _RunState, traj_batches, int_batches, learning_rate: float):
+    """The epoch's optimiser steps (a step with a non-finite loss or gradient is skipped);
+    returns the mean loss terms of the steps taken and how many were skipped."""
+    sums: dict[str, float] = {}
+    skipped = 0
+    for tb, ib_ in zip(traj_batches, int_batches):
+        run.params, run.opt_state, terms, ok = step(run.params, run.opt_state, tb, ib_, jnp.asarray(run.lam),
+                                                    jnp.asarray(learning_rate))
+        if bool(ok):
+            for k, v in terms.items():
+                sums[k] = sums.get(k, 0.0) + float(v)
+        else:
+            skipped += 1
+    n_ok = len(traj_batches) - skipped
+    return ({k: v / n_ok for k, v in sums.items()} if n_ok else {}), skipped
 
-    def save_state(epoch: int, model_now) -> None:
-        if out is None:
-            return
-        extra = {"epoch": epoch, "lambda": lam, "run": run_info, "seed": config.seed,
-                 "meta": {"data_hash": dhash, "epoch": epoch, "loss": loss}}
-        best_model = None
-        if best is not None:
-            extra["best_itau"] = {k: v for k, v in best.items() if k != "params"}
-            best_model = eqx.combine(best["params"], static)
-        ckpt.save_training_state(out / STATE_FILE, model_now, opt_state, extra, best_model=best_model)
 
-    # a polite kill (Ctrl-C / SIGTERM) finishes the running epoch and saves; SIGKILL loses at
-    # most the unfinished epoch because the state is written after every epoch
+def _keep_best_itau(run: _RunState, step, stage: int, epoch: int, bounds, means, params_before, int_batch,
+                    ok: bool) -> dict:
+    """keep_best_itau: track the lowest-loss iterate of a full-batch L_Iτ stage and hand it on
+    when the stage ends; returns the history fields of that hand-over (or {})."""
+    best = run.best
+    if ok and (best is None or best["stage"] != stage or means["total"] < best["total"]):
+        # "after": how many epochs (counted over all stages) had run on these parameters
+        best = run.best = {"stage": stage, "after": epoch, "total": means["total"], "params": params_before}
+    if epoch + 1 != bounds[stage] or best is None or best["stage"] != stage:
+        return {}
+    # the stage ends: its last step's result is evaluated too (a step at rate 0 is just the loss;
+    # the step is pure, so its other outputs are dropped), then the stage hands on whichever
+    # iterate had the lowest loss
+    _, _, final_terms, final_ok = step(run.params, run.opt_state, None, int_batch, jnp.asarray(run.lam),
+                                       jnp.asarray(0.0))
+    if bool(final_ok) and float(final_terms["total"]) < best["total"]:
+        best = {"stage": stage, "after": epoch + 1, "total": float(final_terms["total"]), "params": run.params}
+    run.params = best["params"]
+    run.best = None  # handed on: later epochs' training states need not carry it
+    return {"best_after_epoch": best["after"], "best_total": best["total"]}
+
+
+def _save_epoch(out: Path | None, record: dict, model_now, run: _RunState, static, run_info: dict,
+                config: TrainConfig, loss: str) -> None:
+    """The epoch's history line, the resumable state and (every ``checkpoint_every``) a snapshot."""
+    if out is None:
+        return
+    epoch = record["epoch"]
+    # the history is appended line by line (the state file stays small); written before the
+    # state so a resumed run always finds every finished epoch's line
+    with (out / HISTORY_FILE).open("a") as fh:
+        fh.write(json.dumps(record, default=float) + "\n")
+    meta = {"data_hash": run_info["data_hash"], "epoch": epoch, "loss": loss}
+    extra = {"epoch": epoch, "lambda": run.lam, "run": run_info, "seed": config.seed, "meta": meta}
+    best_model = None
+    if run.best is not None:
+        extra["best_itau"] = {k: v for k, v in run.best.items() if k != "params"}
+        best_model = eqx.combine(run.best["params"], static)
+    ckpt.save_training_state(out / STATE_FILE, model_now, run.opt_state, extra, best_model=best_model)
+    if config.checkpoint_every and epoch % config.checkpoint_every == 0:
+        ckpt.save_model(out / f"model_epoch{epoch:06d}.eqx", model_now, meta, overwrite=True)
+
+
+def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: int, steps: int) -> None:
+    if bar is not None:
+        post = {k: f"{v:.3g}" for k, v in means.items() if k != "total"}
+        if loss in ("aph", "prop"):
+            post["λ"] = f"{lam:.3g}"
+        if skipped:
+            post["skipped"] = skipped
+        bar.set_postfix(post, refresh=False)
+        bar.update(1)
+    if skipped:
+        import warnings
+
+        warnings.warn(
+            f"epoch {epoch + 1}: skipped {skipped} of {steps} step(s) with a non-finite loss or "
+            "gradient (NaN guard)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+
+
+@contextlib.contextmanager
+def _polite_stop(out: Path | None, run: _RunState):
+    """A polite kill (Ctrl-C / SIGTERM) finishes the running epoch and saves; SIGKILL loses at
+    most the unfinished epoch because the state is written after every epoch."""
     stop = {"flag": False}
     old_handler = None
     if out is not None:
@@ -587,126 +733,35 @@ def train(
             old_handler = signal.signal(signal.SIGTERM, lambda *_: stop.__setitem__("flag", True))
         except ValueError:  # not in the main thread
             old_handler = None
-
-    bar = None
-    if config.progress and total_epochs > start_epoch:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=total_epochs, initial=start_epoch, desc=f"{model_kind}/{loss}", unit="ep")
     try:
-        for epoch in range(start_epoch, total_epochs):
-            t0 = time.perf_counter()
-            stage = int(np.searchsorted(bounds, epoch, side="right"))
-            rng = np.random.default_rng([config.seed, epoch])
-            step = step_for(stage)
-            loss_now = stage_loss(stage)
-            traj_batches: list[Windows | None] = [None]
-            if loss_now != "itau":
-                tw = windows_for(stage)
-                nw = tw.n_windows
-                bs = nw if config.batch_size is None else min(config.batch_size, nw)
-                perm = rng.permutation(nw)
-                traj_batches = [tw.take(perm[k * bs : (k + 1) * bs]) for k in range(nw // bs)]
-            int_batches: list[Windows | None] = [None] * len(traj_batches)
-            if int_windows is not None:
-                ni = int_windows.n_windows
-                ib = ni if config.integral_batch_size is None else min(config.integral_batch_size, ni)
-                if ib == ni and loss_now != "itau":
-                    int_batches = [int_windows] * len(traj_batches)
-                else:
-                    n_steps = len(traj_batches) if loss_now != "itau" else max(1, ni // ib)
-                    perm = np.concatenate([rng.permutation(ni) for _ in range(math.ceil(n_steps * ib / ni) + 1)])
-                    int_batches = [int_windows.take(perm[k * ib : (k + 1) * ib]) for k in range(n_steps)]
-                    if loss_now == "itau":
-                        traj_batches = [None] * n_steps
-            sums: dict[str, float] = {}
-            skipped = 0
-            # one full-batch step: its loss is exactly the loss of the parameters it started from
-            exact_epoch = config.keep_best_itau and loss_now == "itau" and len(int_batches) == 1
-            params_before = params
-            for tb, ib_ in zip(traj_batches, int_batches):
-                params, opt_state, terms, ok = step(params, opt_state, tb, ib_, jnp.asarray(lam),
-                                                    jnp.asarray(config.epoch_learning_rate(epoch)))
-                if bool(ok):
-                    for k, v in terms.items():
-                        sums[k] = sums.get(k, 0.0) + float(v)
-                else:
-                    skipped += 1
-            n_ok = len(traj_batches) - skipped
-            means = {k: v / n_ok for k, v in sums.items()} if n_ok else {}
-            if exact_epoch and n_ok and (best is None or best["stage"] != stage or means["total"] < best["total"]):
-                # "after": how many epochs (counted over all stages) had run on these parameters
-                best = {"stage": stage, "after": epoch, "total": means["total"], "params": params_before}
-            record_best = {}
-            if exact_epoch and epoch + 1 == bounds[stage] and best is not None and best["stage"] == stage:
-                # the stage ends: its last step's result is evaluated too (a step at rate 0 is
-                # just the loss; the step is pure, so its other outputs are dropped), then the
-                # stage hands on whichever iterate had the lowest loss
-                _, _, final_terms, final_ok = step(params, opt_state, None, int_batches[0], jnp.asarray(lam),
-                                                   jnp.asarray(0.0))
-                if bool(final_ok) and float(final_terms["total"]) < best["total"]:
-                    best = {"stage": stage, "after": epoch + 1, "total": float(final_terms["total"]),
-                            "params": params}
-                params = best["params"]
-                record_best = {"best_after_epoch": best["after"], "best_total": best["total"]}
-                best = None  # handed on: later epochs' training states need not carry it
-            if lam_step and "traj" in means:
-                lam = lam + lam_step * means["traj"]
-            record = {
-                "epoch": epoch + 1,
-                "stage": stage,
-                "horizon": None if loss_now == "itau" else windows_for(stage).length - 1,
-                **means,
-                "lambda": lam,
-                "steps": len(traj_batches),
-                "skipped": skipped,
-                **record_best,
-                "seconds": time.perf_counter() - t0,
-            }
-            history.append(record)
-            model_now = eqx.combine(params, static)
-            if out is not None:
-                # the history is appended line by line (the state file stays small); written
-                # before the state so a resumed run always finds every finished epoch's line
-                with (out / HISTORY_FILE).open("a") as fh:
-                    fh.write(json.dumps(record, default=float) + "\n")
-            save_state(epoch + 1, model_now)
-            if out is not None and config.checkpoint_every and (epoch + 1) % config.checkpoint_every == 0:
-                ckpt.save_model(out / f"model_epoch{epoch + 1:06d}.eqx", model_now,
-                                {"data_hash": dhash, "epoch": epoch + 1, "loss": loss}, overwrite=True)
-            if bar is not None:
-                post = {k: f"{v:.3g}" for k, v in means.items() if k != "total"}
-                if loss in ("aph", "prop"):
-                    post["λ"] = f"{lam:.3g}"
-                if skipped:
-                    post["skipped"] = skipped
-                bar.set_postfix(post, refresh=False)
-                bar.update(1)
-            if skipped:
-                import warnings
-
-                warnings.warn(
-                    f"epoch {epoch + 1}: skipped {skipped} of {len(traj_batches)} step(s) with a "
-                    "non-finite loss or gradient (NaN guard)",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
-            if stop["flag"]:
-                raise _StopRequested
+        yield stop
     except (KeyboardInterrupt, _StopRequested):
-        if bar is not None:
-            bar.close()
         raise KeyboardInterrupt(
-            f"training stopped after epoch {len(history)}; resume with resume=True / --resume"
+            f"training stopped after epoch {len(run.history)}; resume with resume=True / --resume"
             + (f" from {out}" if out is not None else "")
         ) from None
     finally:
         if old_handler is not None:
             signal.signal(signal.SIGTERM, old_handler)
+
+
+@contextlib.contextmanager
+def _progress_bar(config: TrainConfig, start_epoch: int, desc: str):
+    bar = None
+    if config.progress and config.total_epochs > start_epoch:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=config.total_epochs, initial=start_epoch, desc=desc, unit="ep")
+    try:
+        yield bar
+    finally:
         if bar is not None:
             bar.close()
 
-    model = eqx.combine(params, static)
+
+def _finish(model, history: list, config: TrainConfig, loss: str, dhash: str, trajs, forced_trajs, out):
+    """The trained model (with its overall scale fitted on ``forced_trajs``), saved with its
+    history when there is an ``out`` directory; returns ``(model, history)``."""
     meta = {"data_hash": dhash, "epoch": len(history), "loss": loss, "config": config.to_json(),
             "final": history[-1] if history else None}
     if forced_trajs:
