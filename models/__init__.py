@@ -3,7 +3,8 @@
 Analytic: :class:`Furuta`, :class:`NMSD`. Learned (issue 3): DeLaN, APHYNITY, augmented DeLaN.
 """
 
-from ._analytic import NMSD, Furuta, FurutaParameters, NMSDParameters
+from ._analytic import (NMSD, Furuta, FurutaParameters, NMSDParameters, furuta_lumped, furuta_mass_matrix,
+                        furuta_potential, nmsd_potential)
 from ._aphynity import Aphynity
 from ._augmented import AugmentedDeLaN
 from ._delan import DeLaN
@@ -17,6 +18,11 @@ __all__ = [
     "NMSD",
     "NMSDParameters",
     "analytic_model",
+    # the analytic physics in lumped parameters (the diagnosis fits these)
+    "furuta_lumped",
+    "furuta_mass_matrix",
+    "furuta_potential",
+    "nmsd_potential",
     # learned (issue 3)
     "AbstractLearnedSystem",
     "DeLaN",

@@ -15,7 +15,8 @@ from .._x64 import ensure_x64
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import FURUTA, NMSD
 
-__all__ = ["FurutaParameters", "Furuta", "NMSDParameters", "NMSD"]
+__all__ = ["FurutaParameters", "Furuta", "NMSDParameters", "NMSD", "furuta_lumped", "furuta_mass_matrix",
+           "furuta_potential", "nmsd_potential"]
 
 
 def _scalar(x) -> jnp.ndarray:
@@ -56,6 +57,27 @@ class FurutaParameters(eqx.Module):
         return self.Jp + self.mp * self.Lp**2 / 4.0
 
 
+def furuta_lumped(p: FurutaParameters) -> dict[str, jnp.ndarray]:
+    """The Furuta's M and V in the parameters they are linear in: J1 (Jr + mp·Lr²), J1b
+    (¼mp·Lp², the sin²β term), Jc (½mp·Lr·Lp), J2 (Jp + ¼mp·Lp²), G (½mp·g·Lp). The
+    diagnosis fits these (furuta_gym.diagnose)."""
+    return {"J1": p.J1, "J1b": 0.25 * p.mp * p.Lp**2, "Jc": 0.5 * p.mp * p.Lr * p.Lp, "J2": p.J2,
+            "G": 0.5 * p.mp * p.g * p.Lp}
+
+
+def furuta_mass_matrix(J1, J1b, Jc, J2, q):
+    """M(q) = [[J1 + J1b·sin²β, Jc·cosβ], [Jc·cosβ, J2]]."""
+    sb, cb = jnp.sin(q[1]), jnp.cos(q[1])
+    m11 = J1 + J1b * sb**2
+    m12 = Jc * cb
+    return jnp.stack([jnp.stack([m11, m12]), jnp.stack([m12, J2 * jnp.ones_like(m11)])])
+
+
+def furuta_potential(G, q):
+    """V(q) = G·(1 − cosβ): β = 0 hanging down."""
+    return G * (1.0 - jnp.cos(q[1]))
+
+
 class Furuta(AbstractLagrangianSystem):
     """Furuta pendulum, q = (α, β), β = 0 hanging down, u in volts (Laiche et al. 2026, §5).
 
@@ -68,15 +90,11 @@ class Furuta(AbstractLagrangianSystem):
     spec: ClassVar[SystemSpec] = FURUTA
 
     def mass_matrix(self, q):
-        p = self.params
-        sb, cb = jnp.sin(q[1]), jnp.cos(q[1])
-        m11 = p.J1 + 0.25 * p.mp * p.Lp**2 * sb**2
-        m12 = 0.5 * p.mp * p.Lr * p.Lp * cb
-        return jnp.stack([jnp.stack([m11, m12]), jnp.stack([m12, p.J2 * jnp.ones_like(m11)])])
+        b = furuta_lumped(self.params)
+        return furuta_mass_matrix(b["J1"], b["J1b"], b["Jc"], b["J2"], q)
 
     def potential(self, q):
-        p = self.params
-        return 0.5 * p.mp * p.g * p.Lp * (1.0 - jnp.cos(q[1]))
+        return furuta_potential(furuta_lumped(self.params)["G"], q)
 
     def nonconservative_force(self, q, qd):
         p = self.params
@@ -97,6 +115,11 @@ class NMSDParameters(eqx.Module):
     b2: jnp.ndarray = eqx.field(default=0.1, converter=_scalar)  # cubic damping, N·s³/m³
 
 
+def nmsd_potential(k1, k2, q):
+    """V(p) = ½k1·p² + ¼k2·p⁴."""
+    return 0.5 * k1 * q[0] ** 2 + 0.25 * k2 * q[0] ** 4
+
+
 class NMSD(AbstractLagrangianSystem):
     """Nonlinear mass-spring-damper: M = m, V = ½k1p² + ¼k2p⁴, τ_NC = −b1ṗ − b2ṗ³, τ_u = u."""
 
@@ -107,8 +130,7 @@ class NMSD(AbstractLagrangianSystem):
         return jnp.reshape(self.params.m, (1, 1))
 
     def potential(self, q):
-        p = self.params
-        return 0.5 * p.k1 * q[0] ** 2 + 0.25 * p.k2 * q[0] ** 4
+        return nmsd_potential(self.params.k1, self.params.k2, q)
 
     def nonconservative_force(self, q, qd):
         p = self.params

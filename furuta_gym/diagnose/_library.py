@@ -37,7 +37,8 @@ import numpy as np
 
 from ..effects import EFFECT_UNITS, INPUT_EFFECTS, JOINT_EFFECTS, STATEFUL_EFFECTS, Effect
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
-from ..models import FurutaParameters, NMSDParameters
+from ..models import (FurutaParameters, NMSDParameters, furuta_lumped, furuta_mass_matrix, furuta_potential,
+                      nmsd_potential)
 from ..systems import get_spec
 
 __all__ = ["Candidate", "ParameterLayout", "LumpedModel", "LearnedWithLibrary", "layout_for",
@@ -81,17 +82,9 @@ def nominal_base(system: str) -> dict[str, float]:
     """The pinned analytic model's values of the lumped parameters."""
     if system == "furuta":
         p = FurutaParameters()
-        f = lambda x: float(x)  # noqa: E731
-        return {
-            "J1": f(p.J1),
-            "J1b": f(0.25 * p.mp * p.Lp**2),
-            "Jc": f(0.5 * p.mp * p.Lr * p.Lp),
-            "J2": f(p.J2),
-            "G": f(0.5 * p.mp * p.g * p.Lp),
-            "c_alpha": f(p.c_r + p.kt * p.km / p.Rm),
-            "c_beta": f(p.c_p),
-            "K": f(p.kt / p.Rm),
-        }
+        lumped = {k: float(v) for k, v in furuta_lumped(p).items()}
+        return {**lumped, "c_alpha": float(p.c_r + p.kt * p.km / p.Rm), "c_beta": float(p.c_p),
+                "K": float(p.kt / p.Rm)}
     p = NMSDParameters()
     return {"m": float(p.m), "k1": float(p.k1), "k2": float(p.k2), "b1": float(p.b1),
             "b2": float(p.b2), "gain": 1.0}
@@ -245,19 +238,16 @@ class LumpedModel(AbstractLagrangianSystem):
         return len(BASE[self.system])
 
     def mass_matrix(self, q):
+        b = self._base
         if self.system == "furuta":
-            b = self._base
-            sb, cb = jnp.sin(q[1]), jnp.cos(q[1])
-            m11 = b("J1") + b("J1b") * sb**2
-            m12 = b("Jc") * cb
-            return jnp.stack([jnp.stack([m11, m12]), jnp.stack([m12, b("J2") + 0.0 * m11])])
-        return jnp.reshape(self._base("m"), (1, 1))
+            return furuta_mass_matrix(b("J1"), b("J1b"), b("Jc"), b("J2"), q)
+        return jnp.reshape(b("m"), (1, 1))
 
     def _declared_potential(self, q):
         b = self._base
         if self.system == "furuta":
-            return b("G") * (1.0 - jnp.cos(q[1]))
-        return 0.5 * b("k1") * q[0] ** 2 + 0.25 * b("k2") * q[0] ** 4
+            return furuta_potential(b("G"), q)
+        return nmsd_potential(b("k1"), b("k2"), q)
 
     def potential(self, q):
         return _library_potential(self.theta, self.system, self._n_base, q, self._declared_potential)
