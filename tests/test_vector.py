@@ -485,3 +485,19 @@ def test_rollout_in_concurrent_chunks_equals_one_batch_and_still_traces():
     assert _max_diff(traced, whole.states) <= 1e-12
     with pytest.raises(ValueError, match=r"chunks must be an integer from 1 to the number of copies \(7\)"):
         rollout(Furuta(), lqr_like, x0s, 5, chunks=8, **kwargs)
+
+
+def test_an_env_refused_at_construction_closes_quietly():
+    # VectorEnv.__del__ calls close() on an env whose __init__ raised before its parts existed
+    import gc
+    import warnings
+
+    from furuta_gym.envs.vector import FurutaVectorEnv
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="workers must be an integer"):
+            FurutaVectorEnv(2, workers=5)
+        env = object.__new__(FurutaVectorEnv)
+        env.close()  # nothing was built: nothing to close, no AttributeError
+        gc.collect()

@@ -648,10 +648,10 @@ class LagrangianVectorEnv(VectorEnv):
         return False
 
     def close_extras(self, **kwargs):
-        if self._workers is not None:
-            self._workers.close()
-        self._chunked.close()
-        self._template.close()
+        # also called (from VectorEnv.__del__) on an env whose __init__ refused its arguments
+        for part in ("_workers", "_chunked", "_template"):
+            if getattr(self, part, None) is not None:
+                getattr(self, part).close()
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(num_envs={self.num_envs}, dynamics={type(self.system).__name__})"
