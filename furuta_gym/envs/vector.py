@@ -264,44 +264,7 @@ class LagrangianVectorEnv(VectorEnv):
         workers: int = 0,
         **env_kwargs,
     ):
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 0 <= workers <= num_envs:
-            raise ValueError(
-                f"workers must be an integer from 0 (step in this process) to num_envs = "
-                f"{num_envs} (worker processes, each with a one-thread XLA pool), got {workers!r}"
-            )
-        if chunks is None:
-            chunks = auto_chunks(int(num_envs)) if workers == 0 else 1
-        elif isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or not 1 <= chunks <= num_envs:
-            raise ValueError(
-                f"chunks must be an integer from 1 to num_envs = {num_envs} (sub-batches stepped "
-                f"concurrently) or None for auto ({auto_chunks(int(num_envs))} here), got {chunks!r}"
-            )
-        elif workers and chunks != 1:
-            raise ValueError(
-                f"chunks={chunks} splits the step inside this process; with workers={workers} "
-                "each worker process steps its own slice: pass one of the two"
-            )
-        if isinstance(dynamics, str) and dynamics == "mujoco":
-            raise ValueError(
-                f"{type(self).__name__} batches model backends with jax.vmap; dynamics='mujoco' is "
-                f"not a JAX function. Use gymnasium.make_vec({self._env_id()!r}, num_envs=N, "
-                "vectorization_mode='sync' or 'async') for the MuJoCo ground truth, or "
-                "dynamics='analytic', a checkpoint path or an AbstractLagrangianSystem here."
-            )
-        if env_kwargs.get("render_mode") is not None:
-            raise ValueError(
-                f"{type(self).__name__} does not render; render a single env "
-                f"(gymnasium.make({self._env_id()!r}, render_mode=...)) or use "
-                "gymnasium.make_vec(..., vectorization_mode='sync')"
-            )
-        if env_kwargs.get("kernel", "auto") != "auto":
-            raise ValueError(
-                f"kernel={env_kwargs['kernel']!r} chooses a single env's step kernel; "
-                f"{type(self).__name__} steps all copies in one vmapped XLA program (chunks= and "
-                "workers= set how)"
-            )
+        chunks = self._check_arguments(num_envs, dynamics, workers, chunks, env_kwargs)
         # The single env is the specification: its validated settings, spaces, task and initial-
         # state distribution are what every copy uses. It never steps: no C kernel to build.
         env_kwargs["kernel"] = "xla"
@@ -336,6 +299,19 @@ class LagrangianVectorEnv(VectorEnv):
                 self.num_envs, int(workers), 2 * self._n, self.spec_system.n_inputs, self._step_settings()
             )
 
+        self._init_spaces(template, autoreset_mode)
+
+        n_state = 2 * self._n
+        self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
+        self._x = np.zeros((self.num_envs, n_state))
+        self._obs = np.zeros((self.num_envs, n_state))
+        self._steps = np.zeros(self.num_envs, dtype=np.int64)
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        self._needs_reset = True
+
+    # ------------------------------------------------------------------ set-up helpers
+    def _init_spaces(self, template: LagrangianEnv, autoreset_mode) -> None:
+        """Batched copies of the template's spaces; the autoreset mode and the metadata."""
         self.single_observation_space = template.observation_space
         self.single_action_space = template.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -354,15 +330,49 @@ class LagrangianVectorEnv(VectorEnv):
         }
         self.render_mode = None
 
-        n_state = 2 * self._n
-        self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
-        self._x = np.zeros((self.num_envs, n_state))
-        self._obs = np.zeros((self.num_envs, n_state))
-        self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._autoreset = np.zeros(self.num_envs, dtype=bool)
-        self._needs_reset = True
+    @classmethod
+    def _check_arguments(cls, num_envs, dynamics, workers, chunks, env_kwargs) -> int:
+        """Refuse what a batched model env cannot do; returns the number of chunks."""
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 0 <= workers <= num_envs:
+            raise ValueError(
+                f"workers must be an integer from 0 (step in this process) to num_envs = "
+                f"{num_envs} (worker processes, each with a one-thread XLA pool), got {workers!r}"
+            )
+        if chunks is None:
+            chunks = auto_chunks(int(num_envs)) if workers == 0 else 1
+        elif isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or not 1 <= chunks <= num_envs:
+            raise ValueError(
+                f"chunks must be an integer from 1 to num_envs = {num_envs} (sub-batches stepped "
+                f"concurrently) or None for auto ({auto_chunks(int(num_envs))} here), got {chunks!r}"
+            )
+        elif workers and chunks != 1:
+            raise ValueError(
+                f"chunks={chunks} splits the step inside this process; with workers={workers} "
+                "each worker process steps its own slice: pass one of the two"
+            )
+        if isinstance(dynamics, str) and dynamics == "mujoco":
+            raise ValueError(
+                f"{cls.__name__} batches model backends with jax.vmap; dynamics='mujoco' is "
+                f"not a JAX function. Use gymnasium.make_vec({cls._env_id()!r}, num_envs=N, "
+                "vectorization_mode='sync' or 'async') for the MuJoCo ground truth, or "
+                "dynamics='analytic', a checkpoint path or an AbstractLagrangianSystem here."
+            )
+        if env_kwargs.get("render_mode") is not None:
+            raise ValueError(
+                f"{cls.__name__} does not render; render a single env "
+                f"(gymnasium.make({cls._env_id()!r}, render_mode=...)) or use "
+                "gymnasium.make_vec(..., vectorization_mode='sync')"
+            )
+        if env_kwargs.get("kernel", "auto") != "auto":
+            raise ValueError(
+                f"kernel={env_kwargs['kernel']!r} chooses a single env's step kernel; "
+                f"{cls.__name__} steps all copies in one vmapped XLA program (chunks= and "
+                "workers= set how)"
+            )
+        return chunks
 
-    # ------------------------------------------------------------------ set-up helpers
     @classmethod
     def _env_id(cls) -> str:
         from . import ENV_IDS
