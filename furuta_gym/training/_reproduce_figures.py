@@ -45,114 +45,137 @@ def _label(kind, loss) -> str:
 
 
 def make_figures(out: Path, config, per_system: dict) -> dict[str, Path]:
+    """The four figures of each system (module docstring) into ``out/figures``; returns their paths."""
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .metrics import energy_along, predict
-
     fig_dir = out / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
     for system in config.systems:
         data, truth = per_system[system]["data"], per_system[system]["truth"]
         models = _load_models(out, system, config)
-        n = truth.spec.n_dof
-
-        # -- predictions on the first 10 s of a forced trajectory ----------------------------
-        tr = data[FORCED_SET[system]][0]
-        k = min(len(tr), int(round(10.0 / tr.dt)) + 1)
-        fig, axes = plt.subplots(2 * n, 1, figsize=(8, 2.0 * 2 * n), sharex=True)
-        for j in range(2 * n):
-            axes[j].plot(tr.t[:k], tr.x[:k, j], "k", lw=2, label="ground truth")
-            axes[j].set_ylabel(STATE_LABELS[system][j])
-        for kind, loss, model in models:
-            # the whole set, as in the evaluation: same shapes, so the compiled solve is reused
-            pred = predict(model, data[FORCED_SET[system]])[0]
-            for j in range(2 * n):
-                y = np.where(np.abs(pred[:k, j]) < 1e6, pred[:k, j], np.nan)
-                axes[j].plot(tr.t[:k], y, lw=1, label=_label(kind, loss))
-        axes[0].legend(fontsize=7, ncol=2)
-        axes[-1].set_xlabel("t [s]")
-        fig.suptitle(f"{system}: open-loop predictions, first 10 s of a forced test trajectory")
-        fig.tight_layout()
-        paths[f"predictions_{system}"] = _save(fig, fig_dir / f"predictions_{system}.png")
-
         physics = [(kind, loss, m) for kind, loss, m in models if kind != "aph"]
-
-        # -- energy as a function of the state ------------------------------------------------
-        fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-        if system == "nmsd":
-            grid = np.linspace(-1.5, 1.5, 201)
-            zeros = np.zeros_like(grid)
-            cases = [
-                (grid, np.stack([grid], 1), np.stack([zeros], 1), "p [m] (ṗ = 0)"),
-                (grid * 3, np.stack([zeros], 1), np.stack([grid * 3], 1), "ṗ [m/s] (p = 0)"),
-            ]
-        else:
-            grid = np.linspace(-np.pi, np.pi, 201)
-            zeros = np.zeros_like(grid)
-            vel = np.linspace(-20, 20, 201)
-            cases = [
-                (grid, np.stack([zeros, grid], 1), np.stack([zeros, zeros], 1), "β [rad] (α̇ = β̇ = 0)"),
-                (vel, np.stack([zeros, zeros], 1), np.stack([zeros, vel], 1), "β̇ [rad/s] (β = α̇ = 0)"),
-            ]
-        for ax, (x, q, qd, xlabel) in zip(axes, cases):
-            ax.plot(x, energy_along(truth, q, qd, normalize=False), "k", lw=2, label="ground truth")
-            for kind, loss, model in physics:
-                ax.plot(x, energy_along(model, q, qd, normalize=False), lw=1, label=_label(kind, loss))
-            ax.set_xlabel(xlabel)
-            ax.set_ylabel("E [J] (V(q_rest) = 0)")
-        axes[0].legend(fontsize=7)
-        fig.suptitle(f"{system}: energy as a function of the state")
-        fig.tight_layout()
-        paths[f"energy_state_{system}"] = _save(fig, fig_dir / f"energy_state_{system}.png")
-
-        # -- energy along a trajectory ----------------------------------------------------------
-        tr_e = data[ENERGY_SET[system]][0]
-        fig, ax = plt.subplots(figsize=(7, 3.4))
-        ax.plot(tr_e.t, energy_along(truth, tr_e.q, tr_e.qd), "k", lw=2, label="ground truth")
-        for kind, loss, model in physics:
-            ax.plot(tr_e.t, energy_along(model, tr_e.q, tr_e.qd), lw=1, label=_label(kind, loss))
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel("E(t) / E(0)")
-        ax.legend(fontsize=7)
-        label = next(l for l, name in TEST_SETS[system].items() if name == ENERGY_SET[system])
-        ax.set_title(f"{system}: energy along the first {label} test trajectory")
-        fig.tight_layout()
-        paths[f"energy_time_{system}"] = _save(fig, fig_dir / f"energy_time_{system}.png")
-
-        # -- force decomposition on a forced trajectory ----------------------------------------
-        import jax.numpy as jnp
-
-        from .metrics import _terms_along, _true_accelerations
-
-        q, qd = jnp.asarray(tr.q[:k]), jnp.asarray(tr.qd[:k])
-        u = jnp.asarray(np.asarray(tr.u[:k], dtype=float).reshape(k, -1))
-        qdd = _true_accelerations(truth, q, qd, u)
-
-        def terms(system_):
-            return _terms_along(system_, q, qd, qdd)
-
-        names = ("inertial", "coriolis", "potential")
-        fig, axes = plt.subplots(n, 3, figsize=(12, 2.6 * n), sharex=True, squeeze=False)
-        true_terms = terms(truth)
-        model_terms = [(kind, loss, terms(m)) for kind, loss, m in physics]
-        for j in range(n):
-            for c, name in enumerate(names):
-                ax = axes[j, c]
-                ax.plot(tr.t[:k], np.asarray(getattr(true_terms, name))[:, j], "k", lw=2, label="ground truth")
-                for kind, loss, tt in model_terms:
-                    ax.plot(tr.t[:k], np.asarray(getattr(tt, name))[:, j], lw=1, label=_label(kind, loss))
-                ax.set_title(f"{name} · {truth.spec.joint_names[j]}", fontsize=9)
-        axes[0, 0].legend(fontsize=7)
-        for ax in axes[-1]:
-            ax.set_xlabel("t [s]")
-        fig.suptitle(f"{system}: force decomposition on a forced test trajectory (first 10 s)")
-        fig.tight_layout()
-        paths[f"forces_{system}"] = _save(fig, fig_dir / f"forces_{system}.png")
+        tr = data[FORCED_SET[system]][0]
+        k = min(len(tr), int(round(10.0 / tr.dt)) + 1)  # the first 10 s
+        figures = {
+            "predictions": _predictions(system, data, truth, models, tr, k),
+            "energy_state": _energy_over_state(system, truth, physics),
+            "energy_time": _energy_over_time(system, data, truth, physics),
+            "forces": _forces(system, truth, physics, tr, k),
+        }
+        for name, fig in figures.items():
+            paths[f"{name}_{system}"] = _save(fig, fig_dir / f"{name}_{system}.png")
     return paths
+
+
+def _predictions(system, data, truth, models, tr, k):
+    """Open-loop predictions on the first ``k`` samples of the first forced trajectory."""
+    import matplotlib.pyplot as plt
+
+    from .metrics import predict
+
+    n = truth.spec.n_dof
+    fig, axes = plt.subplots(2 * n, 1, figsize=(8, 2.0 * 2 * n), sharex=True)
+    for j in range(2 * n):
+        axes[j].plot(tr.t[:k], tr.x[:k, j], "k", lw=2, label="ground truth")
+        axes[j].set_ylabel(STATE_LABELS[system][j])
+    for kind, loss, model in models:
+        # the whole set, as in the evaluation: same shapes, so the compiled solve is reused
+        pred = predict(model, data[FORCED_SET[system]])[0]
+        for j in range(2 * n):
+            y = np.where(np.abs(pred[:k, j]) < 1e6, pred[:k, j], np.nan)
+            axes[j].plot(tr.t[:k], y, lw=1, label=_label(kind, loss))
+    axes[0].legend(fontsize=7, ncol=2)
+    axes[-1].set_xlabel("t [s]")
+    fig.suptitle(f"{system}: open-loop predictions, first 10 s of a forced test trajectory")
+    fig.tight_layout()
+    return fig
+
+
+def _energy_cases(system):
+    """(x axis, q, q̇, label) of the two energy-over-state panels."""
+    if system == "nmsd":
+        grid = np.linspace(-1.5, 1.5, 201)
+        zeros = np.zeros_like(grid)
+        return [
+            (grid, np.stack([grid], 1), np.stack([zeros], 1), "p [m] (ṗ = 0)"),
+            (grid * 3, np.stack([zeros], 1), np.stack([grid * 3], 1), "ṗ [m/s] (p = 0)"),
+        ]
+    grid = np.linspace(-np.pi, np.pi, 201)
+    zeros = np.zeros_like(grid)
+    vel = np.linspace(-20, 20, 201)
+    return [
+        (grid, np.stack([zeros, grid], 1), np.stack([zeros, zeros], 1), "β [rad] (α̇ = β̇ = 0)"),
+        (vel, np.stack([zeros, zeros], 1), np.stack([zeros, vel], 1), "β̇ [rad/s] (β = α̇ = 0)"),
+    ]
+
+
+def _energy_over_state(system, truth, physics):
+    import matplotlib.pyplot as plt
+
+    from .metrics import energy_along
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    for ax, (x, q, qd, xlabel) in zip(axes, _energy_cases(system)):
+        ax.plot(x, energy_along(truth, q, qd, normalize=False), "k", lw=2, label="ground truth")
+        for kind, loss, model in physics:
+            ax.plot(x, energy_along(model, q, qd, normalize=False), lw=1, label=_label(kind, loss))
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("E [J] (V(q_rest) = 0)")
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{system}: energy as a function of the state")
+    fig.tight_layout()
+    return fig
+
+
+def _energy_over_time(system, data, truth, physics):
+    import matplotlib.pyplot as plt
+
+    from .metrics import energy_along
+
+    tr_e = data[ENERGY_SET[system]][0]
+    fig, ax = plt.subplots(figsize=(7, 3.4))
+    ax.plot(tr_e.t, energy_along(truth, tr_e.q, tr_e.qd), "k", lw=2, label="ground truth")
+    for kind, loss, model in physics:
+        ax.plot(tr_e.t, energy_along(model, tr_e.q, tr_e.qd), lw=1, label=_label(kind, loss))
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("E(t) / E(0)")
+    ax.legend(fontsize=7)
+    label = next(l for l, name in TEST_SETS[system].items() if name == ENERGY_SET[system])
+    ax.set_title(f"{system}: energy along the first {label} test trajectory")
+    fig.tight_layout()
+    return fig
+
+
+def _forces(system, truth, physics, tr, k):
+    """Inertial, Coriolis and potential forces per joint along the first ``k`` samples of ``tr``."""
+    import jax.numpy as jnp
+    import matplotlib.pyplot as plt
+
+    from .metrics import _terms_along, _true_accelerations
+
+    n = truth.spec.n_dof
+    q, qd = jnp.asarray(tr.q[:k]), jnp.asarray(tr.qd[:k])
+    u = jnp.asarray(np.asarray(tr.u[:k], dtype=float).reshape(k, -1))
+    qdd = _true_accelerations(truth, q, qd, u)
+    names = ("inertial", "coriolis", "potential")
+    fig, axes = plt.subplots(n, 3, figsize=(12, 2.6 * n), sharex=True, squeeze=False)
+    true_terms = _terms_along(truth, q, qd, qdd)
+    model_terms = [(kind, loss, _terms_along(m, q, qd, qdd)) for kind, loss, m in physics]
+    for j in range(n):
+        for c, name in enumerate(names):
+            ax = axes[j, c]
+            ax.plot(tr.t[:k], np.asarray(getattr(true_terms, name))[:, j], "k", lw=2, label="ground truth")
+            for kind, loss, tt in model_terms:
+                ax.plot(tr.t[:k], np.asarray(getattr(tt, name))[:, j], lw=1, label=_label(kind, loss))
+            ax.set_title(f"{name} · {truth.spec.joint_names[j]}", fontsize=9)
+    axes[0, 0].legend(fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
+    fig.suptitle(f"{system}: force decomposition on a forced test trajectory (first 10 s)")
+    fig.tight_layout()
+    return fig
 
 
 def _save(fig, path: Path) -> Path:
