@@ -202,49 +202,10 @@ def apply_parameters(
     """
     spec = get_spec(system)
     n = spec.n_dof
-    stiffness = np.zeros(n)
-    stiff_ref = np.zeros(n)  # Σ k·q_ref
-    damping = np.zeros(n)
-    gain = 1.0
+    stiffness, stiff_ref, damping = np.zeros(n), np.zeros(n), np.zeros(n)  # stiff_ref: Σ k·q_ref
     extra: dict[int, list[float]] = {}
-    if system == "furuta":
-        rotor, pend = model.body("rotor").id, model.body("pendulum").id
-        model.body_mass[rotor] = p["mr"]
-        model.body_inertia[rotor] = p["mr"] * p["Lr"] ** 2 / 12.0
-        model.body_pos[pend] = (p["Lr"], 0.0, 0.0)
-        model.body_mass[pend] = p["mp"]
-        model.body_ipos[pend] = (0.0, 0.0, -0.5 * p["Lp"])
-        model.body_inertia[pend] = _POINT_MASS_INERTIA
-        model.dof_armature[:] = (0.0, p["mp"] * p["Lp"] ** 2 / 12.0 - _POINT_MASS_INERTIA)
-        model.opt.gravity[:] = (0.0, 0.0, -p["g"])
-        damping[:] = (p["c_r"], p["c_p"])
-        motor_gain, motor_bias = p["kt"] / p["Rm"], -p["kt"] * p["km"] / p["Rm"]
-    else:
-        model.body_mass[model.body("mass").id] = p["m"]
-        stiffness[0] = p["k1"]
-        damping[0] = p["b1"]
-        motor_gain, motor_bias = 1.0, 0.0
-        if p["k2"] != 0.0 or p["b2"] != 0.0:
-            extra[0] = _no_terms()
-            extra[0][:2] = p["k2"], p["b2"]
-    for e in effects:
-        if e.name == "input_gain":
-            gain += e.coefficient
-            continue
-        if e.name in ("input_delay", "actuator_lag"):
-            continue  # the env's input buffer; the actuator dynamics below
-        j = e.joint_index(spec)
-        if e.name == "spring":
-            stiffness[j] += e.coefficient
-            stiff_ref[j] += e.coefficient * e.reference
-        elif e.name == "viscous_friction":
-            damping[j] += e.coefficient
-        elif e.name == "stiction":
-            extra.setdefault(j, _no_terms())[5].append((e.coefficient, e.stribeck_velocity))
-        else:
-            slots = {"coulomb_friction": 2, "quadratic_drag": 3, "constant_torque": 4, "com_offset": 6}
-            slot = slots[e.name]
-            extra.setdefault(j, _no_terms())[slot] += e.coefficient
+    motor_gain, motor_bias = _WRITE_SYSTEM[system](model, p, stiffness, damping, extra)
+    gain = _add_effects(spec, effects, stiffness, stiff_ref, damping, extra)
     # masses changed: refresh MuJoCo's derived constants (e.g. the constant mass of a body that
     # only slides, dof_M0, which the N-MSD uses instead of body_mass)
     mujoco.mj_setConst(model, mujoco.MjData(model) if data is None else data)
@@ -265,6 +226,60 @@ def apply_parameters(
         if e.name == "com_offset":
             _check_gravitational(model, system, e.joint, e.joint_index(spec))
     return extra
+
+
+def _write_furuta(model, p, stiffness, damping, extra) -> tuple[float, float]:
+    """The QUBE-Servo 2's bodies (the pendulum a point mass at Lp/2 plus hinge armature = the
+    rest of Jp), gravity and viscous friction; returns the motor's (gain, back-EMF bias)."""
+    rotor, pend = model.body("rotor").id, model.body("pendulum").id
+    model.body_mass[rotor] = p["mr"]
+    model.body_inertia[rotor] = p["mr"] * p["Lr"] ** 2 / 12.0
+    model.body_pos[pend] = (p["Lr"], 0.0, 0.0)
+    model.body_mass[pend] = p["mp"]
+    model.body_ipos[pend] = (0.0, 0.0, -0.5 * p["Lp"])
+    model.body_inertia[pend] = _POINT_MASS_INERTIA
+    model.dof_armature[:] = (0.0, p["mp"] * p["Lp"] ** 2 / 12.0 - _POINT_MASS_INERTIA)
+    model.opt.gravity[:] = (0.0, 0.0, -p["g"])
+    damping[:] = (p["c_r"], p["c_p"])
+    return p["kt"] / p["Rm"], -p["kt"] * p["km"] / p["Rm"]
+
+
+def _write_nmsd(model, p, stiffness, damping, extra) -> tuple[float, float]:
+    """The mass, linear spring and damper (native); the cubic terms go to the passive callback."""
+    model.body_mass[model.body("mass").id] = p["m"]
+    stiffness[0] = p["k1"]
+    damping[0] = p["b1"]
+    if p["k2"] != 0.0 or p["b2"] != 0.0:
+        extra[0] = _no_terms()
+        extra[0][:2] = p["k2"], p["b2"]
+    return 1.0, 0.0
+
+
+_WRITE_SYSTEM = {"furuta": _write_furuta, "nmsd": _write_nmsd}
+
+
+def _add_effects(spec, effects, stiffness, stiff_ref, damping, extra) -> float:
+    """Springs and viscous friction into the native terms, the rest into the callback's
+    per-dof terms; returns the input gain factor (1 + Σ g)."""
+    gain = 1.0
+    for e in effects:
+        if e.name == "input_gain":
+            gain += e.coefficient
+            continue
+        if e.name in ("input_delay", "actuator_lag"):
+            continue  # the env's input buffer; the actuator dynamics
+        j = e.joint_index(spec)
+        if e.name == "spring":
+            stiffness[j] += e.coefficient
+            stiff_ref[j] += e.coefficient * e.reference
+        elif e.name == "viscous_friction":
+            damping[j] += e.coefficient
+        elif e.name == "stiction":
+            extra.setdefault(j, _no_terms())[5].append((e.coefficient, e.stribeck_velocity))
+        else:
+            slots = {"coulomb_friction": 2, "quadratic_drag": 3, "constant_torque": 4, "com_offset": 6}
+            extra.setdefault(j, _no_terms())[slots[e.name]] += e.coefficient
+    return gain
 
 
 def _passive_callback(extra: dict[int, list], model: mujoco.MjModel):
