@@ -190,10 +190,12 @@ class FurutaRecipe:
         )
 
 
+RECIPE_CLASS = {"furuta": FurutaRecipe, "nmsd": NMSDRecipe}
+
+
 def recipe_for(system: str, small: bool = False):
     """The default (or ``small``) recipe of ``"nmsd"`` / ``"furuta"``."""
-    name = get_spec(system).name
-    cls = NMSDRecipe if name == "nmsd" else FurutaRecipe
+    cls = RECIPE_CLASS[get_spec(system).name]
     return cls.small() if small else cls()
 
 
@@ -681,7 +683,7 @@ def _generate(system, kind, *, seed, small, recipe, sensor, ground_truth):
             f"{spec.joint_names}); use noise_std for a position sensor's resolution"
         )
     recipe = recipe if recipe is not None else recipe_for(spec.name, small)
-    expected = NMSDRecipe if spec.name == "nmsd" else FurutaRecipe
+    expected = RECIPE_CLASS[spec.name]
     if not isinstance(recipe, expected):
         raise ValueError(f"recipe for {spec.name} must be a {expected.__name__}, got {recipe!r}")
     gt = default_ground_truth(spec.name, ground_truth) if isinstance(ground_truth, str) else ground_truth

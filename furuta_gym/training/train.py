@@ -65,6 +65,14 @@ HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
 
 
+#: the paper's training schedule per system (appendix A.2): epochs of the 2-step and the
+#: long-horizon stage, and the horizons (2 samples, then 1 s Furuta / 2 s N-MSD)
+PAPER_SCHEDULE = {
+    "furuta": {"epochs": (50_000, 10_000), "horizons": (2, 1.0)},
+    "nmsd": {"epochs": (5_000, 1_000), "horizons": (2, 2.0)},
+}
+
+
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """Hyper-parameters of a training run.
@@ -199,21 +207,14 @@ class TrainConfig:
     @classmethod
     def for_system(cls, system: str, **overrides) -> "TrainConfig":
         """CPU-friendly defaults with the paper's horizons (1 s Furuta, 2 s N-MSD)."""
-        name = get_spec(system).name
-        base = dict(horizons=(2, 1.0) if name == "furuta" else (2, 2.0))
+        base = dict(horizons=PAPER_SCHEDULE[get_spec(system).name]["horizons"])
         base.update(overrides)
         return cls(**base)
 
     @classmethod
     def paper(cls, system: str, **overrides) -> "TrainConfig":
         """The paper's recipe: 2-step stage then the long horizon, full batch (appendix A.2)."""
-        name = get_spec(system).name
-        base = dict(
-            epochs=(50_000, 10_000) if name == "furuta" else (5_000, 1_000),
-            horizons=(2, 1.0) if name == "furuta" else (2, 2.0),
-            batch_size=None,
-            checkpoint_every=500,
-        )
+        base = dict(**PAPER_SCHEDULE[get_spec(system).name], batch_size=None, checkpoint_every=500)
         base.update(overrides)
         return cls(**base)
 
