@@ -3,7 +3,7 @@
 Analytic: :class:`Furuta`, :class:`NMSD`. Learned (issue 3): DeLaN, APHYNITY, augmented DeLaN.
 """
 
-from ._analytic import (NMSD, Furuta, FurutaParameters, NMSDParameters, furuta_lumped, furuta_mass_matrix,
+from ._analytic import (ANALYTIC, NMSD, Furuta, FurutaParameters, NMSDParameters, furuta_lumped, furuta_mass_matrix,
                         furuta_potential, nmsd_potential)
 from ._aphynity import Aphynity
 from ._augmented import AugmentedDeLaN
@@ -42,5 +42,4 @@ def analytic_model(system: str):
     """The analytic model of ``"furuta"`` or ``"nmsd"`` with the pinned parameters."""
     from ..systems import get_spec
 
-    name = get_spec(system).name
-    return Furuta() if name == "furuta" else NMSD()
+    return ANALYTIC[get_spec(system).name][0]()

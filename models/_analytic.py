@@ -15,7 +15,7 @@ from .._x64 import ensure_x64
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import FURUTA, NMSD
 
-__all__ = ["FurutaParameters", "Furuta", "NMSDParameters", "NMSD", "furuta_lumped", "furuta_mass_matrix",
+__all__ = ["ANALYTIC", "FurutaParameters", "Furuta", "NMSDParameters", "NMSD", "furuta_lumped", "furuta_mass_matrix",
            "furuta_potential", "nmsd_potential"]
 
 
@@ -138,3 +138,7 @@ class NMSD(AbstractLagrangianSystem):
 
     def input_force(self, q, qd, u):
         return u[:1]
+
+
+#: each system's analytic model and its parameters
+ANALYTIC = {"furuta": (Furuta, FurutaParameters), "nmsd": (NMSD, NMSDParameters)}

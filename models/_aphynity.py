@@ -25,7 +25,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
-from ._analytic import NMSD, Furuta, FurutaParameters, NMSDParameters
+from ._analytic import ANALYTIC
 from ._augmented import DAMPING_SCALE, FORCE_ACTIVATION, ForceNetwork
 from ._learned import AbstractLearnedSystem, freeze_hparams, system_defaults
 
@@ -60,7 +60,7 @@ class Aphynity(AbstractLearnedSystem):
         if unknown:
             raise ValueError(f"unknown APHYNITY hyper-parameters {sorted(unknown)}; known: {sorted(hp)}")
         hp.update(hparams)
-        params = FurutaParameters() if spec.name == "furuta" else NMSDParameters()
+        params = ANALYTIC[spec.name][1]()
         overrides = dict(hp["prior"])
         nominal = {}
         for name in dataclass_fields(params):
@@ -101,9 +101,8 @@ class Aphynity(AbstractLearnedSystem):
     def prior(self):
         """The frictionless analytic model with the current physical parameters."""
         values = self.physical_parameters
-        if self.spec.name == "furuta":
-            return Furuta(params=FurutaParameters(**values))
-        return NMSD(params=NMSDParameters(**values))
+        model_class, parameter_class = ANALYTIC[self.spec.name]
+        return model_class(params=parameter_class(**values))
 
     @property
     def has_augmentation(self) -> bool:

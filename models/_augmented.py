@@ -18,7 +18,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
 from ._delan import LagrangianNetworks
-from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
+from ._learned import MLP, AbstractLearnedSystem, first_joint_input, coordinate_features, feature_size, freeze_hparams, system_defaults
 
 __all__ = ["AugmentedDeLaN", "ForceNetwork", "ADLN_ODD_IN_VELOCITY"]
 
@@ -177,6 +177,4 @@ class AugmentedDeLaN(AbstractLearnedSystem):
         return self.augmentation(q, qd)
 
     def input_force(self, q, qd, u):
-        if self.spec.name == "furuta":
-            return jnp.stack([self.input_gain * u[0], jnp.zeros_like(u[0])])
-        return self.input_gain * u[:1]
+        return first_joint_input(self.spec, self.input_gain, u)

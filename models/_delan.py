@@ -30,7 +30,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
-from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams
+from ._learned import MLP, AbstractLearnedSystem, first_joint_input, coordinate_features, feature_size, freeze_hparams
 
 __all__ = ["LagrangianNetworks", "DeLaN", "known_damping_force"]
 
@@ -177,6 +177,4 @@ class DeLaN(AbstractLearnedSystem):
         return known_damping_force(self.spec, self.damping, qd)
 
     def input_force(self, q, qd, u):
-        if self.spec.name == "furuta":
-            return jnp.stack([self.input_gain * u[0], jnp.zeros_like(u[0])])
-        return self.input_gain * u[:1]
+        return first_joint_input(self.spec, self.input_gain, u)
