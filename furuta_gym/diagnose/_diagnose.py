@@ -569,22 +569,21 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
     with the measurement noise. A vetoed step is tried once more after the others: an effect can
     predict worse only while another one is missing (a pendulum's centre-of-mass offset before the
     rotor's friction and the input lag). Returns (accepted candidates, θ, input dynamics)."""
-    state = dict(accepted=[], theta=theta_before, dyn=_fit.NO_INPUT_DYNAMICS)
-    state["sums"] = fx.validation_sums(theta_before, state["dyn"])
-
-    def add(todo):
+    accepted: list[Candidate] = []
+    theta, dyn = theta_before, _fit.NO_INPUT_DYNAMICS
+    sums = fx.validation_sums(theta, dyn)
+    todo = list(steps)
+    for _ in range(2):  # a second pass for what was vetoed
         vetoed = []
         for step in todo:
-            ev, th, dyn, sums = _try_step(fx, state["accepted"], state["dyn"], state["sums"], step)
+            ev, th, trial_dyn, trial_sums = _try_step(fx, accepted, dyn, sums, step)
             if ev.z > -fx.settings.veto_t:
-                state.update(accepted=state["accepted"] + list(step.members), theta=th, dyn=dyn, sums=sums)
+                accepted, theta, dyn, sums = accepted + list(step.members), th, trial_dyn, trial_sums
             else:
                 vetoed.append((step, ev))
-        return vetoed
-
-    vetoed = add(steps)
-    if vetoed and len(vetoed) < len(steps):  # something was added after a veto: try again
-        vetoed = add([step for step, _ in vetoed])
+        if not vetoed or len(vetoed) == len(todo):  # nothing vetoed, or nothing added since
+            break
+        todo = [step for step, _ in vetoed]
     for step, ev in vetoed:
         for c in step.members:
             bad = evidence[c.key]
@@ -592,7 +591,6 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
             bad.note = (f"equation-error evidence, but the refitted model predicts the fit-set validation "
                         f"windows significantly worse (error {-ev.improvement:+.1%}, t {ev.z:.1f})")
             fx.notes.append(f"{c.key}: {bad.note}; dropped")
-    accepted, theta, dyn = state["accepted"], state["theta"], state["dyn"]
     fx.build(dyn)
     return accepted, theta, dyn
 
@@ -613,19 +611,21 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
     validation windows by the trace's rule (gain ≥ ``min_improvement``, t ≥ ``z_threshold``),
     ΔF > 0. Returns (accepted, θ)."""
     s = fx.settings
+    sums = None
     for c in library:
         coulomb = f"coulomb_friction:{c.joint}"
-        if c.name != "stiction" or c in accepted or coulomb not in {a.key for a in accepted}:
-            continue
-        if evidence.get(c.key) is not None and evidence[c.key].status != "tested":
+        # an entry in evidence: selected by the trace, or untestable, equivalent, not confirmed
+        if c.name != "stiction" or c.key in evidence or coulomb not in {a.key for a in accepted}:
             continue
         trial = accepted + [c]
         th, _ = _fit.oe_fit(fx.layout, _stiction_start(fx, theta, c), free_columns(fx.layout, trial, fx.fixed_idx),
                             fx.fit_windows(dyn, fx.oe_idx), fx.smoothing, fx.substeps, max_nfev=s.oe_max_nfev)
-        ev = _prediction_evidence(fx.validation_sums(theta, dyn), fx.validation_sums(th, dyn))
+        sums = fx.validation_sums(theta, dyn) if sums is None else sums
+        trial_sums = fx.validation_sums(th, dyn)
+        ev = _prediction_evidence(sums, trial_sums)
         coef = float(th[fx.layout.index(c.key)])
         if coef > 0 and _physical(fx.layout, th) and ev.passes(s.min_improvement, s.z_threshold):
-            accepted, theta = trial, th
+            accepted, theta, sums = trial, th, trial_sums
             evidence[c.key] = EffectEvidence(
                 c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z, "selected",
                 "found by prediction, given the joint's Coulomb friction: gain and t on the fit-set "
