@@ -43,15 +43,10 @@ class EnvArgumentError(ValueError, TypeError):
     keyword error, a TypeError)."""
 
 
-def check_int(name: str, value: Any, minimum: int, maximum: int | None = None, what: str = "") -> int:
-    """``value`` as an int in [minimum, maximum] (bools refused), or an EnvArgumentError naming
-    ``name`` and ``what`` it means."""
-    ok = not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= minimum
-    if ok and maximum is not None:
-        ok = value <= maximum
-    if not ok:
-        bound = f">= {minimum}" if maximum is None else f"from {minimum} to {maximum}"
-        raise EnvArgumentError(f"{name} must be an integer {bound}{what}, got {value!r}")
+def check_int(name: str, value: Any, minimum: int) -> int:
+    """``value`` as an int >= ``minimum`` (bools refused), or an EnvArgumentError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise EnvArgumentError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return int(value)
 
 

@@ -37,7 +37,7 @@ from ..lagrangian import AbstractLagrangianSystem, energy
 from ..signals import quantize_joints
 from ..simulate import small_kernel_compiler_options
 from ._backends import ModelBackend
-from ._base import EnvArgumentError, LagrangianEnv
+from ._base import EnvArgumentError, LagrangianEnv, check_int
 from ._jax_rollout import Rollout, controlled_step, map_chunks, rollout, scan_closed_loop
 from ._parameters import PARAMETER_CLASSES
 from ._tasks import divergence_bounds
@@ -333,8 +333,7 @@ class LagrangianVectorEnv(VectorEnv):
     @classmethod
     def _check_arguments(cls, num_envs, dynamics, workers, chunks, env_kwargs) -> int:
         """Refuse what a batched model env cannot do; returns the number of chunks."""
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        check_int("num_envs", num_envs, 1)
         if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 0 <= workers <= num_envs:
             raise ValueError(
                 f"workers must be an integer from 0 (step in this process) to num_envs = "

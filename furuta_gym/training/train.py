@@ -516,7 +516,7 @@ def train(
                 "seconds": time.perf_counter() - t0,
             }
             run.history.append(record)
-            _save_epoch(out, record, eqx.combine(run.params, static), run, static, run_info, config, loss)
+            _save_epoch(out, record, run, static, run_info, config, loss)
             _show_epoch(bar, means, loss, run.lam, skipped, epoch, len(traj_batches))
             if stop["flag"]:
                 raise _StopRequested
@@ -682,11 +682,12 @@ def _keep_best_itau(run: _RunState, step, stage: int, epoch: int, bounds, means,
     return {"best_after_epoch": best["after"], "best_total": best["total"]}
 
 
-def _save_epoch(out: Path | None, record: dict, model_now, run: _RunState, static, run_info: dict,
+def _save_epoch(out: Path | None, record: dict, run: _RunState, static, run_info: dict,
                 config: TrainConfig, loss: str) -> None:
     """The epoch's history line, the resumable state and (every ``checkpoint_every``) a snapshot."""
     if out is None:
         return
+    model_now = eqx.combine(run.params, static)
     epoch = record["epoch"]
     # the history is appended line by line (the state file stays small); written before the
     # state so a resumed run always finds every finished epoch's line
