@@ -3,13 +3,15 @@
 Analytic: :class:`Furuta`, :class:`NMSD`. Learned (issue 3): DeLaN, APHYNITY, augmented DeLaN.
 """
 
-from ._analytic import (ANALYTIC, NMSD, Furuta, FurutaParameters, NMSDParameters, furuta_lumped, furuta_mass_matrix,
-                        furuta_potential, nmsd_potential)
+from ._definitions import SYSTEM_DEFINITIONS, system_definition
+from ._furuta import Furuta, FurutaParameters, furuta_lumped, furuta_mass_matrix, furuta_potential
+from ._nmsd import NMSD, NMSDParameters, nmsd_potential
 from ._aphynity import Aphynity
 from ._augmented import AugmentedDeLaN
 from ._delan import DeLaN
 from ._factory import MODEL_KINDS, make_model
 from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
+from ._system import LumpedForm, SystemDefinition, first_joint_input
 from .checkpoint import CheckpointError, load_model, read_header, save_model
 
 __all__ = [
@@ -18,6 +20,12 @@ __all__ = [
     "NMSD",
     "NMSDParameters",
     "analytic_model",
+    # one object per system
+    "SystemDefinition",
+    "LumpedForm",
+    "SYSTEM_DEFINITIONS",
+    "system_definition",
+    "first_joint_input",
     # the analytic physics in lumped parameters (the diagnosis fits these)
     "furuta_lumped",
     "furuta_mass_matrix",
@@ -40,6 +48,4 @@ __all__ = [
 
 def analytic_model(system: str):
     """The analytic model of ``"furuta"`` or ``"nmsd"`` with the pinned parameters."""
-    from ..systems import get_spec
-
-    return ANALYTIC[get_spec(system).name][0]()
+    return system_definition(system).model()

@@ -25,13 +25,13 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
-from ._analytic import ANALYTIC
 from ._augmented import DAMPING_SCALE, FORCE_ACTIVATION, ForceNetwork
+from ._definitions import SYSTEM_DEFINITIONS, system_definition
 from ._learned import AbstractLearnedSystem, freeze_hparams, system_defaults
 
 __all__ = ["Aphynity", "LEARNABLE_PHYSICAL_PARAMETERS"]
 
-LEARNABLE_PHYSICAL_PARAMETERS = {"furuta": ("mr", "Lr", "mp", "Lp"), "nmsd": ("m", "k1", "k2")}
+LEARNABLE_PHYSICAL_PARAMETERS = {name: d.learnable_parameters for name, d in SYSTEM_DEFINITIONS.items()}
 
 
 class Aphynity(AbstractLearnedSystem):
@@ -60,7 +60,8 @@ class Aphynity(AbstractLearnedSystem):
         if unknown:
             raise ValueError(f"unknown APHYNITY hyper-parameters {sorted(unknown)}; known: {sorted(hp)}")
         hp.update(hparams)
-        params = ANALYTIC[spec.name][1]()
+        definition = system_definition(spec)
+        params = definition.parameters()
         overrides = dict(hp["prior"])
         nominal = {}
         for name in dataclass_fields(params):
@@ -69,13 +70,12 @@ class Aphynity(AbstractLearnedSystem):
         if overrides:
             raise ValueError(f"prior names unknown physical parameters {sorted(overrides)}")
         # friction is what the network must find: the prior has none
-        for name in ("c_r", "c_p", "b1", "b2"):
-            if name in nominal:
-                nominal[name] = 0.0
-        if spec.name == "furuta" and not hp["prior_back_emf"]:
-            nominal["km"] = 0.0  # the back-EMF −(kt·km/Rm)·α̇ is F_a's (module docstring)
+        for name in definition.friction_parameters:
+            nominal[name] = 0.0
+        if definition.back_emf_parameter is not None and not hp["prior_back_emf"]:
+            nominal[definition.back_emf_parameter] = 0.0  # the back-EMF −(kt·km/Rm)·α̇ is F_a's (module docstring)
         self.nominal = tuple(nominal.items())
-        self.log_ratios = jnp.zeros(len(LEARNABLE_PHYSICAL_PARAMETERS[spec.name]))
+        self.log_ratios = jnp.zeros(len(definition.learnable_parameters))
         self.force_net = ForceNetwork(
             spec, key=key, hidden=tuple(hp["hidden"]), force_scale=hp["force_scale"],
             position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
@@ -93,7 +93,7 @@ class Aphynity(AbstractLearnedSystem):
     def physical_parameters(self) -> dict[str, Any]:
         """The prior's current physical parameter values (learned ones included)."""
         values = dict(self.nominal)
-        for i, name in enumerate(LEARNABLE_PHYSICAL_PARAMETERS[self.spec.name]):
+        for i, name in enumerate(system_definition(self.spec).learnable_parameters):
             values[name] = values[name] * jnp.exp(self.log_ratios[i])
         return values
 
@@ -101,8 +101,8 @@ class Aphynity(AbstractLearnedSystem):
     def prior(self):
         """The frictionless analytic model with the current physical parameters."""
         values = self.physical_parameters
-        model_class, parameter_class = ANALYTIC[self.spec.name]
-        return model_class(params=parameter_class(**values))
+        definition = system_definition(self.spec)
+        return definition.model(params=definition.parameters(**values))
 
     @property
     def has_augmentation(self) -> bool:

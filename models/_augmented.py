@@ -18,7 +18,8 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
 from ._delan import LagrangianNetworks
-from ._learned import MLP, AbstractLearnedSystem, first_joint_input, coordinate_features, feature_size, freeze_hparams, system_defaults
+from ._system import first_joint_input
+from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
 
 __all__ = ["AugmentedDeLaN", "ForceNetwork", "ADLN_ODD_IN_VELOCITY"]
 

@@ -30,11 +30,11 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
-from ._learned import MLP, AbstractLearnedSystem, first_joint_input, coordinate_features, feature_size, freeze_hparams
+from ._definitions import system_definition
+from ._system import first_joint_input
+from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams
 
 __all__ = ["LagrangianNetworks", "DeLaN", "known_damping_force"]
-
-BACK_EMF_DAMPING = 0.042 * 0.042 / 8.4  # kt·km/Rm of the pinned QUBE-Servo 2 motor, N·m·s/rad
 
 
 class LagrangianNetworks(eqx.Module):
@@ -104,9 +104,7 @@ class LagrangianNetworks(eqx.Module):
 
 def known_damping_force(spec: SystemSpec, coefficients, qd):
     """The paper's non-conservative structure with given coefficients (Furuta / N-MSD)."""
-    if spec.name == "furuta":
-        return -coefficients * qd
-    return -coefficients[0] * qd - coefficients[1] * qd**3
+    return system_definition(spec).known_damping_force(coefficients, qd)
 
 
 class DeLaN(AbstractLearnedSystem):
@@ -163,9 +161,10 @@ class DeLaN(AbstractLearnedSystem):
     @property
     def rotor_friction(self):
         """Furuta only: c_r = d_r − kt·km/Rm (the lumped damping minus the pinned back-EMF)."""
-        if self.spec.name != "furuta":
+        back_emf = system_definition(self.spec).back_emf_damping
+        if back_emf is None:
             raise AttributeError("rotor_friction is defined for the Furuta model only")
-        return self.damping[0] - BACK_EMF_DAMPING
+        return self.damping[0] - back_emf
 
     def mass_matrix(self, q):
         return self.scale * self.lagrangian_nets.mass_matrix(q)

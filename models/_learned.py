@@ -221,10 +221,3 @@ class AbstractLearnedSystem(AbstractLagrangianSystem):
 def _positive(x) -> jnp.ndarray:
     ensure_x64()
     return jnp.asarray(x, dtype=float)
-
-
-def first_joint_input(spec: SystemSpec, gain, u):
-    """τ_u = (gain·u, 0, …): both systems drive their first joint only (the rotor; the mass)."""
-    if spec.n_dof == 1:
-        return gain * u[:1]
-    return jnp.stack([gain * u[0], *([jnp.zeros_like(u[0])] * (spec.n_dof - 1))])

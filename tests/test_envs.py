@@ -461,3 +461,28 @@ def test_initial_state_sampling_and_reset_options_without_an_episode():
     assert nmsd.task.target == 0.25
     with pytest.raises(ValueError, match=r"unknown reset option\(s\) \['goal'\]"):
         nmsd.apply_reset_options({"goal": 1.0})
+
+
+@pytest.mark.parametrize("env_id,randomize", [("furuta_gym/Furuta-v0", None), ("furuta_gym/Furuta-v0", 0.2),
+                                              ("furuta_gym/NMSD-v0", 0.2)])
+def test_info_energy_is_the_models_energy_at_the_plants_parameters(env_id, randomize):
+    # the env's float energy (no JAX per step) and lagrangian.energy of the analytic model with
+    # the plant's parameters (drawn anew at each reset) are one physics: equal to rounding
+    from furuta_gym.lagrangian import energy
+    from furuta_gym.models import system_definition
+
+    env = gym.make(env_id, randomize=randomize)
+    definition = system_definition(env.unwrapped.system)
+    n = definition.spec.n_dof
+    rng = np.random.default_rng(1)
+    drawn = set()
+    for seed in range(4):
+        x = rng.uniform(-3, 3, 2 * n)
+        _, info = env.reset(seed=seed, options={"state": x})
+        params = env.unwrapped.physical_parameters()
+        drawn.add(tuple(sorted(params.items())))
+        model = definition.model(params=definition.parameters(**params))
+        expected = float(energy(model, jnp.asarray(x[:n]), jnp.asarray(x[n:])))
+        assert info["energy"] == pytest.approx(expected, rel=1e-12)
+    assert len(drawn) == (1 if randomize is None else 4)
+    env.close()

@@ -52,13 +52,14 @@ def read_logs(paths, system: str, column_map=None, sign=None, offset=None) -> li
     log for error messages (a vendored run: its token and file). With several DATA tokens the
     trajectories are named ``<file stem>:<name>``."""
     from ..data import load_trajectories
-    from ..datasets import load_qube_closed_loop, qube_closed_loop_files
+    from ..datasets import QUBE_CLOSED_LOOP_SYSTEM, load_qube_closed_loop, qube_closed_loop_files
 
     out = []
     for path in paths:
         if path == "qube" or path.startswith("qube:"):
-            if system != "furuta":
-                raise ValueError(f"{path!r}: the shipped QUBE-Servo runs are Furuta data; got --system {system}")
+            if system != QUBE_CLOSED_LOOP_SYSTEM.name:
+                raise ValueError(f"{path!r}: the shipped QUBE-Servo runs are {QUBE_CLOSED_LOOP_SYSTEM.name} data; "
+                                 f"got --system {system}")
             runs = qube_runs(path)
             files = qube_closed_loop_files(runs)  # checks the run numbers
             for run, file in zip(runs or range(1, len(files) + 1), files):

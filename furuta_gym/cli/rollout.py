@@ -45,9 +45,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _policy(name: str, env, amplitude: float, seconds: float, rng: np.random.Generator):
+    from ..models import system_definition
     from ..signals import chirp
 
-    f1 = 5.0 if env.unwrapped.system == "furuta" else 2.0
+    f1 = system_definition(env.unwrapped.system).chirp_end_frequency
     if name == "zero":
         return lambda t: 0.0
     if name == "chirp":

@@ -23,13 +23,18 @@ from pathlib import Path
 from typing import Iterable
 
 from ..data import Trajectory, load_trajectories
+from ..systems import FURUTA
 
 __all__ = [
+    "QUBE_CLOSED_LOOP_SYSTEM",
     "QUBE_CLOSED_LOOP_RUNS",
     "QUBE_CLOSED_LOOP_MAPPING",
     "qube_closed_loop_files",
     "load_qube_closed_loop",
 ]
+
+QUBE_CLOSED_LOOP_SYSTEM = FURUTA
+"""The system the vendored runs are logs of."""
 
 QUBE_CLOSED_LOOP_RUNS = 15
 """Number of vendored runs; run numbers are 1-based."""
@@ -88,7 +93,7 @@ def load_qube_closed_loop(
         raise ValueError(f"skip_seconds must be >= 0, got {skip_seconds!r}")
     out = []
     for path in qube_closed_loop_files(runs):
-        (tr,) = load_trajectories(path, "furuta", **QUBE_CLOSED_LOOP_MAPPING)
+        (tr,) = load_trajectories(path, QUBE_CLOSED_LOOP_SYSTEM.name, **QUBE_CLOSED_LOOP_MAPPING)
         keep = tr.t >= tr.t[0] + skip_seconds - 1e-9
         if keep.sum() < 3:
             raise ValueError(

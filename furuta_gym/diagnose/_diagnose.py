@@ -19,18 +19,16 @@ from ..lagrangian import AbstractLagrangianSystem
 from ..measured import estimate_velocities
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
+from ..models import system_definition
 from ..models.checkpoint import load_model
 from . import _fit
 from . import _trace as _trace_mod
 from ._problem import Problem, fit_equation_error, free_columns
 from ._library import (
-    GAIN_PARAMETER,
-    MECHANICAL_ANCHOR,
     Candidate,
     ParameterLayout,
     check_input_linear,
     layout_for,
-    nominal_base,
 )
 
 __all__ = ["diagnose", "DiagnosisResult", "EffectEvidence", "ErrorSummary", "DiagnosisSettings"]
@@ -67,12 +65,12 @@ class DiagnosisSettings:
     trim_seconds: float = 0.05
 
     def resolved(self, system: str, dt: float) -> "DiagnosisSettings":
-        fur = system == "furuta"
+        definition = system_definition(system)
         return dataclasses.replace(
             self,
             interval=self.interval or 0.1,
-            window=self.window or (0.5 if fur else 1.0),
-            segment_seconds=self.segment_seconds or (2.0 if fur else 5.0),
+            window=self.window or definition.diagnosis_window,
+            segment_seconds=self.segment_seconds or definition.diagnosis_segment_seconds,
         )
 
 
@@ -345,7 +343,7 @@ def _in_span(prob, layout, free, candidate, fixed_idx) -> str | None:
         return None
     j = layout.index(candidate.key)
     if candidate.name == "input_gain" and layout.learned is None:
-        gain_idx = layout.index(GAIN_PARAMETER[layout.system])
+        gain_idx = layout.index(system_definition(layout.system).lumped.gain)
         if gain_idx not in fixed_idx:
             return "absorbed: the motor/input gain is a fitted parameter of the declared model"
         if len(fixed_idx) < 2:
@@ -495,10 +493,7 @@ def _physical(layout, theta) -> bool:
     if layout.learned is not None:
         return bool(theta[0] > 0)
     p = {b: theta[i] for i, b in enumerate(layout.base)}
-    if layout.system == "furuta":
-        ok = p["J1"] > 0 and p["J2"] > 0 and p["J1b"] >= 0 and p["J1"] * p["J2"] > p["Jc"] ** 2
-        return bool(ok and p["c_alpha"] >= 0 and p["c_beta"] >= 0 and p["Jc"] > 0)
-    return bool(p["m"] > 0 and p["b1"] >= 0 and p["k1"] >= 0)
+    return system_definition(layout.system).lumped.is_physical(p)
 
 
 def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputDynamics:
@@ -642,26 +637,21 @@ def _anchor(spec, layout, fixed, forced, notes):
         notes.append("the given model is the declared model, as it is (overall scale held at 1); "
                      "only the library's effects are fitted around it")
         return {"scale": 1.0}
-    nom = nominal_base(spec.name)
-    gain_name = GAIN_PARAMETER[spec.name]
+    lumped = system_definition(spec).lumped
+    nom = lumped.nominal()
     if fixed:
         fixed = {k: float(v) for k, v in fixed.items()}
         for k in fixed:
             if k not in layout.base:
                 raise ValueError(f"fixed: unknown parameter {k!r}; expected one of {list(layout.base)}")
-    elif spec.name == "furuta":
-        fixed = {"G": nom["G"]}
-        notes.append(
-            "scale anchored on the pendulum gravity term G = 0.5*mp*g*Lp = "
-            f"{nom['G']:.6g} N m (nominal)" + ("; everything else, including the motor gain K, is fitted" if forced else "")
-        )
     else:
-        fixed = {"gain": 1.0}
-        if forced:
-            notes.append("scale anchored on the input gain (u is a force in N)")
+        fixed = {lumped.scale_anchor: nom[lumped.scale_anchor]}
+        note = lumped.anchor_note(nom, forced)
+        if note:
+            notes.append(note)
     if not forced:
-        fixed.setdefault(gain_name, nom[gain_name])
-        anchor = MECHANICAL_ANCHOR[spec.name]
+        fixed.setdefault(lumped.gain, nom[lumped.gain])
+        anchor = lumped.mechanical_anchor
         fixed.setdefault(anchor, nom[anchor])
         notes.append(
             "free data (u = 0): the overall scale and the input gain are not identifiable from "

@@ -37,8 +37,7 @@ import numpy as np
 
 from ..effects import EFFECT_UNITS, INPUT_EFFECTS, JOINT_EFFECTS, STATEFUL_EFFECTS, Effect
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
-from ..models import (FurutaParameters, NMSDParameters, furuta_lumped, furuta_mass_matrix, furuta_potential,
-                      nmsd_potential)
+from ..models import system_definition
 from ..systems import get_spec
 
 __all__ = ["Candidate", "ParameterLayout", "LumpedModel", "LearnedWithLibrary", "layout_for",
@@ -61,33 +60,9 @@ class Candidate:
         return EFFECT_UNITS[self.name][0 if angular else 1]
 
 
-BASE = {
-    "furuta": ("J1", "J1b", "Jc", "J2", "G", "c_alpha", "c_beta", "K"),
-    "nmsd": ("m", "k1", "k2", "b1", "b2", "gain"),
-}
-BASE_UNITS = {
-    "furuta": ("kg m^2", "kg m^2", "kg m^2", "kg m^2", "N m", "N m s/rad", "N m s/rad", "N m/V"),
-    "nmsd": ("kg", "N/m", "N/m^3", "N s/m", "N s^3/m^3", "1"),
-}
-# The base parameter that *is* the input gain, and the default mechanical scale anchor used
-# when the data carry no input excitation (free data leave the gain unidentifiable).
-GAIN_PARAMETER = {"furuta": "K", "nmsd": "gain"}
-# Joints whose declared potential is gravity: a centre-of-mass offset (``com_offset``) shifts it.
-# Elsewhere a shifted potential is a spring's neutral (``spring`` + ``constant_torque``).
-GRAVITY_JOINTS = {"furuta": ("beta",), "nmsd": ()}
-MECHANICAL_ANCHOR = {"furuta": "G", "nmsd": "m"}
-
-
 def nominal_base(system: str) -> dict[str, float]:
     """The pinned analytic model's values of the lumped parameters."""
-    if system == "furuta":
-        p = FurutaParameters()
-        lumped = {k: float(v) for k, v in furuta_lumped(p).items()}
-        return {**lumped, "c_alpha": float(p.c_r + p.kt * p.km / p.Rm), "c_beta": float(p.c_p),
-                "K": float(p.kt / p.Rm)}
-    p = NMSDParameters()
-    return {"m": float(p.m), "k1": float(p.k1), "k2": float(p.k2), "b1": float(p.b1),
-            "b2": float(p.b2), "gain": 1.0}
+    return system_definition(system).lumped.nominal()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,17 +141,13 @@ def layout_for(system: str, learned: AbstractLagrangianSystem | None = None) -> 
     generic = [n for n in JOINT_EFFECTS if n not in ("constant_torque", "com_offset")] + ["constant_torque"]
     cands = []
     for j in spec.joint_names:
-        gravity = j in GRAVITY_JOINTS[spec.name]
+        gravity = j in system_definition(spec).lumped.gravity_joints
         cands += [Candidate(n, j) for n in (["com_offset"] if gravity else []) + generic]
     cands += [Candidate(n, "u") for n in INPUT_EFFECTS if n not in STATEFUL_EFFECTS]
     if learned is not None:
         return ParameterLayout(spec.name, ("scale",), ("1",), tuple(cands), learned)
-    return ParameterLayout(
-        system=spec.name,
-        base=BASE[spec.name],
-        base_units=BASE_UNITS[spec.name],
-        candidates=tuple(cands),
-    )
+    lumped = system_definition(spec).lumped
+    return ParameterLayout(system=spec.name, base=lumped.names, base_units=lumped.units, candidates=tuple(cands))
 
 
 def _library_effects(theta, system: str, n_base: int, names) -> list[Effect]:
@@ -230,41 +201,33 @@ class LumpedModel(AbstractLagrangianSystem):
 
     spec: ClassVar = property(lambda self: get_spec(self.system))  # type: ignore[assignment]
 
+    @property
+    def _lumped(self):
+        return system_definition(self.system).lumped
+
     def _base(self, name):
-        return self.theta[BASE[self.system].index(name)]
+        return self.theta[self._lumped.names.index(name)]
 
     @property
     def _n_base(self) -> int:
-        return len(BASE[self.system])
+        return len(self._lumped.names)
 
     def mass_matrix(self, q):
-        b = self._base
-        if self.system == "furuta":
-            return furuta_mass_matrix(b("J1"), b("J1b"), b("Jc"), b("J2"), q)
-        return jnp.reshape(b("m"), (1, 1))
+        return self._lumped.mass_matrix(self._base, q)
 
     def _declared_potential(self, q):
-        b = self._base
-        if self.system == "furuta":
-            return furuta_potential(b("G"), q)
-        return nmsd_potential(b("k1"), b("k2"), q)
+        return self._lumped.potential(self._base, q)
 
     def potential(self, q):
         return _library_potential(self.theta, self.system, self._n_base, q, self._declared_potential)
 
     def nonconservative_force(self, q, qd):
-        b = self._base
-        if self.system == "furuta":
-            tau = jnp.stack([-b("c_alpha") * qd[0], -b("c_beta") * qd[1]])
-        else:
-            tau = -b("b1") * qd - b("b2") * qd**3
+        tau = self._lumped.damping(self._base, qd)
         return tau + _library_force(self.theta, self.system, self._n_base, q, qd, self.coulomb_smoothing)
 
     def input_force(self, q, qd, u):
-        gain = self._base(GAIN_PARAMETER[self.system]) * _library_gain(self.theta, self.system, self._n_base)
-        if self.system == "furuta":
-            return jnp.stack([gain * u[0], 0.0 * u[0]])
-        return gain * u[:1]
+        gain = self._base(self._lumped.gain) * _library_gain(self.theta, self.system, self._n_base)
+        return system_definition(self.system).input_force(gain, u)
 
 
 class LearnedWithLibrary(AbstractLagrangianSystem):

@@ -35,7 +35,7 @@ from scipy.signal import lfilter
 from .._x64 import ensure_x64
 from ..data import Trajectory
 from ..effects import ActuatorLag, Effect, WithEffects, actuator_lag_time
-from ..models import NMSD, Furuta
+from ..models import SYSTEM_DEFINITIONS, analytic_model, system_definition
 from ..signals import chirp, quantize_encoder
 from ..simulate import rk4_zoh_step, rollout_zoh
 
@@ -52,14 +52,10 @@ BALANCE_GAINS = {"kp_theta": 6.0, "kd_theta": 1.8, "kp_alpha": 30.0, "kd_alpha":
 def _inputs(system: str, t: np.ndarray, rng: np.random.Generator, forced: bool) -> np.ndarray:
     if not forced:
         return np.zeros_like(t)
-    if system == "furuta":
-        amp = rng.uniform(0.6, 1.5)
-        f0, f1 = rng.uniform(0.3, 1.0), rng.uniform(2.0, 5.0)
-        offset = rng.uniform(-0.15, 0.15)
-    else:
-        amp = rng.uniform(2.0, 5.0)
-        f0, f1 = rng.uniform(0.1, 0.3), rng.uniform(0.8, 1.5)
-        offset = 0.0
+    amplitude, start, end, offset_range = system_definition(system).chirp_ranges
+    amp = rng.uniform(*amplitude)
+    f0, f1 = rng.uniform(*start), rng.uniform(*end)
+    offset = 0.0 if offset_range is None else rng.uniform(*offset_range)
     return offset + chirp(t, f0, f1, t[-1], amplitude=amp, phase=rng.uniform(0, 2 * np.pi))
 
 
@@ -128,7 +124,7 @@ class _Plant:
             assert abs(self.backend.control_dt - dt) < 1e-12
         elif plant == "analytic":
             mem = [e for e in mem if e.name != "actuator_lag"]
-            base = Furuta() if system == "furuta" else NMSD()
+            base = analytic_model(system)
             model = WithEffects(base, mem, coulomb_smoothing=1e-3) if mem else base
             self._rollout = jax.jit(lambda x0, us: rollout_zoh(model, x0, us, dt, substeps))
             self._period = jax.jit(lambda x, u: rk4_zoh_step(model, x, u, dt, substeps))
@@ -234,11 +230,13 @@ def measured_like(
     ensure_x64()
     if excitation not in EXCITATIONS:
         raise ValueError(f"excitation must be one of {list(EXCITATIONS)}, got {excitation!r}")
-    fur = system == "furuta"
-    if excitation != "chirp" and not fur:
-        raise ValueError(f"excitation={excitation!r} is a Furuta (QUBE) experiment; {system} has 'chirp'")
+    definition = system_definition(system)
+    if excitation not in definition.excitations:
+        owners = [d.title for d in SYSTEM_DEFINITIONS.values() if excitation in d.excitations]
+        raise ValueError(f"excitation={excitation!r} is an experiment of {' and '.join(owners)}; "
+                         f"{definition.title} has {list(definition.excitations)}")
     rng = np.random.default_rng(seed)
-    dt = 0.002 if fur else 0.01
+    dt = definition.sample_period
     T = int(round(duration / dt)) + 1
     t = np.arange(T) * dt
     # the new experiments integrate MuJoCo finely too: under RK4 the sgn law lets a rotor held by
@@ -254,15 +252,12 @@ def measured_like(
                 q0 = [rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05)]
                 x0 = np.array([*q0, *rng.uniform(-0.01, 0.01, 2)])
                 u = _sine_with_rests(t, rng)
-            elif fur:
-                x0 = np.array([rng.uniform(-1, 1), rng.uniform(-np.pi, np.pi), rng.uniform(-3, 3), rng.uniform(-3, 3)])
-                u = _inputs(system, t, rng, forced)
             else:
-                x0 = np.array([rng.uniform(-1, 1), rng.uniform(-3, 3)])
+                x0 = np.array([rng.uniform(lo, hi) for lo, hi in definition.chirp_initial_ranges])
                 u = _inputs(system, t, rng, forced)
             xs = sim.roll(x0, u)
-            q = xs[:, : 2 if fur else 1]
-            if fur:
+            q = xs[:, : definition.spec.n_dof]
+            if definition.encoders:
                 q = quantize_encoder(q)
             else:
                 q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)

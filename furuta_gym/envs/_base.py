@@ -21,6 +21,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ..effects import ActuatorLag, Effect, actuator_lag_time
+from ..models import system_definition
 from ..signals import DerivativeFilter, quantize_joints
 from ..systems import get_spec
 from ._backends import AbstractBackend, make_backend
@@ -143,6 +144,7 @@ class LagrangianEnv(gymnasium.Env):
         cfg = {**common, **kwargs}
         self._init_kwargs = dict(kwargs)  # for pickling: rebuilt from the constructor keywords
         self._spec = get_spec(self.system)
+        self._definition = system_definition(self.system)
         self._n = self._spec.n_dof
         self._init_control(cfg)
         self._init_physics(cfg)
@@ -373,7 +375,10 @@ class LagrangianEnv(gymnasium.Env):
         return x0
 
     def _energy(self, x: Sequence[float]) -> float:
-        raise NotImplementedError
+        """T + V of the system's model at the plant's physical parameters (``info["energy"]``)."""
+        if not hasattr(self, "_energy_values"):
+            self._on_parameters(self.physical_parameters())
+        return self._definition.energy(self._energy_values, x)
 
     def _configure(self, **extra) -> None:
         """Validate and apply the :attr:`extra_defaults` keywords (none by default)."""
@@ -433,7 +438,9 @@ class LagrangianEnv(gymnasium.Env):
         return obs.copy(), self._info(False)
 
     def _on_parameters(self, parameters: Mapping[str, float]) -> None:
-        """Hook: physical parameters changed (domain randomisation)."""
+        """Physical parameters changed (domain randomisation): a subclass that overrides this
+        calls ``super()._on_parameters``."""
+        self._energy_values = self._definition.lumped_values(parameters)
 
     def physical_parameters(self) -> dict[str, float]:
         """The plant's physical parameters (for a learned model: the pinned nominal ones, which

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import ClassVar
 
 from ._base import LagrangianEnv
@@ -149,23 +148,3 @@ class FurutaEnv(LagrangianEnv):
 
     def _make_task(self):
         return FurutaSwingUp(max_voltage=self.max_action)
-
-    def _on_parameters(self, p):
-        self._energy_constants(p)
-
-    def _energy_constants(self, p):
-        mp, Lp, Lr = p["mp"], p["Lp"], p["Lr"]
-        self._J1 = p["mr"] * Lr**2 / 12.0 + mp * Lr**2
-        self._K = 0.25 * mp * Lp**2
-        self._M12 = 0.5 * mp * Lr * Lp
-        self._J2 = mp * Lp**2 / 3.0
-        self._V = 0.5 * mp * p["g"] * Lp
-
-    def _energy(self, x):
-        if not hasattr(self, "_J1"):
-            self._energy_constants(self.physical_parameters())
-        _, b, ad, bd = x
-        sb, cb = math.sin(b), math.cos(b)
-        m11 = self._J1 + self._K * sb * sb
-        kinetic = 0.5 * (m11 * ad * ad + 2.0 * self._M12 * cb * ad * bd + self._J2 * bd * bd)
-        return kinetic + self._V * (1.0 - cb)

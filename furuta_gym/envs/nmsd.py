@@ -130,16 +130,6 @@ class NMSDEnv(LagrangianEnv):
     def presentation_options(self) -> list[str]:
         return super().presentation_options() + (["observe_target=True"] if self.observe_target else [])
 
-    def _energy(self, x):
-        if not hasattr(self, "_p"):
-            self._p = self.physical_parameters()
-        p = self._p
-        pos, vel = x
-        return 0.5 * p["m"] * vel * vel + 0.5 * p["k1"] * pos * pos + 0.25 * p["k2"] * pos**4
-
-    def _on_parameters(self, p):
-        self._p = p
-
     def _info(self, diverged):
         info = super()._info(diverged)
         info["target"] = self.task.target

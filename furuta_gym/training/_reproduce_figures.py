@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..models import system_definition
 from .reproduce import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 
 FORCED_SET = {"nmsd": "test_square", "furuta": "test_forced"}
@@ -94,21 +95,16 @@ def _predictions(system, data, truth, models, tr, k):
 
 
 def _energy_cases(system):
-    """(x axis, q, q̇, label) of the two energy-over-state panels."""
-    if system == "nmsd":
-        grid = np.linspace(-1.5, 1.5, 201)
-        zeros = np.zeros_like(grid)
-        return [
-            (grid, np.stack([grid], 1), np.stack([zeros], 1), "p [m] (ṗ = 0)"),
-            (grid * 3, np.stack([zeros], 1), np.stack([grid * 3], 1), "ṗ [m/s] (p = 0)"),
-        ]
-    grid = np.linspace(-np.pi, np.pi, 201)
-    zeros = np.zeros_like(grid)
-    vel = np.linspace(-20, 20, 201)
-    return [
-        (grid, np.stack([zeros, grid], 1), np.stack([zeros, zeros], 1), "β [rad] (α̇ = β̇ = 0)"),
-        (vel, np.stack([zeros, zeros], 1), np.stack([zeros, vel], 1), "β̇ [rad/s] (β = α̇ = 0)"),
-    ]
+    """(x axis, q, q̇, label) of the two energy-over-state panels: one state variable on a grid,
+    the others zero."""
+    n = system_definition(system).spec.n_dof
+    cases = []
+    for index, low, high, factor, label in system_definition(system).energy_panels:
+        grid = np.linspace(low, high, 201) * factor
+        state = np.zeros((len(grid), 2 * n))
+        state[:, index] = grid
+        cases.append((grid, state[:, :n], state[:, n:], label))
+    return cases
 
 
 def _energy_over_state(system, truth, physics):

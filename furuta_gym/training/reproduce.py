@@ -359,6 +359,7 @@ def _default_hparams(system: str, kind: str, overrides: dict | None = None) -> d
 
 def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceConfig, truth):
     """Train (or resume / reuse) one model and evaluate it; returns its metrics dict."""
+    from ..models import system_definition
     from .checkpoint import load_model
     from .metrics import evaluate_model, metrics_to_json
     from .train import MODEL_FILE, STATE_FILE, train
@@ -393,7 +394,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     else:
         resume = (run_dir / STATE_FILE).exists()
         status = "resumed" if resume else "trained"
-        forced = data.get(SCALE_FIT_SET[config.split]) if system == "furuta" else None
+        forced = data.get(SCALE_FIT_SET[config.split]) if system_definition(system).scale_fit_on_forced_data else None
         try:
             train(kind, system, loss, data["train"], tcfg, out_dir=run_dir, resume=resume,
                   forced_trajs=forced, hparams=config.model_overrides)
@@ -685,6 +686,8 @@ _METRIC_HEADERS = {
 
 
 def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_meta) -> Path:
+    from ..models import system_definition
+
     lines = [
         "# Reproduction of Tables 1 and 2 (simulated systems)",
         "",
@@ -707,7 +710,7 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
         ]
     for system in config.systems:
         cols = METRIC_COLUMNS[system]
-        title = "Table 1 — N-MSD" if system == "nmsd" else "Table 2 — Furuta pendulum (simulation)"
+        title = system_definition(system).table_title
         gt = data_meta.get(system, {}).get("ground_truth")
         lines += [f"## {title}", "", f"Data: {gt} ground truth, seed {config.data_seed}.", ""]
         lines.append("| Test set | Model | " + " | ".join(_METRIC_HEADERS[c] for c in cols) + " |")

@@ -1,0 +1,197 @@
+"""The Furuta pendulum (Quanser QUBE-Servo 2; Laiche et al. 2026, §5): its physics, written once,
+and its :class:`~furuta_gym.models.SystemDefinition`.
+
+Physical parameters are Equinox pytrees of float64 scalars, so they can be fitted with the same
+machinery as network weights (``eqx.filter(model, eqx.is_inexact_array)``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar, Mapping
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from .._x64 import ensure_x64
+from ..lagrangian import AbstractLagrangianSystem, SystemSpec
+from ..systems import FURUTA
+from ._system import LumpedForm, SystemDefinition
+
+__all__ = ["FURUTA_DEFINITION", "FurutaParameters", "Furuta", "furuta_energy", "furuta_lumped",
+           "furuta_mass_matrix", "furuta_potential"]
+
+
+def _scalar(x) -> jnp.ndarray:
+    ensure_x64()
+    return jnp.asarray(x, dtype=float)
+
+
+class FurutaParameters(eqx.Module):
+    """Quanser QUBE-Servo 2 rotary pendulum (DEVELOPERS.md "Conventions"; SI units, volts)."""
+
+    mr: jnp.ndarray = eqx.field(default=0.095, converter=_scalar)  # rotor arm mass, kg
+    Lr: jnp.ndarray = eqx.field(default=0.085, converter=_scalar)  # rotor arm length, m
+    mp: jnp.ndarray = eqx.field(default=0.024, converter=_scalar)  # pendulum mass, kg
+    Lp: jnp.ndarray = eqx.field(default=0.129, converter=_scalar)  # pendulum length, m
+    g: jnp.ndarray = eqx.field(default=9.81, converter=_scalar)  # gravity, m/s²
+    c_r: jnp.ndarray = eqx.field(default=3e-4, converter=_scalar)  # rotor viscous friction, N·m·s/rad
+    c_p: jnp.ndarray = eqx.field(default=1.5e-5, converter=_scalar)  # pendulum viscous friction
+    kt: jnp.ndarray = eqx.field(default=0.042, converter=_scalar)  # motor torque constant, N·m/A
+    km: jnp.ndarray = eqx.field(default=0.042, converter=_scalar)  # back-EMF constant, V·s/rad
+    Rm: jnp.ndarray = eqx.field(default=8.4, converter=_scalar)  # terminal resistance, Ω
+
+    @property
+    def Jr(self):
+        """Rotor arm inertia about the motor axis, mr·Lr²/12 (Quanser's convention)."""
+        return self.mr * self.Lr**2 / 12.0
+
+    @property
+    def Jp(self):
+        """Pendulum inertia about its centre of mass, mp·Lp²/12."""
+        return self.mp * self.Lp**2 / 12.0
+
+    @property
+    def J1(self):
+        return self.Jr + self.mp * self.Lr**2
+
+    @property
+    def J2(self):
+        return self.Jp + self.mp * self.Lp**2 / 4.0
+
+
+class _FloatParameters:
+    """Parameter values as plain floats, with :class:`FurutaParameters`' own derived inertias
+    (its property objects), for arithmetic without JAX arrays."""
+
+    Jr, Jp, J1, J2 = FurutaParameters.Jr, FurutaParameters.Jp, FurutaParameters.J1, FurutaParameters.J2
+
+    def __init__(self, values: Mapping[str, float]):
+        self.__dict__.update(values)
+
+
+def furuta_lumped(p: FurutaParameters | Mapping[str, float]) -> dict[str, jnp.ndarray]:
+    """The Furuta's M and V in the parameters they are linear in: J1 (Jr + mp·Lr²), J1b
+    (¼mp·Lp², the sin²β term), Jc (½mp·Lr·Lp), J2 (Jp + ¼mp·Lp²), G (½mp·g·Lp). The
+    diagnosis fits these (furuta_gym.diagnose). ``p``: parameters, or a mapping of plain floats
+    (then the values are floats: the env's per-step energy touches no JAX)."""
+    if isinstance(p, Mapping):
+        p = _FloatParameters(p)
+    return {"J1": p.J1, "J1b": 0.25 * p.mp * p.Lp**2, "Jc": 0.5 * p.mp * p.Lr * p.Lp, "J2": p.J2,
+            "G": 0.5 * p.mp * p.g * p.Lp}
+
+
+def _mass_entries(J1, J1b, Jc, sin_beta, cos_beta):
+    """M11 and M12 of M(q) (M22 = J2 is constant)."""
+    return J1 + J1b * sin_beta**2, Jc * cos_beta
+
+
+def furuta_mass_matrix(J1, J1b, Jc, J2, q):
+    """M(q) = [[J1 + J1b·sin²β, Jc·cosβ], [Jc·cosβ, J2]]."""
+    m11, m12 = _mass_entries(J1, J1b, Jc, jnp.sin(q[1]), jnp.cos(q[1]))
+    return jnp.stack([jnp.stack([m11, m12]), jnp.stack([m12, J2 * jnp.ones_like(m11)])])
+
+
+def furuta_potential(G, q, cos=jnp.cos):
+    """V(q) = G·(1 − cosβ): β = 0 hanging down."""
+    return G * (1.0 - cos(q[1]))
+
+
+def furuta_energy(lumped: Mapping[str, float], x) -> float:
+    """T + V at the state ``x`` = (α, β, α̇, β̇) on plain floats, from :func:`furuta_lumped`
+    values: the envs' per-step ``info["energy"]``, where a JAX call would cost 100× the step."""
+    _, beta, alpha_dot, beta_dot = x
+    m11, m12 = _mass_entries(lumped["J1"], lumped["J1b"], lumped["Jc"], math.sin(beta), math.cos(beta))
+    kinetic = 0.5 * (m11 * alpha_dot * alpha_dot + 2.0 * m12 * alpha_dot * beta_dot
+                     + lumped["J2"] * beta_dot * beta_dot)
+    return kinetic + furuta_potential(lumped["G"], x, cos=math.cos)
+
+
+class Furuta(AbstractLagrangianSystem):
+    """Furuta pendulum, q = (α, β), β = 0 hanging down, u in volts (Laiche et al. 2026, §5).
+
+    M = [[J1 + ¼mpLp²sin²β, ½mpLrLp cosβ], [½mpLrLp cosβ, J2]], V = ½mp g Lp (1 − cosβ),
+    τ_NC = (−c_r α̇, −c_p β̇), τ_u = ((kt/Rm)(u − km α̇), 0). Unlike the paper (−u), positive
+    voltage drives positive α.
+    """
+
+    params: FurutaParameters = eqx.field(default_factory=FurutaParameters)
+    spec: ClassVar[SystemSpec] = FURUTA
+
+    def mass_matrix(self, q):
+        b = furuta_lumped(self.params)
+        return furuta_mass_matrix(b["J1"], b["J1b"], b["Jc"], b["J2"], q)
+
+    def potential(self, q):
+        return furuta_potential(furuta_lumped(self.params)["G"], q)
+
+    def nonconservative_force(self, q, qd):
+        p = self.params
+        return jnp.stack([-p.c_r * qd[0], -p.c_p * qd[1]])
+
+    def input_force(self, q, qd, u):
+        p = self.params
+        return jnp.stack([p.kt / p.Rm * (u[0] - p.km * qd[0]), jnp.zeros_like(u[0])])
+
+
+
+def _nominal_lumped() -> dict[str, float]:
+    p = FurutaParameters()
+    lumped = {k: float(v) for k, v in furuta_lumped(p).items()}
+    return {**lumped, "c_alpha": float(p.c_r + p.kt * p.km / p.Rm), "c_beta": float(p.c_p),
+            "K": float(p.kt / p.Rm)}
+
+
+def _physical(p) -> bool:
+    ok = p["J1"] > 0 and p["J2"] > 0 and p["J1b"] >= 0 and p["J1"] * p["J2"] > p["Jc"] ** 2
+    return bool(ok and p["c_alpha"] >= 0 and p["c_beta"] >= 0 and p["Jc"] > 0)
+
+
+def _anchor_note(nominal, forced) -> str:
+    return ("scale anchored on the pendulum gravity term G = 0.5*mp*g*Lp = "
+            f"{nominal['G']:.6g} N m (nominal)"
+            + ("; everything else, including the motor gain K, is fitted" if forced else ""))
+
+
+# Rotor viscous friction and back-EMF are the same regressor (−α̇) on any data: one parameter.
+FURUTA_LUMPED = LumpedForm(
+    names=("J1", "J1b", "Jc", "J2", "G", "c_alpha", "c_beta", "K"),
+    units=("kg m^2", "kg m^2", "kg m^2", "kg m^2", "N m", "N m s/rad", "N m s/rad", "N m/V"),
+    nominal=_nominal_lumped,
+    mass_matrix=lambda b, q: furuta_mass_matrix(b("J1"), b("J1b"), b("Jc"), b("J2"), q),
+    potential=lambda b, q: furuta_potential(b("G"), q),
+    damping=lambda b, qd: jnp.stack([-b("c_alpha") * qd[0], -b("c_beta") * qd[1]]),
+    is_physical=_physical,
+    gain="K",
+    scale_anchor="G",
+    anchor_note=_anchor_note,
+    mechanical_anchor="G",
+    gravity_joints=("beta",),
+)
+
+FURUTA_DEFINITION = SystemDefinition(
+    spec=FURUTA,
+    title="the Furuta pendulum (QUBE-Servo 2)",
+    model=Furuta,
+    parameters=FurutaParameters,
+    lumped=FURUTA_LUMPED,
+    learnable_parameters=("mr", "Lr", "mp", "Lp"),
+    friction_parameters=("c_r", "c_p"),
+    known_damping_force=lambda coefficients, qd: -coefficients * qd,
+    back_emf_parameter="km",
+    back_emf_damping=0.042 * 0.042 / 8.4,  # kt·km/Rm of the pinned motor, N·m·s/rad
+    sample_period=0.002,
+    chirp_ranges=((0.6, 1.5), (0.3, 1.0), (2.0, 5.0), (-0.15, 0.15)),
+    chirp_initial_ranges=((-1.0, 1.0), (-3.141592653589793, 3.141592653589793), (-3.0, 3.0), (-3.0, 3.0)),
+    chirp_end_frequency=5.0,
+    diagnosis_window=0.5,
+    diagnosis_segment_seconds=2.0,
+    excitations=("chirp", "sine_sweep", "closed_loop_prbs"),
+    encoders=True,
+    table_title="Table 2 — Furuta pendulum (simulation)",
+    energy_panels=((1, -3.141592653589793, 3.141592653589793, 1.0, "β [rad] (α̇ = β̇ = 0)"),
+                   (3, -20.0, 20.0, 1.0, "β̇ [rad/s] (β = α̇ = 0)")),
+    scale_fit_on_forced_data=True,
+    lumped_values=furuta_lumped,
+    energy=furuta_energy,
+)

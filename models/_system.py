@@ -1,0 +1,108 @@
+"""One object per benchmark system: :class:`SystemDefinition`.
+
+Each system's module (``_furuta.py``, ``_nmsd.py``) writes its physics once — the analytic model
+and the same M, V, τ_NC in the parameters they are linear in (:class:`LumpedForm`, which the
+diagnosis fits) — and states its defaults for the layers above (learned models, diagnosis,
+synthetic logs, the reproduction). Code elsewhere asks the definition instead of branching on a
+system's name; a third system is one new module plus a line in :data:`SYSTEM_DEFINITIONS`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable
+
+import jax.numpy as jnp
+
+from ..lagrangian import SystemSpec
+
+__all__ = ["LumpedForm", "SystemDefinition", "first_joint_input"]
+
+#: ``b(name)``: the value of a lumped parameter (a traced array inside a fit)
+Lookup = Callable[[str], Any]
+
+
+def first_joint_input(spec: SystemSpec, gain, u):
+    """τ_u = (gain·u, 0, …): both systems drive their first joint only (the rotor; the mass)."""
+    if spec.n_dof == 1:
+        return gain * u[:1]
+    return jnp.stack([gain * u[0], *([jnp.zeros_like(u[0])] * (spec.n_dof - 1))])
+
+
+@dataclasses.dataclass(frozen=True)
+class LumpedForm:
+    """M, V and τ_NC written in the parameters they are linear in (base parameters ``names``);
+    τ_u = (gain·u, 0, …) with gain the parameter named ``gain``.
+
+    ``scale_anchor``: the base parameter held at its nominal value to fix the overall scale of
+    forced data (``anchor_note(nominal, forced)`` says so in the report, or ``None``);
+    ``mechanical_anchor``: the one also held on free data (u = 0), where the gain is not
+    identifiable either. ``gravity_joints``: joints whose declared potential is gravity, so a
+    centre-of-mass offset shifts it.
+    """
+
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    nominal: Callable[[], dict[str, float]]
+    mass_matrix: Callable[[Lookup, Any], Any]
+    potential: Callable[[Lookup, Any], Any]
+    damping: Callable[[Lookup, Any], Any]
+    is_physical: Callable[[dict], bool]
+    gain: str
+    scale_anchor: str
+    anchor_note: Callable[[dict, bool], str | None]
+    mechanical_anchor: str
+    gravity_joints: tuple[str, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class SystemDefinition:
+    """Everything about one system that is not a choice of model: spec, analytic model, lumped
+    form, and the defaults the learned models, the diagnosis and the reproduction use.
+
+    ``title``: its name in prose. ``friction_parameters``: the analytic parameters that are friction (APHYNITY's prior has
+    none); ``back_emf_parameter``: the one that makes the input force depend on velocity, or
+    ``None``; ``back_emf_damping``: its pinned damping (DeLaN lumps it with friction).
+    ``known_damping_force(coefficients, q̇)``: the paper's τ_NC structure with given positive
+    coefficients (DeLaN). ``excitations``: the synthetic experiments of
+    :func:`furuta_gym.diagnose.measured_like`; ``chirp_ranges``: its random chirps' amplitude,
+    start and end frequency and offset ranges (offset ``None``: no offset drawn).
+    ``chirp_initial_ranges``: their initial states' (low, high) per state variable; ``encoders``:
+    the joints are measured by quadrature encoders (else by a position sensor with Gaussian noise).
+    ``lumped_values(parameters)``: the values the lumped form and ``energy`` use, from a mapping
+    of physical parameter floats; ``energy(values, x)``: T + V on plain floats (the envs' info).
+    ``energy_panels``: (state index, grid low, grid high, grid factor, label) of the
+    reproduction's energy figure.
+    """
+
+    spec: SystemSpec
+    title: str
+    model: type
+    parameters: type
+    lumped: LumpedForm
+    learnable_parameters: tuple[str, ...]
+    friction_parameters: tuple[str, ...]
+    known_damping_force: Callable[[Any, Any], Any]
+    sample_period: float
+    chirp_ranges: tuple
+    chirp_initial_ranges: tuple
+    chirp_end_frequency: float
+    diagnosis_window: float
+    diagnosis_segment_seconds: float
+    table_title: str
+    energy_panels: tuple
+    lumped_values: Callable[[Any], dict]
+    energy: Callable[[Any, Any], float]
+    back_emf_parameter: str | None = None
+    back_emf_damping: float | None = None
+    excitations: tuple[str, ...] = ("chirp",)
+    encoders: bool = False
+    scale_fit_on_forced_data: bool = False
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def input_force(self, gain, u):
+        """τ_u of the lumped form: ``gain``·u on the first joint."""
+        return first_joint_input(self.spec, gain, u)
