@@ -174,20 +174,7 @@ def rollout(
 
     Returns a :class:`Rollout` (states, actions, rewards, terminated/diverged/done flags).
     """
-    steps = int(steps)
-    if steps < 1:
-        raise ValueError(f"steps must be a positive integer, got {steps}")
-    if int(substeps) < 1:
-        raise ValueError(f"substeps must be a positive integer, got {substeps}")
-    if not dt > 0:
-        raise ValueError(f"dt must be a positive control period in seconds, got {dt}")
-    x0s = jnp.asarray(x0s, dtype=float)
-    n_state = 2 * system.spec.n_dof
-    if x0s.ndim not in (1, 2) or x0s.shape[-1] != n_state:
-        raise ValueError(
-            f"x0s must have shape (N, {n_state}) or ({n_state},) for {system.spec.name!r} "
-            f"(state {system.spec.state_names}), got {tuple(x0s.shape)}"
-        )
+    steps, x0s = _checked_rollout_arguments(system, x0s, steps, substeps, dt)
     single = x0s.ndim == 1
     step_fn, policy_state, stateful = _as_policy(policy, policy_state)
     batch = x0s[None] if single else x0s
@@ -196,10 +183,7 @@ def rollout(
         for leaf in jax.tree_util.tree_leaves((system, step_fn, batch, policy_state))
     )
     n = batch.shape[0]
-    if chunks is None:
-        chunks = (os.cpu_count() or 1) if n >= 512 else 1
-    elif isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or not 1 <= chunks <= n:
-        raise ValueError(f"chunks must be an integer from 1 to the number of copies ({n}), got {chunks!r}")
+    chunks = _chunk_count(chunks, n)
     # inside someone else's jit, the rollout is part of their computation: a nested jit may not
     # carry compiler options
     run = functools.partial(
@@ -226,6 +210,34 @@ def rollout(
     if single:
         out = Rollout(*(a[0] for a in out))
     return out
+
+
+def _checked_rollout_arguments(system, x0s, steps, substeps, dt):
+    """(steps, x0s as a float array) after checking them against the system."""
+    steps = int(steps)
+    if steps < 1:
+        raise ValueError(f"steps must be a positive integer, got {steps}")
+    if int(substeps) < 1:
+        raise ValueError(f"substeps must be a positive integer, got {substeps}")
+    if not dt > 0:
+        raise ValueError(f"dt must be a positive control period in seconds, got {dt}")
+    x0s = jnp.asarray(x0s, dtype=float)
+    n_state = 2 * system.spec.n_dof
+    if x0s.ndim not in (1, 2) or x0s.shape[-1] != n_state:
+        raise ValueError(
+            f"x0s must have shape (N, {n_state}) or ({n_state},) for {system.spec.name!r} "
+            f"(state {system.spec.state_names}), got {tuple(x0s.shape)}"
+        )
+    return steps, x0s
+
+
+def _chunk_count(chunks, n: int) -> int:
+    """Sub-batches of a rollout of ``n`` copies: one per core from 512 copies on, else 1."""
+    if chunks is None:
+        return (os.cpu_count() or 1) if n >= 512 else 1
+    if isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or not 1 <= chunks <= n:
+        raise ValueError(f"chunks must be an integer from 1 to the number of copies ({n}), got {chunks!r}")
+    return chunks
 
 
 def chunk_bounds(n: int, chunks: int) -> np.ndarray:
@@ -265,6 +277,19 @@ def _as_policy(policy, policy_state):
     return policy, policy_state, policy_state is not None
 
 
+def _observation(observer, observation_fn, x0):
+    """(initial sensor state, ``observe(x, z) -> (obs, z)``): the observer's, or a memoryless
+    ``observation_fn`` (default: the state itself) with an empty sensor state."""
+    if observer is not None:
+        return observer.init(x0), observer.observe
+    identity = (lambda x: x) if observation_fn is None else observation_fn
+
+    def observe(x, z):
+        return identity(x), z
+
+    return (), observe
+
+
 def scan_closed_loop(
     system,
     policy,
@@ -294,15 +319,7 @@ def scan_closed_loop(
     :func:`furuta_gym.controllers.closed_loop` reports). Used by :func:`rollout` (vmapped, jitted)
     and by the controllers' ``closed_loop``; jit and vmap it as they do.
     """
-    if observer is None:
-        identity = (lambda x: x) if observation_fn is None else observation_fn
-        z0 = ()
-
-        def observe(x, z):
-            return identity(x), z
-
-    else:
-        z0, observe = observer.init(x0), observer.observe
+    z0, observe = _observation(observer, observation_fn, x0)
 
     def freeze(live, new, old):
         return jax.tree_util.tree_map(lambda a, b: jnp.where(live, a, b), new, old)

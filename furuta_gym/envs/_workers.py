@@ -169,8 +169,10 @@ def _shutdown(processes, connections, blocks) -> None:
         except Exception:
             pass
     for p in processes:
+        # a worker tears down its interpreter and JAX on the way out: seconds on a loaded machine,
+        # so it is killed only when it is plainly stuck
         try:
-            p.wait(timeout=5)
+            p.wait(timeout=30)
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait()

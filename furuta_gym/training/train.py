@@ -421,6 +421,66 @@ class _StopRequested(Exception):
     pass
 
 
+class _Stages:
+    """What each training stage uses: its loss (a stage without a horizon is L_Iτ alone: no ODE
+    solve, an epoch costs milliseconds), its trajectory windows and its compiled step, each
+    built once when first needed."""
+
+    def __init__(self, config, loss, trajs, dt, shortest, int_windows, make_step):
+        self.config, self.trajs, self.dt, self.shortest = config, trajs, dt, shortest
+        self.int_windows, self._loss, self._make_step = int_windows, loss, make_step
+        self.bounds = np.cumsum(config.epochs)
+        self.lam_step = config.lambda_step if config.lambda_step is not None else (1000.0 if loss == "aph" else 0.0)
+        self._windows: dict[int, Windows] = {}
+        self._steps: dict[str, Any] = {}
+
+    def of_epoch(self, epoch: int) -> int:
+        return int(np.searchsorted(self.bounds, epoch, side="right"))
+
+    def loss(self, stage: int) -> str:
+        return "itau" if self.config.horizons[stage] is None else self._loss
+
+    def windows(self, stage: int) -> Windows:
+        if stage not in self._windows:
+            h = min(_horizon_samples(self.config.horizons[stage], self.dt), self.shortest - 1)
+            self._windows[stage] = make_windows(self.trajs, h + 1, stride=1)
+        return self._windows[stage]
+
+    def step(self, stage: int):
+        name = self.loss(stage)
+        if name not in self._steps:
+            self._steps[name] = self._make_step(name)
+        return self._steps[name]
+
+
+def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict, int]:
+    """One epoch's steps; returns its history record, its mean loss terms and its step count."""
+    config = stages.config
+    t0 = time.perf_counter()
+    stage = stages.of_epoch(epoch)
+    loss_now = stages.loss(stage)
+    traj_batches, int_batches = _epoch_batches(
+        np.random.default_rng([config.seed, epoch]), None if loss_now == "itau" else stages.windows(stage),
+        stages.int_windows, config)
+    params_before = run.params
+    means, skipped = _run_steps(stages.step(stage), run, traj_batches, int_batches,
+                                config.epoch_learning_rate(epoch))
+    record_best = {}
+    # one full-batch step: its loss is exactly the loss of the parameters it started from
+    if config.keep_best_itau and loss_now == "itau" and len(int_batches) == 1:
+        record_best = _keep_best_itau(run, stages.step(stage), stage, epoch, stages.bounds, means, params_before,
+                                      int_batches[0], ok=len(traj_batches) > skipped)
+    if stages.lam_step and "traj" in means:
+        run.lam = run.lam + stages.lam_step * means["traj"]
+    record = {
+        "epoch": epoch + 1, "stage": stage,
+        "horizon": None if loss_now == "itau" else stages.windows(stage).length - 1,
+        **means, "lambda": run.lam, "steps": len(traj_batches), "skipped": skipped, **record_best,
+        "seconds": time.perf_counter() - t0,
+    }
+    return record, means, len(traj_batches)
+
+
 def train(
     model_kind: str,
     system: str,
@@ -460,64 +520,22 @@ def train(
     shortest = min(len(tr) for tr in trajs)
     dhash = data_hash(trajs)
     int_windows, normalization = _integral_windows(trajs, config, loss, shortest)
-    stage_windows: dict[int, Windows] = {}
-
-    def windows_for(stage: int) -> Windows:
-        if stage not in stage_windows:
-            h = min(_horizon_samples(config.horizons[stage], dt), shortest - 1)
-            stage_windows[stage] = make_windows(trajs, h + 1, stride=1)
-        return stage_windows[stage]
-
     optimizer, trainable, params = _build_optimizer(model, config)
     _, static = eqx.partition(model, trainable)
     run = _RunState(params=params, opt_state=optimizer.init(params), lam=float(config.lambda_traj))
-    lam_step = config.lambda_step if config.lambda_step is not None else (1000.0 if loss == "aph" else 0.0)
     out = Path(out_dir) if out_dir is not None else None
     run_info = {"model_kind": model_kind, "system": spec.name, "loss": loss, "data_hash": dhash,
                 "config": config.to_json()}
     if out is not None:
         static = _open_run_dir(out, resume, model, trainable, run, run_info, static)
-    bounds = np.cumsum(config.epochs)
-
-    def stage_loss(stage: int) -> str:
-        # a stage without a horizon is L_Iτ alone: no ODE solve, an epoch costs milliseconds
-        return "itau" if config.horizons[stage] is None else loss
-
-    steps_by_loss: dict[str, Any] = {}
-
-    def step_for(stage: int):
-        name = stage_loss(stage)
-        if name not in steps_by_loss:
-            steps_by_loss[name] = _make_step(static, optimizer, name, config, normalization, augmentation_weight)
-        return steps_by_loss[name]
-
+    stages = _Stages(config, loss, trajs, dt, shortest, int_windows,
+                     lambda name: _make_step(static, optimizer, name, config, normalization, augmentation_weight))
     with _polite_stop(out, run) as stop, _progress_bar(config, run.start_epoch, f"{model_kind}/{loss}") as bar:
         for epoch in range(run.start_epoch, config.total_epochs):
-            t0 = time.perf_counter()
-            stage = int(np.searchsorted(bounds, epoch, side="right"))
-            loss_now = stage_loss(stage)
-            traj_batches, int_batches = _epoch_batches(
-                np.random.default_rng([config.seed, epoch]), None if loss_now == "itau" else windows_for(stage),
-                int_windows, config)
-            params_before = run.params
-            means, skipped = _run_steps(step_for(stage), run, traj_batches, int_batches,
-                                        config.epoch_learning_rate(epoch))
-            record_best = {}
-            # one full-batch step: its loss is exactly the loss of the parameters it started from
-            if config.keep_best_itau and loss_now == "itau" and len(int_batches) == 1:
-                record_best = _keep_best_itau(run, step_for(stage), stage, epoch, bounds, means, params_before,
-                                              int_batches[0], ok=len(traj_batches) > skipped)
-            if lam_step and "traj" in means:
-                run.lam = run.lam + lam_step * means["traj"]
-            record = {
-                "epoch": epoch + 1, "stage": stage,
-                "horizon": None if loss_now == "itau" else windows_for(stage).length - 1,
-                **means, "lambda": run.lam, "steps": len(traj_batches), "skipped": skipped, **record_best,
-                "seconds": time.perf_counter() - t0,
-            }
+            record, means, steps = _run_epoch(stages, run, epoch)
             run.history.append(record)
             _save_epoch(out, record, run, static, run_info, config, loss)
-            _show_epoch(bar, means, loss, run.lam, skipped, epoch, len(traj_batches))
+            _show_epoch(bar, means, loss, run.lam, record["skipped"], epoch, steps)
             if stop["flag"]:
                 raise _StopRequested
     return _finish(eqx.combine(run.params, static), run.history, config, loss, dhash, trajs, forced_trajs, out)
