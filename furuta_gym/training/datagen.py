@@ -160,9 +160,10 @@ class FurutaRecipe:
     amplitude: float = 2.0  # V
     n_scale_fit: int = 1
     scale_fit_duration: float = 20.0
-    # "chirp": the test chirp (a scale-fit trajectory then follows the forced test trajectories
-    # once both forget their start); "steps": random ±amplitude steps of its own
-    scale_fit_input: Literal["chirp", "steps"] = "chirp"
+    # "steps": random ±amplitude steps of its own; "chirp": the test chirp, as before the recipe
+    # was frozen (a scale-fit trajectory then follows the forced test trajectories once both
+    # forget their start)
+    scale_fit_input: Literal["chirp", "steps"] = "steps"
     # validation (generate_validation): x0 in the training ranges, inputs other than the chirp;
     # free ones end before the pendulum settles (~3 s), where every free trajectory meets the others
     n_val_free: int = 12

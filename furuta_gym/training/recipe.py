@@ -71,7 +71,8 @@ RECIPE: dict[tuple[str, str, str], RunRecipe] = {
         "furuta", epochs=(12000, 20, 60), finetune_learning_rate=1e-6,
         decisions=("L_Iτ epochs, Furuta DeLaN", "fine-tuning step, Furuta DeLaN")),
     ("furuta", "aph", "prop"): _row(
-        "furuta", augmentation_weight=0.1, decisions=("μ per system and kind", "F_a design")),
+        "furuta", quadrature="hermite", augmentation_weight=0.1,
+        decisions=("L_Iτ quadrature, Furuta APHYNITY", "μ per system and kind", "F_a design")),
     ("furuta", "adln", "prop"): _row(
         "furuta", epochs=(24000, 20, 60), quadrature="hermite", finetune_learning_rate=3e-4,
         augmentation_weight=10.0,
