@@ -486,3 +486,21 @@ def test_info_energy_is_the_models_energy_at_the_plants_parameters(env_id, rando
         assert info["energy"] == pytest.approx(expected, rel=1e-12)
     assert len(drawn) == (1 if randomize is None else 4)
     env.close()
+
+
+@pytest.mark.parametrize("env_class", [FurutaEnv, NMSDEnv])
+def test_the_signature_is_the_documented_keywords(env_class):
+    # issue 26: typed keywords help() and IDEs show, the same set as the docstring's table
+    import inspect
+    import re
+
+    params = inspect.signature(env_class).parameters
+    declared = {n for n, p in params.items() if p.kind is p.KEYWORD_ONLY}
+    section = env_class.__doc__.split("## Arguments")[1].split("\n    ## ")[0]
+    documented = set(re.findall(r"`+(\w+)`+", section))
+    assert declared - documented == set()  # every keyword is documented
+    other = NMSDEnv if env_class is FurutaEnv else FurutaEnv
+    shared = declared & set(inspect.signature(other).parameters)
+    assert len(shared) >= 18
+    for name in shared:  # one default per common keyword in both envs
+        assert params[name].default == inspect.signature(other).parameters[name].default, name

@@ -84,64 +84,39 @@ def _check_dtype(dtype: Any) -> np.dtype:
     return value
 
 
+def env_arguments(local_variables: dict) -> dict:
+    """A subclass ``__init__``'s ``locals()`` as the keywords of :meth:`LagrangianEnv.__init__`."""
+    return {k: v for k, v in local_variables.items() if k not in ("self", "__class__")}
+
+
 class LagrangianEnv(gymnasium.Env):
     """Base of the furuta_gym envs (see :class:`furuta_gym.envs.FurutaEnv` for the user docs).
 
-    Subclasses set :attr:`system`, :attr:`defaults` (constructor keyword → default value, the
-    whole accepted set besides the common ones) and implement :meth:`_make_task`,
+    Subclasses set :attr:`system`, declare their keywords in ``__init__`` and implement :meth:`_make_task`,
     :meth:`_initial_state`, :meth:`_energy` and optionally :meth:`_update_scene`.
     """
 
     metadata: ClassVar[dict] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
 
     system: ClassVar[str]
-    #: default frame_skip (RK4 timesteps per control period)
-    default_frame_skip: ClassVar[int] = 1
-    #: default episode length in seconds
-    default_episode_seconds: ClassVar[float] = 10.0
-    default_reset_noise_scale: ClassVar[float] = 0.01
-    #: action limit (volts or newtons) and the keyword that sets it
+    #: the keyword of the action limit (volts or newtons)
     action_limit_name: ClassVar[str]
-    default_action_limit: ClassVar[float]
-    #: task-specific keywords → defaults
-    task_defaults: ClassVar[dict[str, Any]] = {}
-    #: other system-specific keywords → defaults, handed to :meth:`_configure`
-    extra_defaults: ClassVar[dict[str, Any]] = {}
+    #: task-specific keywords, handed to :meth:`_make_task`
+    task_keywords: ClassVar[tuple[str, ...]] = ()
+    #: other system-specific keywords, handed to :meth:`_configure`
+    extra_keywords: ClassVar[tuple[str, ...]] = ()
     default_camera_config: ClassVar[dict[str, Any]] = {}
 
     def __init__(self, **kwargs):
-        common = dict(
-            dynamics="mujoco",
-            kernel="auto",
-            frame_skip=self.default_frame_skip,
-            reset_noise_scale=self.default_reset_noise_scale,
-            episode_seconds=self.default_episode_seconds,
-            render_mode=None,
-            width=480,
-            height=480,
-            plant=None,
-            effects=None,
-            randomize=None,
-            encoder_counts=None,
-            position_resolution=None,
-            measurement_noise=0.0,
-            velocity="exact",
-            actuation_delay=0.0,
-            actuation_delay_steps=0,
-            observation="raw",
-            normalize_action=False,
-            dtype="float64",
-            **{self.action_limit_name: self.default_action_limit},
-            **self.task_defaults,
-            **self.extra_defaults,
-        )
-        unknown = sorted(set(kwargs) - set(common))
-        if unknown:
+        """Subclasses declare every keyword with its type and default in their own ``__init__``
+        (what ``help()`` and IDEs show) and hand them all here with :func:`env_arguments`."""
+        unexpected = kwargs.pop("unexpected", {})
+        if unexpected:
             raise EnvArgumentError(
-                f"{type(self).__name__}: unknown keyword argument(s) {unknown}; expected any of "
-                f"{sorted(common)}"
+                f"{type(self).__name__}: unknown keyword argument(s) {sorted(unexpected)}; expected any of "
+                f"{sorted(kwargs)}"
             )
-        cfg = {**common, **kwargs}
+        cfg = kwargs
         self._init_kwargs = dict(kwargs)  # for pickling: rebuilt from the constructor keywords
         self._spec = get_spec(self.system)
         self._definition = system_definition(self.system)
@@ -151,7 +126,7 @@ class LagrangianEnv(gymnasium.Env):
         self._init_actuation(cfg)
         self._init_sensors(cfg)
         self._init_presentation(cfg)
-        self._task_kwargs = {k: cfg[k] for k in self.task_defaults}
+        self._task_kwargs = {k: cfg[k] for k in self.task_keywords}
         self.task = self._make_task(**self._task_kwargs)
         self.action_space = spaces.Box(-self._action_high, self._action_high, (1,), dtype=self.dtype)
         self.observation_space = self._observation_space()
@@ -249,7 +224,7 @@ class LagrangianEnv(gymnasium.Env):
             raise EnvArgumentError(f"normalize_action must be a bool, got {cfg['normalize_action']!r}")
         self.normalize_action = bool(cfg["normalize_action"])
         self._action_high = 1.0 if self.normalize_action else self.max_action
-        self._configure(**{k: cfg[k] for k in self.extra_defaults})
+        self._configure(**{k: cfg[k] for k in self.extra_keywords})
         # obs is the backend's state array itself: no sensor model, raw, float64
         self._exact_observation = (
             self._exact_sensors

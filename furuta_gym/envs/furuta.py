@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
+import os
+from typing import ClassVar, Mapping, Sequence
 
-from ._base import LagrangianEnv
+from ..effects import Effect
+from ..lagrangian import AbstractLagrangianSystem
+from ._base import LagrangianEnv, env_arguments
 from ._tasks import FurutaSwingUp
 
 __all__ = ["FurutaEnv"]
@@ -109,6 +112,7 @@ class FurutaEnv(LagrangianEnv):
     | `effects`               | list[Effect]  | `None`      | extra `furuta_gym.effects.Effect`s on the plant (any backend) |
     | `randomize`             | float / dict  | `None`      | domain randomisation per reset: relative spread for all parameters (not g) or `{name: spread}` |
     | `encoder_counts`        | int / None    | `None`      | quantise observed angles to 2π/counts (hardware: 2048) |
+    | `position_resolution`   | float / None  | `None`      | quantise observed non-angular joints (none on this system: the Furuta has encoders) |
     | `measurement_noise`     | float / (4,)  | `0.0`       | Gaussian std added to each observed component |
     | `velocity`              | str           | `"exact"`   | `"filter"`: velocities from the paper's derivative filter on measured angles |
     | `actuation_delay`       | float         | `0.0`       | input delay in s (a multiple of 2 ms) |
@@ -135,16 +139,41 @@ class FurutaEnv(LagrangianEnv):
     """
 
     system: ClassVar[str] = "furuta"
-    default_frame_skip: ClassVar[int] = 1
-    default_episode_seconds: ClassVar[float] = 10.0
     action_limit_name: ClassVar[str] = "max_voltage"
-    default_action_limit: ClassVar[float] = 5.0
     default_camera_config: ClassVar[dict] = {
         "distance": 0.42,
         "elevation": -20.0,
         "azimuth": 135.0,
         "lookat": (0.0, 0.0, 0.09),
     }
+
+    def __init__(
+        self,
+        *,
+        dynamics: str | os.PathLike | AbstractLagrangianSystem = "mujoco",
+        kernel: str = "auto",
+        max_voltage: float = 5.0,
+        frame_skip: int = 1,
+        episode_seconds: float | None = 10.0,
+        reset_noise_scale: float = 0.01,
+        plant: str | Sequence[str] | None = None,
+        effects: Sequence[Effect] | None = None,
+        randomize: float | Mapping[str, float] | None = None,
+        encoder_counts: int | None = None,
+        position_resolution: float | None = None,
+        measurement_noise: float | Sequence[float] = 0.0,
+        velocity: str = "exact",
+        actuation_delay: float = 0.0,
+        actuation_delay_steps: int = 0,
+        observation: str = "raw",
+        normalize_action: bool = False,
+        dtype: str = "float64",
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+        **unexpected,
+    ):
+        super().__init__(**env_arguments(locals()))
 
     def _make_task(self):
         return FurutaSwingUp(max_voltage=self.max_action)

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+import os
+from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from ._base import EnvArgumentError, LagrangianEnv
+from ..effects import Effect
+from ..lagrangian import AbstractLagrangianSystem
+from ._base import EnvArgumentError, LagrangianEnv, env_arguments
 from ._tasks import NMSDReach
 
 __all__ = ["NMSDEnv", "DEFAULT_TARGET_RANGE"]
@@ -73,17 +76,15 @@ class NMSDEnv(LagrangianEnv):
     with ``max_force`` (N, default 20) instead of ``max_voltage``, ``target`` (m, default 0.5;
     ``"random"`` or ``(low, high)``: drawn per reset), ``observe_target`` (bool, default False:
     append the target to the observation), ``normalize_action`` (actions in [−1, 1] × max_force)
-    and ``dtype`` (``"float32"`` / ``"float64"``). The batched JAX env supports neither a random
+    and ``dtype`` (``"float32"`` / ``"float64"``). ``encoder_counts`` and an ``observation`` other
+    than ``"raw"`` are refused: the N-MSD has no angle to quantise or wrap. The batched JAX env supports neither a random
     target nor ``observe_target``: with them ``make_vec`` gives a SyncVectorEnv of single envs.
     """
 
     system: ClassVar[str] = "nmsd"
-    default_frame_skip: ClassVar[int] = 1
-    default_episode_seconds: ClassVar[float] = 10.0
     action_limit_name: ClassVar[str] = "max_force"
-    default_action_limit: ClassVar[float] = 20.0
-    task_defaults: ClassVar[dict] = {"target": 0.5}
-    extra_defaults: ClassVar[dict] = {"observe_target": False}
+    task_keywords: ClassVar[tuple[str, ...]] = ("target",)
+    extra_keywords: ClassVar[tuple[str, ...]] = ("observe_target",)
     #: (low, high) of a random target per reset, None for a fixed target
     _target_range: tuple[float, float] | None = None
     reset_option_names: ClassVar[tuple[str, ...]] = ("state", "target")
@@ -93,6 +94,36 @@ class NMSDEnv(LagrangianEnv):
         "azimuth": 90.0,
         "lookat": (0.0, 0.0, 0.2),
     }
+
+    def __init__(
+        self,
+        *,
+        dynamics: str | os.PathLike | AbstractLagrangianSystem = "mujoco",
+        kernel: str = "auto",
+        max_force: float = 20.0,
+        target: float | str | tuple[float, float] = 0.5,
+        observe_target: bool = False,
+        frame_skip: int = 1,
+        episode_seconds: float | None = 10.0,
+        reset_noise_scale: float = 0.01,
+        plant: str | Sequence[str] | None = None,
+        effects: Sequence[Effect] | None = None,
+        randomize: float | Mapping[str, float] | None = None,
+        encoder_counts: int | None = None,
+        position_resolution: float | None = None,
+        measurement_noise: float | Sequence[float] = 0.0,
+        velocity: str = "exact",
+        actuation_delay: float = 0.0,
+        actuation_delay_steps: int = 0,
+        observation: str = "raw",
+        normalize_action: bool = False,
+        dtype: str = "float64",
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+        **unexpected,
+    ):
+        super().__init__(**env_arguments(locals()))
 
     def _configure(self, observe_target: bool) -> None:
         if not isinstance(observe_target, (bool, np.bool_)):
