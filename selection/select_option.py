@@ -26,8 +26,10 @@ choice goes into the code by hand.
         --seeds 3 --out results/selection/force_parity
 
 Values are JSON where they parse (false, 0.1) and strings otherwise. ``--reuse DIR …``: a run of
-a DIR (another selection's output; the first that has one) whose recorded settings are exactly a
-candidate's, split and seed included, is copied in instead of trained again. Writes
+a DIR (a folder holding ``runs/``: one candidate of another selection,
+``OUT/<system>_<kind>/<value>``, or a validation reproduction; the first that has one) whose
+recorded settings are exactly a candidate's, split and seed included, is copied in instead of
+trained again. Writes
 ``OUT/<system>.md`` / ``.json``; runs live under ``OUT/<system>_<kind>/<value>``.
 """
 
@@ -122,7 +124,8 @@ def main(argv=None) -> None:
     option.add_argument("--train", nargs="+", metavar=("NAME", "VALUE"), help="a TrainConfig field and its values")
     option.add_argument("--model", nargs="+", metavar=("NAME", "VALUE"), help="a model option and its values")
     parser.add_argument("--reuse", type=Path, nargs="+", default=[],
-                        help="reproductions' outputs to copy matching runs from (the first that has one)")
+                        help="folders holding runs/ (a candidate of another selection: OUT/<system>_<kind>/<value>) "
+                             "to copy matching runs from (the first that has one)")
     parser.add_argument("--seeds", type=int, default=1,
                         help="model seeds per candidate (0 … N-1); the criterion is their mean")
     args = parse_selection_args(parser, argv, "results/selection")
