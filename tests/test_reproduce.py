@@ -323,47 +323,24 @@ def test_runs_record_the_augmentation_weight_they_used():
     assert training_config("furuta", own, 0, "prop", "adln").augmentation_weight == 0.5
 
 
-def test_a_setting_added_later_compares_as_what_older_runs_did():
-    """A record from before keep_best_itau existed was trained without it: an L_prop run (which
-    has an L_Iτ-alone stage) is then not the same as today's, a baseline without such a stage is."""
-    from furuta_gym.training.reproduce import _same_settings
-    from furuta_gym.training.train import TrainConfig
+def test_run_records_compare_within_their_form_and_a_later_setting_as_its_default():
+    """A record of another form (RUN_RECORD_SCHEMA) is never reused; a record without the key is
+    form 1. Within a form, a training setting the record lacks counts as its default; a model
+    hyper-parameter it lacks makes it another model."""
+    from furuta_gym.training.reproduce import RUN_RECORD_SCHEMA, _run_settings, _same_settings
 
-    def record(horizons):
-        train = json.loads(json.dumps(TrainConfig(epochs=(5,) * len(horizons), horizons=horizons).to_json()))
-        return {"system": "nmsd", "model": "dln", "loss": "prop", "seed": 0, "train": train}
-
-    for horizons, same in (((None, 2, 2.0), False), ((2, 2.0), True)):
-        current = record(horizons)
-        old = json.loads(json.dumps(current))
-        del old["train"]["keep_best_itau"]
-        assert _same_settings(old, current) is same
-        off = json.loads(json.dumps(current))
-        off["train"]["keep_best_itau"] = False
-        assert _same_settings(old, off)
-
-
-def test_a_model_hyperparameter_added_later_compares_as_what_older_models_were():
-    """Runs recorded before F_a's odd_in_velocity existed had a general F_a: they match a model
-    with a general F_a (the Furuta's augmented DeLaN today) and not one with the option on (the
-    N-MSD's, whose old runs are therefore retrained)."""
-    from furuta_gym.training.reproduce import _default_hparams, _same_settings
-    from furuta_gym.training.train import TrainConfig
-
-    train = json.loads(json.dumps(TrainConfig().to_json()))
-    current = {"system": "furuta", "model": "adln", "loss": "prop", "seed": 0, "train": train,
-               "model_hparams": _default_hparams("furuta", "adln")}
-    nmsd = {"system": "nmsd", "model": "adln", "loss": "prop", "seed": 0, "train": train,
-            "model_hparams": _default_hparams("nmsd", "adln")}
-    old_nmsd = json.loads(json.dumps(nmsd))
-    del old_nmsd["model_hparams"]["odd_in_velocity"]
-    assert not _same_settings(old_nmsd, nmsd)
-    old = json.loads(json.dumps(current))
-    del old["model_hparams"]["odd_in_velocity"]
-    assert _same_settings(old, current)
-    odd = json.loads(json.dumps(current))
-    odd["model_hparams"]["odd_in_velocity"] = True
-    assert not _same_settings(old, odd)
+    current = _run_settings("furuta", "adln", "prop", 0, ReproduceConfig())
+    assert current["schema"] == RUN_RECORD_SCHEMA == 1
+    unversioned = {k: v for k, v in current.items() if k != "schema"}
+    assert _same_settings(unversioned, current)
+    assert not _same_settings(dict(current, schema=2), current)
+    older = json.loads(json.dumps(current))
+    del older["train"]["fast_compile"]  # added later, default False: what runs did before
+    assert _same_settings(older, current)
+    assert not _same_settings(older, dict(current, train=dict(current["train"], fast_compile=True)))
+    no_option = json.loads(json.dumps(current))
+    del no_option["model_hparams"]["odd_in_velocity"]
+    assert not _same_settings(no_option, current)
 
 
 def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
@@ -396,27 +373,14 @@ def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys
         _default_hparams("furuta", "dln", {"odd_in_velocity": True})
 
 
-def test_quick_runs_compile_their_steps_fast_and_full_runs_keep_their_records():
+def test_quick_runs_compile_their_steps_fast_and_full_runs_do_not():
     """--quick trains a few hundred steps per model, so its steps are compiled unoptimised
-    (``fast_compile``); the full run's are not, and its committed runs, recorded before the
-    setting existed, still count as trained with exactly its settings (so they are reused)."""
-    import json
-    from pathlib import Path
-
-    from furuta_gym.training.reproduce import _run_settings, _same_settings, training_config
+    (``fast_compile``); the full run's are not."""
+    from furuta_gym.training.reproduce import training_config
 
     for kind, loss in (("dln", "traj"), ("adln", "prop"), ("aph", "aph")):
         assert training_config("furuta", ReproduceConfig(quick=True), 0, loss, kind).fast_compile
         assert not training_config("furuta", ReproduceConfig(), 0, loss, kind).fast_compile
-    # a committed L_prop run trained before fast_compile existed (2026-11-23)
-    record = Path(__file__).resolve().parents[1] / "results/reproduce/runs/furuta/aph_prop/seed0/reproduce_config.json"
-    saved = json.loads(record.read_text())
-    assert "fast_compile" not in saved["train"]
-    current = _run_settings("furuta", "aph", "prop", 0, ReproduceConfig())
-    assert current["train"]["fast_compile"] is False
-    assert _same_settings(saved, current)
-    quick = dict(current, train=dict(current["train"], fast_compile=True))
-    assert not _same_settings(saved, quick)
 
 
 def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path):

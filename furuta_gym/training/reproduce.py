@@ -291,9 +291,11 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
             shutil.copyfile(fresh, folder / entry["path"])
 
 
-#: training settings added with a default that changed behaviour, and what every run recorded
-#: before the setting existed did
-SETTINGS_BEFORE_RECORDED = {"keep_best_itau": False}
+#: The form of a run record (``reproduce_config.json``); a record without the key is form 1.
+#: A training setting added later whose default does what runs did before it needs nothing (the
+#: record lacks it and compares as that default); a change that older records cannot be compared
+#: with bumps this, and runs of another form are then trained again, never guessed equal.
+RUN_RECORD_SCHEMA = 1
 
 
 def _run_settings(system: str, kind: str, loss: str, seed: int, config: ReproduceConfig) -> dict:
@@ -302,37 +304,27 @@ def _run_settings(system: str, kind: str, loss: str, seed: int, config: Reproduc
     so it compares with a saved record as it is."""
     train = training_config(system, config, seed, loss, kind).to_json()
     train.pop("progress", None)
-    settings = {"system": system, "model": kind, "loss": loss, "seed": seed, "train": train,
-                "model_hparams": _default_hparams(system, kind, config.model_overrides)}
+    settings = {"schema": RUN_RECORD_SCHEMA, "system": system, "model": kind, "loss": loss, "seed": seed,
+                "train": train, "model_hparams": _default_hparams(system, kind, config.model_overrides)}
     if config.split != "test":  # the scale is fitted on the split's own trajectory
         settings["split"] = config.split
     return json.loads(json.dumps(settings))
 
 
 def _same_settings(saved: dict, current: dict) -> bool:
-    """Whether a run directory's recorded settings are this run's. A training setting the record
-    lacks was added later; the run then did what :data:`SETTINGS_BEFORE_RECORDED` says, or else
-    what is now that setting's default."""
+    """Whether a run directory's recorded settings are this run's: the same record form
+    (:data:`RUN_RECORD_SCHEMA`) and the same values, where a training setting the record lacks
+    counts as its default (it was added later, with a default that keeps what runs did)."""
     from .train import TrainConfig
 
+    if saved.get("schema", 1) != current.get("schema", 1):
+        return False
     defaults = json.loads(json.dumps(TrainConfig().to_json()))
-    saved = dict(saved, train=dict(saved.get("train", {})))
-    if "model_hparams" not in saved:  # recorded since 2026-11-23; older runs without a checkpoint: trusted
-        current = {k: v for k, v in current.items() if k != "model_hparams"}
-    elif "model_hparams" in current:
-        from .checkpoint import HPARAMS_BEFORE_RECORDED  # what a model recorded before a key existed was
-
-        hp = dict(saved["model_hparams"])
-        for key in current["model_hparams"].keys() - hp.keys():
-            if key in HPARAMS_BEFORE_RECORDED:
-                hp[key] = HPARAMS_BEFORE_RECORDED[key]
-        saved["model_hparams"] = hp
+    saved = {k: v for k, v in saved.items() if k != "schema"}
+    current = {k: v for k, v in current.items() if k != "schema"}
+    saved["train"] = dict(saved.get("train", {}))
     for key, value in current.get("train", {}).items():
-        if key in saved["train"]:
-            continue
-        if key in SETTINGS_BEFORE_RECORDED:
-            saved["train"][key] = SETTINGS_BEFORE_RECORDED[key]
-        elif key in defaults and value == defaults[key]:
+        if key not in saved["train"] and key in defaults and value == defaults[key]:
             saved["train"][key] = value
     # keep_best_itau acts on stages of L_Iτ alone only: without one, runs agree whatever it says
     saved, current = (_without_inert_settings(d) for d in (saved, current))
