@@ -22,20 +22,34 @@ an unfinished one continues from its training state. The experimental columns of
 
 from __future__ import annotations
 
+import concurrent.futures as cf
+import csv
 import dataclasses
 import datetime as _dt
+import hashlib
 import json
 import math
+import multiprocessing as mp
 import os
 import platform
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+import jax
 import numpy as np
 
+from .. import __version__, enable_x64, ensure_x64
+from ..data import load_trajectories
+from ..models import analytic_model, make_model, system_definition
 from ..systems import get_spec
+from .checkpoint import load_model, package_versions, read_header
+from .datagen import generate
+from .metrics import evaluate_model, metrics_to_json
+from .train import MODEL_FILE, STATE_FILE, TrainConfig, train
 from .recipe import (
     DEFAULT_LEARNING_RATE,
     DEFAULT_QUADRATURE,
@@ -114,7 +128,6 @@ class ReproduceConfig:
     same training data, scale-fitted and scored on the validation datasets only — no test set
     is written or scored, no figure made).
     """
-
     quick: bool = False
     seeds: tuple[int, ...] = (0,)
     data_seed: int = 0
@@ -185,8 +198,6 @@ def quadrature_rule(system: str, config: ReproduceConfig, loss: str, kind: str |
 def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop", kind: str | None = None):
     """The :class:`~furuta_gym.training.TrainConfig` of one run of model ``kind`` on ``system``
     with ``loss``: its recipe row, then the caller's ``train_overrides``."""
-    from .train import TrainConfig
-
     name = get_spec(system).name
     row = _run_recipe(name, config, loss, kind)
     horizons = tuple(TrainConfig.for_system(name).horizons)
@@ -239,9 +250,6 @@ def _log(msg: str, stream=None) -> None:
 
 def _datasets(system: str, out: Path, config: ReproduceConfig):
     """Generate (or reuse) the datasets of ``system`` under ``out/data/<system>``."""
-    from ..data import load_trajectories
-    from .datagen import generate
-
     folder = out / "data" / system
     manifest = folder / "manifest.json"
     if manifest.exists():
@@ -268,11 +276,6 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
     """Re-create data files a manifest lists but the folder lacks (a committed run keeps the
     manifest, not the CSVs): the data are seeded, so they must come out byte for byte as
     recorded; anything else is an error, never a silent change of the data under the models."""
-    import hashlib
-    import shutil
-    import tempfile
-
-    from .datagen import generate
 
     with tempfile.TemporaryDirectory() as tmp:
         generate(system, tmp, seed=meta.get("seed", 0), small=bool(meta.get("small")),
@@ -315,8 +318,6 @@ def _same_settings(saved: dict, current: dict) -> bool:
     """Whether a run directory's recorded settings are this run's: the same record form
     (:data:`RUN_RECORD_SCHEMA`) and the same values, where a training setting the record lacks
     counts as its default (it was added later, with a default that keeps what runs did)."""
-    from .train import TrainConfig
-
     if saved.get("schema", 1) != current.get("schema", 1):
         return False
     defaults = json.loads(json.dumps(TrainConfig().to_json()))
@@ -341,9 +342,6 @@ def _without_inert_settings(settings: dict) -> dict:
 def _default_hparams(system: str, kind: str, overrides: dict | None = None) -> dict:
     """The architecture a new model of this kind gets, with ``overrides`` (so a run trained with
     another is never silently reused)."""
-    import jax
-
-    from ..models import make_model
 
     model = make_model(system, kind, jax.random.PRNGKey(0), **(overrides or {}))
     return json.loads(json.dumps(dict(model.hparams), default=str))
@@ -351,11 +349,6 @@ def _default_hparams(system: str, kind: str, overrides: dict | None = None) -> d
 
 def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceConfig, truth):
     """Train (or resume / reuse) one model and evaluate it; returns its metrics dict."""
-    from ..models import system_definition
-    from .checkpoint import load_model
-    from .metrics import evaluate_model, metrics_to_json
-    from .train import MODEL_FILE, STATE_FILE, train
-
     metrics_path = run_dir / "metrics.json"
     model_path = run_dir / MODEL_FILE
     tcfg = training_config(system, config, seed, loss, kind)
@@ -365,7 +358,6 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
         saved = json.loads(cfg_path.read_text())
         if "model_hparams" not in saved and model_path.exists():
             # a record from before the architecture was recorded: the checkpoint's header knows it
-            from .checkpoint import read_header
 
             saved["model_hparams"] = json.loads(json.dumps(read_header(model_path).get("hparams", {}), default=str))
         if not _same_settings(saved, cfg_json):
@@ -414,9 +406,6 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
 def _worker_inputs(system: str, out: Path, config: ReproduceConfig):
     """``(datasets, ground-truth model)`` of ``system`` in a worker process, read from what the
     parent generated under ``out``."""
-    from .. import enable_x64
-    from ..models import analytic_model
-
     enable_x64()  # the parent already chose float64 (and said so): no second warning
     data, _ = _datasets(system, out, config)
     return data, analytic_model(system)
@@ -484,7 +473,6 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
     time, and with ``config.figures`` ``("figures", system, (paths | error, seconds))`` once per
     system, made as soon as that system's last model is done (in the pool: beside the models still
     training, and in the worker that has most likely compiled the models' predictions already)."""
-
     def report(task, result):
         system, kind, loss, seed = task
         log(f"[{system}] {MODEL_LABELS[kind]} ({LOSS_LABELS[loss]}) seed {seed}: {result[2]} in {result[1]} s")
@@ -501,8 +489,6 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
                 yield "figures", system, _figures_task(system, out, config, loaded[system]["data"],
                                                        loaded[system]["truth"])
         return
-    import concurrent.futures as cf
-    import multiprocessing as mp
 
     # "spawn": a forked copy of a process that already runs JAX's thread pools can deadlock.
     # Progress bars of parallel workers would overwrite each other: the log lines stay.
@@ -535,9 +521,6 @@ def reproduce(
 ) -> dict[str, Path]:
     """Run the reproduction into ``out``; returns the paths of the written tables, figures and
     run record. See the module docstring."""
-    from .. import ensure_x64
-    from ..models import analytic_model
-
     ensure_x64()
     if config.split != "test":  # the figures show the test sets
         config = dataclasses.replace(config, figures=False)
@@ -662,7 +645,6 @@ def _compare(mean, ours_text, paper_value) -> str:
 
 
 def _write_csv(path: Path, rows: list[dict]) -> Path:
-    import csv
 
     with path.open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
@@ -678,7 +660,6 @@ _METRIC_HEADERS = {
 
 
 def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_meta) -> Path:
-    from ..models import system_definition
 
     lines = [
         "# Reproduction of Tables 1 and 2 (simulated systems)",
@@ -805,8 +786,6 @@ def _quadrature_by_model(config: ReproduceConfig) -> dict[str, str]:
 
 
 def _write_run_record(path: Path, config: ReproduceConfig, command, timings, data_meta) -> Path:
-    from .. import __version__
-    from .checkpoint import package_versions
 
     record = {
         "command": command,
