@@ -47,10 +47,16 @@ import time
 from pathlib import Path
 from typing import Callable, Literal, Sequence
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .. import __version__, ensure_x64
 from ..data import Trajectory, save_trajectories
+from ..envs import MujocoBackend
+from ..lagrangian import vector_field
+from ..models import analytic_model
 from ..signals import (
     ENCODER_COUNTS_PER_REV,
     chirp,
@@ -272,9 +278,6 @@ class AnalyticGroundTruth:
     name = "analytic"
 
     def __init__(self, system: str, substeps: int = 4):
-        from .. import ensure_x64
-        from ..models import analytic_model
-
         ensure_x64()
         self.system = get_spec(system).name
         self.model = analytic_model(self.system)
@@ -282,11 +285,6 @@ class AnalyticGroundTruth:
         self._compiled = None
 
     def _build(self):
-        import jax
-        import jax.numpy as jnp
-
-        from ..lagrangian import vector_field
-
         model, S = self.model, self.substeps
 
         def interval(x, inputs):
@@ -320,8 +318,6 @@ class AnalyticGroundTruth:
     _BATCH = 8  # batch padded to a multiple of this, so few shapes ever compile
 
     def __call__(self, x0s, t, us):
-        import jax.numpy as jnp
-
         if self._compiled is None:
             self._compiled = self._build()
         x0s, us = np.asarray(x0s, dtype=float), np.asarray(us, dtype=float)
@@ -358,10 +354,6 @@ class MujocoGroundTruth:
     name = "mujoco"
 
     def __init__(self, system: str, substeps: int = 4):
-        try:
-            from ..envs import MujocoBackend
-        except ImportError as exc:  # pragma: no cover - depends on the envs package
-            raise ImportError(f"no MuJoCo backend available: {exc}") from exc
         self.system = get_spec(system).name
         self.substeps = int(substeps)
         self._backend = MujocoBackend(self.system, substeps=1)
@@ -803,8 +795,6 @@ def generate(
     """:func:`generate_datasets` then :func:`write_datasets`; returns ``{name: csv path}``.
     ``split="validation"``: the training set and the validation datasets
     (:func:`generate_validation`) instead of the test sets, which are then never written."""
-    from .. import __version__
-
     sensor = sensor or SensorOptions()
     spec = get_spec(system)
     gt = default_ground_truth(spec.name, ground_truth) if isinstance(ground_truth, str) else ground_truth

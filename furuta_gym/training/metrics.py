@@ -33,10 +33,13 @@ from typing import Any, Mapping, Sequence
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ..data import DataError, Trajectory
 from ..lagrangian import AbstractLagrangianSystem, energy, forward_dynamics, inverse_dynamics_terms
+from ..models import analytic_model
+from ..simulate import simulate
 
 __all__ = [
     "DIVERGED",
@@ -109,12 +112,6 @@ def predict(
     Non-finite where the solve failed. Trajectories of equal length and time grid are solved
     together in one vmapped call.
     """
-    import equinox as eqx
-    import jax
-    import jax.numpy as jnp
-
-    from ..simulate import simulate
-
     trajs = _stack_set(trajs, model.spec.n_dof)
     out: list[np.ndarray | None] = [None] * len(trajs)
     groups: dict[tuple, list[int]] = {}
@@ -191,8 +188,6 @@ def force_decomposition_errors(
 ) -> dict[str, float]:
     """log10 RMSE of the inertial, Coriolis and potential-derived terms against ``truth`` along
     the recorded states, with q̈ from ``truth``'s forward dynamics (pooled over joints)."""
-    import jax.numpy as jnp
-
     trajs = _stack_set(trajs, model.spec.n_dof)
     q = jnp.asarray(np.concatenate([tr.q for tr in trajs]))
     qd = jnp.asarray(np.concatenate([tr.qd for tr in trajs]))
@@ -211,8 +206,6 @@ def energy_along(
 ) -> np.ndarray:
     """E(t) of ``system`` along (q, q̇) with V shifted so V(q_rest) = 0 (q_rest defaults to 0),
     divided by E(t = 0) when ``normalize``."""
-    import jax.numpy as jnp
-
     q = jnp.asarray(q, dtype=float)
     qd = jnp.asarray(qd, dtype=float)
     q_rest = jnp.zeros(q.shape[1]) if q_rest is None else jnp.asarray(q_rest, dtype=float)
@@ -257,8 +250,6 @@ def evaluate_model(
     ``return_predictions`` the open-loop predictions are returned under ``"predictions"``.
     """
     if truth is None:
-        from ..models import analytic_model
-
         truth = analytic_model(model.spec.name)
     if truth.spec.name != model.spec.name:
         raise ValueError(

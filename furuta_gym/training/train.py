@@ -27,6 +27,7 @@ import json
 import math
 import signal
 import time
+import warnings
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -39,6 +40,7 @@ import optax
 from .._x64 import ensure_x64
 from ..data import Trajectory
 from ..lagrangian import QUADRATURE_RULES, QuadratureRule, integral_terms
+from ..models import make_model
 from ..systems import get_spec
 from . import _step_cache
 from . import checkpoint as ckpt
@@ -568,8 +570,6 @@ def _prepared_model(spec, model_kind: str, loss: str, trajs, config: TrainConfig
                 f"trajectory has {spec.n_dof} joint(s)"
             )
     if model is None:
-        from ..models import make_model
-
         model = make_model(spec.name, model_kind, jax.random.PRNGKey(config.seed), **(hparams or {}))
     elif model.kind != model_kind or model.spec.name != spec.name:
         raise ValueError(f"model is a {model.spec.name} {model.kind}; asked for {spec.name} {model_kind}")
@@ -732,8 +732,6 @@ def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: in
         bar.set_postfix(post, refresh=False)
         bar.update(1)
     if skipped:
-        import warnings
-
         warnings.warn(
             f"epoch {epoch + 1}: skipped {skipped} of {steps} step(s) with a non-finite loss or "
             "gradient (NaN guard)",
