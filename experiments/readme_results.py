@@ -3,8 +3,7 @@
     python experiments/readme_results.py           # rewrite the README block
     python experiments/readme_results.py --check   # exit 1 if the README block is stale
 
-Reads the three-seed reproductions (``results/reproduce_seeds/tables.csv`` for the Furuta,
-``results/reproduce_seeds_nmsd/tables.csv`` for the N-MSD). Per system and model, with L_prop
+Reads the reproduction of the frozen recipe (``results/reproduce/tables.csv``). Per system and model, with L_prop
 against the model's baseline loss (L_traj for DeLaN, L_aph for APHYNITY and augmented DeLaN):
 how many cells of each are at or below the paper's, and the force decomposition — the mean over
 both test sets of the inertial, Coriolis and potential-derived log10 RMSE (APHYNITY has none:
@@ -22,8 +21,7 @@ from _generated import fill_block, update
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
-TABLES = {"furuta": ROOT / "results" / "reproduce_seeds" / "tables.csv",
-          "nmsd": ROOT / "results" / "reproduce_seeds_nmsd" / "tables.csv"}
+TABLE = ROOT / "results" / "reproduce" / "tables.csv"
 NAME = "readme-results"  # the README block this writes
 BASELINE = {"DLN": "traj", "APH": "aph", "ADLN": "aph"}
 LOSS = {"traj": "L_traj", "aph": "L_aph", "prop": "L_prop"}
@@ -32,8 +30,8 @@ SYSTEM = {"furuta": "Furuta", "nmsd": "N-MSD"}
 
 
 def _rows(system: str) -> list[dict]:
-    with TABLES[system].open() as f:
-        return list(csv.DictReader(f))
+    with TABLE.open() as f:
+        return [r for r in csv.DictReader(f) if r["system"] == system]
 
 
 def _cells(rows, model, loss) -> tuple[int, int]:
@@ -52,7 +50,7 @@ def table() -> str:
     lines = ["| system | model | cells at or below the paper: L_prop | baseline | "
              "force decomposition, log10 RMSE: L_prop | baseline |", "|---|---|---|---|---|---|"]
     seeds = set()
-    for system in TABLES:
+    for system in SYSTEM:
         rows = _rows(system)
         seeds |= {r["n_seeds"] for r in rows}
         for model, base in BASELINE.items():
@@ -61,9 +59,8 @@ def table() -> str:
             force = "N/A (prior) | N/A" if fp is None else f"**{fp:.2f}** | {fb:.2f} ({LOSS[base]})"
             lines.append(f"| {SYSTEM[system]} | {model} | {prop[0]} of {prop[1]} | "
                          f"{ref[0]} of {ref[1]} ({LOSS[base]}) | {force} |")
-    note = (f"Means over {' / '.join(sorted(seeds))} model seeds; generated from "
-            "[results/reproduce_seeds](results/reproduce_seeds/tables.md) and "
-            "[results/reproduce_seeds_nmsd](results/reproduce_seeds_nmsd/tables.md) by "
+    note = (f"{' / '.join(sorted(seeds))} model seed(s) per row, the frozen recipe, one run from scratch; "
+            "generated from [results/reproduce](results/reproduce/tables.md) by "
             "`experiments/readme_results.py`.")
     return "\n".join(lines) + "\n\n" + note
 

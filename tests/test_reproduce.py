@@ -425,3 +425,16 @@ def test_every_recipe_row_cites_rows_of_the_decision_log():
         assert row.decisions, key
         for decision in row.decisions:
             assert any(c.startswith(decision) for c in choices), (key, decision)
+
+
+@pytest.mark.parametrize("script", ["reproduce_summary.py", "recipe_table.py"])
+def test_docs_reproduce_tables_match_their_sources(script):
+    """docs/reproduce.md's recipe table is the recipe (training/recipe.py) and its results summary
+    is results/reproduce: a quoted number that disagrees with its source fails here."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "experiments" / script
+    out = subprocess.run([sys.executable, str(path), "--check"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr

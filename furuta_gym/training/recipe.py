@@ -41,7 +41,7 @@ class RunRecipe:
 
 
 _BASELINE = ("baseline epochs",)
-_PROP = ("λ of L_prop", "L_Iτ quadrature")
+_PROP = ("λ of L_prop",)
 
 
 def _prop(epochs, *, decisions=(), **settings) -> RunRecipe:
@@ -54,7 +54,8 @@ SYSTEM_ROWS = {
     "furuta": {"baseline": RunRecipe(epochs=(60, 200), decisions=_BASELINE),
                "prop": _prop((6000, 20, 60))},
     "nmsd": {"baseline": RunRecipe(epochs=(100, 100), decisions=_BASELINE),
-             "prop": _prop((4000, 30, 30), itau_learning_rate=1e-2, decisions=("L_Iτ step, N-MSD",))},
+             "prop": _prop((4000, 30, 30), itau_learning_rate=1e-2,
+                           decisions=("L_Iτ quadrature, N-MSD", "L_Iτ step, N-MSD"))},
 }
 
 
@@ -69,7 +70,7 @@ RECIPE: dict[tuple[str, str, str], RunRecipe] = {
        for k, loss in (("dln", "traj"), ("aph", "aph"), ("adln", "aph"))},
     ("furuta", "dln", "prop"): _row(
         "furuta", epochs=(12000, 20, 60), finetune_learning_rate=1e-6,
-        decisions=("L_Iτ epochs, Furuta DeLaN", "fine-tuning step, Furuta DeLaN")),
+        decisions=("L_Iτ quadrature, Furuta DeLaN", "L_Iτ epochs, Furuta DeLaN", "fine-tuning step, Furuta DeLaN")),
     ("furuta", "aph", "prop"): _row(
         "furuta", quadrature="hermite", augmentation_weight=0.1,
         decisions=("L_Iτ quadrature, Furuta APHYNITY", "μ per system and kind", "F_a design")),

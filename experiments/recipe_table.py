@@ -1,0 +1,57 @@
+"""docs/reproduce.md's table of the training recipe, written from the recipe itself.
+
+    python experiments/recipe_table.py           # rewrite the docs block
+    python experiments/recipe_table.py --check   # exit 1 if the docs block is stale
+
+One row per (system, model kind, loss) of :data:`furuta_gym.training.recipe.RECIPE`: the stages'
+epochs, L_Iτ's quadrature, Adam's step in the L_Iτ stage and in the stages after it, λ, μ and the
+decision-log rows behind them.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from _generated import fill_block, update
+
+from furuta_gym.training.recipe import RECIPE
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs" / "reproduce.md"
+NAME = "recipe-table"  # the docs/reproduce.md block this writes
+LOSS = {"traj": "L_traj", "aph": "L_aph", "prop": "L_prop"}
+SYSTEM = {"furuta": "Furuta", "nmsd": "N-MSD"}
+
+
+def _value(x) -> str:
+    return "—" if x is None else f"{x:g}"
+
+
+def table() -> str:
+    lines = ["| system | model | loss | epochs per stage | L_Iτ quadrature | step: L_Iτ / after | λ | μ | "
+             "decision-log rows |", "|---|---|---|---|---|---|---|---|---|"]
+    for (system, kind, loss), row in sorted(RECIPE.items(), key=lambda kv: (kv[0][0] != "furuta", kv[0][1], kv[0][2] == "prop")):
+        prop = loss == "prop"
+        epochs = " + ".join(f"{e:,}".replace(",", " ") for e in row.epochs)
+        lines.append(
+            f"| {SYSTEM[system]} | {kind.upper()} | {LOSS[loss]} | {epochs} | "
+            f"{row.quadrature if prop else '—'} | "
+            f"{_value(row.itau_learning_rate) + ' / ' + _value(row.finetune_learning_rate) if prop else _value(row.finetune_learning_rate)} | "
+            f"{_value(row.lambda_traj)} | {_value(row.augmentation_weight)} | {'; '.join(row.decisions)} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="exit 1 if the docs block is stale")
+    args = ap.parse_args(argv)
+    text = fill_block(DOCS.read_text(), NAME, table(), where=DOCS)
+    status = update(DOCS, text, args.check, "run python experiments/recipe_table.py")
+    if not args.check:
+        print(table())
+    return status
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
