@@ -421,15 +421,10 @@ def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
     return metrics, round(time.perf_counter() - t0, 1), status
 
 
-#: Seconds one model takes (training + evaluation, one seed), two jobs at a time on this project's
-#: 2-core machine: the full recipe from the one-invocation run of 2026-11-25 evening (AMD EPYC,
-#: results/reproduce_from_scratch/run.json), --quick from results/reproduce_quick/run.json. Only
-#: the order in which a pool of jobs starts the models reads them: longest first, so no job is
-#: left with a long model at the end while the others idle (LPT scheduling). Replayed on 2 jobs,
-#: the order used before (Furuta first, trajectory losses before L_prop) finished --quick's 12
-#: models in 280 s and longest first in 264 s. The full run's longest model has been the Furuta
-#: augmented DeLaN's L_prop since it took the Hermite rule: started first, the run took 2684 s,
-#: where these times replay to 2653 s on two jobs (the bound, half their sum, is 2649 s).
+#: Seconds one model takes (training + evaluation, one seed), as a full and a --quick run on a
+#: 2-core machine measured them (their run.json). Only the order in which a pool of jobs starts
+#: the models reads them: longest first, so no job is left with a long model at the end while
+#: the others idle (LPT scheduling).
 EXPECTED_SECONDS = {
     "full": {
         ("nmsd", "dln", "traj"): 349, ("nmsd", "dln", "prop"): 953, ("nmsd", "aph", "aph"): 60,
