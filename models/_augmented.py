@@ -35,10 +35,9 @@ FORCE_ACTIVATION = "silu"
 DAMPING_SCALE = {"furuta": 1e-3, "nmsd": 1.0}
 
 #: augmented DeLaN's F_a odd in q̇ (ForceNetwork's odd_in_velocity) per system, chosen on
-#: validation trajectories like μ (results/force_parity/): N-MSD mean prediction log10 RMSE
-#: −2.597 general → −2.747 odd (its non-conservative force is pure friction, and a general F_a
-#: held part of the spring that V should); Furuta −0.795 general → −0.648 odd, so it keeps the
-#: general F_a. APHYNITY, whose prior holds M and V exactly, keeps it general on both.
+#: validation data (docs/reproduce.md, decision log): the N-MSD's non-conservative force is pure
+#: friction, and a general F_a held part of the spring that V should; the Furuta's F_a also holds
+#: the back-EMF and stays general. APHYNITY, whose prior holds M and V exactly, is general on both.
 ADLN_ODD_IN_VELOCITY = {"furuta": False, "nmsd": True}
 
 
@@ -49,7 +48,7 @@ class ForceNetwork(eqx.Module):
     The linear term W (starts at zero) is there for extrapolation in velocity: a tanh network
     saturates outside the velocities it was trained on, while viscous friction and back-EMF keep
     growing linearly. The paper's Furuta test sets start at |q̇| up to 20 rad/s, four times the
-    training range; without W the learned rotor damping fell 10–25 % short at 20–25 rad/s.
+    training range, where a network without W under-damped the rotor.
 
     ``odd_in_velocity``: the network part becomes ½(net(q, q̇) − net(q, −q̇)), odd in q̇ by
     construction, so F_a(q, 0) = 0: a force of friction type (viscous, cubic, Coulomb are all odd)
