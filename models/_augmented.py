@@ -17,6 +17,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
+from ._definitions import SYSTEM_DEFINITIONS
 from ._delan import LagrangianNetworks
 from ._system import first_joint_input
 from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
@@ -27,18 +28,15 @@ __all__ = ["AugmentedDeLaN", "ForceNetwork", "ADLN_ODD_IN_VELOCITY"]
 #: activation of the F_a network (APHYNITY, augmented DeLaN); see ForceNetwork
 FORCE_ACTIVATION = "silu"
 
-#: F_a's linear velocity term in physical units: W = 1 is this damping (N·m·s/rad, N·s/m).
-#: Of the order of the real ones (Furuta rotor: c_r + kt·km/Rm = 5.1e-4; N-MSD: b1 = 0.5), so
-#: Adam's steps move W as fast as the network's weights; with force_scale / velocity_scale
-#: (1e-4 for the Furuta) W needed thousands of epochs to reach the rotor damping and the network
-#: carried it instead, badly outside the training velocities.
-DAMPING_SCALE = {"furuta": 1e-3, "nmsd": 1.0}
+#: F_a's linear velocity term in physical units per system: W = 1 is this damping (N·m·s/rad,
+#: N·s/m), of the order of the real ones, so that Adam moves W as fast as the network's weights
+#: (each system's definition holds its own)
+DAMPING_SCALE = {name: d.force_damping_scale for name, d in SYSTEM_DEFINITIONS.items()}
 
 #: augmented DeLaN's F_a odd in q̇ (ForceNetwork's odd_in_velocity) per system, chosen on
-#: validation data (docs/reproduce.md, decision log): the N-MSD's non-conservative force is pure
-#: friction, and a general F_a held part of the spring that V should; the Furuta's F_a also holds
-#: the back-EMF and stays general. APHYNITY, whose prior holds M and V exactly, is general on both.
-ADLN_ODD_IN_VELOCITY = {"furuta": False, "nmsd": True}
+#: validation data (docs/reproduce.md, decision log; each system's definition holds its own).
+#: APHYNITY, whose prior holds M and V exactly, is general on both.
+ADLN_ODD_IN_VELOCITY = {name: d.adln_odd_in_velocity for name, d in SYSTEM_DEFINITIONS.items()}
 
 
 class ForceNetwork(eqx.Module):

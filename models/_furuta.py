@@ -175,6 +175,19 @@ FURUTA_DEFINITION = SystemDefinition(
     model=Furuta,
     parameters=FurutaParameters,
     lumped=FURUTA_LUMPED,
+    # J1 = Jr + mp·Lr² = 2.31e-4 kg·m², mp·g·Lp = 0.0304 J, lumped rotor damping 5.1e-4 N·m·s/rad
+    learned_defaults=dict(
+        hidden=(16, 16),
+        mass_scale=2.3e-4,
+        potential_scale=0.03,
+        force_scale=1e-3,
+        position_scale=1.0,
+        velocity_scale=10.0,
+        damping_init=(1e-3, 1e-4),
+        input_gain=0.042 / 8.4,  # kt / Rm: the motor's torque per volt (back-EMF lumped, see DeLaN)
+    ),
+    force_damping_scale=1e-3,
+    adln_odd_in_velocity=False,  # F_a also holds the lumped back-EMF
     learnable_parameters=("mr", "Lr", "mp", "Lp"),
     friction_parameters=("c_r", "c_p"),
     known_damping_force=lambda coefficients, qd: -coefficients * qd,

@@ -30,6 +30,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from .._x64 import ensure_x64
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import get_spec
+from ._definitions import SYSTEM_DEFINITIONS
 
 __all__ = ["MLP", "AbstractLearnedSystem", "SYSTEM_DEFAULTS", "coordinate_features", "system_defaults"]
 
@@ -40,31 +41,8 @@ _ACTIVATIONS: dict[str, Callable] = {
     "silu": jax.nn.silu,
 }
 
-# Reference magnitudes (SI) per system. Furuta: J1 = Jr + mp·Lr² = 2.31e-4 kg·m², mp·g·Lp =
-# 0.0304 J; lumped rotor damping c_r + kt·km/Rm = 5.1e-4 N·m·s/rad. N-MSD: m = 1 kg, k1·(1 m)² =
-# 10 J. Initial damping values are order-of-magnitude guesses, deliberately not the true values.
-SYSTEM_DEFAULTS: dict[str, dict[str, Any]] = {
-    "furuta": dict(
-        hidden=(16, 16),
-        mass_scale=2.3e-4,
-        potential_scale=0.03,
-        force_scale=1e-3,
-        position_scale=1.0,
-        velocity_scale=10.0,
-        damping_init=(1e-3, 1e-4),
-        input_gain=0.042 / 8.4,  # kt / Rm: the motor's torque per volt (back-EMF lumped, see DeLaN)
-    ),
-    "nmsd": dict(
-        hidden=(64, 64),
-        mass_scale=1.0,
-        potential_scale=10.0,
-        force_scale=1.0,
-        position_scale=1.0,
-        velocity_scale=5.0,
-        damping_init=(1.0, 1.0),
-        input_gain=1.0,
-    ),
-}
+#: the learned models' default hyper-parameters per system (each system's definition holds its own)
+SYSTEM_DEFAULTS: dict[str, dict[str, Any]] = {name: d.learned_defaults for name, d in SYSTEM_DEFINITIONS.items()}
 
 
 def system_defaults(system: str) -> dict[str, Any]:

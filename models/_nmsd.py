@@ -87,6 +87,19 @@ NMSD_DEFINITION = SystemDefinition(
     model=NMSD,
     parameters=NMSDParameters,
     lumped=NMSD_LUMPED,
+    # m = 1 kg, k1·(1 m)² = 10 J
+    learned_defaults=dict(
+        hidden=(64, 64),
+        mass_scale=1.0,
+        potential_scale=10.0,
+        force_scale=1.0,
+        position_scale=1.0,
+        velocity_scale=5.0,
+        damping_init=(1.0, 1.0),
+        input_gain=1.0,
+    ),
+    force_damping_scale=1.0,
+    adln_odd_in_velocity=True,  # its non-conservative force is pure friction
     learnable_parameters=("m", "k1", "k2"),
     friction_parameters=("b1", "b2"),
     known_damping_force=lambda coefficients, qd: -coefficients[0] * qd - coefficients[1] * qd**3,

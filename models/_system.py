@@ -60,7 +60,13 @@ class SystemDefinition:
     """Everything about one system that is not a choice of model: spec, analytic model, lumped
     form, and the defaults the learned models, the diagnosis and the reproduction use.
 
-    ``title``: its name in prose. ``friction_parameters``: the analytic parameters that are friction (APHYNITY's prior has
+    ``title``: its name in prose. ``learned_defaults``: the learned models' default
+    hyper-parameters (reference magnitudes in SI, network widths, initial damping: order-of-
+    magnitude guesses, deliberately not the true values); ``force_damping_scale``: the unit of
+    F_a's linear velocity term W (N·m·s/rad or N·s/m), of the order of the real damping so that
+    Adam moves W as fast as the network's weights; ``adln_odd_in_velocity``: whether augmented
+    DeLaN's F_a is odd in q̇ (a choice made on validation data, docs/reproduce.md).
+    ``friction_parameters``: the analytic parameters that are friction (APHYNITY's prior has
     none); ``back_emf_parameter``: the one that makes the input force depend on velocity, or
     ``None``; ``back_emf_damping``: its pinned damping (DeLaN lumps it with friction).
     ``known_damping_force(coefficients, q̇)``: the paper's τ_NC structure with given positive
@@ -80,6 +86,9 @@ class SystemDefinition:
     model: type
     parameters: type
     lumped: LumpedForm
+    learned_defaults: dict
+    force_damping_scale: float
+    adln_odd_in_velocity: bool
     learnable_parameters: tuple[str, ...]
     friction_parameters: tuple[str, ...]
     known_damping_force: Callable[[Any, Any], Any]
