@@ -11,7 +11,7 @@ from ._augmented import AugmentedDeLaN
 from ._delan import DeLaN
 from ._factory import MODEL_KINDS, make_model
 from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
-from ._system import LumpedForm, SystemDefinition, first_joint_input
+from ._system import LumpedForm, SystemDefinition, first_joint_input, parameter_defaults
 from .checkpoint import CheckpointError, load_model, read_header, save_model
 
 __all__ = [
@@ -26,6 +26,7 @@ __all__ = [
     "SYSTEM_DEFINITIONS",
     "system_definition",
     "first_joint_input",
+    "parameter_defaults",
     # the analytic physics in lumped parameters (the diagnosis fits these)
     "furuta_lumped",
     "furuta_mass_matrix",

@@ -13,33 +13,27 @@ from typing import ClassVar, Mapping
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._x64 import ensure_x64
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import FURUTA
-from ._system import LumpedForm, SystemDefinition
+from ._system import LumpedForm, SystemDefinition, parameter_defaults, scalar
 
 __all__ = ["FURUTA_DEFINITION", "FurutaParameters", "Furuta", "furuta_energy", "furuta_lumped",
            "furuta_mass_matrix", "furuta_potential"]
 
 
-def _scalar(x) -> jnp.ndarray:
-    ensure_x64()
-    return jnp.asarray(x, dtype=float)
-
-
 class FurutaParameters(eqx.Module):
     """Quanser QUBE-Servo 2 rotary pendulum (DEVELOPERS.md "Conventions"; SI units, volts)."""
 
-    mr: jnp.ndarray = eqx.field(default=0.095, converter=_scalar)  # rotor arm mass, kg
-    Lr: jnp.ndarray = eqx.field(default=0.085, converter=_scalar)  # rotor arm length, m
-    mp: jnp.ndarray = eqx.field(default=0.024, converter=_scalar)  # pendulum mass, kg
-    Lp: jnp.ndarray = eqx.field(default=0.129, converter=_scalar)  # pendulum length, m
-    g: jnp.ndarray = eqx.field(default=9.81, converter=_scalar)  # gravity, m/s²
-    c_r: jnp.ndarray = eqx.field(default=3e-4, converter=_scalar)  # rotor viscous friction, N·m·s/rad
-    c_p: jnp.ndarray = eqx.field(default=1.5e-5, converter=_scalar)  # pendulum viscous friction
-    kt: jnp.ndarray = eqx.field(default=0.042, converter=_scalar)  # motor torque constant, N·m/A
-    km: jnp.ndarray = eqx.field(default=0.042, converter=_scalar)  # back-EMF constant, V·s/rad
-    Rm: jnp.ndarray = eqx.field(default=8.4, converter=_scalar)  # terminal resistance, Ω
+    mr: jnp.ndarray = eqx.field(default=0.095, converter=scalar)  # rotor arm mass, kg
+    Lr: jnp.ndarray = eqx.field(default=0.085, converter=scalar)  # rotor arm length, m
+    mp: jnp.ndarray = eqx.field(default=0.024, converter=scalar)  # pendulum mass, kg
+    Lp: jnp.ndarray = eqx.field(default=0.129, converter=scalar)  # pendulum length, m
+    g: jnp.ndarray = eqx.field(default=9.81, converter=scalar)  # gravity, m/s²
+    c_r: jnp.ndarray = eqx.field(default=3e-4, converter=scalar)  # rotor viscous friction, N·m·s/rad
+    c_p: jnp.ndarray = eqx.field(default=1.5e-5, converter=scalar)  # pendulum viscous friction
+    kt: jnp.ndarray = eqx.field(default=0.042, converter=scalar)  # motor torque constant, N·m/A
+    km: jnp.ndarray = eqx.field(default=0.042, converter=scalar)  # back-EMF constant, V·s/rad
+    Rm: jnp.ndarray = eqx.field(default=8.4, converter=scalar)  # terminal resistance, Ω
 
     @property
     def Jr(self):
@@ -169,6 +163,8 @@ FURUTA_LUMPED = LumpedForm(
     gravity_joints=("beta",),
 )
 
+_PINNED = parameter_defaults(FurutaParameters)
+
 FURUTA_DEFINITION = SystemDefinition(
     spec=FURUTA,
     title="the Furuta pendulum (QUBE-Servo 2)",
@@ -184,7 +180,7 @@ FURUTA_DEFINITION = SystemDefinition(
         position_scale=1.0,
         velocity_scale=10.0,
         damping_init=(1e-3, 1e-4),
-        input_gain=0.042 / 8.4,  # kt / Rm: the motor's torque per volt (back-EMF lumped, see DeLaN)
+        input_gain=_PINNED["kt"] / _PINNED["Rm"],  # the motor's torque per volt (back-EMF lumped, see DeLaN)
     ),
     force_damping_scale=1e-3,
     adln_odd_in_velocity=False,  # F_a also holds the lumped back-EMF
@@ -192,7 +188,7 @@ FURUTA_DEFINITION = SystemDefinition(
     friction_parameters=("c_r", "c_p"),
     known_damping_force=lambda coefficients, qd: -coefficients * qd,
     back_emf_parameter="km",
-    back_emf_damping=0.042 * 0.042 / 8.4,  # kt·km/Rm of the pinned motor, N·m·s/rad
+    back_emf_damping=_PINNED["kt"] * _PINNED["km"] / _PINNED["Rm"],  # N·m·s/rad
     sample_period=0.002,
     chirp_ranges=((0.6, 1.5), (0.3, 1.0), (2.0, 5.0), (-0.15, 0.15)),
     chirp_initial_ranges=((-1.0, 1.0), (-3.141592653589793, 3.141592653589793), (-3.0, 3.0), (-3.0, 3.0)),

@@ -10,8 +10,7 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import NMSD as NMSD_SPEC
-from ._furuta import _scalar
-from ._system import LumpedForm, SystemDefinition
+from ._system import LumpedForm, SystemDefinition, scalar
 
 __all__ = ["NMSD_DEFINITION", "NMSDParameters", "NMSD", "nmsd_energy", "nmsd_potential"]
 
@@ -19,11 +18,11 @@ __all__ = ["NMSD_DEFINITION", "NMSDParameters", "NMSD", "nmsd_energy", "nmsd_pot
 class NMSDParameters(eqx.Module):
     """Nonlinear mass-spring-damper (paper §5); SI units, force input in newtons."""
 
-    m: jnp.ndarray = eqx.field(default=1.0, converter=_scalar)  # mass, kg
-    k1: jnp.ndarray = eqx.field(default=10.0, converter=_scalar)  # linear stiffness, N/m
-    k2: jnp.ndarray = eqx.field(default=5.0, converter=_scalar)  # cubic stiffness, N/m³
-    b1: jnp.ndarray = eqx.field(default=0.5, converter=_scalar)  # linear damping, N·s/m
-    b2: jnp.ndarray = eqx.field(default=0.1, converter=_scalar)  # cubic damping, N·s³/m³
+    m: jnp.ndarray = eqx.field(default=1.0, converter=scalar)  # mass, kg
+    k1: jnp.ndarray = eqx.field(default=10.0, converter=scalar)  # linear stiffness, N/m
+    k2: jnp.ndarray = eqx.field(default=5.0, converter=scalar)  # cubic stiffness, N/m³
+    b1: jnp.ndarray = eqx.field(default=0.5, converter=scalar)  # linear damping, N·s/m
+    b2: jnp.ndarray = eqx.field(default=0.1, converter=scalar)  # cubic damping, N·s³/m³
 
 
 def nmsd_potential(k1, k2, q):

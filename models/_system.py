@@ -14,12 +14,25 @@ from typing import Any, Callable
 
 import jax.numpy as jnp
 
+from .._x64 import ensure_x64
 from ..lagrangian import SystemSpec
 
-__all__ = ["LumpedForm", "SystemDefinition", "first_joint_input"]
+__all__ = ["LumpedForm", "SystemDefinition", "first_joint_input", "parameter_defaults"]
 
 #: ``b(name)``: the value of a lumped parameter (a traced array inside a fit)
 Lookup = Callable[[str], Any]
+
+
+def scalar(x) -> jnp.ndarray:
+    """A physical parameter as a float64 JAX scalar (the parameter classes' field converter)."""
+    ensure_x64()
+    return jnp.asarray(x, dtype=float)
+
+
+def parameter_defaults(cls) -> dict[str, float]:
+    """A parameter class's pinned values as plain floats, read from its fields (no JAX array is
+    made: a MuJoCo-only env never touches JAX's configuration)."""
+    return {f.name: float(f.default) for f in dataclasses.fields(cls)}
 
 
 def first_joint_input(spec: SystemSpec, gain, u):

@@ -133,6 +133,7 @@ class LagrangianEnv(gymnasium.Env):
         self._init_episode(cfg)
         self._init_rendering(cfg)
         self._zero_action = np.zeros(1)
+        self._on_parameters(self.physical_parameters())
         self._reset_episode(self._initial_state(None))
 
     def _init_control(self, cfg) -> None:
@@ -351,12 +352,10 @@ class LagrangianEnv(gymnasium.Env):
 
     def _energy(self, x: Sequence[float]) -> float:
         """T + V of the system's model at the plant's physical parameters (``info["energy"]``)."""
-        if not hasattr(self, "_energy_values"):
-            self._on_parameters(self.physical_parameters())
         return self._definition.energy(self._energy_values, x)
 
     def _configure(self, **extra) -> None:
-        """Validate and apply the :attr:`extra_defaults` keywords (none by default)."""
+        """Validate and apply the :attr:`extra_keywords` (none by default)."""
 
     def _extra_observation_size(self) -> int:
         """Components appended to the observation after the state (e.g. N-MSD's target)."""

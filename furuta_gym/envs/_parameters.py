@@ -8,13 +8,12 @@ JAX's configuration.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from ..effects import INPUT_EFFECTS, JOINT_EFFECTS, Effect
-from ..models import FurutaParameters, NMSDParameters
+from ..models import SYSTEM_DEFINITIONS, parameter_defaults, system_definition
 
 __all__ = [
     "PARAMETER_CLASSES",
@@ -25,7 +24,7 @@ __all__ = [
     "resolve_effects",
 ]
 
-PARAMETER_CLASSES = {"furuta": FurutaParameters, "nmsd": NMSDParameters}
+PARAMETER_CLASSES = {name: d.parameters for name, d in SYSTEM_DEFINITIONS.items()}
 
 # Parameters a relative spread applies to when `randomize` is a single number. Gravity is a fact
 # of the lab, not of the device, so it is left out (name it explicitly to randomise it).
@@ -34,8 +33,7 @@ _NOT_RANDOMISED_BY_DEFAULT = ("g",)
 
 def default_parameters(system: str) -> dict[str, float]:
     """The pinned physical parameters of ``"furuta"`` or ``"nmsd"`` as ``{name: float}``."""
-    cls = PARAMETER_CLASSES[system]
-    return {f.name: float(f.default) for f in dataclasses.fields(cls)}
+    return parameter_defaults(system_definition(system).parameters)
 
 
 def parse_randomization(system: str, randomize) -> dict[str, float]:

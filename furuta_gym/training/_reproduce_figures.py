@@ -97,9 +97,10 @@ def _predictions(system, data, truth, models, tr, k):
 def _energy_cases(system):
     """(x axis, q, q̇, label) of the two energy-over-state panels: one state variable on a grid,
     the others zero."""
-    n = system_definition(system).spec.n_dof
+    definition = system_definition(system)
+    n = definition.spec.n_dof
     cases = []
-    for index, low, high, factor, label in system_definition(system).energy_panels:
+    for index, low, high, factor, label in definition.energy_panels:
         grid = np.linspace(low, high, 201) * factor
         state = np.zeros((len(grid), 2 * n))
         state[:, index] = grid
