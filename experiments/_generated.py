@@ -4,8 +4,10 @@ a script in experiments/, whose ``--check`` (run by the tests) fails when a bloc
 
 from __future__ import annotations
 
+import argparse
 import re
 from pathlib import Path
+from typing import Callable
 
 
 def fill_block(text: str, name: str, body: str, *, where: object = "text", required: bool = True) -> str:
@@ -27,3 +29,19 @@ def update(path: Path, new_text: str, check: bool, how_to_fix: str) -> int:
         return 1
     path.write_text(new_text)
     return 0
+
+
+
+def block_main(script: str, path: Path, name: str, body: Callable[[], str], argv=None) -> int:
+    """The command line of ``script`` (its ``__file__``), whose one output is the block ``name``
+    of ``path``: rewrite the block and print it, or with ``--check`` only compare (exit 1 if
+    stale). ``body`` is computed once."""
+    ap = argparse.ArgumentParser(description=f"write the {name} block of {path.name}")
+    ap.add_argument("--check", action="store_true", help="exit 1 if that block is stale")
+    args = ap.parse_args(argv)
+    text = body()
+    new = fill_block(path.read_text(), name, text, where=path)
+    status = update(path, new, args.check, f"run python experiments/{Path(script).name}")
+    if not args.check:
+        print(text)
+    return status

@@ -12,12 +12,11 @@ its M and V are the prior's).
 
 from __future__ import annotations
 
-import argparse
 import csv
 from pathlib import Path
 
 import numpy as np
-from _generated import fill_block, update
+from _generated import block_main
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -66,14 +65,7 @@ def table() -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--check", action="store_true", help="exit 1 if the README block is stale")
-    args = ap.parse_args(argv)
-    text = fill_block(README.read_text(), NAME, table(), where=README)
-    status = update(README, text, args.check, "run python experiments/readme_results.py")
-    if not args.check:
-        print(table())
-    return status
+    return block_main(__file__, README, NAME, table, argv)
 
 
 if __name__ == "__main__":

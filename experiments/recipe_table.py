@@ -10,10 +10,9 @@ decision-log rows behind them.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
-from _generated import fill_block, update
+from _generated import block_main
 
 from furuta_gym.training.recipe import RECIPE
 
@@ -43,14 +42,7 @@ def table() -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--check", action="store_true", help="exit 1 if the docs block is stale")
-    args = ap.parse_args(argv)
-    text = fill_block(DOCS.read_text(), NAME, table(), where=DOCS)
-    status = update(DOCS, text, args.check, "run python experiments/recipe_table.py")
-    if not args.check:
-        print(table())
-    return status
+    return block_main(__file__, DOCS, NAME, table, argv)
 
 
 if __name__ == "__main__":

@@ -12,14 +12,13 @@ test sets), training seconds; then every cell where the paper's number is lower 
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import re
 from pathlib import Path
 
 import numpy as np
-from _generated import fill_block, update
+from _generated import block_main
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = ROOT / "results" / "reproduce"
@@ -82,14 +81,7 @@ def summary() -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--check", action="store_true", help="exit 1 if the docs block is stale")
-    args = ap.parse_args(argv)
-    text = fill_block(DOCS.read_text(), NAME, summary(), where=DOCS)
-    status = update(DOCS, text, args.check, "run python experiments/reproduce_summary.py")
-    if not args.check:
-        print(summary())
-    return status
+    return block_main(__file__, DOCS, NAME, summary, argv)
 
 
 if __name__ == "__main__":
