@@ -455,8 +455,8 @@ class _Stages:
         return self._steps[name]
 
 
-def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict, int]:
-    """One epoch's steps; returns its history record, its mean loss terms and its step count."""
+def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict]:
+    """One epoch's steps; returns its history record and its mean loss terms."""
     config = stages.config
     t0 = time.perf_counter()
     stage = stages.of_epoch(epoch)
@@ -480,7 +480,7 @@ def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict,
         **means, "lambda": run.lam, "steps": len(traj_batches), "skipped": skipped, **record_best,
         "seconds": time.perf_counter() - t0,
     }
-    return record, means, len(traj_batches)
+    return record, means
 
 
 def train(
@@ -534,10 +534,10 @@ def train(
                      lambda name: _make_step(static, optimizer, name, config, normalization, augmentation_weight))
     with _polite_stop(out, run) as stop, _progress_bar(config, run.start_epoch, f"{model_kind}/{loss}") as bar:
         for epoch in range(run.start_epoch, config.total_epochs):
-            record, means, steps = _run_epoch(stages, run, epoch)
+            record, means = _run_epoch(stages, run, epoch)
             run.history.append(record)
             _save_epoch(out, record, run, static, run_info, config, loss)
-            _show_epoch(bar, means, loss, run.lam, record["skipped"], epoch, steps)
+            _show_epoch(bar, means, loss, run.lam, record["skipped"], epoch, record["steps"])
             if stop["flag"]:
                 raise _StopRequested
     return _finish(eqx.combine(run.params, static), run.history, config, loss, dhash, trajs, forced_trajs, out)
