@@ -15,7 +15,7 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import FURUTA
-from ._system import LumpedForm, SystemDefinition, parameter_defaults, scalar
+from ._system import LumpedForm, MujocoTerms, SystemDefinition, parameter_defaults, scalar
 
 __all__ = ["FURUTA_DEFINITION", "FurutaParameters", "Furuta", "furuta_energy", "furuta_lumped",
            "furuta_mass_matrix", "furuta_potential"]
@@ -165,6 +165,27 @@ FURUTA_LUMPED = LumpedForm(
 
 _PINNED = parameter_defaults(FurutaParameters)
 
+# MuJoCo refuses a zero inertia on a moving body: the pendulum's point mass carries this much
+# about each axis, and the hinge armature is reduced by the same amount so M22 stays exact.
+_POINT_MASS_INERTIA = 1e-14
+
+
+def write_furuta_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
+    """The QUBE-Servo 2's bodies (the pendulum a point mass at Lp/2 plus hinge armature = the
+    rest of Jp) and gravity; viscous friction native, the motor with its back-EMF as bias."""
+    rotor, pend = model.body("rotor").id, model.body("pendulum").id
+    model.body_mass[rotor] = p["mr"]
+    model.body_inertia[rotor] = p["mr"] * p["Lr"] ** 2 / 12.0
+    model.body_pos[pend] = (p["Lr"], 0.0, 0.0)
+    model.body_mass[pend] = p["mp"]
+    model.body_ipos[pend] = (0.0, 0.0, -0.5 * p["Lp"])
+    model.body_inertia[pend] = _POINT_MASS_INERTIA
+    model.dof_armature[:] = (0.0, p["mp"] * p["Lp"] ** 2 / 12.0 - _POINT_MASS_INERTIA)
+    model.opt.gravity[:] = (0.0, 0.0, -p["g"])
+    return MujocoTerms(stiffness=(0.0, 0.0), damping=(p["c_r"], p["c_p"]),
+                       motor_gain=p["kt"] / p["Rm"], motor_bias=-p["kt"] * p["km"] / p["Rm"])
+
+
 FURUTA_DEFINITION = SystemDefinition(
     spec=FURUTA,
     title="the Furuta pendulum (QUBE-Servo 2)",
@@ -203,4 +224,5 @@ FURUTA_DEFINITION = SystemDefinition(
     scale_fit_on_forced_data=True,
     lumped_values=furuta_lumped,
     energy=furuta_energy,
+    write_mujoco=write_furuta_mujoco,
 )

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import NMSD as NMSD_SPEC
-from ._system import LumpedForm, SystemDefinition, scalar
+from ._system import LumpedForm, MujocoTerms, SystemDefinition, scalar
 
 __all__ = ["NMSD_DEFINITION", "NMSDParameters", "NMSD", "nmsd_energy", "nmsd_potential"]
 
@@ -80,6 +80,13 @@ NMSD_LUMPED = LumpedForm(
     mechanical_anchor="m",
 )
 
+def write_nmsd_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
+    """The mass; the linear spring and damper native, the cubic terms for the passive callback."""
+    model.body_mass[model.body("mass").id] = p["m"]
+    return MujocoTerms(stiffness=(p["k1"],), damping=(p["b1"],), cubic_stiffness=(p["k2"],),
+                       cubic_damping=(p["b2"],))
+
+
 NMSD_DEFINITION = SystemDefinition(
     spec=NMSD_SPEC,
     title="the N-MSD",
@@ -112,4 +119,5 @@ NMSD_DEFINITION = SystemDefinition(
     energy_panels=((0, -1.5, 1.5, 1.0, "p [m] (ṗ = 0)"), (1, -1.5, 1.5, 3.0, "ṗ [m/s] (p = 0)")),
     lumped_values=dict,
     energy=nmsd_energy,
+    write_mujoco=write_nmsd_mujoco,
 )

@@ -69,6 +69,20 @@ class LumpedForm:
 
 
 @dataclasses.dataclass(frozen=True)
+class MujocoTerms:
+    """What a system's MuJoCo writer leaves to the backend, per dof: native joint stiffness and
+    damping, the cubic stiffness and damping MuJoCo cannot express (the passive callback's), and
+    the motor as an affine actuator, force = ``motor_gain``·u + ``motor_bias``·q̇₀ (back-EMF)."""
+
+    stiffness: tuple[float, ...]
+    damping: tuple[float, ...]
+    cubic_stiffness: tuple[float, ...] = ()
+    cubic_damping: tuple[float, ...] = ()
+    motor_gain: float = 1.0
+    motor_bias: float = 0.0
+
+
+@dataclasses.dataclass(frozen=True)
 class SystemDefinition:
     """Everything about one system that is not a choice of model: spec, analytic model, lumped
     form, and the defaults the learned models, the diagnosis and the reproduction use.
@@ -91,7 +105,9 @@ class SystemDefinition:
     ``lumped_values(parameters)``: the values the lumped form and ``energy`` use, from a mapping
     of physical parameter floats; ``energy(values, x)``: T + V on plain floats (the envs' info).
     ``energy_panels``: (state index, grid low, grid high, grid factor, label) of the
-    reproduction's energy figure.
+    reproduction's energy figure. ``write_mujoco(model, parameters)``: writes the physical
+    parameters' bodies, inertias and gravity into an ``MjModel`` of the system's MJCF and returns
+    the rest as :class:`MujocoTerms` (no MuJoCo import needed: it only sets the model's arrays).
     """
 
     spec: SystemSpec
@@ -115,6 +131,7 @@ class SystemDefinition:
     energy_panels: tuple
     lumped_values: Callable[[Any], dict]
     energy: Callable[[Any, Any], float]
+    write_mujoco: Callable[[Any, Any], MujocoTerms]
     back_emf_parameter: str | None = None
     back_emf_damping: float | None = None
     excitations: tuple[str, ...] = ("chirp",)

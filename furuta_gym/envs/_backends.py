@@ -31,6 +31,7 @@ import numpy as np
 from ..assets import asset_path
 from ..effects import STATEFUL_EFFECTS, Effect, actuator_lag_time
 from ..lagrangian import AbstractLagrangianSystem
+from ..models import system_definition
 from ..systems import get_spec
 from ._parameters import default_parameters
 
@@ -49,11 +50,6 @@ _ACCEPTED = (
     "'mujoco' (MuJoCo ground truth), 'analytic' (closed-form model in JAX), a checkpoint path "
     "written by `furuta-gym train`, or an AbstractLagrangianSystem object"
 )
-
-# MuJoCo refuses a zero inertia on a moving body: the Furuta pendulum's point mass carries this
-# much about each axis, and the hinge armature is reduced by the same amount so M22 stays exact.
-_POINT_MASS_INERTIA = 1e-14
-
 
 class AbstractBackend(abc.ABC):
     """Advance a system's state (q, q̇) one control period at a time, input held (zero-order hold).
@@ -202,9 +198,14 @@ def apply_parameters(
     """
     spec = get_spec(system)
     n = spec.n_dof
-    stiffness, stiff_ref, damping = np.zeros(n), np.zeros(n), np.zeros(n)  # stiff_ref: Σ k·q_ref
+    terms = system_definition(system).write_mujoco(model, p)
+    stiffness, damping = np.array(terms.stiffness, float), np.array(terms.damping, float)
+    stiff_ref = np.zeros(n)  # Σ k·q_ref of the springs
     extra: dict[int, list[float]] = {}
-    motor_gain, motor_bias = _WRITE_SYSTEM[system](model, p, stiffness, damping, extra)
+    for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping)):
+        if any(cubic):
+            extra[dof] = _no_terms()
+            extra[dof][:2] = cubic
     gain = _add_effects(spec, effects, stiffness, stiff_ref, damping, extra)
     # masses changed: refresh MuJoCo's derived constants (e.g. the constant mass of a body that
     # only slides, dof_M0, which the N-MSD uses instead of body_mass)
@@ -212,8 +213,8 @@ def apply_parameters(
     model.jnt_stiffness[:] = stiffness
     model.qpos_spring[:] = np.divide(stiff_ref, stiffness, out=np.zeros(n), where=stiffness != 0)
     model.dof_damping[:] = damping
-    model.actuator_gainprm[0, 0] = gain * motor_gain
-    model.actuator_biasprm[0, :3] = (0.0, 0.0, gain * motor_bias)
+    model.actuator_gainprm[0, 0] = gain * terms.motor_gain
+    model.actuator_biasprm[0, :3] = (0.0, 0.0, gain * terms.motor_bias)
     tau = actuator_lag_time(effects)
     if tau > 0:
         if model.na != 1:
@@ -226,36 +227,6 @@ def apply_parameters(
         if e.name == "com_offset":
             _check_gravitational(model, system, e.joint, e.joint_index(spec))
     return extra
-
-
-def _write_furuta(model, p, stiffness, damping, extra) -> tuple[float, float]:
-    """The QUBE-Servo 2's bodies (the pendulum a point mass at Lp/2 plus hinge armature = the
-    rest of Jp), gravity and viscous friction; returns the motor's (gain, back-EMF bias)."""
-    rotor, pend = model.body("rotor").id, model.body("pendulum").id
-    model.body_mass[rotor] = p["mr"]
-    model.body_inertia[rotor] = p["mr"] * p["Lr"] ** 2 / 12.0
-    model.body_pos[pend] = (p["Lr"], 0.0, 0.0)
-    model.body_mass[pend] = p["mp"]
-    model.body_ipos[pend] = (0.0, 0.0, -0.5 * p["Lp"])
-    model.body_inertia[pend] = _POINT_MASS_INERTIA
-    model.dof_armature[:] = (0.0, p["mp"] * p["Lp"] ** 2 / 12.0 - _POINT_MASS_INERTIA)
-    model.opt.gravity[:] = (0.0, 0.0, -p["g"])
-    damping[:] = (p["c_r"], p["c_p"])
-    return p["kt"] / p["Rm"], -p["kt"] * p["km"] / p["Rm"]
-
-
-def _write_nmsd(model, p, stiffness, damping, extra) -> tuple[float, float]:
-    """The mass, linear spring and damper (native); the cubic terms go to the passive callback."""
-    model.body_mass[model.body("mass").id] = p["m"]
-    stiffness[0] = p["k1"]
-    damping[0] = p["b1"]
-    if p["k2"] != 0.0 or p["b2"] != 0.0:
-        extra[0] = _no_terms()
-        extra[0][:2] = p["k2"], p["b2"]
-    return 1.0, 0.0
-
-
-_WRITE_SYSTEM = {"furuta": _write_furuta, "nmsd": _write_nmsd}
 
 
 def _add_effects(spec, effects, stiffness, stiff_ref, damping, extra) -> float:
