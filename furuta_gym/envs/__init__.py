@@ -10,6 +10,7 @@ See docs/envs.md.
 
 from ._backends import AbstractBackend, ModelBackend, MujocoBackend, load_checkpoint, make_backend
 from ._base import EnvArgumentError, LagrangianEnv
+from ._config import Actuation, Sensors
 from ._parameters import PLANT_PRESETS, default_parameters
 from ._tasks import DEFAULT_STATE_BOUND, FurutaSwingUp, NMSDReach, is_diverged, tolerance
 from .furuta import FurutaEnv
@@ -23,6 +24,8 @@ __all__ = [
     "load_checkpoint",
     "LagrangianEnv",
     "EnvArgumentError",
+    "Sensors",
+    "Actuation",
     "FurutaEnv",
     "NMSDEnv",
     "FurutaSwingUp",

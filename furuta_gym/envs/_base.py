@@ -20,11 +20,12 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from ..effects import ActuatorLag, Effect, actuator_lag_time
+from ..effects import ActuatorLag, Effect
 from ..models import system_definition
 from ..signals import DerivativeFilter, quantize_joints
 from ..systems import get_spec
 from ._backends import AbstractBackend, make_backend
+from ._config import Actuation, EnvArgumentError, Sensors, check_int
 from ._parameters import (
     default_parameters,
     parse_randomization,
@@ -37,30 +38,6 @@ from ._tasks import divergence_bounds, wrap_angle
 OBSERVATIONS = ("raw", "wrapped", "trig")
 
 __all__ = ["LagrangianEnv", "EnvArgumentError"]
-
-
-class EnvArgumentError(ValueError, TypeError):
-    """A bad constructor keyword or reset option (a ValueError and, like Python's own unknown-
-    keyword error, a TypeError)."""
-
-
-def check_int(name: str, value: Any, minimum: int) -> int:
-    """``value`` as an int >= ``minimum`` (bools refused), or an EnvArgumentError naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise EnvArgumentError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
-def _check_delay(seconds: float, timestep: float, what: str) -> int:
-    """Delay in seconds → whole RK4 substeps (it must be a multiple of the timestep)."""
-    if not (np.isfinite(seconds) and seconds >= 0):
-        raise EnvArgumentError(f"{what} must be a delay in seconds >= 0, got {seconds!r}")
-    n = round(seconds / timestep)
-    if abs(n * timestep - seconds) > 1e-9:
-        raise EnvArgumentError(
-            f"{what} = {seconds} s is not a multiple of the simulation timestep {timestep} s"
-        )
-    return int(n)
 
 
 def _check_observation(observation: str, angular: Sequence[bool], system: str) -> str:
@@ -165,17 +142,13 @@ class LagrangianEnv(gymnasium.Env):
 
     def _init_actuation(self, cfg) -> None:
         """Actuation delay (whole RK4 substeps) and actuator lag."""
-        steps = check_int("actuation_delay_steps", cfg["actuation_delay_steps"], 0)
-        delay = _check_delay(float(cfg["actuation_delay"]), self.timestep, "actuation_delay")
-        delay += steps * self.frame_skip
-        for e in self.effects:
-            if e.name == "input_delay":
-                delay += _check_delay(e.coefficient, self.timestep, "effect input_delay")
-        self._delay_periods, self._delay_substeps = divmod(delay, self.frame_skip)
-        self._has_delay = delay > 0
+        self.actuation = Actuation.from_arguments(self.effects, self.timestep, self.frame_skip,
+                                                  cfg["actuation_delay"], cfg["actuation_delay_steps"])
+        self._delay_periods, self._delay_substeps = divmod(self.actuation.delay_substeps, self.frame_skip)
+        self._has_delay = self.actuation.delay_substeps > 0
         # MuJoCo integrates the lag (actuator dynamics); for a model backend this env applies it
         # after the delay, exactly per (part of a) period: see _actuate
-        self._lag_tau = actuator_lag_time(self.effects)
+        self._lag_tau = self.actuation.lag
         self._lag = (
             ActuatorLag(self._lag_tau, len(self._spec.input_names))
             if self._lag_tau > 0 and not self.backend.native_actuator_lag
@@ -184,38 +157,13 @@ class LagrangianEnv(gymnasium.Env):
 
     def _init_sensors(self, cfg) -> None:
         """Encoder quantisation, measurement noise and the velocity the observation carries."""
-        n = self._n
-        self._quant = np.zeros(n)  # quantisation step per joint (0: exact)
-        if cfg["encoder_counts"] is not None:
-            counts = check_int("encoder_counts", cfg["encoder_counts"], 1)
-            if not any(self._spec.angular):
-                raise EnvArgumentError(
-                    f"encoder_counts quantises angles, but {self.system} has no angular joint; "
-                    "use position_resolution (in joint units)"
-                )
-            self._quant[list(self._spec.angular)] = 2.0 * math.pi / counts
-        if cfg["position_resolution"] is not None:
-            res = float(cfg["position_resolution"])
-            if not (np.isfinite(res) and res > 0):
-                raise EnvArgumentError(f"position_resolution must be > 0, got {res!r}")
-            self._quant[[not a for a in self._spec.angular]] = res
-        noise = np.broadcast_to(np.asarray(cfg["measurement_noise"], dtype=float), (2 * n,)) \
-            if np.ndim(cfg["measurement_noise"]) in (0, 1) and np.size(cfg["measurement_noise"]) in (1, 2 * n) \
-            else None
-        if noise is None or not np.all(np.isfinite(noise)) or np.any(noise < 0):
-            raise EnvArgumentError(
-                f"measurement_noise must be a standard deviation >= 0, scalar or one per observation "
-                f"component {self._spec.state_names}; got {cfg['measurement_noise']!r}"
-            )
-        self._noise = noise.copy()
-        if cfg["velocity"] not in ("exact", "filter"):
-            raise EnvArgumentError(
-                f"velocity must be 'exact' (true velocity) or 'filter' (the paper's derivative "
-                f"filter on the measured positions); got {cfg['velocity']!r}"
-            )
-        self.velocity = cfg["velocity"]
-        self._filter = DerivativeFilter(self.dt, n) if self.velocity == "filter" else None
-        self._exact_sensors = not self._quant.any() and not self._noise.any() and self._filter is None
+        self.sensors = Sensors.from_arguments(self._spec, cfg["encoder_counts"], cfg["position_resolution"],
+                                              cfg["measurement_noise"], cfg["velocity"])
+        self._quant = np.array(self.sensors.quantization)
+        self._noise = np.array(self.sensors.noise)
+        self.velocity = self.sensors.velocity
+        self._filter = DerivativeFilter(self.dt, self._n) if self.velocity == "filter" else None
+        self._exact_sensors = self.sensors.exact
 
     def _init_presentation(self, cfg) -> None:
         """Observation layout, dtype, action scale and the system's own keywords."""

@@ -289,7 +289,7 @@ class LagrangianVectorEnv(VectorEnv):
         self._energy_model = eqx.tree_at(
             lambda m: m.params, analytic_model(backend.system), analytic_params
         )
-        self._quantizer = _Quantizer(tuple(float(s) for s in template.encoder_steps))
+        self._quantizer = _Quantizer(template.sensors.quantization)
         self._workers = None
         self._set_task(template.task)
         if workers:
