@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import ClassVar, Sequence
+from typing import Any, Callable, ClassVar, Sequence
 
 import equinox as eqx
 import jax
@@ -130,27 +130,35 @@ class Effect:
         angular = self.joint == "u" or spec.angular[self.joint_index(spec)]
         return EFFECT_UNITS[self.name][0 if angular else 1]
 
-    def generalized_force(self, q_j, qd_j, coulomb_smoothing: float = 0.0):
-        """Force on its joint from joint position/velocity (jnp-traceable). Springs included.
+    def generalized_force(self, q_j, qd_j, coulomb_smoothing: float = 0.0, xp=jnp):
+        """Force on its joint from joint position/velocity (see :meth:`law`). Springs included."""
+        return self.law(coulomb_smoothing, xp)(q_j, qd_j)
+
+    def law(self, coulomb_smoothing: float = 0.0, xp=jnp) -> Callable[[Any, Any], Any]:
+        """The effect's force law f(q_j, q̇_j) on its joint, written once for every user.
 
         ``coulomb_smoothing`` > 0 replaces sgn(v) by tanh(v / smoothing) (for integrators), in
-        Coulomb friction and stiction alike. ``com_offset`` depends on the whole potential: see
-        :meth:`com_offset_force`.
+        Coulomb friction and stiction alike. ``xp``: the namespace of sign/tanh/exp/abs
+        (``jax.numpy``: traceable; MuJoCo's passive-force callback passes one for plain floats).
+        ``com_offset`` depends on the whole potential: see :meth:`com_offset_force`.
         """
         c = self.coefficient
         if self.name == "spring":
-            return -c * (q_j - self.reference)
+            reference = self.reference
+            return lambda q, qd: -c * (q - reference)
         if self.name in ("coulomb_friction", "stiction"):
-            s = jnp.sign(qd_j) if coulomb_smoothing <= 0 else jnp.tanh(qd_j / coulomb_smoothing)
-            if self.name == "stiction":
-                s = jnp.exp(-((qd_j / self.stribeck_velocity) ** 2)) * s
-            return -c * s
+            smoothing = coulomb_smoothing
+            sgn = xp.sign if smoothing <= 0 else (lambda v: xp.tanh(v / smoothing))
+            if self.name == "coulomb_friction":
+                return lambda q, qd: -c * sgn(qd)
+            v_s = self.stribeck_velocity
+            return lambda q, qd: -c * (xp.exp(-((qd / v_s) ** 2)) * sgn(qd))
         if self.name == "viscous_friction":
-            return -c * qd_j
+            return lambda q, qd: -c * qd
         if self.name == "quadratic_drag":
-            return -c * qd_j * jnp.abs(qd_j)
+            return lambda q, qd: -c * qd * xp.abs(qd)
         if self.name == "constant_torque":
-            return c + 0.0 * q_j
+            return lambda q, qd: c + 0.0 * q
         if self.name == "com_offset":
             raise ValueError(
                 "com_offset shifts the system's potential, V(q) -> V(q - δ e_j); its force depends "

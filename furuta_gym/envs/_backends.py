@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import abc
 import contextlib
+import dataclasses
 import math
 import os
 import xml.etree.ElementTree as ET
@@ -145,9 +146,18 @@ def load_mjcf(system: str, actuator_lag: bool = False) -> mujoco.MjModel:
     return mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
 
 
-def _no_terms() -> list:
-    """Per-dof slots of the callback's forces (see :func:`apply_parameters`)."""
-    return [0.0, 0.0, 0.0, 0.0, 0.0, [], 0.0]
+@dataclasses.dataclass
+class PassiveForces:
+    """The forces MuJoCo cannot express, for the passive callback: per dof the system's cubic
+    stiffness and damping, the joint effects whose law :meth:`Effect.generalized_force` gives,
+    and the ``com_offset`` shift of MuJoCo's gravity potential."""
+
+    cubic: dict[int, tuple[float, float]]
+    effects: dict[int, list[Effect]]
+    shift: np.ndarray
+
+    def __bool__(self) -> bool:
+        return bool(self.cubic or self.effects or self.shift.any())
 
 
 def _gravity_force(model: mujoco.MjModel, scratch: mujoco.MjData, qpos, out: np.ndarray) -> np.ndarray:
@@ -186,12 +196,11 @@ def apply_parameters(
     p: Mapping[str, float],
     effects: Sequence[Effect] = (),
     data: mujoco.MjData | None = None,
-) -> dict[int, list[float]]:
+) -> PassiveForces:
     """Write physical parameters (and the natively expressible effects) into ``model``.
 
-    Returns the per-dof coefficients of the forces MuJoCo cannot express, which the passive
-    callback applies: ``{dof: [cubic_stiffness, cubic_damping, coulomb, quadratic_drag,
-    constant, [(stiction ΔF, v_s), ...], com_offset δ]}``. Springs, viscous friction, the input
+    Returns the forces MuJoCo cannot express, which the passive callback applies (see
+    :class:`PassiveForces`). Springs, viscous friction, the input
     gain and the actuator lag are native (joint stiffness with a combined rest position, joint
     damping, actuator gain and bias, actuator dynamics: ``model`` must then come from
     ``load_mjcf(system, actuator_lag=True)``).
@@ -201,11 +210,8 @@ def apply_parameters(
     terms = system_definition(system).write_mujoco(model, p)
     stiffness, damping = np.array(terms.stiffness, float), np.array(terms.damping, float)
     stiff_ref = np.zeros(n)  # Σ k·q_ref of the springs
-    extra: dict[int, list[float]] = {}
-    for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping)):
-        if any(cubic):
-            extra[dof] = _no_terms()
-            extra[dof][:2] = cubic
+    extra = PassiveForces({dof: cubic for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping))
+                           if any(cubic)}, {}, np.zeros(n))
     gain = _add_effects(spec, effects, stiffness, stiff_ref, damping, extra)
     # masses changed: refresh MuJoCo's derived constants (e.g. the constant mass of a body that
     # only slides, dof_M0, which the N-MSD uses instead of body_mass)
@@ -229,9 +235,9 @@ def apply_parameters(
     return extra
 
 
-def _add_effects(spec, effects, stiffness, stiff_ref, damping, extra) -> float:
+def _add_effects(spec, effects, stiffness, stiff_ref, damping, extra: PassiveForces) -> float:
     """Springs and viscous friction into the native terms, the rest into the callback's
-    per-dof terms; returns the input gain factor (1 + Σ g)."""
+    forces; returns the input gain factor (1 + Σ g)."""
     gain = 1.0
     for e in effects:
         if e.name == "input_gain":
@@ -245,28 +251,38 @@ def _add_effects(spec, effects, stiffness, stiff_ref, damping, extra) -> float:
             stiff_ref[j] += e.coefficient * e.reference
         elif e.name == "viscous_friction":
             damping[j] += e.coefficient
-        elif e.name == "stiction":
-            extra.setdefault(j, _no_terms())[5].append((e.coefficient, e.stribeck_velocity))
+        elif e.name == "com_offset":
+            extra.shift[j] += e.coefficient
         else:
-            slots = {"coulomb_friction": 2, "quadratic_drag": 3, "constant_torque": 4, "com_offset": 6}
-            extra.setdefault(j, _no_terms())[slots[e.name]] += e.coefficient
+            extra.effects.setdefault(j, []).append(e)
     return gain
 
 
-def _passive_callback(extra: dict[int, list], model: mujoco.MjModel):
+class _FloatMath:
+    """The namespace :meth:`Effect.law` needs, on plain floats (the callback
+    runs at every RK4 stage: numpy's scalar functions would cost more than the step itself)."""
+
+    tanh, exp, abs = staticmethod(math.tanh), staticmethod(math.exp), staticmethod(abs)
+
+    @staticmethod
+    def sign(x: float) -> int:
+        return (x > 0.0) - (x < 0.0)
+
+
+def _passive_callback(extra: PassiveForces, model: mujoco.MjModel):
     """MuJoCo passive-force callback adding the non-native forces (evaluated at every RK4 stage).
 
-    Per dof: −k3·q³ − b3·q̇³ − [F_c + Σ ΔF·exp(−(q̇/v_s)²)]·sgn(q̇) − c·q̇|q̇| + τ0, the laws of
-    :meth:`furuta_gym.effects.Effect.generalized_force` (dry friction as the honest
-    discontinuous sgn law, sgn(0) = 0, as :class:`~furuta_gym.effects.WithEffects` with no
-    smoothing, so the model backend with the same effects matches it). A ``com_offset`` Δ shifts
-    MuJoCo's own gravity potential, V(q) → V(q − Δ), generically: + g(q) − g(q − Δ), with
-    g = ∂V_gravity/∂q computed by MuJoCo on a scratch MjData of ``model``.
+    Per dof: the system's −k3·q³ − b3·q̇³, plus each effect's
+    :meth:`furuta_gym.effects.Effect.generalized_force` (dry friction as the honest discontinuous
+    sgn law, sgn(0) = 0, as :class:`~furuta_gym.effects.WithEffects` with no smoothing, so the
+    model backend with the same effects matches it). A ``com_offset`` Δ shifts MuJoCo's own
+    gravity potential, V(q) → V(q − Δ), generically: + g(q) − g(q − Δ), with g = ∂V_gravity/∂q
+    computed by MuJoCo on a scratch MjData of ``model``.
     """
-    terms = tuple((dof, *coefs[:5], tuple(coefs[5])) for dof, coefs in sorted(extra.items()))
-    shift = np.zeros(model.nv)
-    for dof, coefs in extra.items():
-        shift[dof] = coefs[6]
+    dofs = sorted(set(extra.cubic) | set(extra.effects))
+    terms = tuple((dof, *extra.cubic.get(dof, (0.0, 0.0)), tuple(e.law(xp=_FloatMath) for e in extra.effects.get(dof, ())))
+                  for dof in dofs)
+    shift = extra.shift
     if shift.any() and model.nq != model.nv:
         raise ValueError("com_offset needs hinge/slide joints only (qpos and qvel of equal size)")
     scratch = mujoco.MjData(model) if shift.any() else None
@@ -274,15 +290,11 @@ def _passive_callback(extra: dict[int, list], model: mujoco.MjModel):
 
     def callback(model, data):
         qpos, qvel, qfrc = data.qpos, data.qvel, data.qfrc_passive
-        for dof, k3, b3, coulomb, drag, const, stiction in terms:
-            q = qpos[dof]
-            v = qvel[dof]
-            f = const - k3 * q * q * q - b3 * v * v * v - drag * v * abs(v)
-            if v != 0.0 and (coulomb or stiction):
-                dry = coulomb
-                for dF, v_s in stiction:
-                    dry += dF * math.exp(-((v / v_s) ** 2))
-                f -= dry if v > 0.0 else -dry
+        for dof, k3, b3, laws in terms:
+            q, v = float(qpos[dof]), float(qvel[dof])
+            f = -k3 * q * q * q - b3 * v * v * v
+            for law in laws:
+                f += law(q, v)
             qfrc[dof] += f
         if scratch is not None:
             _gravity_force(model, scratch, qpos, g_here)
