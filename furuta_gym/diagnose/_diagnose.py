@@ -63,9 +63,15 @@ class DiagnosisSettings:
     oe_max_windows: int = 24
     oe_max_nfev: int = 15
     trim_seconds: float = 0.05
+    # Gauss-Newton steps on each window's start velocity in the output-error fits (the stiction test
+    # always takes at least one; everywhere on the closed-loop logs it gave less accurate coefficients)
+    start_iterations: int = 0
 
     def resolved(self, system: str, dt: float) -> "DiagnosisSettings":
         definition = system_definition(system)
+        if isinstance(self.start_iterations, bool) or not isinstance(self.start_iterations, (int, np.integer)) \
+                or self.start_iterations < 0:
+            raise ValueError(f"start_iterations: expected an integer >= 0, got {self.start_iterations!r}")
         return dataclasses.replace(
             self,
             interval=self.interval or 0.1,
@@ -378,6 +384,7 @@ class _Fitter:
         self.stride = max(1, int(round(settings.interval / dt)))
         self.L = int(round(settings.window / dt))
         self.smoothing, self.substeps = _fit.PREDICTION[spec.name]
+        self.fit_start = settings.start_iterations
         self.alternative = ""  # the input dynamics' other kind and how it fitted (a note)
         self.c_input = _fit.input_direction(layout, theta_fixed)
         self.weights = np.ones(spec.n_dof)
@@ -429,15 +436,16 @@ class _Fitter:
         return _fit.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
 
     def window_rmse(self, theta, win) -> float:
-        return _fit.window_errors(self.layout, theta, win, self.smoothing, self.substeps)[1]
+        return _fit.window_errors(self.layout, theta, win, self.smoothing, self.substeps, self.fit_start)[1]
 
     def validation_rmse(self, theta, dynamics) -> float:
         return self.window_rmse(theta, self.fit_windows(dynamics, self.val_idx))
 
-    def validation_sums(self, theta, dynamics) -> np.ndarray:
+    def validation_sums(self, theta, dynamics, start_iterations: int | None = None) -> np.ndarray:
         """Per-window squared position errors on the fit-set validation windows."""
         win = self.fit_windows(dynamics, self.val_idx)
-        return _fit.window_square_sums(self.layout, theta, win, self.smoothing, self.substeps)
+        start = self.fit_start if start_iterations is None else start_iterations
+        return _fit.window_square_sums(self.layout, theta, win, self.smoothing, self.substeps, start)
 
     def refine(self, theta0, free, dynamics, tag):
         """Output-error refinement of an equation-error estimate, kept only if it also predicts
@@ -457,7 +465,7 @@ class _Fitter:
             self.notes.append("the equation-error estimate was non-physical or predicted worse than the "
                               f"nominal model ({tag}); output error started from the nominal parameters")
         th, ok = _fit.oe_fit(self.layout, start, free, win, self.smoothing, self.substeps,
-                             max_nfev=self.settings.oe_max_nfev)
+                             max_nfev=self.settings.oe_max_nfev, start_iterations=self.fit_start)
         if not ok:
             self.notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
             return th
@@ -604,30 +612,37 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
     joint that sticks shows in open-loop predictions. With a joint's Coulomb friction accepted, its
     stiction is fitted by output error on the output-error windows and judged on the fit-set
     validation windows by the trace's rule (gain ≥ ``min_improvement``, t ≥ ``z_threshold``),
-    ΔF > 0. Returns (accepted, θ)."""
+    ΔF > 0, against the model without it refitted the same way. Returns (accepted, θ)."""
     s = fx.settings
-    sums = None
-    for c in library:
-        coulomb = f"coulomb_friction:{c.joint}"
-        # an entry in evidence: selected by the trace, or untestable, equivalent, not confirmed
-        if c.name != "stiction" or c.key in evidence or coulomb not in {a.key for a in accepted}:
-            continue
-        trial = accepted + [c]
-        th, _ = _fit.oe_fit(fx.layout, _stiction_start(fx, theta, c), free_columns(fx.layout, trial, fx.fixed_idx),
-                            fx.fit_windows(dyn, fx.oe_idx), fx.smoothing, fx.substeps, max_nfev=s.oe_max_nfev)
-        sums = fx.validation_sums(theta, dyn) if sums is None else sums
-        trial_sums = fx.validation_sums(th, dyn)
+    todo = [c for c in library if c.name == "stiction" and c.key not in evidence
+            and f"coulomb_friction:{c.joint}" in {a.key for a in accepted}]
+    if not todo:
+        return accepted, theta
+    # whether a joint stops within a window depends on its start velocity, which a smoothed
+    # estimate near a stop does not resolve: the windows' start velocities are estimated too
+    start = max(1, s.start_iterations)
+    win = fx.fit_windows(dyn, fx.oe_idx)
+
+    def refit(th0, effects):
+        free = free_columns(fx.layout, effects, fx.fixed_idx)
+        th, _ = _fit.oe_fit(fx.layout, th0, free, win, fx.smoothing, fx.substeps, s.oe_max_nfev, start)
+        return th, fx.validation_sums(th, dyn, start)
+
+    # the baseline is refitted as the trial is, so that the gain is the stiction's own
+    base, sums = refit(theta, accepted)
+    for c in todo:
+        th, trial_sums = refit(_stiction_start(fx, base, c), accepted + [c])
         ev = _prediction_evidence(sums, trial_sums)
         coef = float(th[fx.layout.index(c.key)])
         if coef > 0 and _physical(fx.layout, th) and ev.passes(s.min_improvement, s.z_threshold):
-            accepted, theta, sums = trial, th, trial_sums
+            accepted, theta, base, sums = accepted + [c], th, th, trial_sums
             evidence[c.key] = EffectEvidence(
                 c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z, "selected",
                 "found by prediction, given the joint's Coulomb friction: gain and t on the fit-set "
                 "validation windows")
         else:
-            fx.notes.append(f"{c.key}: tested by prediction given {coulomb}: ΔF {coef:.3g}, validation "
-                            f"gain {ev.improvement:.1%}, t {ev.z:.1f}; not added")
+            fx.notes.append(f"{c.key}: tested by prediction given coulomb_friction:{c.joint}: ΔF {coef:.3g}, "
+                            f"validation gain {ev.improvement:.1%}, t {ev.z:.1f}; not added")
     return accepted, theta
 
 

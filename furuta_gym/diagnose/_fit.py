@@ -299,15 +299,41 @@ PREDICTION = {"furuta": (0.005, 2), "nmsd": (0.01, 2)}
 _BATCH = 16  # windows per compiled call: every window set reuses one compiled shape
 
 
-def _predictor(layout: ParameterLayout, dt: float, length: int, substeps: int, smoothing: float):
+def _refined_positions(positions, v, x, u, q_measured, iterations: int):
+    """A window's predicted positions after Gauss-Newton steps on its start velocity: the velocity
+    that best explains the window's measured positions under the model. A step that does not
+    lower the window's error is not taken; the last rollout is reused as the prediction."""
+    n = v.shape[0]
+    p = positions(v, x, u)
+    for _ in range(iterations):
+        p, lin = jax.linearize(lambda vv: positions(vv, x, u), v)
+        r = (p - q_measured).reshape(-1)
+        J = jax.vmap(lin, out_axes=-1)(jnp.eye(n)).reshape(-1, n)
+        JtJ = J.T @ J
+        v_new = v - jnp.linalg.solve(JtJ + (1e-9 * jnp.trace(JtJ) + 1e-300) * jnp.eye(n), J.T @ r)
+        p_new = positions(v_new, x, u)
+        better = jnp.sum((p_new - q_measured) ** 2) < r @ r  # False for a non-finite rollout
+        v, p = jnp.where(better, v_new, v), jnp.where(better, p_new, p)
+    return p
+
+
+def _predictor(layout: ParameterLayout, dt: float, length: int, substeps: int, smoothing: float,
+               start_iterations: int = 0):
     n = get_spec(layout.system).n_dof
 
-    def predict(theta, x0, us):
+    def predict(theta, x0, us, q_measured):
         model = layout.model(theta, coulomb_smoothing=smoothing)
-        xs = jax.vmap(lambda x, u: rollout_zoh(model, x, u, dt, substeps))(x0, us)
-        return xs[:, 1:, :n]
 
-    return _compiled("predict", layout, dt, length, substeps, smoothing, build=lambda: jax.jit(predict))
+        def positions(v, x, u):
+            return rollout_zoh(model, jnp.concatenate([x[:n], v]), u, dt, substeps)[1:, :n]
+
+        def one(x, u, qm):
+            return _refined_positions(positions, x[n:], x, u, qm, start_iterations)
+
+        return jax.vmap(one)(x0, us, q_measured)
+
+    return _compiled("predict", layout, dt, length, substeps, smoothing, start_iterations,
+                     build=lambda: jax.jit(predict))
 
 
 def _batches(win: "Windows"):
@@ -319,22 +345,26 @@ def _batches(win: "Windows"):
         yield idx.size, jnp.asarray(win.x0[pad]), jnp.asarray(win.us[pad]), jnp.asarray(win.q[pad])
 
 
-def predict_windows(layout, theta, win: Windows, smoothing: float, substeps: int = 1) -> np.ndarray:
-    predict = _predictor(layout, win.dt, win.length, substeps, smoothing)
-    out = [np.asarray(predict(jnp.asarray(theta), x0, us))[:k] for k, x0, us, _ in _batches(win)]
+def predict_windows(layout, theta, win: Windows, smoothing: float, substeps: int = 1,
+                    start_iterations: int = 0) -> np.ndarray:
+    """Open-loop position predictions of each window; with ``start_iterations`` > 0 each window's
+    start velocity is first re-estimated from its own positions (Gauss-Newton steps)."""
+    predict = _predictor(layout, win.dt, win.length, substeps, smoothing, start_iterations)
+    out = [np.asarray(predict(jnp.asarray(theta), x0, us, q))[:k] for k, x0, us, q in _batches(win)]
     return np.concatenate(out)
 
 
-def window_square_sums(layout, theta, win: Windows, smoothing: float, substeps: int = 1) -> np.ndarray:
+def window_square_sums(layout, theta, win: Windows, smoothing: float, substeps: int = 1,
+                       start_iterations: int = 0) -> np.ndarray:
     """(W,) sum of squared position errors of each open-loop window (inf where it blew up)."""
-    err = predict_windows(layout, theta, win, smoothing, substeps) - win.q
+    err = predict_windows(layout, theta, win, smoothing, substeps, start_iterations) - win.q
     ss = np.sum(err**2, axis=(1, 2))
     return np.where(np.isfinite(ss), ss, np.inf)
 
 
-def window_errors(layout, theta, win: Windows, smoothing: float, substeps: int = 1):
+def window_errors(layout, theta, win: Windows, smoothing: float, substeps: int = 1, start_iterations: int = 0):
     """Per-joint RMS position error of open-loop window predictions, and the combined RMS."""
-    pred = predict_windows(layout, theta, win, smoothing, substeps)
+    pred = predict_windows(layout, theta, win, smoothing, substeps, start_iterations)
     err = pred - win.q
     if not np.all(np.isfinite(err)):
         per = np.full(err.shape[-1], np.inf)
@@ -351,6 +381,7 @@ def oe_fit(
     smoothing: float,
     substeps: int = 1,
     max_nfev: int = 10,
+    start_iterations: int = 0,
 ):
     """Refine the free entries of θ by output error (Gauss-Newton / trust region).
 
@@ -368,7 +399,7 @@ def oe_fit(
         return th
 
     def f(z):
-        r = (predict_windows(layout, full(z), win, smoothing, substeps) - win.q).reshape(-1)
+        r = (predict_windows(layout, full(z), win, smoothing, substeps, start_iterations) - win.q).reshape(-1)
         return np.where(np.isfinite(r), r, 1e3)
 
     def J(z):

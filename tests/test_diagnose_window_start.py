@@ -1,0 +1,57 @@
+"""Open-loop prediction windows whose start velocity is estimated from the window's own positions
+(Gauss-Newton on the start velocity, ``start_iterations``): what the stiction test uses, since a
+smoothed velocity estimate does not resolve a joint that is about to stop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import furuta_gym
+from furuta_gym.diagnose import _fit, diagnose, measured_like
+from furuta_gym.diagnose._library import layout_for
+
+furuta_gym.enable_x64()
+
+DT, L = 0.002, 50
+
+
+def _windows(layout, theta, velocity_error, noise=0.0, seed=0):
+    """Four windows simulated by the model itself from known states, handed to the predictor with
+    start velocities off by ``velocity_error`` (rad/s) and positions with Gaussian noise."""
+    rng = np.random.default_rng(seed)
+    x0 = np.array([[0.1, 3.0, 1.0, -2.0], [0.0, 0.2, -0.5, 3.0], [-0.3, 1.0, 0.0, 0.0], [0.5, np.pi, 2.0, 0.3]])
+    us = rng.uniform(-2, 2, (4, L, 1))
+    truth = _fit.Windows(x0, us, np.zeros((4, L, 2)), np.zeros(4, int), DT, L)
+    q = _fit.predict_windows(layout, theta, truth, 0.005, 2) + noise * rng.standard_normal((4, L, 2))
+    start = x0.copy()
+    start[:, 2:] += velocity_error
+    return _fit.Windows(start, us, q, np.zeros(4, int), DT, L)
+
+
+def test_estimated_start_velocity_recovers_the_true_one():
+    layout = layout_for("furuta")
+    theta = layout.nominal()
+    win = _windows(layout, theta, velocity_error=np.array([0.3, -0.4]))
+    as_given = _fit.window_errors(layout, theta, win, 0.005, 2)[1]
+    estimated = _fit.window_errors(layout, theta, win, 0.005, 2, start_iterations=1)[1]
+    assert as_given > 1e-3  # 0.3 rad/s over 0.1 s
+    assert estimated < 1e-2 * as_given  # one Gauss-Newton step
+
+
+def test_estimated_start_never_predicts_worse_and_reaches_the_noise_floor():
+    layout = layout_for("furuta")
+    theta = layout.nominal()
+    noise = 1e-3
+    win = _windows(layout, theta, velocity_error=np.array([0.2, 0.5]), noise=noise, seed=1)
+    sums_given = _fit.window_square_sums(layout, theta, win, 0.005, 2)
+    sums_one = _fit.window_square_sums(layout, theta, win, 0.005, 2, start_iterations=1)
+    assert np.all(sums_one <= sums_given)
+    rms = np.sqrt(sums_one.sum() / win.q.size)
+    assert rms < 1.1 * noise  # two fitted numbers per window: just under the noise itself
+
+
+def test_bad_start_iterations_is_named():
+    data = measured_like("furuta", [], seed=0, n_trajectories=2, duration=3.0)
+    with pytest.raises(ValueError, match="start_iterations"):
+        diagnose(data, "furuta", start_iterations=-1)
