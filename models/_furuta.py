@@ -215,6 +215,7 @@ FURUTA_DEFINITION = SystemDefinition(
     chirp_initial_ranges=((-1.0, 1.0), (-3.141592653589793, 3.141592653589793), (-3.0, 3.0), (-3.0, 3.0)),
     chirp_end_frequency=5.0,
     diagnosis_window=0.5,
+    diagnosis_prediction=(0.005, 2),  # rad/s
     diagnosis_segment_seconds=2.0,
     excitations=("chirp", "sine_sweep", "closed_loop_prbs"),
     encoders=True,

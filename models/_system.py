@@ -104,6 +104,10 @@ class SystemDefinition:
     the joints are measured by quadrature encoders (else by a position sensor with Gaussian noise).
     ``lumped_values(parameters)``: the values the lumped form and ``energy`` use, from a mapping
     of physical parameter floats; ``energy(values, x)``: T + V on plain floats (the envs' info).
+    ``diagnosis_prediction``: (Coulomb smoothing ε, RK4 substeps per sample) of the diagnosis's
+    open-loop predictions: the sgn law smoothed for the integrator, ε well below the Stribeck
+    velocity so that a fitted stiction is the breakaway itself, not what a wider smoothing leaves
+    of it; enough substeps for RK4 to stay stable on the steep friction law and the sample period.
     ``energy_panels``: (state index, grid low, grid high, grid factor, label) of the
     reproduction's energy figure. ``write_mujoco(model, parameters)``: writes the physical
     parameters' bodies, inertias and gravity into an ``MjModel`` of the system's MJCF and returns
@@ -127,6 +131,7 @@ class SystemDefinition:
     chirp_end_frequency: float
     diagnosis_window: float
     diagnosis_segment_seconds: float
+    diagnosis_prediction: tuple[float, int]
     table_title: str
     energy_panels: tuple
     lumped_values: Callable[[Any], dict]

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import argparse
 
+from ..systems import SYSTEMS
+
 # the logs are read as train and evaluate read them (one helper); the old names stay
 from ._logs import load_logs as _load, pairs as _pairs, qube_runs as _qube_runs  # noqa: F401
 
@@ -20,7 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="measured data: CSV (long form, .csv.gz too), NPZ or MAT; several files "
                         "are pooled. 'qube:RUNS' (e.g. qube:1-5, qube:2,7, qube) takes the real "
                         "QUBE-Servo runs shipped with the package, in this project's convention")
-    parser.add_argument("--system", required=True, choices=["furuta", "nmsd"])
+    parser.add_argument("--system", required=True, choices=sorted(SYSTEMS))
     parser.add_argument("--test", metavar="TEST", nargs="+",
                         help="logs never used for fitting (same format and options as DATA): "
                         "errors before/after on them are reported beside the held-out split")

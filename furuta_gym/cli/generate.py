@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 
+from ..systems import SYSTEMS
+
 __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--system", required=True, choices=["furuta", "nmsd"])
+    parser.add_argument("--system", required=True, choices=sorted(SYSTEMS))
     parser.add_argument("--out", required=True, help="output folder (CSV files + manifest.json)")
     parser.add_argument("--seed", type=int, default=0, help="random seed for the initial states")
     parser.add_argument(

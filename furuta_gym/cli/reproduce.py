@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+
+from ..systems import SYSTEMS
 import os
 import shlex
 import sys
@@ -23,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="train every model with N seeds (seed, seed+1, ...) and report mean ± std",
     )
     parser.add_argument(
-        "--system", choices=["nmsd", "furuta"], action="append", dest="systems",
+        "--system", choices=sorted(SYSTEMS), action="append", dest="systems",
         help="only this system (repeatable; default both)",
     )
     parser.add_argument(

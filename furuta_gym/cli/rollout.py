@@ -12,6 +12,8 @@ Existing outputs are never overwritten unless ``--overwrite`` is given.
 from __future__ import annotations
 
 import argparse
+
+from ..systems import SYSTEMS
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +23,7 @@ VIDEO_FPS = 30
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--system", choices=("furuta", "nmsd"), default="furuta")
+    parser.add_argument("--system", choices=sorted(SYSTEMS), default="furuta")
     parser.add_argument(
         "--dynamics",
         default="mujoco",

@@ -21,6 +21,8 @@ resumable ``DIR/train_state.eqx``, periodic ``DIR/model_epoch*.eqx`` and ``DIR/h
 from __future__ import annotations
 
 import argparse
+
+from ..systems import SYSTEMS
 import json
 
 from ._logs import add_log_arguments, prepared_logs
@@ -59,7 +61,7 @@ def _horizons(text: str) -> tuple[int | float | None, ...]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--system", required=True, choices=["furuta", "nmsd"])
+    parser.add_argument("--system", required=True, choices=sorted(SYSTEMS))
     parser.add_argument("--model", required=True, choices=["dln", "aph", "adln"],
                         help="DeLaN, APHYNITY or augmented DeLaN")
     parser.add_argument("--loss", required=True, choices=["traj", "aph", "prop", "itau"],

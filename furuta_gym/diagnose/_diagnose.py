@@ -383,7 +383,7 @@ class _Fitter:
         dt = segs[0].dt
         self.stride = max(1, int(round(settings.interval / dt)))
         self.L = int(round(settings.window / dt))
-        self.smoothing, self.substeps = _fit.PREDICTION[spec.name]
+        self.smoothing, self.substeps = system_definition(spec.name).diagnosis_prediction
         self.fit_start = settings.start_iterations
         self.alternative = ""  # the input dynamics' other kind and how it fitted (a note)
         self.c_input = _fit.input_direction(layout, theta_fixed)

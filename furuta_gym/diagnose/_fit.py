@@ -290,12 +290,6 @@ def make_windows(segments: list[Segment], length: int, dynamics: InputDynamics =
     return w
 
 
-# (Coulomb smoothing ε, RK4 substeps per sample) of the open-loop predictions, per system: the
-# sgn law smoothed for the integrator, ε well below the Stribeck velocity (0.05) so that a fitted
-# stiction is the breakaway itself, not what a wider smoothing leaves of it; substeps keep RK4
-# stable on the steep friction law (Furuta) and on the N-MSD's 100 Hz samples
-PREDICTION = {"furuta": (0.005, 2), "nmsd": (0.01, 2)}
-
 _BATCH = 16  # windows per compiled call: every window set reuses one compiled shape
 
 

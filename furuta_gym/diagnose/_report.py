@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..models import system_definition
+
 __all__ = ["format_table", "write_json", "write_figures"]
 
 
@@ -245,7 +247,7 @@ def _window_predictions(res, segs):
     from . import _fit
 
     L = int(round(res.settings.window / segs[0].dt))
-    smoothing, substeps = _fit.PREDICTION[res.system]
+    smoothing, substeps = system_definition(res.system).diagnosis_prediction
     preds = []
     for theta, dyn in ((res.theta_before, _fit.NO_INPUT_DYNAMICS), (res.theta_after, res.input_dynamics)):
         win = _fit.make_windows(segs, L, dyn)
