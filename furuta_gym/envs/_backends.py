@@ -26,15 +26,23 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Mapping, Sequence
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import mujoco
 import numpy as np
+from jax.flatten_util import ravel_pytree
 
+from .._jaxpr_to_c import CKernel, CKernelError
+from .._x64 import ensure_x64
 from ..assets import asset_path
-from ..effects import STATEFUL_EFFECTS, Effect, actuator_lag_time
+from ..effects import STATEFUL_EFFECTS, Effect, WithEffects, actuator_lag_time
 from ..lagrangian import AbstractLagrangianSystem
-from ..models import system_definition
+from ..models import analytic_model, system_definition
+from ..models.checkpoint import load_model
+from ..simulate import rk4_step, small_kernel_compiler_options
 from ..systems import get_spec
-from ._parameters import default_parameters
+from ._parameters import PARAMETER_CLASSES, default_parameters
 
 __all__ = [
     "AbstractBackend",
@@ -457,12 +465,6 @@ KERNELS = ("auto", "c", "xla")
 def _step_functions(static, rebuild, timestep: float, substeps: int):
     """The (full period, split period) steps of one model structure as plain JAX functions of
     ``(model arrays, x, u...)``: what both kernels compile."""
-    import equinox as eqx
-    import jax
-    import jax.numpy as jnp
-
-    from ..simulate import rk4_step
-
     def period(flat, x, u):
         system = eqx.combine(rebuild(flat), static)
         return jax.lax.fori_loop(0, substeps, lambda _, x_: rk4_step(system, x_, u, timestep), x)
@@ -488,10 +490,6 @@ def _compiled_steps(static, rebuild, treedef_key, timestep: float, substeps: int
     list of their own: a slice feeding a matrix product is a separate XLA kernel per leaf and call
     (~8 µs of a ~50 µs single-copy DeLaN step).
     """
-    import jax
-
-    from ..simulate import small_kernel_compiler_options
-
     key = (treedef_key, timestep, substeps)
     try:
         return _STEP_CACHE[key]
@@ -518,8 +516,6 @@ class _XlaStepper:
         self._x = None
 
     def reset(self, x) -> None:
-        import jax.numpy as jnp
-
         self._x = jnp.asarray(np.asarray(x, dtype=np.float64))
 
     def step(self, u) -> np.ndarray:
@@ -544,8 +540,6 @@ class _CStepper:
     name = "c"
 
     def __init__(self, static, rebuild, treedef_key, dynamic, timestep, substeps, n_state, n_inputs):
-        import jax
-
         self._n_state = n_state
         self._functions = _step_functions(static, rebuild, timestep, substeps)
         self._model_name = type(static).__name__  # named when its C kernel is refused
@@ -562,8 +556,6 @@ class _CStepper:
         """The compiled kernel of this model structure, or the CKernelError it gave: a failure is
         cached too, so ``kernel="auto"`` does not trace and translate the step again at every
         reset that draws new parameters (domain randomisation)."""
-        from .._jaxpr_to_c import CKernel, CKernelError
-
         key = (which, *self._key)
         try:
             kernel = _C_KERNEL_CACHE[key]
@@ -651,8 +643,6 @@ class ModelBackend(AbstractBackend):
         parameters: Mapping[str, float] | None = None,
         kernel: str = "auto",
     ):
-        from .._x64 import ensure_x64
-
         if kernel not in KERNELS:
             raise ValueError(f"kernel must be one of {list(KERNELS)}, got {kernel!r}")
         ensure_x64()
@@ -674,17 +664,9 @@ class ModelBackend(AbstractBackend):
             self._set_model(model)
 
     def _has_parameters(self) -> bool:
-        from ._parameters import PARAMETER_CLASSES
-
         return isinstance(getattr(self.base_model, "params", None), PARAMETER_CLASSES[self.system])
 
     def _set_model(self, model: AbstractLagrangianSystem) -> None:
-        import equinox as eqx
-        import jax
-        from jax.flatten_util import ravel_pytree
-
-        from ..effects import WithEffects
-
         self.model = WithEffects(model, self.effects) if self.effects else model
         dynamic, static = eqx.partition(self.model, eqx.is_array)
         leaves, treedef = jax.tree_util.tree_flatten(dynamic)
@@ -703,8 +685,6 @@ class ModelBackend(AbstractBackend):
         self._stepper = self._make_stepper(static, rebuild, treedef_key)
 
     def _make_stepper(self, static, rebuild, treedef_key):
-        from .._jaxpr_to_c import CKernelError
-
         state = None if self._stepper is None else self._stepper.state
         n_inputs = len(self.spec.input_names)
         args = (static, rebuild, treedef_key, self._dynamic, self.timestep, self.substeps, 2 * self._n, n_inputs)
@@ -730,9 +710,6 @@ class ModelBackend(AbstractBackend):
     def set_parameters(self, values: Mapping[str, float]) -> None:
         if not self._has_parameters():
             super().set_parameters(values)
-        import equinox as eqx
-
-        from ._parameters import PARAMETER_CLASSES
 
         nominal = default_parameters(self.system)
         unknown = sorted(set(values) - set(nominal))
@@ -787,8 +764,6 @@ class ModelBackend(AbstractBackend):
 
 
 def _params_as_floats(params) -> dict[str, float]:
-    import dataclasses
-
     return {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
 
 
@@ -798,18 +773,11 @@ def _params_as_floats(params) -> dict[str, float]:
 
 
 def load_checkpoint(path: str | os.PathLike, system: str | None = None) -> AbstractLagrangianSystem:
-    """Load a model written by ``furuta-gym train`` (via ``furuta_gym.training.checkpoint``);
+    """Load a model written by ``furuta-gym train`` (:func:`furuta_gym.models.checkpoint.load_model`);
     with ``system``, a checkpoint of the other system is a clear error."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"dynamics: checkpoint file {str(path)!r} not found; accepted: {_ACCEPTED}")
-    try:
-        from ..models.checkpoint import load_model
-    except ImportError as exc:
-        raise ValueError(
-            f"dynamics: cannot load checkpoint {str(path)!r}: the checkpoint loader "
-            f"furuta_gym.training.checkpoint.load_model is not available ({exc})"
-        ) from exc
     return load_model(path, expected_system=system)
 
 
@@ -842,8 +810,6 @@ def make_backend(
                 )
             return MujocoBackend(system, substeps, effects, parameters)
         if name == "analytic":
-            from ..models import analytic_model
-
             model = analytic_model(system)
         elif Path(name).exists() or os.sep in name or Path(name).suffix:
             model = load_checkpoint(name, system)
