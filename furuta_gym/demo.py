@@ -17,10 +17,21 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import time
+import warnings
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
+
+from ._x64 import ensure_x64
+from .controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
+from .data import save_trajectories
+from .diagnose import diagnose, measured_like
+from .effects import Effect
+from .training.datagen import FurutaRecipe, generate_datasets, write_datasets
+from .training.train import TrainConfig, train
 
 __all__ = ["DemoConfig", "run_demo"]
 
@@ -70,7 +81,6 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     import matplotlib
 
     matplotlib.use("Agg")
-    from . import ensure_x64
 
     ensure_x64()
     cfg = config or DemoConfig()
@@ -107,8 +117,6 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
 
 def _generate(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> dict:
     """1. A small Furuta training set (and a held-out trajectory) from the MuJoCo ground truth."""
-    from .training.datagen import FurutaRecipe, generate_datasets, write_datasets
-
     with _bar(1, "1/6 generate data (MuJoCo)", progress) as bar:
         recipe = dataclasses.replace(
             FurutaRecipe.small(), n_train=cfg.n_train, n_test_free=1,
@@ -124,10 +132,6 @@ def _generate(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> di
 
 def _train(cfg: DemoConfig, out: Path, datasets: dict, loss: str, progress: bool, overwrite: bool):
     """2. A DeLaN trained with ``loss`` on the demo's data."""
-    import shutil
-
-    from .training.train import TrainConfig, train
-
     tc = TrainConfig.for_system("furuta", epochs=cfg.epochs, seed=cfg.seed,
                                 progress=progress, checkpoint_every=10**9)
     run_dir = out / "models" / f"dln_{loss}"
@@ -142,8 +146,6 @@ def _train(cfg: DemoConfig, out: Path, datasets: dict, loss: str, progress: bool
 def _free_run(dynamics, x0, steps: int, seed: int) -> np.ndarray:
     """States of ``Furuta-v0`` with ``dynamics`` run free from ``x0`` for ``steps`` control
     periods; a model that diverges is padded with its last finite state."""
-    import gymnasium as gym
-
     env = gym.make("furuta_gym/Furuta-v0", dynamics=dynamics)
     obs, info = env.reset(seed=seed, options={"state": x0})
     xs = [info["state"]]
@@ -182,10 +184,6 @@ def _swap_into_env(cfg: DemoConfig, models: dict, progress: bool):
 
 def _control(cfg: DemoConfig, model, progress: bool):
     """4. Swing-up + LQR designed on ``model``, run on MuJoCo from rest and seeded starts near it."""
-    import gymnasium as gym
-
-    from .controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
-
     with _bar(2, "4/6 swing-up + LQR from the learned model on MuJoCo", progress) as bar:
         ctrl = SwingUpLQR.from_model(model)
         bar.update(1)
@@ -208,10 +206,6 @@ def _control(cfg: DemoConfig, model, progress: bool):
 
 def _diagnose_log(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> dict:
     """5. A measured-like log of a plant with an undeclared rotor cable spring, diagnosed."""
-    from .data import save_trajectories
-    from .diagnose import diagnose, measured_like
-    from .effects import Effect
-
     with _bar(1, "5/6 diagnose a log with an undeclared cable spring", progress) as bar:
         log = measured_like("furuta", [Effect("spring", "alpha", cfg.spring)],
                             n_trajectories=cfg.diagnose_trajectories,
@@ -315,9 +309,6 @@ def _plot_control(path, record):
 
 
 def _video(path, xs, fps: int = 30):
-    import warnings
-
-    import gymnasium as gym
     import imageio.v2 as imageio
 
     env = gym.make("furuta_gym/Furuta-v0", render_mode="rgb_array")

@@ -12,6 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from ..models import system_definition
+from ..systems import get_spec
+from . import _fit
+from ._problem import Problem
 
 __all__ = ["format_table", "write_json", "write_figures"]
 
@@ -150,9 +153,6 @@ def _stride(res, dt: float) -> int:
 def _problem(res, segments, dynamics):
     """The equation-error problem of ``segments`` rebuilt on copies (``res._segments`` keep the
     regressors ``diagnose`` left in them)."""
-    from . import _fit
-    from ._problem import Problem
-
     copies = [dataclasses.replace(s) for s in segments]
     theta0, st = _anchor(res), res.settings
     _fit.build_regressors(copies, res.layout, theta0, _stride(res, segments[0].dt), st.input_hold,
@@ -165,8 +165,6 @@ def residual_series(res, segments, which: str) -> list[tuple[np.ndarray, np.ndar
     (N, n_joints; N·m·s or N·s) of the declared model (``which="before"``) or of the model with
     the found effects and input dynamics (``"after"``). Intervals where a joint is at rest (left
     out of the fit's equations) are NaN for that joint."""
-    from . import _fit
-
     if which not in ("before", "after"):
         raise ValueError(f"which must be 'before' or 'after', got {which!r}")
     theta = res.theta_before if which == "before" else res.theta_after
@@ -190,8 +188,6 @@ def _rms(x) -> float:
 
 def _joint_labels(res):
     """Per joint: name, position unit, residual unit (∫ torque dt or ∫ force dt per interval)."""
-    from ..systems import get_spec
-
     spec = get_spec(res.system)
     return [(j, "rad" if a else "m", "N·m·s" if a else "N·s") for j, a in zip(spec.joint_names, spec.angular)]
 
@@ -244,8 +240,6 @@ def _window_predictions(res, segs):
     """Every non-overlapping open-loop window of ``segs`` (as ``diagnose`` scores them): the
     measured positions (W, L + 1, n) from the start state on, both models' predictions the same
     shape, the time axis (W, L + 1) and each window's segment name."""
-    from . import _fit
-
     L = int(round(res.settings.window / segs[0].dt))
     smoothing, substeps = system_definition(res.system).diagnosis_prediction
     preds = []
@@ -344,8 +338,6 @@ def _effect_regressor(res, eff, prob):
 
 
 def _plot_residual_vs_effect(res):
-    from . import _fit
-
     fig = _figure(figsize=(6.4, 4.8))
     ax = fig.subplots()
     eff = _shown_effect(res)
