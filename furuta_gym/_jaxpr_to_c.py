@@ -28,6 +28,7 @@ kept. POSIX only: on Windows, or without a working compiler, the callers take XL
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import ctypes
 import hashlib
@@ -42,6 +43,7 @@ import warnings
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+import jax
 import numpy as np
 
 from ._paths import cache_root
@@ -485,8 +487,6 @@ class _Translator:
         """gather / scatter / dynamic slices with indices known here: linear in the other
         operands, so the result is ``Σ_i J_i · x_i`` with JAX's own (0/1) Jacobians J_i,
         written out element by element."""
-        import jax
-
         index_args = _LINEAR_WITH_INDICES[eqn.primitive.name]
         known = {k: ins[k].value for k in index_args(len(ins))}
         missing = [k for k, v in known.items() if v is None]
@@ -1009,8 +1009,6 @@ def _private_dir() -> Path:
     exit: the last resort when no shared cache directory can be trusted."""
     global _PRIVATE_DIR
     if _PRIVATE_DIR is None:
-        import atexit
-
         _PRIVATE_DIR = Path(tempfile.mkdtemp(prefix="furuta_gym_c_kernels_"))
         atexit.register(shutil.rmtree, _PRIVATE_DIR, ignore_errors=True)
     return _PRIVATE_DIR
@@ -1185,8 +1183,6 @@ class CKernel:
     """
 
     def __init__(self, fn: Callable, *example_args: Any, name: str = "kernel"):
-        import jax
-
         _require_compiler()
         leaves, self.in_tree = jax.tree_util.tree_flatten(example_args)
         self.in_avals = [_Aval(np.shape(x), x.dtype if hasattr(x, "dtype") else np.asarray(x).dtype) for x in leaves]
@@ -1218,8 +1214,6 @@ class CKernel:
         """Run the C function and XLA on the example inputs and a few random ones near them: a
         translation bug (or a primitive whose C semantics differ) must never silently change a
         model's dynamics, so a kernel that disagrees is refused and the caller takes XLA."""
-        import jax
-
         reference = jax.jit(flat_fn)
         rng = np.random.default_rng(0)
         for trial in range(1 + _VERIFY_TRIALS):
@@ -1300,8 +1294,6 @@ class CKernel:
 
     def __call__(self, *args):
         """Convenience call (allocates; for tests and one-off use): same pytree as ``fn``."""
-        import jax
-
         leaves = jax.tree_util.tree_leaves(args)
         inputs = [np.ascontiguousarray(np.asarray(x, dtype=a.dtype).reshape(a.shape)) for x, a in zip(leaves, self.in_avals)]
         _, outputs = self.new_buffers()

@@ -25,10 +25,13 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
+import equinox as eqx
+import jax
 import numpy as np
 
 from .data import DataError, Trajectory
 from .signals import ENCODER_COUNTS_PER_REV, derivative_filter, zero_phase_velocity
+from .simulate import rollout_zoh
 
 __all__ = [
     "SPLIT_SECONDS",
@@ -172,11 +175,6 @@ def window_predictions(model, x0, us, dt: float, substeps: int = 4, batch: int =
     Coulomb friction's sign change where an adaptive solver would crawl). Non-finite where a
     prediction blew up. Windows go through in padded batches of ``batch``, so one compiled call
     serves every window set of the same length."""
-    import equinox as eqx
-    import jax
-
-    from .simulate import rollout_zoh
-
     params, static = eqx.partition(model, eqx.is_array)
     key = (static, jax.tree_util.tree_structure(params), us.shape[1:], float(dt), substeps, batch)
     fn = _ROLLOUTS.get(key)

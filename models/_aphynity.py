@@ -17,6 +17,8 @@ or L_prop (with the same minimum-norm principle for F_a).
 
 from __future__ import annotations
 
+import dataclasses
+
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -128,6 +130,4 @@ class Aphynity(AbstractLearnedSystem):
 
 
 def dataclass_fields(module) -> list[str]:
-    import dataclasses
-
     return [f.name for f in dataclasses.fields(module)]

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..effects import INPUT_EFFECTS, JOINT_EFFECTS, Effect
 from ..models import SYSTEM_DEFINITIONS, parameter_defaults, system_definition
+from ..systems import get_spec
 
 __all__ = [
     "PARAMETER_CLASSES",
@@ -108,8 +109,6 @@ PLANT_PRESETS: dict[str, dict[str, tuple[Effect, ...]]] = {
 
 def resolve_effects(system: str, plant, effects: Sequence[Effect] | None) -> tuple[Effect, ...]:
     """Combine a named ``plant`` preset (or a list of names) with explicit ``effects``."""
-    from ..systems import get_spec
-
     spec = get_spec(system)
     presets = PLANT_PRESETS[system]
     names = [] if plant is None else [plant] if isinstance(plant, str) else list(plant)

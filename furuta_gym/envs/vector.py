@@ -34,6 +34,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..lagrangian import AbstractLagrangianSystem, energy
+from ..models import analytic_model
 from ..signals import quantize_joints
 from ..simulate import small_kernel_compiler_options
 from ._backends import ModelBackend
@@ -283,7 +284,6 @@ class LagrangianVectorEnv(VectorEnv):
         self.system: AbstractLagrangianSystem = backend.model
         parameters = template.physical_parameters()
         analytic_params = PARAMETER_CLASSES[backend.system](**parameters)
-        from ..models import analytic_model
 
         # energy in info is the paper's model at the plant's parameters, as the single env reports
         self._energy_model = eqx.tree_at(

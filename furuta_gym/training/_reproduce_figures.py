@@ -16,9 +16,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import jax.numpy as jnp
 import numpy as np
 
 from ..models import system_definition
+from .checkpoint import load_model
+from .metrics import _terms_along, _true_accelerations, energy_along, predict
 from .reproduce import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 
 FORCED_SET = {"nmsd": "test_square", "furuta": "test_forced"}
@@ -30,8 +33,6 @@ STATE_LABELS = {
 
 
 def _load_models(out: Path, system: str, config) -> list[tuple[str, str, object]]:
-    from .checkpoint import load_model
-
     seed = config.seeds[0]
     models = []
     for kind, loss in config.pairs:
@@ -74,8 +75,6 @@ def _predictions(system, data, truth, models, tr, k):
     """Open-loop predictions on the first ``k`` samples of the first forced trajectory."""
     import matplotlib.pyplot as plt
 
-    from .metrics import predict
-
     n = truth.spec.n_dof
     fig, axes = plt.subplots(2 * n, 1, figsize=(8, 2.0 * 2 * n), sharex=True)
     for j in range(2 * n):
@@ -111,8 +110,6 @@ def _energy_cases(system):
 def _energy_over_state(system, truth, physics):
     import matplotlib.pyplot as plt
 
-    from .metrics import energy_along
-
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     for ax, (x, q, qd, xlabel) in zip(axes, _energy_cases(system)):
         ax.plot(x, energy_along(truth, q, qd, normalize=False), "k", lw=2, label="ground truth")
@@ -128,8 +125,6 @@ def _energy_over_state(system, truth, physics):
 
 def _energy_over_time(system, data, truth, physics):
     import matplotlib.pyplot as plt
-
-    from .metrics import energy_along
 
     tr_e = data[ENERGY_SET[system]][0]
     fig, ax = plt.subplots(figsize=(7, 3.4))
@@ -147,10 +142,7 @@ def _energy_over_time(system, data, truth, physics):
 
 def _forces(system, truth, physics, tr, k):
     """Inertial, Coriolis and potential forces per joint along the first ``k`` samples of ``tr``."""
-    import jax.numpy as jnp
     import matplotlib.pyplot as plt
-
-    from .metrics import _terms_along, _true_accelerations
 
     n = truth.spec.n_dof
     q, qd = jnp.asarray(tr.q[:k]), jnp.asarray(tr.qd[:k])

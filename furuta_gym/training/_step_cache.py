@@ -35,6 +35,7 @@ import os
 import sys
 import tempfile
 import warnings
+import sysconfig
 from pathlib import Path
 from typing import Any, Callable
 
@@ -67,8 +68,6 @@ _SOURCE_DIGEST: str | None = None
 def _local_sources() -> list[Path]:
     """Every .py file of furuta_gym (imported or not) and every loaded module that is not part of
     an installed distribution or the standard library (e.g. a user's own model class)."""
-    import sysconfig
-
     installed = {Path(sysconfig.get_paths()[k]).resolve() for k in ("stdlib", "platstdlib", "purelib", "platlib")}
     files: set[Path] = set()
     # the whole package whatever was imported, so every process computes the same digest; the
