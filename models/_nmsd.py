@@ -80,6 +80,7 @@ NMSD_LUMPED = LumpedForm(
     mechanical_anchor="m",
 )
 
+
 def write_nmsd_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
     """The mass; the linear spring and damper native, the cubic terms for the passive callback."""
     model.body_mass[model.body("mass").id] = p["m"]

@@ -384,7 +384,6 @@ class _Fitter:
         self.stride = max(1, int(round(settings.interval / dt)))
         self.L = int(round(settings.window / dt))
         self.smoothing, self.substeps = system_definition(spec.name).diagnosis_prediction
-        self.fit_start = settings.start_iterations
         self.alternative = ""  # the input dynamics' other kind and how it fitted (a note)
         self.c_input = _fit.input_direction(layout, theta_fixed)
         self.weights = np.ones(spec.n_dof)
@@ -436,7 +435,8 @@ class _Fitter:
         return _fit.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
 
     def window_rmse(self, theta, win) -> float:
-        return _fit.window_errors(self.layout, theta, win, self.smoothing, self.substeps, self.fit_start)[1]
+        return _fit.window_errors(self.layout, theta, win, self.smoothing, self.substeps,
+                                 self.settings.start_iterations)[1]
 
     def validation_rmse(self, theta, dynamics) -> float:
         return self.window_rmse(theta, self.fit_windows(dynamics, self.val_idx))
@@ -444,7 +444,7 @@ class _Fitter:
     def validation_sums(self, theta, dynamics, start_iterations: int | None = None) -> np.ndarray:
         """Per-window squared position errors on the fit-set validation windows."""
         win = self.fit_windows(dynamics, self.val_idx)
-        start = self.fit_start if start_iterations is None else start_iterations
+        start = self.settings.start_iterations if start_iterations is None else start_iterations
         return _fit.window_square_sums(self.layout, theta, win, self.smoothing, self.substeps, start)
 
     def refine(self, theta0, free, dynamics, tag):
@@ -465,7 +465,7 @@ class _Fitter:
             self.notes.append("the equation-error estimate was non-physical or predicted worse than the "
                               f"nominal model ({tag}); output error started from the nominal parameters")
         th, ok = _fit.oe_fit(self.layout, start, free, win, self.smoothing, self.substeps,
-                             max_nfev=self.settings.oe_max_nfev, start_iterations=self.fit_start)
+                             max_nfev=self.settings.oe_max_nfev, start_iterations=self.settings.start_iterations)
         if not ok:
             self.notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
             return th

@@ -297,8 +297,9 @@ def _refined_positions(positions, v, x, u, q_measured, iterations: int):
     """A window's predicted positions after Gauss-Newton steps on its start velocity: the velocity
     that best explains the window's measured positions under the model. A step that does not
     lower the window's error is not taken; the last rollout is reused as the prediction."""
+    if not iterations:
+        return positions(v, x, u)
     n = v.shape[0]
-    p = positions(v, x, u)
     for _ in range(iterations):
         p, lin = jax.linearize(lambda vv: positions(vv, x, u), v)
         r = (p - q_measured).reshape(-1)

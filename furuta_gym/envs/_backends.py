@@ -157,8 +157,8 @@ def load_mjcf(system: str, actuator_lag: bool = False) -> mujoco.MjModel:
 @dataclasses.dataclass
 class PassiveForces:
     """The forces MuJoCo cannot express, for the passive callback: per dof the system's cubic
-    stiffness and damping, the joint effects whose law :meth:`Effect.generalized_force` gives,
-    and the ``com_offset`` shift of MuJoCo's gravity potential."""
+    stiffness and damping, the joint effects (their force laws, :meth:`Effect.law`), and the
+    ``com_offset`` shift of MuJoCo's gravity potential."""
 
     cubic: dict[int, tuple[float, float]]
     effects: dict[int, list[Effect]]
@@ -281,7 +281,7 @@ def _passive_callback(extra: PassiveForces, model: mujoco.MjModel):
     """MuJoCo passive-force callback adding the non-native forces (evaluated at every RK4 stage).
 
     Per dof: the system's −k3·q³ − b3·q̇³, plus each effect's
-    :meth:`furuta_gym.effects.Effect.generalized_force` (dry friction as the honest discontinuous
+    :meth:`furuta_gym.effects.Effect.law` (dry friction as the honest discontinuous
     sgn law, sgn(0) = 0, as :class:`~furuta_gym.effects.WithEffects` with no smoothing, so the
     model backend with the same effects matches it). A ``com_offset`` Δ shifts MuJoCo's own
     gravity potential, V(q) → V(q − Δ), generically: + g(q) − g(q − Δ), with g = ∂V_gravity/∂q
