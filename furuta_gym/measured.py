@@ -30,6 +30,7 @@ import jax
 import numpy as np
 
 from .data import DataError, Trajectory
+from .models import SYSTEM_DEFINITIONS
 from .signals import ENCODER_COUNTS_PER_REV, derivative_filter, zero_phase_velocity
 from .simulate import rollout_zoh
 
@@ -47,9 +48,9 @@ __all__ = [
     "window_errors",
 ]
 
-#: Length of the elementary trajectories measured logs are cut into, s, per system: the paper's
-#: 1 s for its experimental Furuta pendulum; 2 s, its simulated N-MSD trajectories', for the N-MSD.
-SPLIT_SECONDS = {"furuta": 1.0, "nmsd": 2.0}
+#: Length of the elementary trajectories measured logs are cut into, s, per system
+#: (``SystemDefinition.elementary_seconds``).
+SPLIT_SECONDS = {name: d.elementary_seconds for name, d in SYSTEM_DEFINITIONS.items()}
 VELOCITY_METHODS = ("zero_phase", "derivative_filter")
 #: Below this range on every joint a log has no excitation, rad: 5 counts of the QUBE's
 #: 2048-count encoders, the size of encoder noise on a joint that does not move.

@@ -216,6 +216,7 @@ FURUTA_DEFINITION = SystemDefinition(
     chirp_end_frequency=5.0,
     diagnosis_window=0.5,
     diagnosis_prediction=(0.005, 2),  # rad/s
+    elementary_seconds=1.0,  # the paper's, for its experimental pendulum
     diagnosis_segment_seconds=2.0,
     excitations=("chirp", "sine_sweep", "closed_loop_prbs"),
     encoders=True,

@@ -116,6 +116,7 @@ NMSD_DEFINITION = SystemDefinition(
     chirp_end_frequency=2.0,
     diagnosis_window=1.0,
     diagnosis_prediction=(0.01, 2),  # m/s
+    elementary_seconds=2.0,  # its simulated trajectories' (the paper has no measured N-MSD)
     diagnosis_segment_seconds=5.0,
     table_title="Table 1 — N-MSD",
     energy_panels=((0, -1.5, 1.5, 1.0, "p [m] (ṗ = 0)"), (1, -1.5, 1.5, 3.0, "ṗ [m/s] (p = 0)")),

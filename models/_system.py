@@ -108,7 +108,8 @@ class SystemDefinition:
     open-loop predictions: the sgn law smoothed for the integrator, ε well below the Stribeck
     velocity so that a fitted stiction is the breakaway itself, not what a wider smoothing leaves
     of it; enough substeps for RK4 to stay stable on the steep friction law and the sample period.
-    ``energy_panels``: (state index, grid low, grid high, grid factor, label) of the
+    ``elementary_seconds``: the length of the elementary trajectories measured logs are cut into
+    for training (:func:`furuta_gym.measured.split_elementary`). ``energy_panels``: (state index, grid low, grid high, grid factor, label) of the
     reproduction's energy figure. ``write_mujoco(model, parameters)``: writes the physical
     parameters' bodies, inertias and gravity into an ``MjModel`` of the system's MJCF and returns
     the rest as :class:`MujocoTerms` (no MuJoCo import needed: it only sets the model's arrays).
@@ -131,6 +132,7 @@ class SystemDefinition:
     chirp_end_frequency: float
     diagnosis_window: float
     diagnosis_segment_seconds: float
+    elementary_seconds: float
     diagnosis_prediction: tuple[float, int]
     table_title: str
     energy_panels: tuple

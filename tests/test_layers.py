@@ -98,15 +98,21 @@ def test_the_walker_sees_function_level_and_relative_imports():
 
 
 def _name_branches(path: Path) -> list[int]:
-    """Lines that compare something with a system's name (``== "furuta"``, ``!= "nmsd"``)."""
+    """Lines that compare something with a system's name (``== "furuta"``, ``!= "nmsd"``) or ask
+    whether a system's name is in something (``"furuta" in systems``)."""
     from furuta_gym.systems import SYSTEMS
+
+    def named(o):
+        return isinstance(o, ast.Constant) and isinstance(o.value, str) and o.value in SYSTEMS
 
     lines = []
     for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Compare) and any(isinstance(op, (ast.Eq, ast.NotEq)) for op in node.ops):
-            operands = [node.left, *node.comparators]
-            if any(isinstance(o, ast.Constant) and o.value in SYSTEMS for o in operands):
-                lines.append(node.lineno)
+        if not isinstance(node, ast.Compare):
+            continue
+        equal = any(isinstance(op, (ast.Eq, ast.NotEq)) for op in node.ops)
+        member = any(isinstance(op, (ast.In, ast.NotIn)) for op in node.ops)
+        if (equal and any(named(o) for o in [node.left, *node.comparators])) or (member and named(node.left)):
+            lines.append(node.lineno)
     return lines
 
 
@@ -119,8 +125,9 @@ def test_no_code_branches_on_a_system_name():
 
 def test_the_branch_finder_sees_a_branch(tmp_path):
     sample = tmp_path / "sample.py"
-    sample.write_text('def f(system):\n    return 1 if system == "furuta" else "nmsd" != system\n')
-    assert _name_branches(sample) == [2, 2]
+    sample.write_text('def f(system, systems):\n    return 1 if system == "furuta" else "nmsd" != system\n'
+                      'def g(systems):\n    return "furuta" in systems, "nmsd" not in systems, "x" in systems\n')
+    assert _name_branches(sample) == [2, 2, 4, 4]
 
 
 def test_no_function_is_longer_than_80_lines():

@@ -70,10 +70,10 @@ def plant_env_factory(plant: str, voltage_limit: float, sensor: bool, render: bo
     """A zero-argument function making the Furuta env for ``--plant``."""
     import gymnasium as gym
 
-    from furuta_gym.envs import PLANT_PRESETS
+    from furuta_gym.envs import FurutaEnv
 
     kwargs: dict = dict(max_voltage=voltage_limit, episode_seconds=None)
-    presets = PLANT_PRESETS["furuta"]
+    presets = FurutaEnv.plant_presets
     if plant in ("mujoco", "analytic"):
         kwargs["dynamics"] = plant
     elif plant in presets:
@@ -89,7 +89,7 @@ def plant_env_factory(plant: str, voltage_limit: float, sensor: bool, render: bo
         kwargs.update(encoder_counts=2048, velocity="filter")
     if render:
         kwargs.update(render_mode="rgb_array")
-    return lambda: gym.make("furuta_gym/Furuta-v0", **kwargs)
+    return lambda: gym.make(FurutaEnv.env_id, **kwargs)
 
 
 def _check_outputs(args) -> None:

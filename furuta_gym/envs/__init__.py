@@ -11,7 +11,7 @@ See docs/envs.md.
 from ._backends import AbstractBackend, ModelBackend, MujocoBackend, load_checkpoint, make_backend
 from ._base import EnvArgumentError, LagrangianEnv
 from ._config import Actuation, Sensors
-from ._parameters import PLANT_PRESETS, default_parameters
+from ._parameters import default_parameters
 from ._tasks import DEFAULT_STATE_BOUND, FurutaSwingUp, NMSDReach, is_diverged, tolerance
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv
@@ -36,13 +36,18 @@ __all__ = [
     "PLANT_PRESETS",
     "default_parameters",
     "register_envs",
+    "ENV_CLASSES",
     "ENV_IDS",
     "SWINGUP_ID",
     "SWINGUP_PRESET",
     "SWINGUP_EPISODE_STEPS",
 ]
 
-ENV_IDS = {"furuta": "furuta_gym/Furuta-v0", "nmsd": "furuta_gym/NMSD-v0"}
+#: The envs, one per system: a third system's env is one module and one entry here.
+ENV_CLASSES: tuple[type[LagrangianEnv], ...] = (FurutaEnv, NMSDEnv)
+ENV_IDS = {cls.system: cls.env_id for cls in ENV_CLASSES}
+#: Each system's named plant variants (``plant=``), as its env declares them.
+PLANT_PRESETS = {cls.system: dict(cls.plant_presets) for cls in ENV_CLASSES}
 
 #: The RL preset: Furuta-v0 at 50 Hz (10 RK4 steps of 2 ms per action), observations
 #: (cos α, sin α, cos β, sin β, α̇, β̇) in float32, actions in [−1, 1] scaled to ±max_voltage,
@@ -58,30 +63,20 @@ def register_envs() -> None:
     """Register the envs with Gymnasium (idempotent; called by ``import furuta_gym``)."""
     import gymnasium
 
-    for env_id, entry, vector_entry in (
-        (
-            ENV_IDS["furuta"],
-            "furuta_gym.envs.furuta:FurutaEnv",
-            "furuta_gym.envs.vector:furuta_vector_entry_point",
-        ),
-        (
-            ENV_IDS["nmsd"],
-            "furuta_gym.envs.nmsd:NMSDEnv",
-            "furuta_gym.envs.vector:nmsd_vector_entry_point",
-        ),
-    ):
-        if env_id not in gymnasium.registry:
+    for cls in ENV_CLASSES:
+        if cls.env_id not in gymnasium.registry:
             # no max_episode_steps: the env truncates itself after `episode_seconds`, so the
             # episode length follows the control rate (frame_skip). gymnasium.make_vec goes to
             # make_vector_env: batched JAX or SyncVectorEnv, whichever is faster and supports
             # the options.
-            gymnasium.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry)
+            gymnasium.register(id=cls.env_id, entry_point=f"{cls.__module__}:{cls.__name__}",
+                               vector_entry_point=cls.vector_entry_point)
     if SWINGUP_ID not in gymnasium.registry:
         # no vector entry point: the batched JAX env keeps the raw float64 layout, so make_vec of
         # the preset steps copies of the single env (Gymnasium's sync/async vector envs)
         gymnasium.register(
             id=SWINGUP_ID,
-            entry_point="furuta_gym.envs.furuta:FurutaEnv",
+            entry_point=f"{FurutaEnv.__module__}:{FurutaEnv.__name__}",
             max_episode_steps=SWINGUP_EPISODE_STEPS,
             kwargs=dict(SWINGUP_PRESET),
         )

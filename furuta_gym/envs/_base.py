@@ -69,13 +69,20 @@ def env_arguments(local_variables: dict) -> dict:
 class LagrangianEnv(gymnasium.Env):
     """Base of the furuta_gym envs (see :class:`furuta_gym.envs.FurutaEnv` for the user docs).
 
-    Subclasses set :attr:`system`, declare their keywords in ``__init__`` and implement :meth:`_make_task`,
+    Subclasses set :attr:`system`, :attr:`env_id`, :attr:`plant_presets`, declare their keywords in ``__init__`` and implement :meth:`_make_task`,
     :meth:`_initial_state`, :meth:`_energy` and optionally :meth:`_update_scene`.
     """
 
     metadata: ClassVar[dict] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
 
     system: ClassVar[str]
+    #: its Gymnasium id (``register_envs`` registers every class of ``ENV_CLASSES`` under it)
+    env_id: ClassVar[str]
+    #: ``gymnasium.make_vec``'s entry point ("module:function"; the string Gymnasium can
+    #: serialise), ``None`` for Gymnasium's own vector envs of single envs
+    vector_entry_point: ClassVar[str | None] = None
+    #: named plant variants (``plant=``): the ground truth plus effects the textbook model lacks
+    plant_presets: ClassVar[Mapping[str, tuple[Effect, ...]]] = {"nominal": ()}
     #: the keyword of the action limit (volts or newtons)
     action_limit_name: ClassVar[str]
     #: task-specific keywords, handed to :meth:`_make_task`
@@ -129,7 +136,7 @@ class LagrangianEnv(gymnasium.Env):
 
     def _init_physics(self, cfg) -> None:
         """The plant's effects, its randomisation and the dynamics backend."""
-        self.effects: tuple[Effect, ...] = resolve_effects(self.system, cfg["plant"], cfg["effects"])
+        self.effects: tuple[Effect, ...] = resolve_effects(self.system, cfg["plant"], cfg["effects"], self.plant_presets)
         self._randomize = parse_randomization(self.system, cfg["randomize"])
         self.backend: AbstractBackend = make_backend(
             self.system, cfg["dynamics"], substeps=self.frame_skip, effects=self.effects, kernel=cfg["kernel"]

@@ -1,4 +1,4 @@
-"""Physical parameters as plain floats, domain randomisation, and plant-variant presets.
+"""Physical parameters as plain floats, domain randomisation, and plant variants.
 
 The analytic models' parameter classes (:class:`~furuta_gym.models.FurutaParameters`,
 :class:`~furuta_gym.models.NMSDParameters`) are the single source of the pinned values; this
@@ -21,7 +21,6 @@ __all__ = [
     "default_parameters",
     "parse_randomization",
     "randomize_parameters",
-    "PLANT_PRESETS",
     "resolve_effects",
 ]
 
@@ -77,40 +76,11 @@ def randomize_parameters(
     return out
 
 
-# Named plant variants: ground truth plus an effect the textbook model lacks (issue 4, item 4).
-# Magnitudes are chosen to be visible in a few seconds yet leave the system controllable.
-PLANT_PRESETS: dict[str, dict[str, tuple[Effect, ...]]] = {
-    "furuta": {
-        "nominal": (),
-        # the encoder/motor cable pulls the rotor back towards its mounting angle
-        "cable_spring": (Effect("spring", "alpha", 2e-3),),
-        # dry friction on both bearings, applied as an honest −F·sgn(q̇) law
-        "coulomb": (
-            Effect("coulomb_friction", "alpha", 1e-3),
-            Effect("coulomb_friction", "beta", 1e-4),
-        ),
-        # aerodynamic drag on the swinging pendulum
-        "quadratic_drag": (Effect("quadratic_drag", "beta", 2e-6),),
-        # the motor produces 20 % less torque than its data sheet says
-        "weak_motor": (Effect("input_gain", "u", -0.2),),
-        # 4 ms of transport delay on the voltage (two control periods at 500 Hz)
-        "delay": (Effect("input_delay", "u", 0.004),),
-    },
-    "nmsd": {
-        "nominal": (),
-        "coulomb": (Effect("coulomb_friction", "p", 0.5),),
-        "quadratic_drag": (Effect("quadratic_drag", "p", 0.3),),
-        "stiff_spring": (Effect("spring", "p", 5.0),),
-        "weak_actuator": (Effect("input_gain", "u", -0.2),),
-        "delay": (Effect("input_delay", "u", 0.02),),
-    },
-}
-
-
-def resolve_effects(system: str, plant, effects: Sequence[Effect] | None) -> tuple[Effect, ...]:
-    """Combine a named ``plant`` preset (or a list of names) with explicit ``effects``."""
+def resolve_effects(
+    system: str, plant, effects: Sequence[Effect] | None, presets: Mapping[str, Sequence[Effect]]
+) -> tuple[Effect, ...]:
+    """Combine a named ``plant`` preset of ``presets`` (or a list of names) with explicit ``effects``."""
     spec = get_spec(system)
-    presets = PLANT_PRESETS[system]
     names = [] if plant is None else [plant] if isinstance(plant, str) else list(plant)
     out: list[Effect] = []
     for name in names:

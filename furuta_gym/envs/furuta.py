@@ -139,7 +139,23 @@ class FurutaEnv(LagrangianEnv):
     """
 
     system: ClassVar[str] = "furuta"
+    env_id: ClassVar[str] = "furuta_gym/Furuta-v0"
+    vector_entry_point: ClassVar[str | None] = "furuta_gym.envs.vector:furuta_vector_entry_point"
     action_limit_name: ClassVar[str] = "max_voltage"
+    # magnitudes visible within a few seconds that leave the pendulum controllable
+    plant_presets: ClassVar[Mapping[str, tuple[Effect, ...]]] = {
+        "nominal": (),
+        # the encoder/motor cable pulls the rotor back towards its mounting angle
+        "cable_spring": (Effect("spring", "alpha", 2e-3),),
+        # dry friction on both bearings, applied as an honest −F·sgn(q̇) law
+        "coulomb": (Effect("coulomb_friction", "alpha", 1e-3), Effect("coulomb_friction", "beta", 1e-4)),
+        # aerodynamic drag on the swinging pendulum
+        "quadratic_drag": (Effect("quadratic_drag", "beta", 2e-6),),
+        # the motor produces 20 % less torque than its data sheet says
+        "weak_motor": (Effect("input_gain", "u", -0.2),),
+        # 4 ms of transport delay on the voltage (two control periods at 500 Hz)
+        "delay": (Effect("input_delay", "u", 0.004),),
+    }
     default_camera_config: ClassVar[dict] = {
         "distance": 0.42,
         "elevation": -20.0,

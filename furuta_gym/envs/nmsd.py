@@ -82,7 +82,17 @@ class NMSDEnv(LagrangianEnv):
     """
 
     system: ClassVar[str] = "nmsd"
+    env_id: ClassVar[str] = "furuta_gym/NMSD-v0"
+    vector_entry_point: ClassVar[str | None] = "furuta_gym.envs.vector:nmsd_vector_entry_point"
     action_limit_name: ClassVar[str] = "max_force"
+    plant_presets: ClassVar[Mapping[str, tuple[Effect, ...]]] = {
+        "nominal": (),
+        "coulomb": (Effect("coulomb_friction", "p", 0.5),),
+        "quadratic_drag": (Effect("quadratic_drag", "p", 0.3),),
+        "stiff_spring": (Effect("spring", "p", 5.0),),
+        "weak_actuator": (Effect("input_gain", "u", -0.2),),
+        "delay": (Effect("input_delay", "u", 0.02),),
+    }
     task_keywords: ClassVar[tuple[str, ...]] = ("target",)
     extra_keywords: ClassVar[tuple[str, ...]] = ("observe_target",)
     #: (low, high) of a random target per reset, None for a fixed target

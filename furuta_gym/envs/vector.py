@@ -52,6 +52,7 @@ __all__ = [
     "NMSDVectorEnv",
     "make_vector_env",
     "auto_chunks",
+    "VECTOR_CLASSES",
     "furuta_vector_entry_point",
     "nmsd_vector_entry_point",
     "rollout",
@@ -374,9 +375,7 @@ class LagrangianVectorEnv(VectorEnv):
 
     @classmethod
     def _env_id(cls) -> str:
-        from . import ENV_IDS
-
-        return ENV_IDS[cls.env_class.system]
+        return cls.env_class.env_id
 
     def _check_supported(self, env: LagrangianEnv) -> None:
         unsupported = _unsupported_options(env)
@@ -718,6 +717,9 @@ class NMSDVectorEnv(LagrangianVectorEnv):
         return {"target": np.full(self.num_envs, float(self.task.target))}
 
 
+#: The batched env of each single env (``make_vector_env`` picks by the env's id).
+VECTOR_CLASSES: tuple[type[LagrangianVectorEnv], ...] = (FurutaVectorEnv, NMSDVectorEnv)
+
 #: ``gymnasium.make_vec``'s default for a model backend: Gymnasium's SyncVectorEnv of single envs
 #: (each with its compiled step kernel) below this many copies, the batched JAX env from here on —
 #: where one vmapped XLA step overtakes N kernel calls (bench/vector_crossover.py).
@@ -736,9 +738,7 @@ def make_vector_env(
     (sensor noise, delays, ``observation="trig"``, …); batched otherwise, and whenever
     ``chunks=`` or ``workers=`` is given. Both give each copy the same numbers.
     """
-    from . import ENV_IDS
-
-    classes = {ENV_IDS["furuta"]: FurutaVectorEnv, ENV_IDS["nmsd"]: NMSDVectorEnv}
+    classes = {cls.env_class.env_id: cls for cls in VECTOR_CLASSES}
     if env_id not in classes:
         raise ValueError(f"env_id must be one of {sorted(classes)}, got {env_id!r}")
     if batched not in (None, True, False):
@@ -781,13 +781,9 @@ def _unsupported_options(env: LagrangianEnv) -> list[str]:
 
 def furuta_vector_entry_point(num_envs: int = 1, **kwargs) -> VectorEnv:
     """``vector_entry_point`` of ``furuta_gym/Furuta-v0`` (see :func:`make_vector_env`)."""
-    from . import ENV_IDS
-
-    return make_vector_env(ENV_IDS["furuta"], num_envs, **kwargs)
+    return make_vector_env(FurutaEnv.env_id, num_envs, **kwargs)
 
 
 def nmsd_vector_entry_point(num_envs: int = 1, **kwargs) -> VectorEnv:
     """``vector_entry_point`` of ``furuta_gym/NMSD-v0`` (see :func:`make_vector_env`)."""
-    from . import ENV_IDS
-
-    return make_vector_env(ENV_IDS["nmsd"], num_envs, **kwargs)
+    return make_vector_env(NMSDEnv.env_id, num_envs, **kwargs)

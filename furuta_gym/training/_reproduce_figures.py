@@ -21,15 +21,9 @@ import numpy as np
 
 from ..models import system_definition
 from .checkpoint import load_model
+from .datagen import system_data
 from .metrics import _terms_along, _true_accelerations, energy_along, predict
 from .reproduce import LOSS_LABELS, MODEL_LABELS, TEST_SETS
-
-FORCED_SET = {"nmsd": "test_square", "furuta": "test_forced"}
-ENERGY_SET = {"nmsd": "test_chirp", "furuta": "test_free"}
-STATE_LABELS = {
-    "nmsd": ("p [m]", "ṗ [m/s]"),
-    "furuta": ("α [rad]", "β [rad]", "α̇ [rad/s]", "β̇ [rad/s]"),
-}
 
 
 def _load_models(out: Path, system: str, config) -> list[tuple[str, str, object]]:
@@ -58,7 +52,7 @@ def make_figures(out: Path, config, per_system: dict) -> dict[str, Path]:
         data, truth = per_system[system]["data"], per_system[system]["truth"]
         models = _load_models(out, system, config)
         physics = [(kind, loss, m) for kind, loss, m in models if kind != "aph"]
-        tr = data[FORCED_SET[system]][0]
+        tr = data[system_data(system).forced_set][0]
         k = min(len(tr), int(round(10.0 / tr.dt)) + 1)  # the first 10 s
         figures = {
             "predictions": _predictions(system, data, truth, models, tr, k),
@@ -79,10 +73,10 @@ def _predictions(system, data, truth, models, tr, k):
     fig, axes = plt.subplots(2 * n, 1, figsize=(8, 2.0 * 2 * n), sharex=True)
     for j in range(2 * n):
         axes[j].plot(tr.t[:k], tr.x[:k, j], "k", lw=2, label="ground truth")
-        axes[j].set_ylabel(STATE_LABELS[system][j])
+        axes[j].set_ylabel(system_data(system).state_labels[j])
     for kind, loss, model in models:
         # the whole set, as in the evaluation: same shapes, so the compiled solve is reused
-        pred = predict(model, data[FORCED_SET[system]])[0]
+        pred = predict(model, data[system_data(system).forced_set])[0]
         for j in range(2 * n):
             y = np.where(np.abs(pred[:k, j]) < 1e6, pred[:k, j], np.nan)
             axes[j].plot(tr.t[:k], y, lw=1, label=_label(kind, loss))
@@ -126,7 +120,7 @@ def _energy_over_state(system, truth, physics):
 def _energy_over_time(system, data, truth, physics):
     import matplotlib.pyplot as plt
 
-    tr_e = data[ENERGY_SET[system]][0]
+    tr_e = data[system_data(system).energy_set][0]
     fig, ax = plt.subplots(figsize=(7, 3.4))
     ax.plot(tr_e.t, energy_along(truth, tr_e.q, tr_e.qd), "k", lw=2, label="ground truth")
     for kind, loss, model in physics:
@@ -134,7 +128,7 @@ def _energy_over_time(system, data, truth, physics):
     ax.set_xlabel("t [s]")
     ax.set_ylabel("E(t) / E(0)")
     ax.legend(fontsize=7)
-    label = next(l for l, name in TEST_SETS[system].items() if name == ENERGY_SET[system])
+    label = next(l for l, name in TEST_SETS[system].items() if name == system_data(system).energy_set)
     ax.set_title(f"{system}: energy along the first {label} test trajectory")
     fig.tight_layout()
     return fig

@@ -1,7 +1,8 @@
 """Training and test data for the two benchmark systems, generated as in the paper's appendix.
 
 Laiche et al. 2026, appendix "Data Generation", with the choices the paper leaves open made
-explicit (every number lives in :class:`NMSDRecipe` / :class:`FurutaRecipe`):
+explicit (every number lives in :class:`NMSDRecipe` / :class:`FurutaRecipe`, each in its system's
+module with the code that draws its datasets, ``_nmsd_data.py`` / ``_furuta_data.py``):
 
 N-MSD (100 Hz)
     * train: one 60 s trajectory under a linear chirp 0.1 → 1.1 Hz from p0 ~ U(−1, 1),
@@ -45,7 +46,7 @@ import hashlib
 import json
 import time
 from pathlib import Path
-from typing import Callable, Literal, Sequence
+from typing import Literal, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -57,16 +58,12 @@ from ..data import Trajectory, save_trajectories
 from ..envs import MujocoBackend
 from ..lagrangian import vector_field
 from ..models import analytic_model
-from ..signals import (
-    ENCODER_COUNTS_PER_REV,
-    chirp,
-    derivative_filter,
-    multisine,
-    quantize_encoder,
-    random_steps,
-    square_pulse,
-)
+from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter, quantize_encoder
 from ..systems import get_spec
+from ._furuta_data import FURUTA_DATA, FurutaRecipe
+from ._nmsd_data import NMSD_DATA, NMSDRecipe
+from ._sampling import DATA_RATE_HZ, Clean, GroundTruth
+from ._system_data import SystemData
 
 __all__ = [
     "DATA_RATE_HZ",
@@ -81,128 +78,35 @@ __all__ = [
     "generate_datasets",
     "write_datasets",
     "generate",
+    "SystemData",
+    "SYSTEM_DATA",
+    "system_data",
     "DATASET_NAMES",
     "VALIDATION_NAMES",
     "generate_validation",
     "sample_overlap",
 ]
 
-DATA_RATE_HZ = 100.0
+#: Each system's datasets (:class:`SystemData`): a third system is one module and one entry here.
+SYSTEM_DATA: dict[str, SystemData] = {d.system: d for d in (NMSD_DATA, FURUTA_DATA)}
 
 #: Dataset names per system, in the order they are generated and written.
-DATASET_NAMES = {
-    "nmsd": ("train", "test_chirp", "test_square"),
-    "furuta": ("train", "test_free", "test_forced", "scale_fit"),
-}
+DATASET_NAMES = {name: d.test_names for name, d in SYSTEM_DATA.items()}
 
 #: Validation datasets per system (:func:`generate_validation`): excitations and initial states of
 #: their own, inside the training distribution, so that no validation sample is close to a test
 #: sample (:func:`sample_overlap`). Recipe choices are scored on these, never on the test sets.
-VALIDATION_NAMES = {
-    "nmsd": ("val_multisine", "val_steps"),
-    "furuta": ("val_free", "val_forced", "val_scale_fit"),
-}
+VALIDATION_NAMES = {name: d.validation_names for name, d in SYSTEM_DATA.items()}
 
 
-@dataclasses.dataclass(frozen=True)
-class NMSDRecipe:
-    """The N-MSD datasets (paper appendix; amplitude and test counts are our choice)."""
-
-    train_duration: float = 60.0
-    segment_duration: float = 2.0
-    chirp_f0: float = 0.1
-    chirp_f1: float = 1.1
-    amplitude: float = 5.0  # N, chirp and pulse
-    p0_range: float = 1.0
-    pd0_range: float = 5.0
-    n_test_chirp: int = 3
-    test_chirp_duration: float = 25.0
-    n_test_square: int = 3
-    test_square_duration: float = 15.0
-    pulse_start: float = 1.0
-    pulse_width: float = 3.0
-    # validation (generate_validation): x0 inside the training trajectory's range
-    val_p0_range: float = 0.5
-    val_pd0_range: float = 2.5
-    n_val_multisine: int = 3
-    val_multisine_duration: float = 25.0
-    val_multisine_tones: int = 8
-    n_val_steps: int = 3
-    val_steps_duration: float = 15.0
-    val_steps_hold: tuple[float, float] = (1.0, 3.0)
-
-    @classmethod
-    def small(cls) -> "NMSDRecipe":
-        """A scaled-down recipe for quick pipeline runs (10 segments, 1 + 1 short tests)."""
-        return cls(
-            train_duration=20.0,
-            n_test_chirp=1,
-            test_chirp_duration=10.0,
-            n_test_square=1,
-            test_square_duration=10.0,
-            n_val_multisine=1,
-            val_multisine_duration=10.0,
-            n_val_steps=1,
-            val_steps_duration=10.0,
-        )
-
-
-@dataclasses.dataclass(frozen=True)
-class FurutaRecipe:
-    """The simulated Furuta datasets (paper appendix; see the module docstring for choices)."""
-
-    n_train: int = 64
-    train_duration: float = 1.0
-    angle_range: float = np.pi
-    train_velocity_range: float = 5.0
-    n_test_free: int = 6
-    test_free_duration: float = 6.0
-    test_velocity_range: float = 20.0
-    n_test_forced: int = 3
-    test_forced_duration: float = 20.0
-    chirp_f0: float = 0.5
-    chirp_f1: float = 6.0
-    chirp_t1: float = 20.0  # the paper's "target time"
-    amplitude: float = 2.0  # V
-    n_scale_fit: int = 1
-    scale_fit_duration: float = 20.0
-    # "steps": random ±amplitude steps of its own; "chirp": the test chirp, as before the recipe
-    # was frozen (a scale-fit trajectory then follows the forced test trajectories once both
-    # forget their start)
-    scale_fit_input: Literal["chirp", "steps"] = "steps"
-    # validation (generate_validation): x0 in the training ranges, inputs other than the chirp;
-    # free ones end before the pendulum settles (~3 s), where every free trajectory meets the others
-    n_val_free: int = 12
-    val_free_duration: float = 2.0
-    n_val_forced: int = 3
-    val_forced_duration: float = 20.0
-    val_multisine_tones: int = 12
-    val_scale_fit_duration: float = 20.0
-    val_steps_hold: tuple[float, float] = (0.25, 1.0)
-
-    @classmethod
-    def small(cls) -> "FurutaRecipe":
-        """A scaled-down recipe for quick pipeline runs (16 train, 2 free + 1 forced short tests)."""
-        return cls(
-            n_train=16,
-            n_test_free=2,
-            test_free_duration=3.0,
-            n_test_forced=1,
-            test_forced_duration=10.0,
-            scale_fit_duration=10.0,
-            n_val_free=4,
-            n_val_forced=1,
-            val_forced_duration=10.0,
-            val_scale_fit_duration=10.0,
-        )
-
-
-RECIPE_CLASS = {"furuta": FurutaRecipe, "nmsd": NMSDRecipe}
+def system_data(system: str) -> SystemData:
+    """The :class:`SystemData` of ``"furuta"`` or ``"nmsd"``; a clear error for anything else."""
+    return SYSTEM_DATA[get_spec(system).name]
 
 
 def recipe_for(system: str, small: bool = False):
     """The default (or ``small``) recipe of ``"nmsd"`` / ``"furuta"``."""
-    cls = RECIPE_CLASS[get_spec(system).name]
+    cls = system_data(system).recipe
     return cls.small() if small else cls()
 
 
@@ -261,10 +165,8 @@ class SensorOptions:
 
 # --------------------------------------------------------------------------------------------
 # Ground truth: x0 (B, 2n), sample times t (T,) on the sensor grid, inputs u (B, T, m) on the
-# same grid (linearly interpolated in between) -> states (B, T, 2n).
+# same grid (linearly interpolated in between) -> states (B, T, 2n) (GroundTruth).
 # --------------------------------------------------------------------------------------------
-
-GroundTruth = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 class AnalyticGroundTruth:
@@ -389,195 +291,12 @@ def default_ground_truth(system: str, kind: str = "auto") -> GroundTruth:
 
 
 # --------------------------------------------------------------------------------------------
-# Recipes -> clean trajectories on the sensor grid
-# --------------------------------------------------------------------------------------------
-
-
-@dataclasses.dataclass
-class _Clean:
-    """Noise-free states on the sensor grid."""
-
-    t: np.ndarray  # (T,)
-    x: np.ndarray  # (T, 2n)
-    u: np.ndarray  # (T, m)
-    name: str
-
-
-def _grid(duration: float, rate: float) -> np.ndarray:
-    n = int(round(duration * rate))
-    return np.arange(n + 1) / rate
-
-
-def _inputs_at(u_fn, t_data: np.ndarray, oversample: int) -> np.ndarray:
-    """Input sampled at the data rate, linearly interpolated onto the sensor grid."""
-    u_data = np.asarray(u_fn(t_data), dtype=float)
-    t_fine = np.arange((len(t_data) - 1) * oversample + 1) / (oversample / (t_data[1] - t_data[0]))
-    t_fine = t_data[0] + t_fine
-    return t_fine, np.interp(t_fine, t_data, u_data)
-
-
-def _run(gt: GroundTruth, x0s, duration, u_fn, oversample, names) -> list[_Clean]:
-    t_data = _grid(duration, DATA_RATE_HZ)
-    t_fine, u_fine = _inputs_at(u_fn, t_data, oversample)
-    us = np.broadcast_to(u_fine[None, :, None], (len(x0s), len(t_fine), 1)).copy()
-    xs = gt(np.asarray(x0s, dtype=float), t_fine, us)
-    return [_Clean(t=t_fine, x=xs[b], u=us[b], name=names[b]) for b in range(len(x0s))]
-
-
-def _uniform(rng, n, ranges):
-    ranges = np.asarray(ranges, dtype=float)
-    return rng.uniform(-ranges, ranges, size=(n, len(ranges)))
-
-
-def _rng(seed: int, dataset: str) -> np.random.Generator:
-    # one independent stream per dataset, stable under recipe changes of the other datasets
-    digest = int(hashlib.sha256(dataset.encode()).hexdigest()[:8], 16)
-    return np.random.default_rng([seed, digest])
-
-
-def _nmsd_clean(recipe: NMSDRecipe, gt, seed, oversample) -> dict[str, list[_Clean]]:
-    r = recipe
-    ranges = (r.p0_range, r.pd0_range)
-    out = {}
-    # training: one long chirp trajectory cut into segments
-    x0 = _uniform(_rng(seed, "train"), 1, ranges)
-    (long,) = _run(
-        gt,
-        x0,
-        r.train_duration,
-        lambda t: chirp(t, r.chirp_f0, r.chirp_f1, r.train_duration, r.amplitude),
-        oversample,
-        ["train"],
-    )
-    n_seg = int(round(r.train_duration / r.segment_duration))
-    seg_len = int(round(r.segment_duration * DATA_RATE_HZ)) * oversample
-    out["train"] = [
-        _Clean(
-            t=long.t[k * seg_len : (k + 1) * seg_len + 1] - long.t[k * seg_len],
-            x=long.x[k * seg_len : (k + 1) * seg_len + 1],
-            u=long.u[k * seg_len : (k + 1) * seg_len + 1],
-            name=f"seg{k:02d}",
-        )
-        for k in range(n_seg)
-    ]
-    x0s = _uniform(_rng(seed, "test_chirp"), r.n_test_chirp, ranges)
-    out["test_chirp"] = _run(
-        gt,
-        x0s,
-        r.test_chirp_duration,
-        lambda t: chirp(t, r.chirp_f0, r.chirp_f1, r.test_chirp_duration, r.amplitude),
-        oversample,
-        [f"chirp{k}" for k in range(r.n_test_chirp)],
-    )
-    x0s = _uniform(_rng(seed, "test_square"), r.n_test_square, ranges)
-    out["test_square"] = _run(
-        gt,
-        x0s,
-        r.test_square_duration,
-        lambda t: square_pulse(t, r.pulse_start, r.pulse_width, r.amplitude),
-        oversample,
-        [f"square{k}" for k in range(r.n_test_square)],
-    )
-    return out
-
-
-def _furuta_clean(recipe: FurutaRecipe, gt, seed, oversample) -> dict[str, list[_Clean]]:
-    r = recipe
-    train_ranges = (r.angle_range, r.angle_range, r.train_velocity_range, r.train_velocity_range)
-    test_ranges = (r.angle_range, r.angle_range, r.test_velocity_range, r.test_velocity_range)
-
-    def u_chirp(t):
-        return chirp(t, r.chirp_f0, r.chirp_f1, r.chirp_t1, r.amplitude)
-
-    def u_free(t):
-        return np.zeros_like(t)
-
-    out = {}
-    x0s = _uniform(_rng(seed, "train"), r.n_train, train_ranges)
-    out["train"] = _run(
-        gt, x0s, r.train_duration, u_free, oversample, [f"free{k:02d}" for k in range(r.n_train)]
-    )
-    x0s = _uniform(_rng(seed, "test_free"), r.n_test_free, test_ranges)
-    out["test_free"] = _run(
-        gt, x0s, r.test_free_duration, u_free, oversample, [f"free{k}" for k in range(r.n_test_free)]
-    )
-    x0s = _uniform(_rng(seed, "test_forced"), r.n_test_forced, test_ranges)
-    out["test_forced"] = _run(
-        gt,
-        x0s,
-        r.test_forced_duration,
-        u_chirp,
-        oversample,
-        [f"chirp{k}" for k in range(r.n_test_forced)],
-    )
-    if r.scale_fit_input == "steps":
-        out["scale_fit"] = _run_each(
-            gt, "scale_fit_input", seed, r.n_scale_fit, train_ranges, r.scale_fit_duration,
-            lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng), oversample,
-        )
-        return out
-    x0s = _uniform(_rng(seed, "scale_fit"), r.n_scale_fit, train_ranges)
-    out["scale_fit"] = _run(
-        gt,
-        x0s,
-        r.scale_fit_duration,
-        u_chirp,
-        oversample,
-        [f"scale{k}" for k in range(r.n_scale_fit)],
-    )
-    return out
-
-
-def _nmsd_validation(recipe: NMSDRecipe, gt, seed, oversample) -> dict[str, list[_Clean]]:
-    r = recipe
-    ranges = (r.val_p0_range, r.val_pd0_range)
-    out = {}
-    for name, n, duration, make_u in (
-        ("val_multisine", r.n_val_multisine, r.val_multisine_duration,
-         lambda rng: lambda t: multisine(t, r.chirp_f0, r.chirp_f1, r.val_multisine_tones, r.amplitude, rng)),
-        ("val_steps", r.n_val_steps, r.val_steps_duration,
-         lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng)),
-    ):
-        out[name] = _run_each(gt, name, seed, n, ranges, duration, make_u, oversample)
-    return out
-
-
-def _furuta_validation(recipe: FurutaRecipe, gt, seed, oversample) -> dict[str, list[_Clean]]:
-    r = recipe
-    ranges = (r.angle_range, r.angle_range, r.train_velocity_range, r.train_velocity_range)
-    free = _uniform(_rng(seed, "val_free"), r.n_val_free, ranges)
-    out = {"val_free": _run(gt, free, r.val_free_duration, np.zeros_like, oversample,
-                            [f"free{k}" for k in range(r.n_val_free)])}
-    out["val_forced"] = _run_each(
-        gt, "val_forced", seed, r.n_val_forced, ranges, r.val_forced_duration,
-        lambda rng: lambda t: multisine(t, r.chirp_f0, r.chirp_f1, r.val_multisine_tones, r.amplitude, rng),
-        oversample,
-    )
-    out["val_scale_fit"] = _run_each(
-        gt, "val_scale_fit", seed, 1, ranges, r.val_scale_fit_duration,
-        lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng), oversample,
-    )
-    return out
-
-
-def _run_each(gt, name, seed, n, ranges, duration, make_u, oversample) -> list[_Clean]:
-    """``n`` trajectories of dataset ``name``, each with its own x0 and its own draw of the input
-    signal ``make_u(rng)`` (one seeded stream per dataset)."""
-    rng = _rng(seed, name)
-    x0s = _uniform(rng, n, ranges)
-    return [
-        _run(gt, x0s[k : k + 1], duration, make_u(rng), oversample, [f"{name}{k}"])[0]
-        for k in range(n)
-    ]
-
-
-# --------------------------------------------------------------------------------------------
 # Sensor model: clean sensor-rate states -> measured 100 Hz trajectories
 # --------------------------------------------------------------------------------------------
 
 
 def _measure(
-    clean: _Clean, n_dof: int, angular: Sequence[bool], options: SensorOptions, rng
+    clean: Clean, n_dof: int, angular: Sequence[bool], options: SensorOptions, rng
 ) -> Trajectory:
     q_true, qd_true = clean.x[:, :n_dof], clean.x[:, n_dof:]
     q = q_true.copy()
@@ -658,12 +377,6 @@ def generate_validation(
                      ground_truth=ground_truth)
 
 
-_MAKERS = {
-    ("nmsd", "test"): _nmsd_clean,
-    ("furuta", "test"): _furuta_clean,
-    ("nmsd", "validation"): _nmsd_validation,
-    ("furuta", "validation"): _furuta_validation,
-}
 _NOISE_STREAM = {"test": 7919, "validation": 7927}  # sensor-noise streams, one per kind
 
 
@@ -675,13 +388,14 @@ def _generate(system, kind, *, seed, small, recipe, sensor, ground_truth):
             f"quantize: {spec.name} has no encoder angles to quantise (its joints are "
             f"{spec.joint_names}); use noise_std for a position sensor's resolution"
         )
+    data = system_data(spec.name)
     recipe = recipe if recipe is not None else recipe_for(spec.name, small)
-    expected = RECIPE_CLASS[spec.name]
-    if not isinstance(recipe, expected):
-        raise ValueError(f"recipe for {spec.name} must be a {expected.__name__}, got {recipe!r}")
+    if not isinstance(recipe, data.recipe):
+        raise ValueError(f"recipe for {spec.name} must be a {data.recipe.__name__}, got {recipe!r}")
     gt = default_ground_truth(spec.name, ground_truth) if isinstance(ground_truth, str) else ground_truth
-    clean = _MAKERS[spec.name, kind](recipe, gt, seed, sensor.oversample)
-    names = (DATASET_NAMES if kind == "test" else VALIDATION_NAMES)[spec.name]
+    make, names = ((data.make_test, data.test_names) if kind == "test"
+                   else (data.make_validation, data.validation_names))
+    clean = make(recipe, gt, seed, sensor.oversample)
     out = {}
     for name, trajs in clean.items():
         rng = np.random.default_rng([seed, _NOISE_STREAM[kind], names.index(name)])

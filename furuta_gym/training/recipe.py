@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 
-__all__ = ["RunRecipe", "RECIPE", "SYSTEM_ROWS", "QUICK_EPOCHS", "QUICK_PROP_EPOCHS",
+__all__ = ["RunRecipe", "RECIPE", "SYSTEM_ROWS", "PAPER_SCHEDULE", "QUICK_EPOCHS", "QUICK_PROP_EPOCHS",
            "DEFAULT_QUADRATURE", "DEFAULT_LEARNING_RATE", "recipe_row"]
 
 DEFAULT_QUADRATURE = "simpson"
@@ -85,6 +85,13 @@ RECIPE: dict[tuple[str, str, str], RunRecipe] = {
     ("nmsd", "adln", "prop"): _row(
         "nmsd", augmentation_weight=1e-2,
         decisions=("μ per system and kind", "F_a design", "N-MSD augmented DeLaN F_a odd in q̇")),
+}
+
+#: the paper's training schedule per system (appendix A.2): epochs of the 2-step and the
+#: long-horizon stage, and the horizons (2 samples, then 1 s Furuta / 2 s N-MSD)
+PAPER_SCHEDULE = {
+    "furuta": {"epochs": (50_000, 10_000), "horizons": (2, 1.0)},
+    "nmsd": {"epochs": (5_000, 1_000), "horizons": (2, 2.0)},
 }
 
 #: ``--quick``: a few epochs per stage, for a pipeline check (minutes, not the paper's numbers)

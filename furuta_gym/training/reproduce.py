@@ -47,7 +47,7 @@ from ..data import load_trajectories
 from ..models import analytic_model, make_model, system_definition
 from ..systems import get_spec
 from .checkpoint import load_model, package_versions, read_header
-from .datagen import generate
+from .datagen import SYSTEM_DATA, generate
 from .metrics import evaluate_model, metrics_to_json
 from .train import MODEL_FILE, STATE_FILE, TrainConfig, train
 from .recipe import (
@@ -82,24 +82,19 @@ PAPER_PAIRS: tuple[tuple[str, str], ...] = (
     ("adln", "prop"),
 )
 #: The paper's test-set labels and our dataset names.
-TEST_SETS = {
-    "nmsd": {"Chirp": "test_chirp", "Square": "test_square"},
-    "furuta": {"Free": "test_free", "Forced": "test_forced"},
-}
+TEST_SETS = {name: dict(d.test_labels) for name, d in SYSTEM_DATA.items()}
 #: What a selection run (``split="validation"``) is scored on instead: the validation datasets
 #: (:func:`~furuta_gym.training.datagen.generate_validation`), which share no excitation with
 #: the test sets; the Furuta scale is then fitted on ``val_scale_fit``, not ``scale_fit``.
-VALIDATION_SETS = {
-    "nmsd": {"Multisine": "val_multisine", "Steps": "val_steps"},
-    "furuta": {"Free": "val_free", "Forced": "val_forced"},
-}
+VALIDATION_SETS = {name: dict(d.validation_labels) for name, d in SYSTEM_DATA.items()}
 EVALUATION_SETS = {"test": TEST_SETS, "validation": VALIDATION_SETS}
 SCALE_FIT_SET = {"test": "scale_fit", "validation": "val_scale_fit"}
-METRIC_COLUMNS = {
-    "nmsd": ("p", "p_dot", "inertial", "coriolis", "potential", "energy"),
-    "furuta": ("alpha", "beta", "alpha_dot", "beta_dot", "inertial", "coriolis", "potential", "energy"),
-}
 PHYSICS_METRICS = ("inertial", "coriolis", "potential", "energy")
+#: Columns of a system's metrics: each state variable's prediction error, then the physics terms.
+METRIC_COLUMNS = {
+    name: (*get_spec(name).joint_names, *(f"{j}_dot" for j in get_spec(name).joint_names), *PHYSICS_METRICS)
+    for name in SYSTEM_DATA
+}
 #: Table value of a model whose training failed (no finite model; reason in metrics.json).
 FAILED = "fail"
 MODEL_LABELS = {"dln": "DLN", "aph": "APH", "adln": "ADLN"}
@@ -719,17 +714,17 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
                 return float(r["ours_mean"]) if r["ours_mean"] else None
         return None
 
-    if "furuta" in config.systems:
-        out.append("- Main claim (Furuta: L_prop gives a better force decomposition than L_traj for "
+    for system in (s for s in config.systems if SYSTEM_DATA[get_spec(s).name].main_claim):
+        out.append(f"- Main claim ({SYSTEM_DATA[get_spec(system).name].main_claim}: L_prop gives a better force decomposition than L_traj for "
                    "DLN and than L_aph for ADLN), ours:")
         for model, base in (("DLN", "traj"), ("ADLN", "aph")):
             if ((model.lower(), base) not in config.pairs) or ((model.lower(), "prop") not in config.pairs):
                 continue
-            for label in TEST_SETS["furuta"]:
+            for label in TEST_SETS[system]:
                 parts = []
                 for metric in ("inertial", "coriolis", "potential"):
-                    a = mean_of("furuta", label, model, "prop", metric)
-                    b = mean_of("furuta", label, model, base, metric)
+                    a = mean_of(system, label, model, "prop", metric)
+                    b = mean_of(system, label, model, base, metric)
                     if a is None or b is None:
                         parts.append(f"{metric}: n/a")
                     else:

@@ -53,7 +53,7 @@ from .losses import (
     resolve_normalization,
     trajectory_loss,
 )
-from .recipe import RECIPE
+from .recipe import PAPER_SCHEDULE, RECIPE
 
 __all__ = ["TrainConfig", "train", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
 
@@ -65,14 +65,6 @@ AUGMENTATION_WEIGHT = {(s, k): row.augmentation_weight for (s, k, loss), row in 
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
-
-
-#: the paper's training schedule per system (appendix A.2): epochs of the 2-step and the
-#: long-horizon stage, and the horizons (2 samples, then 1 s Furuta / 2 s N-MSD)
-PAPER_SCHEDULE = {
-    "furuta": {"epochs": (50_000, 10_000), "horizons": (2, 1.0)},
-    "nmsd": {"epochs": (5_000, 1_000), "horizons": (2, 2.0)},
-}
 
 
 @dataclasses.dataclass(frozen=True)
