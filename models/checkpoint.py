@@ -6,7 +6,8 @@ File layout (one file, ``.eqx`` by convention)::
     {JSON header on one line}\\n
     <equinox.tree_serialise_leaves payload>
 
-The header says what the file holds (``"content": "model"`` or ``"training_state"``), the system,
+The header says what the file holds (``"content": "model"`` or ``"training_state"``), its form
+(``"format"``, :data:`HEADER_FORMAT`; older files without one are read as form 1), the system,
 the model kind and the hyper-parameters that rebuild the module's skeleton with
 :func:`furuta_gym.models.make_model`, the package versions, the payload's SHA-256 (so a truncated
 or corrupted file is a clear error, not garbage weights) and free-form ``meta`` (training data
@@ -154,6 +155,7 @@ def _model_header(model, meta: dict | None) -> dict:
         )
     return {
         "content": "model",
+        "format": HEADER_FORMAT,
         "system": model.spec.name,
         "model_kind": model.kind,
         "hparams": model.hyperparameters,
@@ -163,10 +165,25 @@ def _model_header(model, meta: dict | None) -> dict:
     }
 
 
-#: F_a hyper-parameters added after checkpoints (and reproduction run records) began to hold
-#: hyper-parameters, and what every model saved before them was; a header or record without one
-#: is read as this value (furuta_gym.training.reproduce compares records the same way)
-HPARAMS_BEFORE_RECORDED = {"odd_in_velocity": False}
+#: The header's form. 2: ``hparams`` holds every hyper-parameter the model was built with.
+#: 1 (a header without ``"format"``): written before some F_a options existed; where such a
+#: header is silent, the model was built as :func:`_form_1_hparams` says.
+HEADER_FORMAT = 2
+
+
+def _form_1_hparams(kind: str, hparams: dict) -> dict:
+    """A form-1 header's hyper-parameters completed with what its model was trained with: back-EMF
+    in APHYNITY's prior, no linear W (so no scale of its own), F_a even in q̇, tanh."""
+    out = dict(hparams)
+    if kind == "aph":
+        out.setdefault("prior_back_emf", True)
+    if kind in ("aph", "adln"):
+        out.setdefault("linear_velocity", False)
+        out.setdefault("damping_scale", None)  # W in units of force_scale / velocity_scale
+        out.setdefault("odd_in_velocity", False)
+        if "force_activation" not in out:
+            out["force_activation"] = out.pop("activation", "tanh") if kind == "aph" else out.get("activation", "tanh")
+    return out
 
 
 def _skeleton(header: dict, path: Path, expected_system: str | None, expected_kind: str | None = None):
@@ -185,18 +202,14 @@ def _skeleton(header: dict, path: Path, expected_system: str | None, expected_ki
     if kind not in MODEL_KINDS:
         raise CheckpointError(f"{path}: unknown model kind {kind!r} in header")
     hparams = {k: _tuplify(v) for k, v in header.get("hparams", {}).items()}
-    # checkpoints written before these choices existed rebuild as they were trained
-    if kind == "aph" and "prior_back_emf" not in hparams:
-        hparams["prior_back_emf"] = True
-    if kind in ("aph", "adln") and "linear_velocity" not in hparams:
-        hparams["linear_velocity"] = False
-    if kind in ("aph", "adln") and "damping_scale" not in hparams:
-        hparams["damping_scale"] = None  # W in units of force_scale / velocity_scale, as trained
-    if kind in ("aph", "adln"):
-        for key, value in HPARAMS_BEFORE_RECORDED.items():
-            hparams.setdefault(key, value)
-    if kind in ("aph", "adln") and "force_activation" not in hparams:
-        hparams["force_activation"] = hparams.pop("activation", "tanh") if kind == "aph" else hparams.get("activation", "tanh")
+    form = header.get("format", 1)
+    if form not in (1, HEADER_FORMAT):
+        raise CheckpointError(
+            f"{path}: checkpoint header format {form!r}; this furuta-gym reads formats 1 and "
+            f"{HEADER_FORMAT} (a newer version wrote it?)"
+        )
+    if form == 1:
+        hparams = _form_1_hparams(kind, hparams)
     try:
         return make_model(system, kind, jax.random.PRNGKey(0), **hparams)
     except (ValueError, TypeError) as exc:

@@ -180,6 +180,7 @@ def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_p
     header, payload = ckpt._read(path)
     for key in ("prior_back_emf", "linear_velocity", "force_activation", "odd_in_velocity"):
         del header["hparams"][key]
+    del header["format"]  # a form-1 header: written before the format was recorded
     ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")},
                 old, overwrite=True)
     assert "linear_velocity" not in json.dumps(ckpt.read_header(path)["hparams"])
@@ -188,6 +189,26 @@ def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_p
     np.testing.assert_array_equal(loaded.augmentation(q, qd), old.augmentation(q, qd))
     assert loaded.force_net.odd_in_velocity is False
     np.testing.assert_array_equal(loaded.input_force(q, qd, u), old.input_force(q, qd, u))
+
+
+def test_a_form_2_header_is_read_as_written_and_an_unknown_form_is_refused(tmp_path):
+    """A current header records every hyper-parameter: nothing is filled in for it (a form-2
+    header without ``odd_in_velocity`` builds today's default, not form 1's), and a header of a
+    form this version does not know is one clear error naming the file."""
+    from furuta_gym.models import checkpoint as ckpt
+
+    model = make_model("nmsd", "adln", jax.random.PRNGKey(3))
+    assert model.force_net.odd_in_velocity is True  # the N-MSD's default; form 1 would say False
+    path = ckpt.save_model(tmp_path / "now.eqx", model)
+    header, _ = ckpt._read(path)
+    assert header["format"] == ckpt.HEADER_FORMAT == 2
+    del header["hparams"]["odd_in_velocity"]
+    ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")}, model, overwrite=True)
+    assert ckpt.load_model(path).force_net.odd_in_velocity is True
+    ckpt._write(path, {**{k: v for k, v in header.items() if not k.startswith("payload")}, "format": 3},
+                model, overwrite=True)
+    with pytest.raises(ckpt.CheckpointError, match=r"now\.eqx.*format 3"):
+        ckpt.load_model(path)
 
 
 def test_checkpoints_from_before_damping_scale_keep_their_units_for_w(tmp_path):
@@ -203,6 +224,7 @@ def test_checkpoints_from_before_damping_scale_keep_their_units_for_w(tmp_path):
     path = ckpt.save_model(tmp_path / "old.eqx", old)
     header, _ = ckpt._read(path)
     del header["hparams"]["damping_scale"]
+    del header["format"]
     ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")}, old, overwrite=True)
     loaded = ckpt.load_model(path)
     assert loaded.force_net.damping_scale == pytest.approx(1e-4)

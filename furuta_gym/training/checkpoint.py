@@ -2,7 +2,7 @@
 learned model without depending on training; this module keeps the old import path."""
 
 from ..models.checkpoint import (  # noqa: F401
-    HPARAMS_BEFORE_RECORDED,
+    HEADER_FORMAT,
     MAGIC,
     CheckpointError,
     load_model,
