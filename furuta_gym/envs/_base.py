@@ -69,8 +69,9 @@ def env_arguments(local_variables: dict) -> dict:
 class LagrangianEnv(gymnasium.Env):
     """Base of the furuta_gym envs (see :class:`furuta_gym.envs.FurutaEnv` for the user docs).
 
-    Subclasses set :attr:`system`, :attr:`env_id`, :attr:`plant_presets`, declare their keywords in ``__init__`` and implement :meth:`_make_task`,
-    :meth:`_initial_state`, :meth:`_energy` and optionally :meth:`_update_scene`.
+    Subclasses set :attr:`system`, :attr:`env_id` and :attr:`plant_presets`, declare their
+    keywords in ``__init__`` and implement :meth:`_make_task`, :meth:`_initial_state`,
+    :meth:`_energy` and optionally :meth:`_update_scene`.
     """
 
     metadata: ClassVar[dict] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
@@ -136,7 +137,8 @@ class LagrangianEnv(gymnasium.Env):
 
     def _init_physics(self, cfg) -> None:
         """The plant's effects, its randomisation and the dynamics backend."""
-        self.effects: tuple[Effect, ...] = resolve_effects(self.system, cfg["plant"], cfg["effects"], self.plant_presets)
+        self.effects: tuple[Effect, ...] = resolve_effects(
+            self.system, cfg["plant"], cfg["effects"], self.plant_presets)
         self._randomize = parse_randomization(self.system, cfg["randomize"])
         self.backend: AbstractBackend = make_backend(
             self.system, cfg["dynamics"], substeps=self.frame_skip, effects=self.effects, kernel=cfg["kernel"]
