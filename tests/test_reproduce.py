@@ -383,26 +383,33 @@ def test_quick_runs_compile_their_steps_fast_and_full_runs_do_not():
         assert not training_config("furuta", ReproduceConfig(), 0, loss, kind).fast_compile
 
 
-def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path):
+@pytest.mark.parametrize("system, files, labels", [
+    ("furuta", ["train.csv", "val_forced.csv", "val_free.csv", "val_scale_fit.csv"], {"Free", "Forced"}),
+    # the N-MSD's validation labels are not its test labels: its tables are written from them
+    ("nmsd", ["train.csv", "val_multisine.csv", "val_steps.csv"], {"Multisine", "Steps"}),
+])
+def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path, system, files, labels):
     """A selection run (split="validation") trains on the same training data, fits the Furuta scale
     on val_scale_fit and scores the validation sets only: no test file, no test label, no paper
     value; its runs record the split, so a test run never reuses them (and vice versa)."""
     config = ReproduceConfig(
-        quick=True, systems=("furuta",), pairs=(("dln", "prop"),),
-        prop_epochs={"furuta": (10, 1, 0)}, progress=False, ground_truth="analytic",
+        quick=True, systems=(system,), pairs=(("dln", "prop"),),
+        prop_epochs={system: (10, 1, 0)}, progress=False, ground_truth="analytic",
         split="validation",
     )
     paths = reproduce(tmp_path, config, log=lambda msg: None)
-    data = tmp_path / "data" / "furuta"
-    assert sorted(p.name for p in data.glob("*.csv")) == [
-        "train.csv", "val_forced.csv", "val_free.csv", "val_scale_fit.csv"]
-    metrics = json.loads((tmp_path / "runs/furuta/dln_prop/seed0/metrics.json").read_text())
-    assert set(metrics) - {"_seconds"} == {"Free", "Forced"}
-    assert math.isfinite(float(metrics["Forced"]["beta"]))
-    record = json.loads((tmp_path / "runs/furuta/dln_prop/seed0/reproduce_config.json").read_text())
+    data = tmp_path / "data" / system
+    assert sorted(p.name for p in data.glob("*.csv")) == files
+    metrics = json.loads((tmp_path / f"runs/{system}/dln_prop/seed0/metrics.json").read_text())
+    assert set(metrics) - {"_seconds"} == labels
+    assert all(math.isfinite(float(metrics[label]["energy"])) for label in labels)
+    record = json.loads((tmp_path / f"runs/{system}/dln_prop/seed0/reproduce_config.json").read_text())
     assert record["split"] == "validation"
     rows = list(csv.DictReader(paths["tables.csv"].open()))
     assert rows and all(r["paper"] == "" for r in rows) and not any(k.startswith("fig") for k in paths)
+    assert {r["test_set"] for r in rows} == labels
+    table = paths["tables.md"].read_text()
+    assert all(f"| {label} | DLN (L_prop)" in table for label in labels)
     with pytest.raises(ValueError, match="split='validation'; this run wants .* split='test'"):
         reproduce(tmp_path, dataclasses.replace(config, split="test"), log=lambda msg: None)
     with pytest.raises(ValueError, match="split must be one of"):

@@ -678,7 +678,7 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
         lines += [f"## {title}", "", f"Data: {gt} ground truth, seed {config.data_seed}.", ""]
         lines.append("| Test set | Model | " + " | ".join(_METRIC_HEADERS[c] for c in cols) + " |")
         lines.append("|---|---|" + "---|" * len(cols))
-        for label in TEST_SETS[system]:
+        for label in EVALUATION_SETS[config.split][system]:
             for kind, loss in config.pairs:
                 cells = []
                 for c in cols:
@@ -720,7 +720,7 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
         for model, base in (("DLN", "traj"), ("ADLN", "aph")):
             if ((model.lower(), base) not in config.pairs) or ((model.lower(), "prop") not in config.pairs):
                 continue
-            for label in TEST_SETS[system]:
+            for label in EVALUATION_SETS[config.split][system]:
                 parts = []
                 for metric in ("inertial", "coriolis", "potential"):
                     a = mean_of(system, label, model, "prop", metric)
