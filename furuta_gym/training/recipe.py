@@ -59,10 +59,12 @@ SYSTEM_ROWS = {
 }
 
 
-def _row(system, **changes) -> RunRecipe:
+def _row(system, *, replaces=(), **changes) -> RunRecipe:
+    """The system's L_prop row with ``changes``; ``decisions`` are added to the base row's, less
+    the base decisions this row's own ``replaces``."""
     base = SYSTEM_ROWS[system]["prop"]
-    decisions = base.decisions + changes.pop("decisions", ())
-    return dataclasses.replace(base, decisions=decisions, **changes)
+    kept = tuple(d for d in base.decisions if d not in replaces)
+    return dataclasses.replace(base, decisions=kept + changes.pop("decisions", ()), **changes)
 
 
 RECIPE: dict[tuple[str, str, str], RunRecipe] = {
@@ -81,7 +83,8 @@ RECIPE: dict[tuple[str, str, str], RunRecipe] = {
                    "L_Iτ quadrature, Furuta augmented DeLaN", "μ per system and kind", "F_a design")),
     ("nmsd", "dln", "prop"): _row("nmsd", epochs=(8000, 30, 30), decisions=("L_Iτ epochs, N-MSD DeLaN",)),
     ("nmsd", "aph", "prop"): _row(
-        "nmsd", augmentation_weight=1e-2, decisions=("μ per system and kind", "F_a design")),
+        "nmsd", quadrature="trapezoid", augmentation_weight=1e-2, replaces=("L_Iτ quadrature, N-MSD",),
+        decisions=("L_Iτ quadrature, N-MSD APHYNITY", "μ per system and kind", "F_a design")),
     ("nmsd", "adln", "prop"): _row(
         "nmsd", augmentation_weight=1e-2,
         decisions=("μ per system and kind", "F_a design", "N-MSD augmented DeLaN F_a odd in q̇")),
