@@ -18,7 +18,6 @@ or L_prop (with the same minimum-norm principle for F_a).
 from __future__ import annotations
 
 import dataclasses
-
 from typing import Any, ClassVar
 
 import equinox as eqx

@@ -48,6 +48,16 @@ class FurutaRecipe:
     val_scale_fit_duration: float = 20.0
     val_steps_hold: tuple[float, float] = (0.25, 1.0)
 
+    @property
+    def train_ranges(self) -> tuple[float, ...]:
+        """±range of (α, β, α̇, β̇) of training, scale-fit and validation initial states."""
+        return (self.angle_range, self.angle_range, self.train_velocity_range, self.train_velocity_range)
+
+    @property
+    def test_ranges(self) -> tuple[float, ...]:
+        """±range of (α, β, α̇, β̇) of the test sets' initial states."""
+        return (self.angle_range, self.angle_range, self.test_velocity_range, self.test_velocity_range)
+
     @classmethod
     def small(cls) -> "FurutaRecipe":
         """A scaled-down recipe for quick pipeline runs (16 train, 2 free + 1 forced short tests)."""
@@ -65,23 +75,18 @@ class FurutaRecipe:
         )
 
 
-def _free(t):
-    return np.zeros_like(t)
-
-
 def _test_sets(r: FurutaRecipe, gt, seed, oversample) -> dict[str, list[Clean]]:
-    train_ranges = (r.angle_range, r.angle_range, r.train_velocity_range, r.train_velocity_range)
-    test_ranges = (r.angle_range, r.angle_range, r.test_velocity_range, r.test_velocity_range)
+    train_ranges, test_ranges = r.train_ranges, r.test_ranges
 
     def u_chirp(t):
         return chirp(t, r.chirp_f0, r.chirp_f1, r.chirp_t1, r.amplitude)
 
     out = {}
     x0s = uniform(stream(seed, "train"), r.n_train, train_ranges)
-    out["train"] = run_batch(gt, x0s, r.train_duration, _free, oversample,
+    out["train"] = run_batch(gt, x0s, r.train_duration, np.zeros_like, oversample,
                              [f"free{k:02d}" for k in range(r.n_train)])
     x0s = uniform(stream(seed, "test_free"), r.n_test_free, test_ranges)
-    out["test_free"] = run_batch(gt, x0s, r.test_free_duration, _free, oversample,
+    out["test_free"] = run_batch(gt, x0s, r.test_free_duration, np.zeros_like, oversample,
                                  [f"free{k}" for k in range(r.n_test_free)])
     x0s = uniform(stream(seed, "test_forced"), r.n_test_forced, test_ranges)
     out["test_forced"] = run_batch(gt, x0s, r.test_forced_duration, u_chirp, oversample,
@@ -99,7 +104,7 @@ def _test_sets(r: FurutaRecipe, gt, seed, oversample) -> dict[str, list[Clean]]:
 
 
 def _validation_sets(r: FurutaRecipe, gt, seed, oversample) -> dict[str, list[Clean]]:
-    ranges = (r.angle_range, r.angle_range, r.train_velocity_range, r.train_velocity_range)
+    ranges = r.train_ranges
     free = uniform(stream(seed, "val_free"), r.n_val_free, ranges)
     out = {"val_free": run_batch(gt, free, r.val_free_duration, np.zeros_like, oversample,
                                  [f"free{k}" for k in range(r.n_val_free)])}

@@ -34,8 +34,8 @@ def _grid(duration: float, rate: float) -> np.ndarray:
     return np.arange(n + 1) / rate
 
 
-def _inputs_at(u_fn, t_data: np.ndarray, oversample: int) -> np.ndarray:
-    """Input sampled at the data rate, linearly interpolated onto the sensor grid."""
+def _inputs_at(u_fn, t_data: np.ndarray, oversample: int) -> tuple[np.ndarray, np.ndarray]:
+    """The sensor grid and the input on it: sampled at the data rate, linearly interpolated."""
     u_data = np.asarray(u_fn(t_data), dtype=float)
     t_fine = np.arange((len(t_data) - 1) * oversample + 1) / (oversample / (t_data[1] - t_data[0]))
     t_fine = t_data[0] + t_fine

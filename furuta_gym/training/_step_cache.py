@@ -33,9 +33,9 @@ import importlib.util
 import json
 import os
 import sys
+import sysconfig
 import tempfile
 import warnings
-import sysconfig
 from pathlib import Path
 from typing import Any, Callable
 

@@ -47,7 +47,7 @@ from ..data import load_trajectories
 from ..models import analytic_model, make_model, system_definition
 from ..systems import get_spec
 from .checkpoint import load_model, package_versions, read_header
-from .datagen import SYSTEM_DATA, generate
+from .datagen import SYSTEM_DATA, generate, system_data
 from .metrics import evaluate_model, metrics_to_json
 from .train import MODEL_FILE, STATE_FILE, TrainConfig, train
 from .recipe import (
@@ -714,8 +714,11 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
                 return float(r["ours_mean"]) if r["ours_mean"] else None
         return None
 
-    for system in (s for s in config.systems if SYSTEM_DATA[get_spec(s).name].main_claim):
-        out.append(f"- Main claim ({SYSTEM_DATA[get_spec(system).name].main_claim}: L_prop gives a better force decomposition than L_traj for "
+    for system in config.systems:
+        claim = system_data(system).main_claim
+        if claim is None:
+            continue
+        out.append(f"- Main claim ({claim}: L_prop gives a better force decomposition than L_traj for "
                    "DLN and than L_aph for ADLN), ours:")
         for model, base in (("DLN", "traj"), ("ADLN", "aph")):
             if ((model.lower(), base) not in config.pairs) or ((model.lower(), "prop") not in config.pairs):
