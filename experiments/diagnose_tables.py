@@ -153,6 +153,21 @@ def agreement_table(docs: dict[str, dict]) -> str:
     return "\n".join(rows)
 
 
+def per_run_table(record: dict, docs: dict[str, dict]) -> str:
+    """Per run: which independent split holds it, how far its rotor wandered, its spring alone."""
+    split_of = {r: f"{min(d['fit_runs'])}–{max(d['fit_runs'])}" for k, d in docs.items() if k.startswith("split_")
+                for r in d["fit_runs"]}
+    far = record["far_rad"]
+    rows = [f"| run | split | rotor angle range (rad) | RMS angle (rad) | time beyond ±{far:g} rad (s) | "
+            "spring:alpha on this run alone (N m/rad, t) |", "|---|---|---|---:|---:|---|"]
+    for r in record["runs"]:
+        sp = r["spring_alone"]
+        added = " found" if sp["status"] == "selected" else ""
+        rows.append(f"| {r['run']} | {split_of.get(r['run'], '-')} | {r['alpha_min']:+.2f} … {r['alpha_max']:+.2f} | "
+                    f"{r['alpha_rms']:.2f} | {r['seconds_beyond_far']:.1f} | {sp['coefficient']:.2g}, t {sp['t']:.1f}{added} |")
+    return "\n".join(rows)
+
+
 def readme_line(docs: dict[str, dict]) -> str:
     d = docs["split_runs01-05"]
     others = [docs[k] for k in ("split_runs06-10", "split_runs11-15") if k in docs]
@@ -173,6 +188,9 @@ def blocks() -> dict[str, str]:
     if real:
         out["diagnose-real"] = real_table(real) + "\n\nAcross the independent splits:\n\n" + agreement_table(real)
         out["diagnose-real-readme"] = readme_line(real)
+    runs = REAL / "runs" / "per_run.json"
+    if runs.exists():
+        out["diagnose-real-runs"] = per_run_table(json.loads(runs.read_text()), real)
     return out
 
 
