@@ -434,6 +434,44 @@ def test_every_recipe_row_cites_rows_of_the_decision_log():
             assert any(c.startswith(decision) for c in choices), (key, decision)
 
 
+def _seed_differences(node) -> list[list[float]]:
+    """Every ``differences`` list (seed by seed, against the recipe's value) in a selection JSON."""
+    if isinstance(node, dict):
+        found = [node["differences"]] if isinstance(node.get("differences"), list) else []
+        return found + [d for v in node.values() for d in _seed_differences(v)]
+    if isinstance(node, list):
+        return [d for v in node for d in _seed_differences(v)]
+    return []
+
+
+def test_decision_log_quotes_match_their_evidence():
+    """The seed-by-seed differences the decision log quotes — "(a, b, c)" or a range "a … b" —
+    are those of a selection result the same row links to, to the decimals quoted."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    docs = (root / "docs" / "reproduce.md").read_text()
+    log = docs[docs.index("| choice | value now |"):]
+    log = log[: log.index("\n\n")]
+    number = r"[+−-]?\d+\.\d+"
+    value = lambda text: float(text.replace("−", "-"))  # noqa: E731
+    matches = lambda quoted, actual: all(  # noqa: E731
+        abs(a - value(q)) <= 0.5 * 10.0 ** -len(q.split(".")[1]) + 1e-12 for q, a in zip(quoted, actual))
+    checked = 0
+    for row in log.splitlines()[2:]:
+        evidence = [d for link in re.findall(r"\]\(\.\./(results/[^)]+)\.md\)", row)
+                    if (root / f"{link}.json").exists()
+                    for d in _seed_differences(json.loads((root / f"{link}.json").read_text()))]
+        for triple in re.findall(rf"\(({number}), ({number}), ({number})\)", row):
+            assert any(len(d) == 3 and matches(triple, d) for d in evidence), (row[:40], triple)
+            checked += 1
+        for low, high in re.findall(rf"({number}) … ({number})", row):
+            assert any(matches((low, high), (min(d), max(d))) for d in evidence), (row[:40], low, high)
+            checked += 1
+    assert checked >= 8
+
+
 @pytest.mark.parametrize("script", ["reproduce_summary.py", "recipe_table.py"])
 def test_docs_reproduce_tables_match_their_sources(script):
     """docs/reproduce.md's recipe table is the recipe (training/recipe.py) and its results summary
