@@ -86,8 +86,9 @@ RECIPE: dict[tuple[str, str, str], RunRecipe] = {
         "nmsd", quadrature="trapezoid", augmentation_weight=1e-2, replaces=("L_Iτ quadrature, N-MSD",),
         decisions=("L_Iτ quadrature, N-MSD APHYNITY", "μ per system and kind", "F_a design")),
     ("nmsd", "adln", "prop"): _row(
-        "nmsd", augmentation_weight=1e-2,
-        decisions=("μ per system and kind", "F_a design", "N-MSD augmented DeLaN F_a odd in q̇")),
+        "nmsd", quadrature="trapezoid", augmentation_weight=1e-2, replaces=("L_Iτ quadrature, N-MSD",),
+        decisions=("L_Iτ quadrature, N-MSD augmented DeLaN", "μ per system and kind", "F_a design",
+                   "N-MSD augmented DeLaN F_a odd in q̇")),
 }
 
 #: the paper's training schedule per system (appendix A.2): epochs of the 2-step and the
