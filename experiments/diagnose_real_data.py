@@ -38,9 +38,10 @@ SPLITS = {"runs01-05": list(range(1, 6)), "runs06-10": list(range(6, 11)), "runs
 GROWING = {"runs01-03": [1, 2, 3], "runs01-05": list(range(1, 6)), "runs01-10": list(range(1, 11)),
            "runs01-15": ALL}
 COMMON_TEST = list(range(11, 16))
-# runs 1-5 without the one run whose rotor wanders far on the positive side
+# runs 1-5 without the one run whose rotor wanders far on the positive side, judged on the runs
+# the split of runs 1-5 is judged on
 ABLATIONS = {"runs02-05": [2, 3, 4, 5]}
-FAR = 0.5  # rad: a 1e-3 N m/rad cable spring then pulls with 5e-4 N m, above the rotor's dry friction
+FAR = 0.5  # rad: a 1e-3 N m/rad cable spring then pulls with 5e-4 N m, as hard as the rotor's dry friction
 RUN_CANDIDATES = ["spring:alpha", "constant_torque:alpha", "coulomb_friction:alpha"]
 
 
@@ -92,7 +93,7 @@ def main() -> None:
     for name, runs in GROWING.items():
         run_one(f"growing_{name}", runs, None if runs == ALL else COMMON_TEST, out)
     for name, runs in ABLATIONS.items():
-        run_one(f"ablation_{name}", runs, list(range(6, 16)), out)
+        run_one(f"ablation_{name}", runs, [r for r in ALL if r not in SPLITS["runs01-05"]], out)
     per_run(out)
 
 

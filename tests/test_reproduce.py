@@ -416,17 +416,22 @@ def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path, system, fi
         ReproduceConfig(split="train")
 
 
-def test_every_recipe_row_cites_rows_of_the_decision_log():
-    """The recipe is one table (furuta_gym.training.recipe); each of its choices names a row of
-    docs/reproduce.md's decision log, which must exist."""
+def _decision_log_rows() -> list[str]:
+    """The rows of docs/reproduce.md's decision log (the table under "**Decision log.**")."""
     from pathlib import Path
-
-    from furuta_gym.training.recipe import RECIPE
 
     docs = (Path(__file__).resolve().parents[1] / "docs" / "reproduce.md").read_text()
     log = docs[docs.index("**Decision log.**"):]
-    log = log[: log.index("\n\n", log.index("| choice |"))]
-    choices = [line.split("|")[1].strip() for line in log.splitlines() if line.startswith("| ")]
+    table = log[log.index("| choice |"):]
+    return table[: table.index("\n\n")].splitlines()[2:]
+
+
+def test_every_recipe_row_cites_rows_of_the_decision_log():
+    """The recipe is one table (furuta_gym.training.recipe); each of its choices names a row of
+    docs/reproduce.md's decision log, which must exist."""
+    from furuta_gym.training.recipe import RECIPE
+
+    choices = [line.split("|")[1].strip() for line in _decision_log_rows()]
     assert len(RECIPE) == 12
     for key, row in RECIPE.items():
         assert row.decisions, key
@@ -451,15 +456,12 @@ def test_decision_log_quotes_match_their_evidence():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    docs = (root / "docs" / "reproduce.md").read_text()
-    log = docs[docs.index("| choice | value now |"):]
-    log = log[: log.index("\n\n")]
     number = r"[+−-]?\d+\.\d+"
     value = lambda text: float(text.replace("−", "-"))  # noqa: E731
     matches = lambda quoted, actual: all(  # noqa: E731
         abs(a - value(q)) <= 0.5 * 10.0 ** -len(q.split(".")[1]) + 1e-12 for q, a in zip(quoted, actual))
     checked = 0
-    for row in log.splitlines()[2:]:
+    for row in _decision_log_rows():
         evidence = [d for link in re.findall(r"\]\(\.\./(results/[^)]+)\.md\)", row)
                     if (root / f"{link}.json").exists()
                     for d in _seed_differences(json.loads((root / f"{link}.json").read_text()))]
