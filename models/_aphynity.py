@@ -55,7 +55,7 @@ class Aphynity(AbstractLearnedSystem):
         hp["prior_back_emf"] = False  # Furuta: keep −(kt·km/Rm)·α̇ in the prior's τ_u
         hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
         hp["damping_scale"] = DAMPING_SCALE[spec.name]
-        hp["force_activation"] = FORCE_ACTIVATION
+        hp["force_activation"] = FORCE_ACTIVATION[spec.name]["aph"]
         hp["odd_in_velocity"] = False  # see ForceNetwork
         unknown = set(hparams) - set(hp)
         if unknown:

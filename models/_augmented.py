@@ -25,8 +25,9 @@ from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_s
 __all__ = ["AugmentedDeLaN", "ForceNetwork", "ADLN_ODD_IN_VELOCITY"]
 
 
-#: activation of the F_a network (APHYNITY, augmented DeLaN); see ForceNetwork
-FORCE_ACTIVATION = "silu"
+#: activation of the F_a network per system and model kind (APHYNITY, augmented DeLaN), chosen on
+#: validation data (docs/reproduce.md, decision log; each system's definition holds its own)
+FORCE_ACTIVATION = {name: dict(d.force_activation) for name, d in SYSTEM_DEFINITIONS.items()}
 
 #: F_a's linear velocity term in physical units per system: W = 1 is this damping (N·m·s/rad,
 #: N·s/m), of the order of the real ones, so that Adam moves W as fast as the network's weights
@@ -128,7 +129,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
         hp["force_hidden"] = hp["hidden"]
         hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
         hp["damping_scale"] = DAMPING_SCALE[spec.name]
-        hp["force_activation"] = FORCE_ACTIVATION
+        hp["force_activation"] = FORCE_ACTIVATION[spec.name]["adln"]
         hp["odd_in_velocity"] = ADLN_ODD_IN_VELOCITY[spec.name]
         unknown = set(hparams) - set(hp) - {"eps", "activation"}
         if unknown:

@@ -205,6 +205,7 @@ FURUTA_DEFINITION = SystemDefinition(
     ),
     force_damping_scale=1e-3,
     adln_odd_in_velocity=False,  # F_a also holds the lumped back-EMF
+    force_activation={"aph": "tanh", "adln": "silu"},
     learnable_parameters=("mr", "Lr", "mp", "Lp"),
     friction_parameters=("c_r", "c_p"),
     known_damping_force=lambda coefficients, qd: -coefficients * qd,

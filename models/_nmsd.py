@@ -107,6 +107,7 @@ NMSD_DEFINITION = SystemDefinition(
     ),
     force_damping_scale=1.0,
     adln_odd_in_velocity=True,  # its non-conservative force is pure friction
+    force_activation={"aph": "silu", "adln": "silu"},
     learnable_parameters=("m", "k1", "k2"),
     friction_parameters=("b1", "b2"),
     known_damping_force=lambda coefficients, qd: -coefficients[0] * qd - coefficients[1] * qd**3,

@@ -92,7 +92,9 @@ class SystemDefinition:
     magnitude guesses, deliberately not the true values); ``force_damping_scale``: the unit of
     F_a's linear velocity term W (N·m·s/rad or N·s/m), of the order of the real damping so that
     Adam moves W as fast as the network's weights; ``adln_odd_in_velocity``: whether augmented
-    DeLaN's F_a is odd in q̇ (a choice made on validation data, docs/reproduce.md).
+    DeLaN's F_a is odd in q̇ (a choice made on validation data, docs/reproduce.md);
+    ``force_activation``: the activation of F_a's network per model kind (``"aph"``, ``"adln"``),
+    also chosen on validation data.
     ``friction_parameters``: the analytic parameters that are friction (APHYNITY's prior has
     none); ``back_emf_parameter``: the one that makes the input force depend on velocity, or
     ``None``; ``back_emf_damping``: its pinned damping (DeLaN lumps it with friction).
@@ -123,6 +125,7 @@ class SystemDefinition:
     learned_defaults: dict
     force_damping_scale: float
     adln_odd_in_velocity: bool
+    force_activation: dict[str, str]
     learnable_parameters: tuple[str, ...]
     friction_parameters: tuple[str, ...]
     known_damping_force: Callable[[Any, Any], Any]

@@ -119,7 +119,10 @@ def test_force_network_linear_velocity_term_and_activation():
     assert net.linear.shape == (2,) and not np.any(np.asarray(net.linear))
     assert dict(model.hparams)["linear_velocity"] == "diagonal"
     assert make_model("furuta", "adln", 0).force_net.linear.shape == (2,)
-    assert net.net.activation == "silu" and dict(model.hparams)["force_activation"] == "silu"
+    # the network's activation is chosen per system and model kind (the system's definition)
+    assert net.net.activation == "tanh" and dict(model.hparams)["force_activation"] == "tanh"
+    assert make_model("furuta", "adln", 0).force_net.net.activation == "silu"
+    assert make_model("nmsd", "aph", 0).force_net.net.activation == "silu"
     q = jnp.array([0.3, 1.0])
     w = jnp.array([-2.0, -0.5])
     linear_only = eqx.tree_at(lambda m: m.force_net.linear, model, w)
