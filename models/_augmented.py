@@ -29,10 +29,10 @@ __all__ = ["AugmentedDeLaN", "ForceNetwork", "ADLN_ODD_IN_VELOCITY"]
 #: validation data (docs/reproduce.md, decision log; each system's definition holds its own)
 FORCE_ACTIVATION = {name: dict(d.force_activation) for name, d in SYSTEM_DEFINITIONS.items()}
 
-#: F_a's linear velocity term in physical units per system: W = 1 is this damping (N·m·s/rad,
-#: N·s/m), of the order of the real ones, so that Adam moves W as fast as the network's weights
-#: (each system's definition holds its own)
-DAMPING_SCALE = {name: d.force_damping_scale for name, d in SYSTEM_DEFINITIONS.items()}
+#: F_a's linear velocity term in physical units per system and model kind: W = 1 is this damping
+#: (N·m·s/rad, N·s/m), of the order of the real ones, so that Adam moves W as fast as the
+#: network's weights (each system's definition holds its own, chosen on validation data)
+DAMPING_SCALE = {name: dict(d.force_damping_scale) for name, d in SYSTEM_DEFINITIONS.items()}
 
 #: augmented DeLaN's F_a odd in q̇ (ForceNetwork's odd_in_velocity) per system, chosen on
 #: validation data (docs/reproduce.md, decision log; each system's definition holds its own).
@@ -128,7 +128,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
         hp.pop("damping_init")
         hp["force_hidden"] = hp["hidden"]
         hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
-        hp["damping_scale"] = DAMPING_SCALE[spec.name]
+        hp["damping_scale"] = DAMPING_SCALE[spec.name]["adln"]
         hp["force_activation"] = FORCE_ACTIVATION[spec.name]["adln"]
         hp["odd_in_velocity"] = ADLN_ODD_IN_VELOCITY[spec.name]
         unknown = set(hparams) - set(hp) - {"eps", "activation"}

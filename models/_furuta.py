@@ -203,7 +203,7 @@ FURUTA_DEFINITION = SystemDefinition(
         damping_init=(1e-3, 1e-4),
         input_gain=_PINNED["kt"] / _PINNED["Rm"],  # the motor's torque per volt (back-EMF lumped, see DeLaN)
     ),
-    force_damping_scale=1e-3,
+    force_damping_scale={"aph": 1e-3, "adln": 1e-3},
     adln_odd_in_velocity=False,  # F_a also holds the lumped back-EMF
     force_activation={"aph": "tanh", "adln": "silu"},
     learnable_parameters=("mr", "Lr", "mp", "Lp"),

@@ -105,7 +105,7 @@ NMSD_DEFINITION = SystemDefinition(
         damping_init=(1.0, 1.0),
         input_gain=1.0,
     ),
-    force_damping_scale=1.0,
+    force_damping_scale={"aph": 0.2, "adln": 1.0},  # APHYNITY: its force / velocity scale
     adln_odd_in_velocity=True,  # its non-conservative force is pure friction
     force_activation={"aph": "silu", "adln": "silu"},
     learnable_parameters=("m", "k1", "k2"),
