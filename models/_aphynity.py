@@ -26,7 +26,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
-from ._augmented import DAMPING_SCALE, FORCE_ACTIVATION, ForceNetwork
+from ._augmented import FORCE_DEFAULTS, ForceNetwork
 from ._definitions import SYSTEM_DEFINITIONS, system_definition
 from ._learned import AbstractLearnedSystem, freeze_hparams, system_defaults
 
@@ -54,9 +54,7 @@ class Aphynity(AbstractLearnedSystem):
         hp["prior"] = ()  # overrides of nominal parameter values, e.g. (("mp", 0.03),)
         hp["prior_back_emf"] = False  # Furuta: keep −(kt·km/Rm)·α̇ in the prior's τ_u
         hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
-        hp["damping_scale"] = DAMPING_SCALE[spec.name]["aph"]
-        hp["force_activation"] = FORCE_ACTIVATION[spec.name]["aph"]
-        hp["odd_in_velocity"] = False  # see ForceNetwork
+        hp.update(FORCE_DEFAULTS[spec.name]["aph"])  # W's unit, activation, odd in q̇ (see ForceNetwork)
         unknown = set(hparams) - set(hp)
         if unknown:
             raise ValueError(f"unknown APHYNITY hyper-parameters {sorted(unknown)}; known: {sorted(hp)}")

@@ -22,22 +22,14 @@ from ._delan import LagrangianNetworks
 from ._system import first_joint_input
 from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
 
-__all__ = ["AugmentedDeLaN", "ForceNetwork", "ADLN_ODD_IN_VELOCITY"]
+__all__ = ["AugmentedDeLaN", "ForceNetwork", "FORCE_DEFAULTS"]
 
 
-#: activation of the F_a network per system and model kind (APHYNITY, augmented DeLaN), chosen on
-#: validation data (docs/reproduce.md, decision log; each system's definition holds its own)
-FORCE_ACTIVATION = {name: dict(d.force_activation) for name, d in SYSTEM_DEFINITIONS.items()}
-
-#: F_a's linear velocity term in physical units per system and model kind: W = 1 is this damping
-#: (N·m·s/rad, N·s/m), of the order of the real ones, so that Adam moves W as fast as the
-#: network's weights (each system's definition holds its own, chosen on validation data)
-DAMPING_SCALE = {name: dict(d.force_damping_scale) for name, d in SYSTEM_DEFINITIONS.items()}
-
-#: augmented DeLaN's F_a odd in q̇ (ForceNetwork's odd_in_velocity) per system, chosen on
-#: validation data (docs/reproduce.md, decision log; each system's definition holds its own).
-#: APHYNITY, whose prior holds M and V exactly, is general on both.
-ADLN_ODD_IN_VELOCITY = {name: d.adln_odd_in_velocity for name, d in SYSTEM_DEFINITIONS.items()}
+#: F_a's design per system and model kind (APHYNITY, augmented DeLaN), as ForceNetwork's
+#: hyper-parameters: W's unit (``damping_scale``: W = 1 is this damping, N·m·s/rad or N·s/m),
+#: the network's activation, odd in q̇ or general. Chosen on validation data (docs/reproduce.md,
+#: decision log); each system's definition holds its own.
+FORCE_DEFAULTS = {name: d.force_defaults for name, d in SYSTEM_DEFINITIONS.items()}
 
 
 class ForceNetwork(eqx.Module):
@@ -53,7 +45,7 @@ class ForceNetwork(eqx.Module):
     construction, so F_a(q, 0) = 0: a force of friction type (viscous, cubic, Coulomb are all odd)
     and nothing even in q̇ — no spring, no gravity, no constant torque — which a general F_a can
     take over from V at no cost to L_Iτ. Off unless a model asks for it (the paper's F_a is
-    general; augmented DeLaN on the N-MSD asks, :data:`ADLN_ODD_IN_VELOCITY`); it rules out
+    general; augmented DeLaN on the N-MSD asks, :data:`FORCE_DEFAULTS`); it rules out
     real even effects such as a cable's spring, which the diagnosis loop looks for.
 
     ``linear_velocity``: ``"diagonal"`` (the models' default) one viscous coefficient per joint,
@@ -128,9 +120,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
         hp.pop("damping_init")
         hp["force_hidden"] = hp["hidden"]
         hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
-        hp["damping_scale"] = DAMPING_SCALE[spec.name]["adln"]
-        hp["force_activation"] = FORCE_ACTIVATION[spec.name]["adln"]
-        hp["odd_in_velocity"] = ADLN_ODD_IN_VELOCITY[spec.name]
+        hp.update(FORCE_DEFAULTS[spec.name]["adln"])  # W's unit, activation, odd in q̇
         unknown = set(hparams) - set(hp) - {"eps", "activation"}
         if unknown:
             raise ValueError(f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}")

@@ -203,9 +203,10 @@ FURUTA_DEFINITION = SystemDefinition(
         damping_init=(1e-3, 1e-4),
         input_gain=_PINNED["kt"] / _PINNED["Rm"],  # the motor's torque per volt (back-EMF lumped, see DeLaN)
     ),
-    force_damping_scale={"aph": 1e-3, "adln": 1e-3},
-    adln_odd_in_velocity=False,  # F_a also holds the lumped back-EMF
-    force_activation={"aph": "tanh", "adln": "silu"},
+    force_defaults={  # F_a general in q̇: it also holds the lumped back-EMF
+        "aph": {"damping_scale": 1e-3, "force_activation": "tanh", "odd_in_velocity": False},
+        "adln": {"damping_scale": 1e-3, "force_activation": "silu", "odd_in_velocity": False},
+    },
     learnable_parameters=("mr", "Lr", "mp", "Lp"),
     friction_parameters=("c_r", "c_p"),
     known_damping_force=lambda coefficients, qd: -coefficients * qd,

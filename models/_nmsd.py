@@ -105,9 +105,12 @@ NMSD_DEFINITION = SystemDefinition(
         damping_init=(1.0, 1.0),
         input_gain=1.0,
     ),
-    force_damping_scale={"aph": 0.2, "adln": 1.0},  # APHYNITY: its force / velocity scale
-    adln_odd_in_velocity=True,  # its non-conservative force is pure friction
-    force_activation={"aph": "silu", "adln": "silu"},
+    force_defaults={
+        # APHYNITY's W in its network's force / velocity scale; its prior holds M and V exactly
+        "aph": {"damping_scale": 0.2, "force_activation": "silu", "odd_in_velocity": False},
+        # odd in q̇: the non-conservative force is pure friction
+        "adln": {"damping_scale": 1.0, "force_activation": "silu", "odd_in_velocity": True},
+    },
     learnable_parameters=("m", "k1", "k2"),
     friction_parameters=("b1", "b2"),
     known_damping_force=lambda coefficients, qd: -coefficients[0] * qd - coefficients[1] * qd**3,

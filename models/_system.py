@@ -89,12 +89,12 @@ class SystemDefinition:
 
     ``title``: its name in prose. ``learned_defaults``: the learned models' default
     hyper-parameters (reference magnitudes in SI, network widths, initial damping: order-of-
-    magnitude guesses, deliberately not the true values); ``force_damping_scale``: the unit of
-    F_a's linear velocity term W (N·m·s/rad or N·s/m) per model kind (``"aph"``, ``"adln"``), of
-    the order of the real damping so that Adam moves W as fast as the network's weights;
-    ``force_activation``: the activation of F_a's network per model kind;
-    ``adln_odd_in_velocity``: whether augmented DeLaN's F_a is odd in q̇ (all three chosen on
-    validation data, docs/reproduce.md).
+    magnitude guesses, deliberately not the true values); ``force_defaults``: F_a's design per
+    model kind (``"aph"``, ``"adln"``) as the models' hyper-parameters of the same names:
+    ``damping_scale``, the unit of the linear velocity term W (N·m·s/rad or N·s/m, of the order of
+    the real damping so that Adam moves W as fast as the network's weights), ``force_activation``,
+    the network's activation, and ``odd_in_velocity`` (all chosen on validation data,
+    docs/reproduce.md).
     ``friction_parameters``: the analytic parameters that are friction (APHYNITY's prior has
     none); ``back_emf_parameter``: the one that makes the input force depend on velocity, or
     ``None``; ``back_emf_damping``: its pinned damping (DeLaN lumps it with friction).
@@ -123,9 +123,7 @@ class SystemDefinition:
     parameters: type
     lumped: LumpedForm
     learned_defaults: dict
-    force_damping_scale: dict[str, float]
-    adln_odd_in_velocity: bool
-    force_activation: dict[str, str]
+    force_defaults: dict[str, dict[str, Any]]
     learnable_parameters: tuple[str, ...]
     friction_parameters: tuple[str, ...]
     known_damping_force: Callable[[Any, Any], Any]

@@ -163,7 +163,7 @@ def test_force_network_odd_in_velocity_holds_no_force_at_rest(system, kind):
 
 
 def test_only_augmented_delan_on_the_nmsd_has_an_odd_force_by_default():
-    """The per-system choice made on validation data (models/_augmented.py, ADLN_ODD_IN_VELOCITY)."""
+    """The per-system choice made on validation data (models/_augmented.py, FORCE_DEFAULTS)."""
     defaults = {(s, k): dict(make_model(s, k, 0).hparams)["odd_in_velocity"]
                 for s in ("nmsd", "furuta") for k in ("aph", "adln")}
     assert defaults == {("nmsd", "aph"): False, ("nmsd", "adln"): True,
