@@ -15,7 +15,9 @@ three seeds, fine-tuned at 1e-3: −0.79, −0.79, −0.91).
 With several seeds the first value is the recipe's current one, and another replaces it only if
 it scores lower on *every* model seed (seed by seed: the same seed's data order and
 initialisation, so the pair differs by the option alone); among those the lowest mean wins
-(:func:`choose`). A mean lower by less than the seeds' spread, with one seed against, is a tie,
+(:func:`choose`). Seeds are trained in turn, and a value beaten on one seed is not trained on
+the next: it can no longer be chosen, so the decision is the one all seeds would give, at a
+third of the cost for a value beaten on seed 0 (its table row says where it stopped). A mean lower by less than the seeds' spread, with one seed against, is a tie,
 and a tie keeps what the recipe has: that is how the Furuta's DeLaN and APHYNITY kept Simpson's
 rule when the Hermite rule's means were lower by 0.05 and 0.03 (results/quadrature_seeds). The
 choice goes into the code by hand.
@@ -54,19 +56,21 @@ def _parse(text: str):
         return text
 
 
-def _config(system: str, kind: str, where: str, name: str, value, seeds: int = 1):
+def _config(system: str, kind: str, where: str, name: str, value, seeds: int | tuple[int, ...] = 1):
     """The reproduction config of one candidate: ``where`` is "train" or "model"; model seeds
-    0 … ``seeds`` − 1."""
+    0 … ``seeds`` − 1, or the tuple given."""
     from furuta_gym.training.reproduce import ReproduceConfig
 
     override = {name: value}
-    return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), seeds=tuple(range(seeds)),
+    seeds = tuple(range(seeds)) if isinstance(seeds, int) else tuple(seeds)
+    return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), seeds=seeds,
                            figures=False, progress=False, jobs=1, split="validation",
                            train_overrides=override if where == "train" else None,
                            model_overrides=override if where == "model" else None)
 
 
-def _train(system: str, kind: str, where: str, name: str, value, out: Path, seeds: int = 1) -> None:
+def _train(system: str, kind: str, where: str, name: str, value, out: Path,
+           seeds: int | tuple[int, ...] = 1) -> None:
     import furuta_gym
     from furuta_gym.training.reproduce import reproduce
 
@@ -96,24 +100,72 @@ def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path, 
     return True
 
 
-def choose(seed_means: dict[str, list[float]]) -> tuple[str, dict[str, dict]]:
+def choose(seed_means: dict[str, list[float]], paired: bool | None = None) -> tuple[str, dict[str, dict]]:
     """The rule of ``--seeds N``: ``seed_means`` maps each value, the recipe's current one first,
-    to its validation means per model seed. Returns the chosen value and, for every other value,
-    its seed-by-seed differences from the first (``"differences"``, negative = better) and whether
-    it is better on every seed (``"every_seed"``). One seed keeps the plain lowest mean."""
+    to its validation means per model seed, seeds 0, 1, … in order; a value beaten on a seed may
+    stop there (its later seeds untrained). Returns the chosen value and, for every other value,
+    its seed-by-seed differences from the first (``"differences"``, negative = better; as many as
+    it has seeds) and whether it is better on every seed (``"every_seed"``). One seed keeps the
+    plain lowest mean, unless ``paired`` (several seeds were asked for, and every value was beaten
+    on seed 0)."""
     values = list(seed_means)
     first = values[0]
-    if len(seed_means[first]) == 1:
+    if not (len(seed_means[first]) > 1 if paired is None else paired):
         return min(values, key=lambda v: seed_means[v][0]), {}
     paired = {}
     for value in values[1:]:
-        if len(seed_means[value]) != len(seed_means[first]):
-            raise ValueError(f"{value!r} has {len(seed_means[value])} seed means, {first!r} has {len(seed_means[first])}")
-        diff = [b - a for a, b in zip(seed_means[first], seed_means[value])]
-        paired[value] = {"differences": diff, "every_seed": all(d < 0 for d in diff)}
+        means = seed_means[value]
+        if len(means) > len(seed_means[first]):
+            raise ValueError(f"{value!r} has {len(means)} seed means, {first!r} has {len(seed_means[first])}")
+        diff = [b - a for a, b in zip(seed_means[first], means)]
+        if len(means) < len(seed_means[first]) and (not diff or diff[-1] < 0):
+            raise ValueError(f"{value!r} has {len(means)} seed means, {first!r} has "
+                             f"{len(seed_means[first])}, and it was not beaten on its last seed")
+        paired[value] = {"differences": diff,
+                         "every_seed": len(means) == len(seed_means[first]) and all(d < 0 for d in diff)}
     better = [v for v in values[1:] if paired[v]["every_seed"]]
     chosen = min(better, key=lambda v: float(np.mean(seed_means[v]))) if better else first
     return chosen, paired
+
+
+def _seed_mean(system: str, kind: str, out: Path, seed: int) -> float:
+    return _score(system, kind, {"run": out}, (seed,))["run"]["mean"]
+
+
+def _train_in_turn(first: str, candidates, seeds: tuple[int, ...], train, seed_mean) -> dict:
+    """Train seed by seed; a value beaten by ``first`` (the recipe's) on a seed is not trained on
+    later ones. ``candidates``: (kind, value, out) triples; ``train(live, seed)`` trains the live
+    ones' ``seed``, ``seed_mean(kind, out, seed)`` scores one run. Returns {(kind, value): the
+    seeds it was trained on}."""
+    trained = {(k, t): [] for k, t, _ in candidates}
+    beaten = set()
+    for seed in seeds:
+        live = [c for c in candidates if c[:2] not in beaten]
+        if seed > 0 and all(t == first for _, t, _ in live):
+            break  # every other value is beaten: no later seed can change the choice
+        train(live, seed)
+        means = {(k, t): seed_mean(k, out, seed) for k, t, out in live}
+        for k, t, _ in live:
+            trained[(k, t)].append(seed)
+            if t != first and means[(k, t)] >= means[(k, first)]:
+                beaten.add((k, t))
+    return trained
+
+
+def _seed_columns(score: dict, pair: dict | None, seeds: int) -> str:
+    """The table's per-seed columns of one value: its seed means, then its differences from the
+    recipe's value (and where it stopped, beaten)."""
+    means = score["seed_means"]
+    spread = f"± {float(np.std(means, ddof=1)):.3f}" if len(means) > 1 else "one seed"
+    text = f" {' / '.join(f'{m:.3f}' for m in means)} ({spread}) |"
+    if pair is None:
+        return text + " (the recipe's) |"
+    text += f" {' / '.join(f'{d:+.3f}' for d in pair['differences'])}"
+    if pair["every_seed"]:
+        text += " (every seed better)"
+    elif len(means) < seeds:
+        text += f"; beaten on seed {len(means) - 1}, not trained on later seeds"
+    return text + " |"
 
 
 def main(argv=None) -> None:
@@ -153,17 +205,25 @@ def main(argv=None) -> None:
     # spawn, not fork: comparing settings above already ran JAX, whose threads a forked child
     # would inherit mid-flight (it deadlocked)
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        list(pool.map(_train, *zip(*[(args.system, k, where, name, _parse(t), out, args.seeds)
-                                      for k, t, _, out in candidates])))
+        def train(live, seed):
+            list(pool.map(_train, *zip(*[(args.system, k, where, name, _parse(t), out, (seed,))
+                                          for k, t, out in live])))
+
+        trained = _train_in_turn(texts[0], [(k, t, out) for k, t, _, out in candidates], seeds, train,
+                                 lambda k, out, seed: _seed_mean(args.system, k, out, seed))
     rows = {}
     for kind in args.kinds:
-        runs = {text: out for k, text, _, out in candidates if k == kind}
-        scores = _score(args.system, kind, runs, seeds)
-        for text, out in runs.items():
+        scores = {}
+        for k, text, _, out in candidates:
+            if k != kind:
+                continue
+            own = tuple(trained[(kind, text)])
+            scores[text] = _score(args.system, kind, {text: out}, own)[text]
             seconds = [json.loads((_run_dir(out, args.system, kind, seed) / "metrics.json").read_text())
-                       ["_seconds"]["train"] for seed in seeds]
+                       ["_seconds"]["train"] for seed in own]
+            scores[text]["seeds"] = list(own)
             scores[text]["train_seconds"] = sum(seconds) / len(seconds)
-            scores[text]["reused_from"] = copied[(kind, text)] or None
+            scores[text]["reused_from"] = {s: src for s, src in copied[(kind, text)].items() if s in own} or None
         rows[kind] = scores
     first = next(iter(next(iter(rows.values())).values()))
     sets = list(first["sets"])
@@ -191,9 +251,11 @@ def main(argv=None) -> None:
     ]
     chosen, lowest = {}, {}
     for kind, scores in rows.items():
-        best = min(scores, key=lambda t: scores[t]["mean"])
+        # "lower" compares means over the same seeds: among the values trained on all of them
+        full = [t for t in scores if len(scores[t]["seeds"]) == len(scores[texts[0]]["seeds"])]
+        best = min(full, key=lambda t: scores[t]["mean"])
         lowest[kind] = best
-        chosen[kind], paired = choose({t: scores[t]["seed_means"] for t in texts})
+        chosen[kind], paired = choose({t: scores[t]["seed_means"] for t in texts}, paired=args.seeds > 1)
         for text, pair in paired.items():
             scores[text]["vs_first"] = pair
         for text, sc in scores.items():
@@ -204,15 +266,8 @@ def main(argv=None) -> None:
                 mark += " ← chosen"
             reused = ""
             if sc["reused_from"]:
-                reused = " (reused)" if len(sc["reused_from"]) == args.seeds else f" (seeds {', '.join(map(str, sc['reused_from']))} reused)"
-            per_seed = ""
-            if args.seeds > 1:
-                spread = float(np.std(sc["seed_means"], ddof=1))
-                per_seed = f" {' / '.join(f'{m:.3f}' for m in sc['seed_means'])} (± {spread:.3f}) |"
-                pair = sc.get("vs_first")
-                per_seed += (" (the recipe's) |" if pair is None else
-                             f" {' / '.join(f'{d:+.3f}' for d in pair['differences'])}"
-                             f"{' (every seed better)' if pair['every_seed'] else ''} |")
+                reused = " (reused)" if len(sc["reused_from"]) == len(sc["seeds"]) else f" (seeds {', '.join(map(str, sc['reused_from']))} reused)"
+            per_seed = _seed_columns(sc, sc.get("vs_first"), args.seeds) if args.seeds > 1 else ""
             lines.append(f"| {kind} | {text}{reused} | {cell_text} | **{sc['mean']:.3f}**{mark} |{per_seed}"
                          f" {sc['train_seconds']:.0f} |")
     args.out.mkdir(parents=True, exist_ok=True)

@@ -26,8 +26,41 @@ def test_among_values_better_on_every_seed_the_lowest_mean_wins_and_ties_keep_th
     assert choose({"a": [0.0, 0.0], "b": [0.0, -1.0]})[0] == "a"  # equal on a seed is not better
     # one seed: the plain lowest mean
     assert choose({"a": [0.0], "b": [-0.1]}) == ("b", {})
-    with pytest.raises(ValueError, match="'b' has 1 seed means"):
-        choose({"a": [0.0, 0.0], "b": [0.0]})
+    with pytest.raises(ValueError, match="'b' has 3 seed means"):
+        choose({"a": [0.0, 0.0], "b": [0.0, -1.0, -1.0]})
+
+
+def test_a_value_beaten_on_a_seed_may_stop_there_and_is_never_chosen():
+    # beaten on seed 0 (equal counts as beaten), or on seed 1 after winning seed 0
+    chosen, paired = choose({"a": [0.0, 0.0, 0.0], "b": [0.0], "c": [-0.2, 0.1], "d": [-0.1, -0.1, -0.1]})
+    assert chosen == "d"
+    assert paired["b"] == {"differences": [0.0], "every_seed": False}
+    assert paired["c"]["differences"] == pytest.approx([-0.2, 0.1]) and not paired["c"]["every_seed"]
+    # every value beaten on seed 0: the recipe's value has one seed too, and the paired rule
+    # (asked for several seeds) still reports the differences
+    chosen, paired = choose({"a": [0.0], "b": [0.3]}, paired=True)
+    assert chosen == "a" and paired["b"] == {"differences": [0.3], "every_seed": False}
+    # stopping while ahead is not the rule
+    with pytest.raises(ValueError, match="not beaten on its last seed"):
+        choose({"a": [0.0, 0.0, 0.0], "b": [-0.1]})
+
+
+def test_seeds_are_trained_in_turn_and_a_beaten_value_is_not_trained_again():
+    from select_option import _train_in_turn
+
+    means = {"a": [0.0, 0.0, 0.0], "b": [0.1, -9.0, -9.0], "c": [-0.1, 0.2, -9.0], "d": [-0.1, -0.1, -0.1]}
+    calls = []
+    trained = _train_in_turn("a", [("adln", v, f"out/{v}") for v in means], (0, 1, 2),
+                             lambda live, seed: calls.append((seed, [t for _, t, _ in live])),
+                             lambda kind, out, seed: means[out.split("/")[1]][seed])
+    assert calls == [(0, ["a", "b", "c", "d"]), (1, ["a", "c", "d"]), (2, ["a", "d"])]
+    assert trained == {("adln", "a"): [0, 1, 2], ("adln", "b"): [0], ("adln", "c"): [0, 1],
+                       ("adln", "d"): [0, 1, 2]}
+    # all beaten on seed 0: nothing more is trained
+    calls.clear()
+    trained = _train_in_turn("a", [("adln", "a", "out/a"), ("adln", "b", "out/b")], (0, 1, 2),
+                             lambda live, seed: calls.append(seed), lambda kind, out, seed: means[out[4:]][seed])
+    assert calls == [0] and trained == {("adln", "a"): [0], ("adln", "b"): [0]}
 
 
 def test_selection_candidates_are_validation_runs():
