@@ -238,8 +238,9 @@ def main(argv=None) -> None:
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', 'cpu')}, "
         f"{machine['cpu_count']} cores. Training seconds from each run's metrics.json (runs trained "
         "beside others are slower than alone)"
-        + (f"; cells, mean and seconds are means over model seeds {', '.join(map(str, seeds))}, "
-           "whose own means follow (± their standard deviation)" if args.seeds > 1 else "") + ".",
+        + (f"; cells, mean and seconds are means over the model seeds a value was trained on "
+           f"({', '.join(map(str, seeds))} in turn; a value beaten on a seed is not trained on later "
+           "ones), whose own means follow (± their standard deviation)" if args.seeds > 1 else "") + ".",
         "",
         "Open-loop prediction log10 RMSE on the validation datasets (their own excitation; the test "
         "sets are never generated or scored). Lower is better; the mean is the criterion" + (f", and a value replaces the recipe's ({texts[0]}) only if it is lower on "

@@ -450,8 +450,9 @@ def _seed_differences(node) -> list[list[float]]:
 
 
 def test_decision_log_quotes_match_their_evidence():
-    """The seed-by-seed differences the decision log quotes — "(a, b, c)" or a range "a … b" —
-    are those of a selection result the same row links to, to the decimals quoted."""
+    """The seed-by-seed differences the decision log quotes — "(a, b, c)", a range "a … b", or
+    for a candidate stopped once beaten "beaten on seed 0 (a)" / "on seed 1 (a, b)" — are those
+    of a selection result the same row links to, to the decimals quoted."""
     import re
     from pathlib import Path
 
@@ -467,6 +468,10 @@ def test_decision_log_quotes_match_their_evidence():
                     for d in _seed_differences(json.loads((root / f"{link}.json").read_text()))]
         for triple in re.findall(rf"\(({number}), ({number}), ({number})\)", row):
             assert any(len(d) == 3 and matches(triple, d) for d in evidence), (row[:40], triple)
+            checked += 1
+        for stopped in re.findall(rf"beaten on seed \d \(({number}(?:, {number})*)\)", row):
+            quoted = stopped.split(", ")
+            assert any(len(d) == len(quoted) and matches(quoted, d) for d in evidence), (row[:40], stopped)
             checked += 1
         for low, high in re.findall(rf"({number}) … ({number})", row):
             assert any(matches((low, high), (min(d), max(d))) for d in evidence), (row[:40], low, high)
