@@ -106,10 +106,10 @@ NMSD_DEFINITION = SystemDefinition(
         input_gain=1.0,
     ),
     force_defaults={
-        # APHYNITY's W in its network's force / velocity scale; its prior holds M and V exactly
+        # W in the network's force / velocity scale (1 N / 5 m/s) for both; APHYNITY's prior
+        # holds M and V exactly; the augmented DeLaN's F_a is odd in q̇ (pure friction)
         "aph": {"damping_scale": 0.2, "force_activation": "silu", "odd_in_velocity": False},
-        # odd in q̇: the non-conservative force is pure friction
-        "adln": {"damping_scale": 1.0, "force_activation": "silu", "odd_in_velocity": True},
+        "adln": {"damping_scale": 0.2, "force_activation": "silu", "odd_in_velocity": True},
     },
     learnable_parameters=("m", "k1", "k2"),
     friction_parameters=("b1", "b2"),
