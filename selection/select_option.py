@@ -267,7 +267,7 @@ def main(argv=None) -> None:
                 mark += " ← chosen"
             reused = ""
             if sc["reused_from"]:
-                reused = " (reused)" if len(sc["reused_from"]) == len(sc["seeds"]) else f" (seeds {', '.join(map(str, sc['reused_from']))} reused)"
+                reused = " (reused)" if len(sc["reused_from"]) == len(sc["seeds"]) else f" (seed{'s' * (len(sc['reused_from']) > 1)} {', '.join(map(str, sc['reused_from']))} reused)"
             per_seed = _seed_columns(sc, sc.get("vs_first"), args.seeds) if args.seeds > 1 else ""
             lines.append(f"| {kind} | {text}{reused} | {cell_text} | **{sc['mean']:.3f}**{mark} |{per_seed}"
                          f" {sc['train_seconds']:.0f} |")
