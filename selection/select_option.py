@@ -17,8 +17,9 @@ it scores lower on *every* model seed (seed by seed: the same seed's data order 
 initialisation, so the pair differs by the option alone); among those the lowest mean wins
 (:func:`choose`). Seeds are trained in turn, and a value beaten on one seed is not trained on
 the next: it can no longer be chosen, so the decision is the one all seeds would give, at a
-third of the cost for a value beaten on seed 0 (its table row says where it stopped). A mean lower by less than the seeds' spread, with one seed against, is a tie,
-and a tie keeps what the recipe has: that is how the Furuta's DeLaN and APHYNITY kept Simpson's
+third of the cost for a value beaten on seed 0 (its table row says where it stopped). A mean
+lower by less than the seeds' spread, with one seed against, is a tie, and a tie keeps what the
+recipe has: that is how the Furuta's DeLaN and APHYNITY kept Simpson's
 rule when the Hermite rule's means were lower by 0.05 and 0.03 (results/quadrature_seeds). The
 choice goes into the code by hand.
 
@@ -100,17 +101,17 @@ def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path, 
     return True
 
 
-def choose(seed_means: dict[str, list[float]], paired: bool | None = None) -> tuple[str, dict[str, dict]]:
+def choose(seed_means: dict[str, list[float]], several_seeds: bool | None = None) -> tuple[str, dict[str, dict]]:
     """The rule of ``--seeds N``: ``seed_means`` maps each value, the recipe's current one first,
     to its validation means per model seed, seeds 0, 1, … in order; a value beaten on a seed may
     stop there (its later seeds untrained). Returns the chosen value and, for every other value,
     its seed-by-seed differences from the first (``"differences"``, negative = better; as many as
     it has seeds) and whether it is better on every seed (``"every_seed"``). One seed keeps the
-    plain lowest mean, unless ``paired`` (several seeds were asked for, and every value was beaten
-    on seed 0)."""
+    plain lowest mean, unless ``several_seeds`` were asked for (and every value was beaten on
+    seed 0, so that the recipe's value has only that one); by default, whether it has several."""
     values = list(seed_means)
     first = values[0]
-    if not (len(seed_means[first]) > 1 if paired is None else paired):
+    if not (len(seed_means[first]) > 1 if several_seeds is None else several_seeds):
         return min(values, key=lambda v: seed_means[v][0]), {}
     paired = {}
     for value in values[1:]:
@@ -256,7 +257,7 @@ def main(argv=None) -> None:
         full = [t for t in scores if len(scores[t]["seeds"]) == len(scores[texts[0]]["seeds"])]
         best = min(full, key=lambda t: scores[t]["mean"])
         lowest[kind] = best
-        chosen[kind], paired = choose({t: scores[t]["seed_means"] for t in texts}, paired=args.seeds > 1)
+        chosen[kind], paired = choose({t: scores[t]["seed_means"] for t in texts}, several_seeds=args.seeds > 1)
         for text, pair in paired.items():
             scores[text]["vs_first"] = pair
         for text, sc in scores.items():

@@ -38,7 +38,7 @@ def test_a_value_beaten_on_a_seed_may_stop_there_and_is_never_chosen():
     assert paired["c"]["differences"] == pytest.approx([-0.2, 0.1]) and not paired["c"]["every_seed"]
     # every value beaten on seed 0: the recipe's value has one seed too, and the paired rule
     # (asked for several seeds) still reports the differences
-    chosen, paired = choose({"a": [0.0], "b": [0.3]}, paired=True)
+    chosen, paired = choose({"a": [0.0], "b": [0.3]}, several_seeds=True)
     assert chosen == "a" and paired["b"] == {"differences": [0.3], "every_seed": False}
     # stopping while ahead is not the rule
     with pytest.raises(ValueError, match="not beaten on its last seed"):
