@@ -7,7 +7,7 @@ from ._definitions import SYSTEM_DEFINITIONS, system_definition
 from ._furuta import Furuta, FurutaParameters, furuta_lumped, furuta_mass_matrix, furuta_potential
 from ._nmsd import NMSD, NMSDParameters, nmsd_potential
 from ._aphynity import Aphynity
-from ._augmented import AugmentedDeLaN
+from ._augmented import AbstractAugmentedSystem, AugmentedDeLaN
 from ._delan import DeLaN
 from ._factory import MODEL_KINDS, make_model
 from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
@@ -34,6 +34,7 @@ __all__ = [
     "nmsd_potential",
     # learned (issue 3)
     "AbstractLearnedSystem",
+    "AbstractAugmentedSystem",
     "DeLaN",
     "Aphynity",
     "AugmentedDeLaN",

@@ -26,16 +26,16 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
-from ._augmented import FORCE_DEFAULTS, ForceNetwork
+from ._augmented import AbstractAugmentedSystem, ForceNetwork, force_hparams
 from ._definitions import SYSTEM_DEFINITIONS, system_definition
-from ._learned import AbstractLearnedSystem, freeze_hparams, system_defaults
+from ._learned import freeze_hparams, system_defaults
 
 __all__ = ["Aphynity", "LEARNABLE_PHYSICAL_PARAMETERS"]
 
 LEARNABLE_PHYSICAL_PARAMETERS = {name: d.learnable_parameters for name, d in SYSTEM_DEFINITIONS.items()}
 
 
-class Aphynity(AbstractLearnedSystem):
+class Aphynity(AbstractAugmentedSystem):
     """APHYNITY (aph): frictionless analytic prior with learnable parameters + F_a network."""
 
     kind: ClassVar[str] = "aph"
@@ -53,8 +53,7 @@ class Aphynity(AbstractLearnedSystem):
             hp.pop(k)
         hp["prior"] = ()  # overrides of nominal parameter values, e.g. (("mp", 0.03),)
         hp["prior_back_emf"] = False  # Furuta: keep −(kt·km/Rm)·α̇ in the prior's τ_u
-        hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
-        hp.update(FORCE_DEFAULTS[spec.name]["aph"])  # W's unit, activation, odd in q̇ (see ForceNetwork)
+        hp.update(force_hparams(spec, "aph"))
         unknown = set(hparams) - set(hp)
         if unknown:
             raise ValueError(f"unknown APHYNITY hyper-parameters {sorted(unknown)}; known: {sorted(hp)}")
@@ -75,12 +74,7 @@ class Aphynity(AbstractLearnedSystem):
             nominal[definition.back_emf_parameter] = 0.0  # the back-EMF −(kt·km/Rm)·α̇ is F_a's (module docstring)
         self.nominal = tuple(nominal.items())
         self.log_ratios = jnp.zeros(len(definition.learnable_parameters))
-        self.force_net = ForceNetwork(
-            spec, key=key, hidden=tuple(hp["hidden"]), force_scale=hp["force_scale"],
-            position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
-            activation=hp["force_activation"], linear_velocity=hp["linear_velocity"],
-            damping_scale=hp["damping_scale"], odd_in_velocity=hp["odd_in_velocity"],
-        )
+        self.force_net = ForceNetwork.from_hparams(spec, hp, hidden=hp["hidden"], key=key)
         self.scale = jnp.asarray(1.0)
         self.spec = spec
         self.hparams = freeze_hparams(hp)
@@ -103,24 +97,11 @@ class Aphynity(AbstractLearnedSystem):
         definition = system_definition(self.spec)
         return definition.model(params=definition.parameters(**values))
 
-    @property
-    def has_augmentation(self) -> bool:
-        return True
-
-    def augmentation(self, q, qd):
-        return self.scale * self.force_net(q, qd)
-
-    def augmentation_beyond_linear(self, q, qd):
-        return self.scale * self.force_net.beyond_linear(q, qd)
-
     def mass_matrix(self, q):
         return self.scale * self.prior.mass_matrix(q)
 
     def potential(self, q):
         return self.scale * self.prior.potential(q)
-
-    def nonconservative_force(self, q, qd):
-        return self.augmentation(q, qd)
 
     def input_force(self, q, qd, u):
         return self.prior.input_force(q, qd, u)

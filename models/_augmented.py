@@ -22,7 +22,7 @@ from ._delan import LagrangianNetworks
 from ._system import first_joint_input
 from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
 
-__all__ = ["AugmentedDeLaN", "ForceNetwork", "FORCE_DEFAULTS"]
+__all__ = ["AugmentedDeLaN", "AbstractAugmentedSystem", "ForceNetwork", "FORCE_DEFAULTS"]
 
 
 #: F_a's design per system and model kind (APHYNITY, augmented DeLaN), as ForceNetwork's
@@ -87,6 +87,15 @@ class ForceNetwork(eqx.Module):
             raise ValueError(f"odd_in_velocity must be True or False, got {odd_in_velocity!r}")
         self.odd_in_velocity = odd_in_velocity
 
+    @classmethod
+    def from_hparams(cls, spec, hp: dict[str, Any], *, hidden, key) -> "ForceNetwork":
+        """The F_a of a model whose hyper-parameters ``hp`` hold :func:`force_hparams`' keys and
+        the feature scales; ``hidden`` its layer widths."""
+        return cls(spec, key=key, hidden=tuple(hidden), force_scale=hp["force_scale"],
+                   position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
+                   activation=hp["force_activation"], linear_velocity=hp["linear_velocity"],
+                   damping_scale=hp["damping_scale"], odd_in_velocity=hp["odd_in_velocity"])
+
     def __call__(self, q, qd):
         out = self.beyond_linear(q, qd)
         if self.linear is not None:
@@ -103,7 +112,34 @@ class ForceNetwork(eqx.Module):
         return self.force_scale * out
 
 
-class AugmentedDeLaN(AbstractLearnedSystem):
+def force_hparams(spec: SystemSpec, kind: str) -> dict[str, Any]:
+    """F_a's default hyper-parameters for model ``kind`` on ``spec``'s system: W per joint, then
+    the system's :data:`FORCE_DEFAULTS` (W's unit, activation, odd in q̇)."""
+    return {"linear_velocity": "diagonal", **FORCE_DEFAULTS[spec.name][kind]}
+
+
+class AbstractAugmentedSystem(AbstractLearnedSystem):
+    """A learned model whose whole τ_NC is the data-driven force F_a (APHYNITY, augmented DeLaN):
+    a subclass holds it as its field ``force_net``, a :class:`ForceNetwork`. (Not declared here
+    as an abstract field: that would move it in the subclasses' field order, which saved
+    checkpoints' leaves follow.)"""
+
+    @property
+    def has_augmentation(self) -> bool:
+        return True
+
+    def augmentation(self, q, qd):
+        return self.scale * self.force_net(q, qd)
+
+    def augmentation_beyond_linear(self, q, qd):
+        """F_a less its linear viscous term W·q̇ (what L_prop's minimum-norm term P_a measures)."""
+        return self.scale * self.force_net.beyond_linear(q, qd)
+
+    def nonconservative_force(self, q, qd):
+        return self.augmentation(q, qd)
+
+
+class AugmentedDeLaN(AbstractAugmentedSystem):
     """Augmented DeLaN (adln): learned M, V and a learned τ_NC network; known τ_u."""
 
     kind: ClassVar[str] = "adln"
@@ -119,8 +155,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
         hp = system_defaults(spec.name)
         hp.pop("damping_init")
         hp["force_hidden"] = hp["hidden"]
-        hp["linear_velocity"] = "diagonal"  # F_a's per-joint viscous term (see ForceNetwork)
-        hp.update(FORCE_DEFAULTS[spec.name]["adln"])  # W's unit, activation, odd in q̇
+        hp.update(force_hparams(spec, "adln"))
         unknown = set(hparams) - set(hp) - {"eps", "activation"}
         if unknown:
             raise ValueError(f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}")
@@ -132,12 +167,7 @@ class AugmentedDeLaN(AbstractLearnedSystem):
             potential_scale=hp["potential_scale"], position_scale=hp["position_scale"],
             eps=hp.get("eps", 1e-3), activation=act,
         )
-        self.force_net = ForceNetwork(
-            spec, key=kf, hidden=tuple(hp["force_hidden"]), force_scale=hp["force_scale"],
-            position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
-            activation=hp["force_activation"], linear_velocity=hp["linear_velocity"],
-            damping_scale=hp["damping_scale"], odd_in_velocity=hp["odd_in_velocity"],
-        )
+        self.force_net = ForceNetwork.from_hparams(spec, hp, hidden=hp["force_hidden"], key=kf)
         self.scale = jnp.asarray(1.0)
         self.spec = spec
         self.input_gain = float(hp["input_gain"])
@@ -146,24 +176,11 @@ class AugmentedDeLaN(AbstractLearnedSystem):
     def networks(self):
         return (self.lagrangian_nets.mass_net, self.lagrangian_nets.potential_net, self.force_net.net)
 
-    @property
-    def has_augmentation(self) -> bool:
-        return True
-
-    def augmentation(self, q, qd):
-        return self.scale * self.force_net(q, qd)
-
-    def augmentation_beyond_linear(self, q, qd):
-        return self.scale * self.force_net.beyond_linear(q, qd)
-
     def mass_matrix(self, q):
         return self.scale * self.lagrangian_nets.mass_matrix(q)
 
     def potential(self, q):
         return self.scale * self.lagrangian_nets.potential(q)
-
-    def nonconservative_force(self, q, qd):
-        return self.augmentation(q, qd)
 
     def input_force(self, q, qd, u):
         return first_joint_input(self.spec, self.input_gain, u)
