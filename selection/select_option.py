@@ -169,7 +169,7 @@ def _seed_columns(score: dict, pair: dict | None, seeds: int) -> str:
     return text + " |"
 
 
-def main(argv=None) -> None:
+def _arguments(argv) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--system", required=True, choices=("furuta", "nmsd"))
     parser.add_argument("--kinds", nargs="+", default=["dln", "aph", "adln"], choices=("dln", "aph", "adln"))
@@ -182,22 +182,22 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", type=int, default=1,
                         help="model seeds per candidate (0 … N-1); the criterion is their mean")
     args = parse_selection_args(parser, argv, "results/selection")
-    where = "train" if args.train else "model"
-    name, *texts = args.train or args.model
-    if len(texts) < 2:
-        parser.error(f"--{where} {name}: give at least two values to choose between")
-
-    import furuta_gym
-    from furuta_gym.training.reproduce import _machine
-
-    furuta_gym.enable_x64()
-    machine = _machine()
+    args.where = "train" if args.train else "model"
+    args.name, *args.values = args.train or args.model
+    if len(args.values) < 2:
+        parser.error(f"--{args.where} {args.name}: give at least two values to choose between")
     if args.seeds < 1:
         parser.error(f"--seeds must be at least 1, got {args.seeds}")
+    return args
+
+
+def _train_candidates(args) -> tuple[list, dict, dict]:
+    """Copy the runs ``--reuse`` holds, train the others seed by seed. Returns the candidates
+    (kind, value, config, out), {(kind, value): seeds trained} and {(kind, value): {seed: the
+    folder its run was copied from}}."""
     seeds = tuple(range(args.seeds))
-    candidates = [(kind, text, _config(args.system, kind, where, name, _parse(text), args.seeds),
-                   args.out / f"{args.system}_{kind}" / text) for kind in args.kinds for text in texts]
-    # {(kind, value): {seed: the folder its run was copied from}}
+    candidates = [(kind, text, _config(args.system, kind, args.where, args.name, _parse(text), args.seeds),
+                   args.out / f"{args.system}_{kind}" / text) for kind in args.kinds for text in args.values]
     copied = {(k, t): {seed: str(src) for seed in seeds
                        for src in [next((r for r in args.reuse
                                          if _copy_matching_run(r, args.system, k, cfg, out, seed)), None)]
@@ -207,75 +207,102 @@ def main(argv=None) -> None:
     # would inherit mid-flight (it deadlocked)
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         def train(live, seed):
-            list(pool.map(_train, *zip(*[(args.system, k, where, name, _parse(t), out, (seed,))
+            list(pool.map(_train, *zip(*[(args.system, k, args.where, args.name, _parse(t), out, (seed,))
                                           for k, t, out in live])))
 
-        trained = _train_in_turn(texts[0], [(k, t, out) for k, t, _, out in candidates], seeds, train,
+        trained = _train_in_turn(args.values[0], [(k, t, out) for k, t, _, out in candidates], seeds, train,
                                  lambda k, out, seed: _seed_mean(args.system, k, out, seed))
-    rows = {}
-    for kind in args.kinds:
-        scores = {}
-        for k, text, _, out in candidates:
-            if k != kind:
-                continue
-            own = tuple(trained[(kind, text)])
-            scores[text] = _score(args.system, kind, {text: out}, own)[text]
-            seconds = [json.loads((_run_dir(out, args.system, kind, seed) / "metrics.json").read_text())
-                       ["_seconds"]["train"] for seed in own]
-            scores[text]["seeds"] = list(own)
-            scores[text]["train_seconds"] = sum(seconds) / len(seconds)
-            scores[text]["reused_from"] = {s: src for s, src in copied[(kind, text)].items() if s in own} or None
-        rows[kind] = scores
-    first = next(iter(next(iter(rows.values())).values()))
-    sets = list(first["sets"])
-    names = list(first["sets"][sets[0]])
-    lines = [
-        f"# {name} for the {args.system} L_prop runs, chosen on validation data",
+    return candidates, trained, copied
+
+
+def _scores(args, candidates, trained, copied) -> dict[str, dict[str, dict]]:
+    """{kind: {value: its validation score over the seeds it was trained on, with those seeds,
+    its mean training seconds and where reused runs came from}}."""
+    rows = {kind: {} for kind in args.kinds}
+    for kind, text, _, out in candidates:
+        own = tuple(trained[(kind, text)])
+        score = _score(args.system, kind, {text: out}, own)[text]
+        seconds = [json.loads((_run_dir(out, args.system, kind, seed) / "metrics.json").read_text())
+                   ["_seconds"]["train"] for seed in own]
+        score["seeds"] = list(own)
+        score["train_seconds"] = sum(seconds) / len(seconds)
+        score["reused_from"] = {s: src for s, src in copied[(kind, text)].items() if s in own} or None
+        rows[kind][text] = score
+    return rows
+
+
+def _header(args, machine: dict, sets: list, names: list) -> list[str]:
+    several = args.seeds > 1
+    first = args.values[0]
+    return [
+        f"# {args.name} for the {args.system} L_prop runs, chosen on validation data",
         "",
         f"`python selection/select_option.py --system {args.system} --kinds {' '.join(args.kinds)} "
-        f"--{where} {name} {' '.join(texts)}"
-        + (f" --seeds {args.seeds}" if args.seeds > 1 else "")
+        f"--{args.where} {args.name} {' '.join(args.values)}"
+        + (f" --seeds {args.seeds}" if several else "")
         + (f" --reuse {' '.join(map(str, args.reuse))}" if args.reuse else "") + f" --out {args.out}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', 'cpu')}, "
         f"{machine['cpu_count']} cores. Training seconds from each run's metrics.json (runs trained "
         "beside others are slower than alone)"
         + (f"; cells, mean and seconds are means over the model seeds a value was trained on "
-           f"({', '.join(map(str, seeds))} in turn; a value beaten on a seed is not trained on later "
-           "ones), whose own means follow (± their standard deviation)" if args.seeds > 1 else "") + ".",
+           f"({', '.join(map(str, range(args.seeds)))} in turn; a value beaten on a seed is not trained on later "
+           "ones), whose own means follow (± their standard deviation)" if several else "") + ".",
         "",
         "Open-loop prediction log10 RMSE on the validation datasets (their own excitation; the test "
-        "sets are never generated or scored). Lower is better; the mean is the criterion" + (f", and a value replaces the recipe's ({texts[0]}) only if it is lower on "
-                           "every model seed" if args.seeds > 1 else "") + ".",
+        "sets are never generated or scored). Lower is better; the mean is the criterion"
+        + (f", and a value replaces the recipe's ({first}) only if it is lower on every model seed"
+           if several else "") + ".",
         "",
-        f"| model | {name} | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean |"
-        + (f" seeds | seed by seed vs {texts[0]} |" if args.seeds > 1 else "") + " train s |",
-        "|---|---|" + "---:|" * (len(sets) * len(names) + 2 + 2 * (args.seeds > 1)),
+        f"| model | {args.name} | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean |"
+        + (f" seeds | seed by seed vs {first} |" if several else "") + " train s |",
+        "|---|---|" + "---:|" * (len(sets) * len(names) + 2 + 2 * several),
     ]
-    chosen, lowest = {}, {}
+
+
+def _decide(args, rows, sets: list, names: list) -> tuple[list[str], dict, dict]:
+    """The table's rows, the chosen value and the lowest mean per kind (marks each score with its
+    differences from the recipe's value)."""
+    texts, several = args.values, args.seeds > 1
+    lines, chosen, lowest = [], {}, {}
     for kind, scores in rows.items():
         # "lower" compares means over the same seeds: among the values trained on all of them
         full = [t for t in scores if len(scores[t]["seeds"]) == len(scores[texts[0]]["seeds"])]
-        best = min(full, key=lambda t: scores[t]["mean"])
-        lowest[kind] = best
-        chosen[kind], paired = choose({t: scores[t]["seed_means"] for t in texts}, several_seeds=args.seeds > 1)
+        best = lowest[kind] = min(full, key=lambda t: scores[t]["mean"])
+        chosen[kind], paired = choose({t: scores[t]["seed_means"] for t in texts}, several_seeds=several)
         for text, pair in paired.items():
             scores[text]["vs_first"] = pair
         for text, sc in scores.items():
             cells = [sc["sets"][s][n] for s in sets for n in names]
             cell_text = " | ".join(c if isinstance(c, str) else f"{c:.2f}" for c in cells)
             mark = " ← lower" if text == best else ""
-            if args.seeds > 1 and text == chosen[kind]:
+            if several and text == chosen[kind]:
                 mark += " ← chosen"
             reused = ""
             if sc["reused_from"]:
                 reused = " (reused)" if len(sc["reused_from"]) == len(sc["seeds"]) else f" (seed{'s' * (len(sc['reused_from']) > 1)} {', '.join(map(str, sc['reused_from']))} reused)"
-            per_seed = _seed_columns(sc, sc.get("vs_first"), args.seeds) if args.seeds > 1 else ""
+            per_seed = _seed_columns(sc, sc.get("vs_first"), args.seeds) if several else ""
             lines.append(f"| {kind} | {text}{reused} | {cell_text} | **{sc['mean']:.3f}**{mark} |{per_seed}"
                          f" {sc['train_seconds']:.0f} |")
+    return lines, chosen, lowest
+
+
+def main(argv=None) -> None:
+    args = _arguments(argv)
+    import furuta_gym
+    from furuta_gym.training.reproduce import _machine
+
+    furuta_gym.enable_x64()
+    machine = _machine()
+    rows = _scores(args, *_train_candidates(args))
+    first = next(iter(next(iter(rows.values())).values()))
+    sets = list(first["sets"])
+    names = list(first["sets"][sets[0]])
+    table, chosen, lowest = _decide(args, rows, sets, names)
+    lines = _header(args, machine, sets, names) + table
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{args.system}.md").write_text("\n".join(lines) + "\n")
     (args.out / f"{args.system}.json").write_text(json.dumps(
-        {"system": args.system, "option": {where: name}, "split": "validation",
+        {"system": args.system, "option": {args.where: args.name}, "split": "validation",
          "lower": lowest, "chosen": chosen, "scores": rows}, indent=1) + "\n")
     print("\n".join(lines))
 
