@@ -53,6 +53,7 @@ __all__ = [
     "Effect",
     "JOINT_EFFECTS",
     "INPUT_EFFECTS",
+    "DRY_FRICTION",
     "STATEFUL_EFFECTS",
     "EFFECT_UNITS",
     "WithEffects",
@@ -70,6 +71,8 @@ JOINT_EFFECTS = (
     "com_offset",
 )
 INPUT_EFFECTS = ("input_gain", "input_delay", "actuator_lag")
+#: friction bounded by a law of q̇ that can hold a joint at rest (:meth:`Effect.dry_friction_limit`)
+DRY_FRICTION = ("coulomb_friction", "stiction")
 #: effects with memory: no Lagrangian (memoryless) form, applied in the env / plant
 STATEFUL_EFFECTS = ("input_delay", "actuator_lag")
 
@@ -146,13 +149,11 @@ class Effect:
         if self.name == "spring":
             reference = self.reference
             return lambda q, qd: -c * (q - reference)
-        if self.name in ("coulomb_friction", "stiction"):
+        if self.name in DRY_FRICTION:
             smoothing = coulomb_smoothing
             sgn = xp.sign if smoothing <= 0 else (lambda v: xp.tanh(v / smoothing))
-            if self.name == "coulomb_friction":
-                return lambda q, qd: -c * sgn(qd)
-            v_s = self.stribeck_velocity
-            return lambda q, qd: -c * (xp.exp(-((qd / v_s) ** 2)) * sgn(qd))
+            limit = self.dry_friction_limit(xp)
+            return lambda q, qd: -limit(qd) * sgn(qd)
         if self.name == "viscous_friction":
             return lambda q, qd: -c * qd
         if self.name == "quadratic_drag":
@@ -165,6 +166,19 @@ class Effect:
                 "on V: use Effect.com_offset_force(potential, q, spec)"
             )
         raise ValueError(f"{self.name!r} is an input effect, not a joint force")
+
+    def dry_friction_limit(self, xp=jnp) -> Callable[[Any], Any]:
+        """The largest force this dry friction exerts, as a law of q̇_j (N·m or N): F_c for
+        ``coulomb_friction``, ΔF·exp(−(q̇_j/v_s)²) for ``stiction``. Sliding, the friction is
+        −limit·sgn(q̇_j) (:meth:`law`); at rest it holds the joint against any smaller force
+        (:func:`furuta_gym.lagrangian.forward_dynamics_with_dry_friction`)."""
+        c = self.coefficient
+        if self.name == "coulomb_friction":
+            return lambda qd: c + 0.0 * qd
+        if self.name == "stiction":
+            v_s = self.stribeck_velocity
+            return lambda qd: c * xp.exp(-((qd / v_s) ** 2))
+        raise ValueError(f"{self.name!r} is not dry friction; expected one of {DRY_FRICTION}")
 
     def shift(self, spec: SystemSpec):
         """δ·e_j: the vector a ``com_offset`` subtracts from q in the potential."""

@@ -43,6 +43,7 @@ __all__ = [
     "inverse_dynamics_terms",
     "inverse_dynamics",
     "forward_dynamics",
+    "forward_dynamics_with_dry_friction",
     "solve_mass_matrix",
     "vector_field",
     "linearize",
@@ -229,15 +230,47 @@ def solve_mass_matrix(M: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Ar
     return jnp.linalg.solve(M, b)
 
 
-def forward_dynamics(system: AbstractLagrangianSystem, q, qd, u) -> Float[Array, " n"]:
-    """q̈ = M(q)⁻¹ (τ_u + τ_NC + ∂L/∂q − (∂²L/∂q∂q̇) q̇)."""
-    rhs = (
+def _applied_force(system: AbstractLagrangianSystem, q, qd, u) -> Float[Array, " n"]:
+    """τ_u + τ_NC + ∂L/∂q − (∂²L/∂q∂q̇) q̇: what M(q) q̈ equals."""
+    return (
         system.input_force(q, qd, u)
         + system.nonconservative_force(q, qd)
         + potential_derived_force(system, q, qd)
         - coriolis_force(system, q, qd)
     )
-    return solve_mass_matrix(system.mass_matrix(q), rhs)
+
+
+def forward_dynamics(system: AbstractLagrangianSystem, q, qd, u) -> Float[Array, " n"]:
+    """q̈ = M(q)⁻¹ (τ_u + τ_NC + ∂L/∂q − (∂²L/∂q∂q̇) q̇)."""
+    return solve_mass_matrix(system.mass_matrix(q), _applied_force(system, q, qd, u))
+
+
+def forward_dynamics_with_dry_friction(
+    system: AbstractLagrangianSystem, limit: Float[Array, " n"], q, qd, u, relaxation: float
+) -> Float[Array, " n"]:
+    """q̈ of ``system`` with dry friction added that can hold a joint at rest.
+
+    ``limit`` (n,) ≥ 0 is the largest dry-friction force on each joint at this state (N·m or N;
+    0 where a joint has none; e.g. :meth:`furuta_gym.effects.Effect.dry_friction_limit`). Each
+    joint's friction is the force within ±limit that, given the other forces, brings its velocity
+    to zero with time constant ``relaxation`` (s): it holds the joint while the rest of the forces
+    stay within the limit, and is ∓limit while the joint slides (Karnopp's stick–slip model, in a
+    form an explicit integrator can take at steps ≲ ``relaxation``). The sgn law instead chatters
+    about q̇ = 0 and tanh(q̇/ε) lets the joint creep. Joints are resolved in turn, twice
+    (Gauss–Seidel): exact with friction on one joint, close when several stick at once.
+    """
+    M = system.mass_matrix(q)
+    free = solve_mass_matrix(M, _applied_force(system, q, qd, u))
+    n = free.shape[-1]
+    # column j: the accelerations a unit force on joint j gives
+    response = jnp.stack([solve_mass_matrix(M, e) for e in jnp.eye(n, dtype=free.dtype)], axis=1)
+    friction = jnp.zeros_like(free)
+    for _ in range(2):
+        for j in range(n):
+            others = free[j] + response[j] @ friction - response[j, j] * friction[j]
+            holding = (-qd[j] / relaxation - others) / response[j, j]
+            friction = friction.at[j].set(jnp.clip(holding, -limit[j], limit[j]))
+    return free + response @ friction
 
 
 def vector_field(system: AbstractLagrangianSystem, x, u) -> Float[Array, " 2n"]:

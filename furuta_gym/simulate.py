@@ -134,19 +134,22 @@ def _samples(us, ts, m):
     return jnp.asarray(us).reshape(ts.shape[0], m)
 
 
-def rk4_step(system: AbstractLagrangianSystem, x, u, h):
-    """One classic RK4 step of size ``h`` with the input held at ``u``."""
-    k1 = vector_field(system, x, u)
-    k2 = vector_field(system, x + 0.5 * h * k1, u)
-    k3 = vector_field(system, x + 0.5 * h * k2, u)
-    k4 = vector_field(system, x + h * k3, u)
+def rk4_step(system: AbstractLagrangianSystem, x, u, h, field: Callable | None = None):
+    """One classic RK4 step of size ``h`` with the input held at ``u``; ``field(x, u)`` replaces
+    the system's own vector field (e.g. one with dry friction that holds)."""
+    f = field or (lambda x_, u_: vector_field(system, x_, u_))
+    k1 = f(x, u)
+    k2 = f(x + 0.5 * h * k1, u)
+    k3 = f(x + 0.5 * h * k2, u)
+    k4 = f(x + h * k3, u)
     return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
-def rk4_zoh_step(system: AbstractLagrangianSystem, x, u, dt: float, substeps: int = 1):
+def rk4_zoh_step(system: AbstractLagrangianSystem, x, u, dt: float, substeps: int = 1,
+                 field: Callable | None = None):
     """Advance one control period ``dt`` with ``u`` held, in ``substeps`` RK4 steps."""
     h = dt / substeps
-    return jax.lax.fori_loop(0, substeps, lambda _, x_: rk4_step(system, x_, u, h), x)
+    return jax.lax.fori_loop(0, substeps, lambda _, x_: rk4_step(system, x_, u, h, field), x)
 
 
 def rollout_zoh(
@@ -155,11 +158,13 @@ def rollout_zoh(
     us: Float[Array, "T m"],
     dt: float,
     substeps: int = 1,
+    field: Callable | None = None,
 ) -> Float[Array, "T+1 2n"]:
-    """States at every control instant under a held input sequence; ``xs[0] = x0``."""
+    """States at every control instant under a held input sequence; ``xs[0] = x0``
+    (``field``: see :func:`rk4_step`)."""
 
     def step(x, u):
-        x_next = rk4_zoh_step(system, x, u, dt, substeps)
+        x_next = rk4_zoh_step(system, x, u, dt, substeps, field)
         return x_next, x_next
 
     _, xs = jax.lax.scan(step, jnp.asarray(x0), jnp.asarray(us))

@@ -106,10 +106,9 @@ class SystemDefinition:
     the joints are measured by quadrature encoders (else by a position sensor with Gaussian noise).
     ``lumped_values(parameters)``: the values the lumped form and ``energy`` use, from a mapping
     of physical parameter floats; ``energy(values, x)``: T + V on plain floats (the envs' info).
-    ``diagnosis_prediction``: (Coulomb smoothing ε, RK4 substeps per sample) of the diagnosis's
-    open-loop predictions: the sgn law smoothed for the integrator, ε well below the Stribeck
-    velocity so that a fitted stiction is the breakaway itself, not what a wider smoothing leaves
-    of it; enough substeps for RK4 to stay stable on the steep friction law and the sample period.
+    ``diagnosis_substeps``: RK4 steps per sample of the diagnosis's open-loop predictions, whose
+    dry friction holds a joint at rest within one step
+    (:func:`~furuta_gym.lagrangian.forward_dynamics_with_dry_friction`, relaxation = the step).
     ``elementary_seconds``: the length of the elementary trajectories measured logs are cut into
     for training (:func:`furuta_gym.measured.split_elementary`). ``energy_panels``: (state index, grid low, grid high, grid factor, label) of the
     reproduction's energy figure. ``write_mujoco(model, parameters)``: writes the physical
@@ -134,7 +133,7 @@ class SystemDefinition:
     diagnosis_window: float
     diagnosis_segment_seconds: float
     elementary_seconds: float
-    diagnosis_prediction: tuple[float, int]
+    diagnosis_substeps: int
     table_title: str
     energy_panels: tuple
     lumped_values: Callable[[Any], dict]

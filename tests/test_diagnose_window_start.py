@@ -23,7 +23,7 @@ def _windows(layout, theta, velocity_error, noise=0.0, seed=0):
     x0 = np.array([[0.1, 3.0, 1.0, -2.0], [0.0, 0.2, -0.5, 3.0], [-0.3, 1.0, 0.0, 0.0], [0.5, np.pi, 2.0, 0.3]])
     us = rng.uniform(-2, 2, (4, L, 1))
     truth = _fit.Windows(x0, us, np.zeros((4, L, 2)), np.zeros(4, int), DT, L)
-    q = _fit.predict_windows(layout, theta, truth, 0.005, 2) + noise * rng.standard_normal((4, L, 2))
+    q = _fit.predict_windows(layout, theta, truth, 2) + noise * rng.standard_normal((4, L, 2))
     start = x0.copy()
     start[:, 2:] += velocity_error
     return _fit.Windows(start, us, q, np.zeros(4, int), DT, L)
@@ -33,8 +33,8 @@ def test_estimated_start_velocity_recovers_the_true_one():
     layout = layout_for("furuta")
     theta = layout.nominal()
     win = _windows(layout, theta, velocity_error=np.array([0.3, -0.4]))
-    as_given = _fit.window_errors(layout, theta, win, 0.005, 2)[1]
-    estimated = _fit.window_errors(layout, theta, win, 0.005, 2, start_iterations=1)[1]
+    as_given = _fit.window_errors(layout, theta, win, 2)[1]
+    estimated = _fit.window_errors(layout, theta, win, 2, start_iterations=1)[1]
     assert as_given > 1e-3  # 0.3 rad/s over 0.1 s
     assert estimated < 1e-2 * as_given  # one Gauss-Newton step
 
@@ -44,8 +44,8 @@ def test_estimated_start_never_predicts_worse_and_reaches_the_noise_floor():
     theta = layout.nominal()
     noise = 1e-3
     win = _windows(layout, theta, velocity_error=np.array([0.2, 0.5]), noise=noise, seed=1)
-    sums_given = _fit.window_square_sums(layout, theta, win, 0.005, 2)
-    sums_one = _fit.window_square_sums(layout, theta, win, 0.005, 2, start_iterations=1)
+    sums_given = _fit.window_square_sums(layout, theta, win, 2)
+    sums_one = _fit.window_square_sums(layout, theta, win, 2, start_iterations=1)
     assert np.all(sums_one <= sums_given)
     rms = np.sqrt(sums_one.sum() / win.q.size)
     assert rms < 1.1 * noise  # two fitted numbers per window: just under the noise itself

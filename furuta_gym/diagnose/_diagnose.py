@@ -383,7 +383,7 @@ class _Fitter:
         dt = segs[0].dt
         self.stride = max(1, int(round(settings.interval / dt)))
         self.L = int(round(settings.window / dt))
-        self.smoothing, self.substeps = system_definition(spec.name).diagnosis_prediction
+        self.substeps = system_definition(spec.name).diagnosis_substeps
         self.alternative = ""  # the input dynamics' other kind and how it fitted (a note)
         self.c_input = _fit.input_direction(layout, theta_fixed)
         self.weights = np.ones(spec.n_dof)
@@ -435,7 +435,7 @@ class _Fitter:
         return _fit.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
 
     def window_rmse(self, theta, win) -> float:
-        return _fit.window_errors(self.layout, theta, win, self.smoothing, self.substeps,
+        return _fit.window_errors(self.layout, theta, win, self.substeps,
                                  self.settings.start_iterations)[1]
 
     def validation_rmse(self, theta, dynamics) -> float:
@@ -445,7 +445,7 @@ class _Fitter:
         """Per-window squared position errors on the fit-set validation windows."""
         win = self.fit_windows(dynamics, self.val_idx)
         start = self.settings.start_iterations if start_iterations is None else start_iterations
-        return _fit.window_square_sums(self.layout, theta, win, self.smoothing, self.substeps, start)
+        return _fit.window_square_sums(self.layout, theta, win, self.substeps, start)
 
     def refine(self, theta0, free, dynamics, tag):
         """Output-error refinement of an equation-error estimate, kept only if it also predicts
@@ -464,7 +464,7 @@ class _Fitter:
             start, label = nominal, "nominal"
             self.notes.append("the equation-error estimate was non-physical or predicted worse than the "
                               f"nominal model ({tag}); output error started from the nominal parameters")
-        th, ok = _fit.oe_fit(self.layout, start, free, win, self.smoothing, self.substeps,
+        th, ok = _fit.oe_fit(self.layout, start, free, win, self.substeps,
                              max_nfev=self.settings.oe_max_nfev, start_iterations=self.settings.start_iterations)
         if not ok:
             self.notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
@@ -478,7 +478,7 @@ class _Fitter:
     def errors(self, theta, segs, prob) -> ErrorSummary:
         r = prob.R @ theta
         win = _fit.make_windows(segs, self.L, self.dynamics)
-        per_q, comb = _fit.window_errors(self.layout, theta, win, self.smoothing, self.substeps)
+        per_q, comb = _fit.window_errors(self.layout, theta, win, self.substeps)
         names = self.spec.joint_names
         return ErrorSummary(
             trajectory_rmse=comb,
@@ -625,7 +625,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
 
     def refit(th0, effects):
         free = free_columns(fx.layout, effects, fx.fixed_idx)
-        th, _ = _fit.oe_fit(fx.layout, th0, free, win, fx.smoothing, fx.substeps, s.oe_max_nfev, start)
+        th, _ = _fit.oe_fit(fx.layout, th0, free, win, fx.substeps, s.oe_max_nfev, start)
         return th, fx.validation_sums(th, dyn, start)
 
     # the baseline is refitted as the trial is, so that the gain is the stiction's own

@@ -5,7 +5,8 @@
   in θ). Fixed parameters (the scale anchor) go to the right-hand side; the rest is weighted least
   squares, one weight per joint.
 * Output error: open-loop windows started from measured states (measured angle, estimated
-  velocity) with the measured input held (RK4, :func:`furuta_gym.simulate.rollout_zoh`), position
+  velocity) with the measured input held (RK4, :func:`furuta_gym.simulate.rollout_zoh`; dry friction
+  that holds a joint at rest, :func:`furuta_gym.lagrangian.forward_dynamics_with_dry_friction`), position
   error only, Gauss-Newton (scipy ``least_squares``) from the equation-error estimate. This removes
   the errors-in-variables bias the noisy velocity estimates put into the equation-error fit.
 """
@@ -21,7 +22,8 @@ from scipy.linalg import eigh
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from ..lagrangian import interval_difference, interval_integral, momentum, potential_derived_force
+from ..lagrangian import (forward_dynamics_with_dry_friction, interval_difference, interval_integral, momentum,
+                          potential_derived_force)
 from ..simulate import rollout_zoh
 from ..systems import get_spec
 from ._library import ParameterLayout
@@ -312,22 +314,27 @@ def _refined_positions(positions, v, x, u, q_measured, iterations: int):
     return p
 
 
-def _predictor(layout: ParameterLayout, dt: float, length: int, substeps: int, smoothing: float,
-               start_iterations: int = 0):
+def _predictor(layout: ParameterLayout, dt: float, length: int, substeps: int, start_iterations: int = 0):
     n = get_spec(layout.system).n_dof
+    h = dt / substeps
 
     def predict(theta, x0, us, q_measured):
-        model = layout.model(theta, coulomb_smoothing=smoothing)
+        model = layout.model(theta, dry_friction=False)
+
+        def field(x, u):  # dry friction that holds a joint at rest, as a real one does
+            q, qd = x[:n], x[n:]
+            limit = layout.dry_friction_limit(theta, qd)
+            return jnp.concatenate([qd, forward_dynamics_with_dry_friction(model, limit, q, qd, u, h)])
 
         def positions(v, x, u):
-            return rollout_zoh(model, jnp.concatenate([x[:n], v]), u, dt, substeps)[1:, :n]
+            return rollout_zoh(model, jnp.concatenate([x[:n], v]), u, dt, substeps, field)[1:, :n]
 
         def one(x, u, qm):
             return _refined_positions(positions, x[n:], x, u, qm, start_iterations)
 
         return jax.vmap(one)(x0, us, q_measured)
 
-    return _compiled("predict", layout, dt, length, substeps, smoothing, start_iterations,
+    return _compiled("predict", layout, dt, length, substeps, start_iterations,
                      build=lambda: jax.jit(predict))
 
 
@@ -340,26 +347,26 @@ def _batches(win: "Windows"):
         yield idx.size, jnp.asarray(win.x0[pad]), jnp.asarray(win.us[pad]), jnp.asarray(win.q[pad])
 
 
-def predict_windows(layout, theta, win: Windows, smoothing: float, substeps: int = 1,
+def predict_windows(layout, theta, win: Windows, substeps: int = 1,
                     start_iterations: int = 0) -> np.ndarray:
     """Open-loop position predictions of each window; with ``start_iterations`` > 0 each window's
     start velocity is first re-estimated from its own positions (Gauss-Newton steps)."""
-    predict = _predictor(layout, win.dt, win.length, substeps, smoothing, start_iterations)
+    predict = _predictor(layout, win.dt, win.length, substeps, start_iterations)
     out = [np.asarray(predict(jnp.asarray(theta), x0, us, q))[:k] for k, x0, us, q in _batches(win)]
     return np.concatenate(out)
 
 
-def window_square_sums(layout, theta, win: Windows, smoothing: float, substeps: int = 1,
+def window_square_sums(layout, theta, win: Windows, substeps: int = 1,
                        start_iterations: int = 0) -> np.ndarray:
     """(W,) sum of squared position errors of each open-loop window (inf where it blew up)."""
-    err = predict_windows(layout, theta, win, smoothing, substeps, start_iterations) - win.q
+    err = predict_windows(layout, theta, win, substeps, start_iterations) - win.q
     ss = np.sum(err**2, axis=(1, 2))
     return np.where(np.isfinite(ss), ss, np.inf)
 
 
-def window_errors(layout, theta, win: Windows, smoothing: float, substeps: int = 1, start_iterations: int = 0):
+def window_errors(layout, theta, win: Windows, substeps: int = 1, start_iterations: int = 0):
     """Per-joint RMS position error of open-loop window predictions, and the combined RMS."""
-    pred = predict_windows(layout, theta, win, smoothing, substeps, start_iterations)
+    pred = predict_windows(layout, theta, win, substeps, start_iterations)
     err = pred - win.q
     if not np.all(np.isfinite(err)):
         per = np.full(err.shape[-1], np.inf)
@@ -373,7 +380,6 @@ def oe_fit(
     theta_start: np.ndarray,
     free: np.ndarray,
     win: Windows,
-    smoothing: float,
     substeps: int = 1,
     max_nfev: int = 10,
     start_iterations: int = 0,
@@ -394,7 +400,7 @@ def oe_fit(
         return th
 
     def f(z):
-        r = (predict_windows(layout, full(z), win, smoothing, substeps, start_iterations) - win.q).reshape(-1)
+        r = (predict_windows(layout, full(z), win, substeps, start_iterations) - win.q).reshape(-1)
         return np.where(np.isfinite(r), r, 1e3)
 
     def J(z):

@@ -35,7 +35,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..effects import EFFECT_UNITS, INPUT_EFFECTS, JOINT_EFFECTS, STATEFUL_EFFECTS, Effect
+from ..effects import DRY_FRICTION, EFFECT_UNITS, INPUT_EFFECTS, JOINT_EFFECTS, STATEFUL_EFFECTS, Effect
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..models import system_definition
 from ..systems import get_spec
@@ -82,11 +82,25 @@ class ParameterLayout:
         """What identifies this layout's compiled functions (the system, or the learned model)."""
         return self.system if self.learned is None else ("learned", id(self.learned))
 
-    def model(self, theta, coulomb_smoothing: float = 0.0) -> AbstractLagrangianSystem:
-        """The Lagrangian system of parameters ``theta`` (declared model + library effects)."""
+    def model(self, theta, dry_friction: bool = True) -> AbstractLagrangianSystem:
+        """The Lagrangian system of parameters ``theta`` (declared model + library effects);
+        ``dry_friction=False`` leaves the library's dry friction out of τ_NC (a predictor then
+        adds it with :meth:`dry_friction_limit`)."""
         if self.learned is None:
-            return LumpedModel(theta, self.system, coulomb_smoothing)
-        return LearnedWithLibrary(theta, self.learned, coulomb_smoothing)
+            return LumpedModel(theta, self.system, dry_friction)
+        return LearnedWithLibrary(theta, self.learned, dry_friction)
+
+    def dry_friction_limit(self, theta, qd):
+        """The library's dry friction at q̇ as the largest force per joint (N·m or N), for
+        :func:`furuta_gym.lagrangian.forward_dynamics_with_dry_friction`; a negative
+        coefficient counts as none."""
+        spec = get_spec(self.system)
+        n_base = len(self.base)
+        limit = [0.0 * qd[j] for j in range(spec.n_dof)]
+        for e in _library_effects(theta, self.system, n_base, DRY_FRICTION):
+            j = e.joint_index(spec)
+            limit[j] = limit[j] + jnp.maximum(e.dry_friction_limit()(qd[j]), 0.0)
+        return jnp.stack(limit)
 
     @property
     def size(self) -> int:
@@ -169,16 +183,18 @@ def _library_potential(theta, system, n_base, q, declared_potential):
     return v
 
 
-_FORCE_EFFECTS = ("coulomb_friction", "stiction", "viscous_friction", "quadratic_drag", "constant_torque")
+_FORCE_EFFECTS = ("viscous_friction", "quadratic_drag", "constant_torque")
 
 
-def _library_force(theta, system, n_base, q, qd, smoothing):
-    """Generalized force of the library's joint effects, the laws of :mod:`furuta_gym.effects`."""
+def _library_force(theta, system, n_base, q, qd, dry_friction: bool):
+    """Generalized force of the library's joint effects, the laws of :mod:`furuta_gym.effects`
+    (dry friction with sgn(q̇), or left out)."""
     spec = get_spec(system)
     tau = [0.0 * qd[j] for j in range(spec.n_dof)]
-    for e in _library_effects(theta, system, n_base, _FORCE_EFFECTS):
+    names = _FORCE_EFFECTS + (DRY_FRICTION if dry_friction else ())
+    for e in _library_effects(theta, system, n_base, names):
         j = e.joint_index(spec)
-        tau[j] = tau[j] + e.generalized_force(q[j], qd[j], smoothing)
+        tau[j] = tau[j] + e.generalized_force(q[j], qd[j])
     return jnp.stack(tau)
 
 
@@ -191,13 +207,13 @@ class LumpedModel(AbstractLagrangianSystem):
 
     ``theta`` follows :func:`layout_for`; effects with a zero coefficient are absent. Springs go
     into V (rest position 0), the other joint effects into τ_NC, the input gain into τ_u (as
-    :class:`furuta_gym.effects.WithEffects` does). Coulomb friction uses sgn(q̇) when
-    ``coulomb_smoothing`` is 0 (the equation-error fit) and tanh(q̇/ε) otherwise (simulation).
+    :class:`furuta_gym.effects.WithEffects` does). Dry friction uses sgn(q̇) (the equation-error
+    fit) or, with ``dry_friction=False``, is left to the predictor (see :meth:`ParameterLayout.model`).
     """
 
     theta: jnp.ndarray
     system: str = eqx.field(static=True)
-    coulomb_smoothing: float = eqx.field(static=True, default=0.0)
+    dry_friction: bool = eqx.field(static=True, default=True)
 
     spec: ClassVar = property(lambda self: get_spec(self.system))  # type: ignore[assignment]
 
@@ -223,7 +239,7 @@ class LumpedModel(AbstractLagrangianSystem):
 
     def nonconservative_force(self, q, qd):
         tau = self._lumped.damping(self._base, qd)
-        return tau + _library_force(self.theta, self.system, self._n_base, q, qd, self.coulomb_smoothing)
+        return tau + _library_force(self.theta, self.system, self._n_base, q, qd, self.dry_friction)
 
     def input_force(self, q, qd, u):
         gain = self._base(self._lumped.gain) * _library_gain(self.theta, self.system, self._n_base)
@@ -241,7 +257,7 @@ class LearnedWithLibrary(AbstractLagrangianSystem):
 
     theta: jnp.ndarray
     base: AbstractLagrangianSystem
-    coulomb_smoothing: float = eqx.field(static=True, default=0.0)
+    dry_friction: bool = eqx.field(static=True, default=True)
 
     spec: ClassVar = property(lambda self: self.base.spec)  # type: ignore[assignment]
 
@@ -255,7 +271,7 @@ class LearnedWithLibrary(AbstractLagrangianSystem):
     def nonconservative_force(self, q, qd):
         zero_u = jnp.zeros(len(self.spec.input_names))
         own = self.base.nonconservative_force(q, qd) + self.base.input_force(q, qd, zero_u)
-        return self.theta[0] * own + _library_force(self.theta, self.spec.name, 1, q, qd, self.coulomb_smoothing)
+        return self.theta[0] * own + _library_force(self.theta, self.spec.name, 1, q, qd, self.dry_friction)
 
     def input_force(self, q, qd, u):
         zero_u = jnp.zeros_like(u)

@@ -241,13 +241,13 @@ def _window_predictions(res, segs):
     measured positions (W, L + 1, n) from the start state on, both models' predictions the same
     shape, the time axis (W, L + 1) and each window's segment name."""
     L = int(round(res.settings.window / segs[0].dt))
-    smoothing, substeps = system_definition(res.system).diagnosis_prediction
+    substeps = system_definition(res.system).diagnosis_substeps
     preds = []
     for theta, dyn in ((res.theta_before, _fit.NO_INPUT_DYNAMICS), (res.theta_after, res.input_dynamics)):
         win = _fit.make_windows(segs, L, dyn)
         if win is None:
             return None
-        p = _fit.predict_windows(res.layout, theta, win, smoothing, substeps)
+        p = _fit.predict_windows(res.layout, theta, win, substeps)
         preds.append(np.concatenate([win.x0[:, None, : p.shape[2]], p], axis=1))  # from the start state
     # start states and measured positions do not depend on the input dynamics: either win does
     meas = np.concatenate([win.x0[:, None, : p.shape[2]], win.q], axis=1)
