@@ -252,18 +252,19 @@ def test_full_run_gives_single_models_a_longer_itau_stage_and_overrides_win():
     assert training_config("furuta", own, 0, "prop", "adln").epochs == (50, 2, 1)
 
 
-def test_full_run_fine_tunes_furuta_delan_and_augmented_delan_at_smaller_steps():
-    """Their two L_Iτ + λ·L_traj stages run at FULL_PROP_FINETUNE_LEARNING_RATE after the L_Iτ
-    stage's own rate; APHYNITY, the N-MSD, the baselines, --quick, an explicit schedule and an
-    explicit learning_rate keep what they had."""
+def test_full_run_fine_tunes_at_smaller_steps_where_the_recipe_says_so():
+    """The Furuta DeLaN, augmented DeLaN and both APHYNITYs run their two L_Iτ + λ·L_traj stages
+    at FULL_PROP_FINETUNE_LEARNING_RATE after the L_Iτ stage's own rate; the N-MSD DeLaN and
+    augmented DeLaN, the baselines, --quick, an explicit schedule and an explicit learning_rate
+    keep what they had."""
     from furuta_gym.training.reproduce import FULL_PROP_FINETUNE_LEARNING_RATE, training_config
 
     full = ReproduceConfig()
-    for kind in ("adln", "dln"):
-        step = FULL_PROP_FINETUNE_LEARNING_RATE[("furuta", kind)]
+    for system, kind, itau_step in (("furuta", "adln", 1e-3), ("furuta", "dln", 1e-3),
+                                    ("furuta", "aph", 1e-3), ("nmsd", "aph", 1e-2)):
+        step = FULL_PROP_FINETUNE_LEARNING_RATE[(system, kind)]
         assert step < 1e-3
-        assert training_config("furuta", full, 0, "prop", kind).learning_rate == (1e-3, step, step)
-    assert training_config("furuta", full, 0, "prop", "aph").learning_rate == 1e-3
+        assert training_config(system, full, 0, "prop", kind).learning_rate == (itau_step, step, step)
     assert training_config("nmsd", full, 0, "prop", "adln").learning_rate == (1e-2, 1e-3, 1e-3)
     assert training_config("furuta", full, 0, "aph", "adln").learning_rate == 1e-3
     assert training_config("furuta", ReproduceConfig(quick=True), 0, "prop", "adln").learning_rate == 1e-3

@@ -42,6 +42,7 @@ class RunRecipe:
 
 _BASELINE = ("baseline epochs",)
 _PROP = ("λ of L_prop",)
+_NMSD_FINETUNE = "fine-tuning step, N-MSD DeLaN and augmented DeLaN"
 
 
 def _prop(epochs, *, decisions=(), **settings) -> RunRecipe:
@@ -74,21 +75,24 @@ RECIPE: dict[tuple[str, str, str], RunRecipe] = {
         "furuta", epochs=(12000, 20, 60), finetune_learning_rate=1e-6,
         decisions=("L_Iτ quadrature, Furuta DeLaN", "L_Iτ epochs, Furuta DeLaN", "fine-tuning step, Furuta DeLaN")),
     ("furuta", "aph", "prop"): _row(
-        "furuta", quadrature="hermite", augmentation_weight=0.1,
-        decisions=("L_Iτ quadrature, Furuta APHYNITY", "μ per system and kind", "F_a design")),
+        "furuta", quadrature="hermite", finetune_learning_rate=1e-4, augmentation_weight=0.1,
+        decisions=("L_Iτ quadrature, Furuta APHYNITY", "fine-tuning step, APHYNITY", "μ per system and kind",
+                   "F_a design")),
     ("furuta", "adln", "prop"): _row(
         "furuta", epochs=(24000, 20, 60), quadrature="hermite", finetune_learning_rate=3e-4,
         augmentation_weight=10.0,
         decisions=("L_Iτ epochs, Furuta augmented DeLaN", "fine-tuning step, Furuta augmented DeLaN",
                    "L_Iτ quadrature, Furuta augmented DeLaN", "μ per system and kind", "F_a design")),
-    ("nmsd", "dln", "prop"): _row("nmsd", epochs=(8000, 30, 30), decisions=("L_Iτ epochs, N-MSD DeLaN",)),
+    ("nmsd", "dln", "prop"): _row("nmsd", epochs=(8000, 30, 30), decisions=("L_Iτ epochs, N-MSD DeLaN", _NMSD_FINETUNE)),
     ("nmsd", "aph", "prop"): _row(
-        "nmsd", quadrature="trapezoid", augmentation_weight=1e-2, replaces=("L_Iτ quadrature, N-MSD",),
-        decisions=("L_Iτ quadrature, N-MSD APHYNITY", "μ per system and kind", "F_a design")),
+        "nmsd", quadrature="trapezoid", finetune_learning_rate=1e-4, augmentation_weight=1e-2,
+        replaces=("L_Iτ quadrature, N-MSD",),
+        decisions=("L_Iτ quadrature, N-MSD APHYNITY", "fine-tuning step, APHYNITY", "μ per system and kind",
+                   "F_a design")),
     ("nmsd", "adln", "prop"): _row(
         "nmsd", quadrature="trapezoid", augmentation_weight=1e-2, replaces=("L_Iτ quadrature, N-MSD",),
         decisions=("L_Iτ quadrature, N-MSD augmented DeLaN", "μ per system and kind", "F_a design",
-                   "N-MSD augmented DeLaN F_a odd in q̇")),
+                   "N-MSD augmented DeLaN F_a odd in q̇", _NMSD_FINETUNE)),
 }
 
 #: the paper's training schedule per system (appendix A.2): epochs of the 2-step and the
