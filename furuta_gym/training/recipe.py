@@ -85,7 +85,7 @@ RECIPE: dict[tuple[str, str, str], RunRecipe] = {
                    "L_Iτ quadrature, Furuta augmented DeLaN", "μ per system and kind", "F_a design")),
     ("nmsd", "dln", "prop"): _row("nmsd", epochs=(8000, 30, 30), decisions=("L_Iτ epochs, N-MSD DeLaN", _NMSD_FINETUNE)),
     ("nmsd", "aph", "prop"): _row(
-        "nmsd", quadrature="trapezoid", finetune_learning_rate=1e-4, augmentation_weight=1e-3,
+        "nmsd", quadrature="trapezoid", finetune_learning_rate=1e-4, augmentation_weight=1e-4,
         replaces=("L_Iτ quadrature, N-MSD",),
         decisions=("L_Iτ quadrature, N-MSD APHYNITY", "fine-tuning step, APHYNITY", "μ per system and kind",
                    "F_a design")),
