@@ -42,7 +42,6 @@ class RunRecipe:
 
 _BASELINE = ("baseline epochs",)
 _PROP = ("λ of L_prop",)
-_NMSD_FINETUNE = "fine-tuning step, N-MSD DeLaN and augmented DeLaN"
 
 
 def _prop(epochs, *, decisions=(), **settings) -> RunRecipe:
@@ -56,7 +55,8 @@ SYSTEM_ROWS = {
                "prop": _prop((6000, 20, 60))},
     "nmsd": {"baseline": RunRecipe(epochs=(100, 100), decisions=_BASELINE),
              "prop": _prop((4000, 30, 30), itau_learning_rate=1e-2,
-                           decisions=("L_Iτ quadrature, N-MSD", "L_Iτ step, N-MSD"))},
+                           decisions=("L_Iτ quadrature, N-MSD", "L_Iτ step, N-MSD",
+                                      "fine-tuning step, N-MSD DeLaN and augmented DeLaN"))},
 }
 
 
@@ -83,16 +83,16 @@ RECIPE: dict[tuple[str, str, str], RunRecipe] = {
         augmentation_weight=10.0,
         decisions=("L_Iτ epochs, Furuta augmented DeLaN", "fine-tuning step, Furuta augmented DeLaN",
                    "L_Iτ quadrature, Furuta augmented DeLaN", "μ per system and kind", "F_a design")),
-    ("nmsd", "dln", "prop"): _row("nmsd", epochs=(8000, 30, 30), decisions=("L_Iτ epochs, N-MSD DeLaN", _NMSD_FINETUNE)),
+    ("nmsd", "dln", "prop"): _row("nmsd", epochs=(8000, 30, 30), decisions=("L_Iτ epochs, N-MSD DeLaN",)),
     ("nmsd", "aph", "prop"): _row(
         "nmsd", quadrature="trapezoid", finetune_learning_rate=1e-4, augmentation_weight=1e-4,
-        replaces=("L_Iτ quadrature, N-MSD",),
+        replaces=("L_Iτ quadrature, N-MSD", "fine-tuning step, N-MSD DeLaN and augmented DeLaN"),
         decisions=("L_Iτ quadrature, N-MSD APHYNITY", "fine-tuning step, APHYNITY", "μ per system and kind",
                    "F_a design")),
     ("nmsd", "adln", "prop"): _row(
         "nmsd", quadrature="trapezoid", augmentation_weight=1e-2, replaces=("L_Iτ quadrature, N-MSD",),
         decisions=("L_Iτ quadrature, N-MSD augmented DeLaN", "μ per system and kind", "F_a design",
-                   "N-MSD augmented DeLaN F_a odd in q̇", _NMSD_FINETUNE)),
+                   "N-MSD augmented DeLaN F_a odd in q̇")),
 }
 
 #: the paper's training schedule per system (appendix A.2): epochs of the 2-step and the
