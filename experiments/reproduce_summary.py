@@ -64,6 +64,18 @@ def _behind(rows) -> list[str]:
     return [f"Cells where the paper is lower ({len(worse)}): " + "; ".join(cells) + "."]
 
 
+def _provenance(run) -> str:
+    """What the last invocation trained itself and what it took from earlier ones into its folder."""
+    models = [r for k, r in run["seconds"].items() if isinstance(r, dict) and "/seed" in k]
+    reused = sum(r.get("status") == "reused" for r in models)
+    if reused == 0:
+        return f"it trained all {len(models)} models"
+    if reused == len(models):
+        return "it reused all the models, each trained by one invocation into an empty folder: `invocations/`"
+    return (f"it trained {len(models) - reused} models and reused {reused} trained by an earlier "
+            "invocation into the same folder: `invocations/`")
+
+
 def summary() -> str:
     with (RUN / "tables.csv").open() as f:
         rows = list(csv.DictReader(f))
@@ -73,8 +85,8 @@ def summary() -> str:
     total = sum(s for s in map(_seconds, run["seconds"].values()) if s is not None)
     command = re.sub(r"--out \S+", "--out <folder>", run["command"])
     head = (f"`{command}` (the last invocation, {run['date_utc'][:16].replace('T', ' ')} UTC, "
-            f"{machine.get('cpu', 'cpu')}, {machine['cpu_count']} cores; it reused all the models, "
-            f"each trained by one invocation into an empty folder: `invocations/`); {' / '.join(seeds)} model seed(s); "
+            f"{machine.get('cpu', 'cpu')}, {machine['cpu_count']} cores; {_provenance(run)}); "
+            f"{' / '.join(seeds)} model seed(s); "
             f"{total:.0f} s of training and evaluation summed over the models. Full tables: "
             "[results/reproduce/tables.md](../results/reproduce/tables.md).")
     return "\n".join([head, "", *_model_rows(rows, run), "", *_behind(rows)])
