@@ -470,6 +470,8 @@ def test_decision_log_quotes_match_their_evidence():
         for triple in re.findall(rf"\(({number}), ({number}), ({number})\)", row):
             assert any(len(d) == 3 and matches(triple, d) for d in evidence), (row[:40], triple)
             checked += 1
+        # a quote placed away from its "beaten on seed N" would escape the check below
+        assert not re.search(r"beaten on seed \d(?! \()", row), row[:40]
         for stopped in re.findall(rf"beaten on seed \d \(({number}(?:, {number})*)\)", row):
             quoted = stopped.split(", ")
             assert any(len(d) == len(quoted) and matches(quoted, d) for d in evidence), (row[:40], stopped)
