@@ -48,3 +48,17 @@ def test_a_reproduction_model_trained_with_l_prop_still_matches_the_true_system(
     true = jax.vmap(truth.forward_dynamics)(q, qd, u)
     relative = np.sqrt(np.mean((learned - true) ** 2, axis=0) / np.mean(true ** 2, axis=0))
     assert np.all(relative < 0.1), relative
+
+
+@pytest.mark.parametrize("path", REPRODUCTION, ids=lambda p: "/".join(p.parts[-4:-2]))
+def test_a_committed_reproduction_run_is_todays_recipe(path):
+    """The recipe is frozen: each committed reproduction run records the settings it was trained
+    with, and they are what ``furuta-gym reproduce`` would train today. A recipe change that was
+    not followed by training that model again fails here, not silently in the published tables."""
+    import json
+
+    from furuta_gym.training.reproduce import ReproduceConfig, _run_settings, _same_settings
+
+    system, (kind, loss) = path.parts[-4], path.parts[-3].split("_")
+    saved = json.loads((path.parent / "reproduce_config.json").read_text())
+    assert _same_settings(saved, _run_settings(system, kind, loss, 0, ReproduceConfig())), path.parent
