@@ -71,7 +71,8 @@ def _provenance(run) -> str:
     if reused == 0:
         return f"it trained all {len(models)} models"
     if reused == len(models):
-        return "it reused all the models, trained from scratch into the same folder by the invocations in `invocations/`"
+        return ("it reused all the models, trained from scratch into the same folder by the invocations "
+                "in `invocations/`")
     return (f"it trained {len(models) - reused} models and reused {reused} trained by an earlier "
             "invocation into the same folder: `invocations/`")
 
