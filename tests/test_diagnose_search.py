@@ -177,6 +177,8 @@ class _FakeFitter:
     def __init__(self):
         from types import SimpleNamespace
         self.settings, self.notes, self.built = SimpleNamespace(veto_t=2.0), [], []
+        order = [SPRING.key, COM.key, COULOMB.key]
+        self.layout = SimpleNamespace(index=order.index)
 
     def validation_sums(self, theta, dyn):
         return np.ones(4)
@@ -184,10 +186,17 @@ class _FakeFitter:
     def build(self, dyn):
         self.built.append(dyn)
 
+    def fit_ee(self, effects):
+        return np.ones(3), None
 
-def _confirm_with(monkeypatch, predicts_worse_unless):
+    def refine(self, theta, free, dyn, tag):
+        return theta
+
+
+def _confirm_with(monkeypatch, predicts_worse_unless, refit_coefficient=None):
     """Run the confirmation of steps SPRING, COM, COULOMB where a step predicts worse (t −5)
-    unless every candidate in ``predicts_worse_unless[step]`` has been accepted already."""
+    unless every candidate in ``predicts_worse_unless[step]`` has been accepted already; a step's
+    refit gives the coefficients ``refit_coefficient.get(step, {})`` (the others 1)."""
     from types import SimpleNamespace
 
     from furuta_gym.diagnose import _diagnose
@@ -199,7 +208,10 @@ def _confirm_with(monkeypatch, predicts_worse_unless):
         tried.append(key)
         needs = predicts_worse_unless.get(key, set())
         ok = needs <= {c.key for c in accepted}
-        return Evidence(0.1 if ok else -0.1, 5.0 if ok else -5.0, 40), np.zeros(1), dyn, sums
+        theta = np.ones(3)
+        for other, value in (refit_coefficient or {}).get(key, {}).items():
+            theta[[SPRING.key, COM.key, COULOMB.key].index(other)] = value
+        return Evidence(0.1 if ok else -0.1, 5.0 if ok else -5.0, 40), theta, dyn, sums
 
     monkeypatch.setattr(_diagnose, "_try_step", fake_try)
     steps = [_Step(SPRING), _Step(COM), _Step(COULOMB)]
@@ -222,6 +234,25 @@ def test_a_step_that_predicts_worse_given_everything_stays_dropped(monkeypatch):
     assert accepted == [SPRING.key, COULOMB.key]
     assert tried == [SPRING.key, COM.key, COULOMB.key, COM.key]
     assert evidence[COM.key].status == "not confirmed" and not evidence[COM.key].significant
+
+
+def test_a_step_whose_refit_turns_its_sign_non_physical_is_dropped(monkeypatch):
+    # the search checks a spring's sign on the equation-error fit; the refit may flip it
+    refits = {SPRING.key: {SPRING.key: -1e-4}, COM.key: {COM.key: -1e-3}}
+    accepted, evidence, _ = _confirm_with(monkeypatch, {}, refits)
+    assert accepted == [COM.key, COULOMB.key]  # a centre-of-mass offset may have either sign
+    assert evidence[SPRING.key].status == "not confirmed"
+    assert "non-physical sign" in evidence[SPRING.key].note
+
+
+def test_an_effect_a_later_refit_turns_non_physical_is_dropped_not_the_later_one(monkeypatch):
+    # seen with exact angles: a spurious stiction, then the true centre-of-mass offset whose refit
+    # turned the stiction negative
+    accepted, evidence, tried = _confirm_with(monkeypatch, {}, {COULOMB.key: {SPRING.key: -1e-4}})
+    assert accepted == [COM.key, COULOMB.key]
+    assert tried == [SPRING.key, COM.key, COULOMB.key]
+    assert evidence[SPRING.key].status == "not confirmed" and evidence[COULOMB.key].status == "selected"
+    assert "refitted with the effects added after it" in evidence[SPRING.key].note
 
 
 def test_nothing_is_refitted_again_when_every_step_is_vetoed(monkeypatch):

@@ -571,7 +571,10 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
     −``veto_t``): the trace is an equation-error test, and on closed-loop logs the input correlates
     with the measurement noise. A vetoed step is tried once more after the others: an effect can
     predict worse only while another one is missing (a pendulum's centre-of-mass offset before the
-    rotor's friction and the input lag). Returns (accepted candidates, θ, input dynamics)."""
+    rotor's friction and the input lag). A step is vetoed too if its refit gives one of its own
+    coefficients the non-physical sign (a spring, friction or drag ≤ 0: the search tested signs on
+    the equation-error fit alone); an effect that a later step's refit turns non-physical is
+    dropped at the end. Returns (accepted candidates, θ, input dynamics)."""
     accepted: list[Candidate] = []
     theta, dyn = theta_before, _fit.NO_INPUT_DYNAMICS
     sums = fx.validation_sums(theta, dyn)
@@ -580,22 +583,50 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
         vetoed = []
         for step in todo:
             ev, th, trial_dyn, trial_sums = _try_step(fx, accepted, dyn, sums, step)
-            if ev.z > -fx.settings.veto_t:
+            flipped = _non_physical(fx.layout, th, step.members)
+            if ev.z > -fx.settings.veto_t and not flipped:
                 accepted, theta, dyn, sums = accepted + list(step.members), th, trial_dyn, trial_sums
             else:
-                vetoed.append((step, ev))
+                vetoed.append((step, ev, flipped))
         if not vetoed or len(vetoed) == len(todo):  # nothing vetoed, or nothing added since
             break
-        todo = [step for step, _ in vetoed]
-    for step, ev in vetoed:
+        todo = [step for step, _, _ in vetoed]
+    for step, ev, flipped in vetoed:
         for c in step.members:
             bad = evidence[c.key]
             bad.significant, bad.status = False, "not confirmed"
-            bad.note = (f"equation-error evidence, but the refitted model predicts the fit-set validation "
+            bad.note = (f"equation-error evidence, but the refit gives {', '.join(flipped)} the non-physical sign"
+                        if flipped else
+                        f"equation-error evidence, but the refitted model predicts the fit-set validation "
                         f"windows significantly worse (error {-ev.improvement:+.1%}, t {ev.z:.1f})")
             fx.notes.append(f"{c.key}: {bad.note}; dropped")
+    accepted, theta = _drop_non_physical(fx, accepted, theta, dyn, evidence)
     fx.build(dyn)
     return accepted, theta, dyn
+
+
+def _drop_non_physical(fx: _Fitter, accepted, theta, dyn, evidence):
+    """Effects that the refits of steps added after them left with the non-physical sign are
+    dropped and the rest refitted (the later, physical steps stay). Returns (accepted, θ)."""
+    for _ in range(len(accepted)):
+        flipped = _non_physical(fx.layout, theta, accepted)
+        if not flipped:
+            break
+        for key in flipped:
+            bad = evidence[key]
+            bad.significant, bad.status = False, "not confirmed"
+            bad.note = "equation-error evidence, but refitted with the effects added after it its sign is non-physical"
+            fx.notes.append(f"{key}: {bad.note}; dropped")
+        accepted = [c for c in accepted if c.key not in flipped]
+        fx.build(dyn)
+        th_ee, free = fx.fit_ee(accepted)
+        theta = fx.refine(th_ee, free, dyn, "with " + ", ".join(c.key for c in accepted))
+    return accepted, theta
+
+
+def _non_physical(layout, theta, effects) -> list[str]:
+    """Keys of ``effects`` whose coefficient in ``theta`` has the non-physical sign."""
+    return [c.key for c in effects if c.name in _trace_mod.SIGNED and theta[layout.index(c.key)] <= 0]
 
 
 def _stiction_start(fx: _Fitter, theta, c: Candidate) -> np.ndarray:

@@ -173,7 +173,8 @@ def _best_pair(comparer, chosen, scores, pool, s: SearchSettings, equivalents=No
         if min(given_b.z, given_a.z) < s.member_z_threshold or min(given_a.improvement, given_b.improvement) <= 0:
             continue
         if best is None or whole.z > best.pair_evidence.z:
-            same = {o: m.key for m in (a, b) for o in (equivalents or {}).get(m.key, ())}
+            # sorted: a set's order would vary from run to run
+            same = {o: m.key for m in (a, b) for o in sorted((equivalents or {}).get(m.key, ()))}
             best = Step((a, b), {a.key: given_b, b.key: given_a}, whole, same)
     return best
 
