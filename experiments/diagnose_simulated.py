@@ -14,6 +14,9 @@ per log into ``results/diagnose_sim/``; ``experiments/diagnose_tables.py`` makes
     # the calibration that left start-velocity estimation off for every output-error fit:
     python experiments/diagnose_simulated.py --excitations closed_loop_prbs --start-iterations 1 \
         --out results/diagnose_sim_start_velocity
+    # the same closed-loop logs with exact angles: what the encoder's resolution costs
+    python experiments/diagnose_simulated.py --excitations closed_loop_prbs --no-quantize \
+        --only coulomb_com_lag coulomb_com_lag5 --out results/diagnose_sim_exact_angles
 """
 
 from __future__ import annotations
@@ -49,16 +52,16 @@ PLAN = [("sine_sweep", "none"), ("closed_loop_prbs", "none"), ("sine_sweep", "sp
         ("closed_loop_prbs", "coulomb_com_lag"), ("closed_loop_prbs", "coulomb_com_lag5")]
 
 
-def run_one(excitation: str, case: str, seed: int, out: Path, **overrides) -> dict:
+def run_one(excitation: str, case: str, seed: int, out: Path, quantize: bool = True, **overrides) -> dict:
     target = out / f"{excitation}__{case}__{seed}.json"
     if target.exists():
         return json.loads(target.read_text())
     t0 = time.time()
     effects = CASES[case]
-    data = measured_like("furuta", effects, seed=seed, excitation=excitation, **LOG)
+    data = measured_like("furuta", effects, seed=seed, excitation=excitation, quantize=quantize, **LOG)
     res = diagnose(data, "furuta", **{**SETTINGS[excitation], **overrides})
     doc = res.to_json()
-    doc.update(excitation=excitation, case=case, seed=seed, seconds=round(time.time() - t0, 1),
+    doc.update(excitation=excitation, case=case, seed=seed, quantized=quantize, seconds=round(time.time() - t0, 1),
                planted=[dict(name=e.name, joint=e.joint, coefficient=e.coefficient, reference=e.reference)
                         for e in effects])
     target.write_text(json.dumps(doc, indent=1) + "\n")
@@ -75,6 +78,7 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", help="cases to run (default: all)")
     ap.add_argument("--excitations", nargs="*", help="experiments to run (default: all)")
     ap.add_argument("--start-iterations", type=int, help="DiagnosisSettings.start_iterations (default: its default)")
+    ap.add_argument("--no-quantize", action="store_true", help="log exact angles (no encoder resolution)")
     args = ap.parse_args()
     overrides = {} if args.start_iterations is None else {"start_iterations": args.start_iterations}
     out = Path(args.out)
@@ -83,7 +87,7 @@ def main() -> None:
         if (args.only and case not in args.only) or (args.excitations and excitation not in args.excitations):
             continue
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            run_one(excitation, case, seed, out, **overrides)
+            run_one(excitation, case, seed, out, quantize=not args.no_quantize, **overrides)
 
 
 if __name__ == "__main__":

@@ -1,10 +1,11 @@
 """Docs tables of the diagnosis, generated from the committed result files (never typed by hand).
 
-Reads ``results/diagnose_sim/*.json`` (``experiments/diagnose_simulated.py``) and
-``results/diagnose_real/*.json`` (``experiments/diagnose_real_data.py``) and rewrites the blocks
-between ``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->`` in docs/diagnose.md and
-README.md. ``--check`` only compares (the test suite runs it: a quoted number that disagrees with
-its results file fails).
+Reads ``results/diagnose_sim/*.json`` and ``results/diagnose_sim_exact_angles/*.json``
+(``experiments/diagnose_simulated.py``) and ``results/diagnose_real/`` (its JSON files and
+``reference/``, ``runs/``; ``experiments/diagnose_real_data.py``) and rewrites the blocks between
+``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->`` in docs/diagnose.md and README.md.
+``--check`` only compares (the test suite runs it: a quoted number that disagrees with its
+results file fails).
 
     python experiments/diagnose_tables.py [--check]
 """
@@ -22,6 +23,7 @@ from _generated import fill_block
 
 ROOT = Path(__file__).resolve().parents[1]
 SIM, REAL = ROOT / "results" / "diagnose_sim", ROOT / "results" / "diagnose_real"
+EXACT = ROOT / "results" / "diagnose_sim_exact_angles"  # the closed-loop logs without quantisation
 REAL_COMMAND = ("furuta-gym diagnose qube:1-5 --test qube:6-15 --system furuta --skip 0.5 "
                 "--window 0.1 --oe-windows 64")
 
@@ -168,6 +170,22 @@ def per_run_table(record: dict, docs: dict[str, dict]) -> str:
     return "\n".join(rows)
 
 
+def reference_table(split: dict, refs: dict[str, dict], target: float = 1.25) -> str:
+    """Runs 1–5's prediction of runs 6–15 beside models of runs 6–15 fitted on themselves."""
+    before = split["test_error_before"]["trajectory_rmse"]
+    err = lambda d: d["test_error_after"]["trajectory_rmse"]  # noqa: E731
+    rows = ["| model | fitted on | candidates | found | error on runs 6–15 (rad) |", "|---|---|---|---|---|",
+            f"| declared | runs 1–5 | - | - | {before:.4f} |",
+            f"| {target}× lower than the declared model | | | | {before / target:.4f} |",
+            f"| runs 1–5's diagnosis (a prediction) | runs 1–5 | the library | {_found_text(split)} | "
+            f"{err(split):.4f} ({before / err(split):.2f}×) |"]
+    for d in refs.values():
+        cands = ", ".join(d["candidates"]) if d.get("candidates") else "the library"
+        rows.append(f"| in-sample reference | runs 6–15 | {cands} | {_found_text(d)} | {err(d):.4f} "
+                    f"({before / err(d):.2f}×) |")
+    return "\n".join(rows)
+
+
 def readme_line(docs: dict[str, dict]) -> str:
     d = docs["split_runs01-05"]
     others = [docs[k] for k in ("split_runs06-10", "split_runs11-15") if k in docs]
@@ -188,6 +206,12 @@ def blocks() -> dict[str, str]:
     if real:
         out["diagnose-real"] = real_table(real) + "\n\nAcross the independent splits:\n\n" + agreement_table(real)
         out["diagnose-real-readme"] = readme_line(real)
+    refs = _load(REAL / "reference")
+    if refs and "split_runs01-05" in real:
+        out["diagnose-real-reference"] = reference_table(real["split_runs01-05"], refs)
+    exact = _load(EXACT)
+    if exact:
+        out["diagnose-sim-exact-angles"] = sim_table(exact)
     runs = REAL / "runs" / "per_run.json"
     if runs.exists():
         out["diagnose-real-runs"] = per_run_table(json.loads(runs.read_text()), real)

@@ -21,6 +21,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from furuta_gym.cli import main
@@ -95,6 +96,19 @@ def test_no_effect_logs_report_nothing(excitation):
     res = diagnose(measured_like("furuta", [], excitation=excitation, seed=100, **LOG), "furuta", **kw)
     assert res.found == [], res.table()
     assert res.error_after.trajectory_rmse == res.error_before.trajectory_rmse
+
+
+@pytest.mark.parametrize("excitation", ["sine_sweep", "closed_loop_prbs"])
+def test_measured_like_logs_encoder_counts_unless_told_exact_angles(excitation):
+    count = 2 * np.pi / 2048
+    short = dict(n_trajectories=1, duration=0.4, seed=3, excitation=excitation)
+    counts = measured_like("furuta", [], **short)[0].q / count
+    exact = measured_like("furuta", [], quantize=False, **short)[0].q
+    assert np.abs(counts - np.round(counts)).max() < 1e-9
+    off_grid = np.abs(exact / count - np.round(exact / count)) > 1e-3
+    assert off_grid.mean() > 0.9
+    if excitation == "sine_sweep":  # open loop: the same motion, only the sensor differs
+        assert np.abs(counts * count - exact).max() <= count / 2 + 1e-12
 
 
 def test_closed_loop_rig_effects_are_found():

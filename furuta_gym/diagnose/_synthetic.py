@@ -168,8 +168,8 @@ class _Plant:
         return self.x
 
 
-def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, cutoff: float = 100.0):
-    """One closed-loop upright run: (quantised angles (T, 2), plant input (T,)).
+def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, cutoff: float = 100.0, sense=quantize_encoder):
+    """One closed-loop upright run: (``sense``d angles (T, 2), plant input (T,)).
 
     The controller sees only the encoders, as on the rig: velocities are a first-order filtered
     difference of the quantised angles (cut-off ``cutoff`` rad/s; a raw difference turns one
@@ -181,10 +181,10 @@ def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, cutoff: float
     rotor_ref, pendulum_ref, feed = _excitation(len(t), dt, rng)
     sim.reset(x)
     smooth = 1.0 - math.exp(-cutoff * dt)
-    q_prev, v = quantize_encoder(x[:2]), np.zeros(2)
+    q_prev, v = sense(x[:2]), np.zeros(2)
     qs, us = np.empty((len(t), 2)), np.empty(len(t))
     for k in range(len(t)):
-        q = quantize_encoder(x[:2])
+        q = sense(x[:2])
         v += smooth * ((q - q_prev) / dt - v)
         q_prev = q
         tilt = (q[1] - np.pi + np.pi) % (2 * np.pi) - np.pi  # β − π wrapped to [−π, π)
@@ -208,6 +208,7 @@ def measured_like(
     plant: str = "mujoco",
     substeps: int = 10,
     excitation: str = "chirp",
+    quantize: bool = True,
 ) -> list[Trajectory]:
     """Trajectories of the pinned model with ``effects`` added, as a sensor would log them.
 
@@ -222,6 +223,10 @@ def measured_like(
       PD on the encoder angles (:data:`BALANCE_GAINS`, filtered-difference velocities) tracking
       references plus a ±0.5 V feed-forward as the MIT logs do (:func:`_excitation`), saturated
       at ±10 V; u is the saturated command.
+
+    ``quantize=False`` logs the Furuta's exact angles (and the balancing controller sees them):
+    the same experiment without the encoder's resolution, to tell the sensor's limits from the
+    method's.
 
     ``input_delay`` is applied as the plant seeing the command ``round(d/dt)`` samples late,
     ``actuator_lag`` after it. The plant takes one MJCF step per sample for ``"chirp"`` (as it
@@ -243,10 +248,11 @@ def measured_like(
     # dry friction against a spring creep at a rate ∝ the step (~3 mrad/s, one count per
     # 0.3–0.5 s at 2 ms; ~0.3 mrad/s at 0.2 ms), where a real rotor sticks
     sim = _Plant(system, effects, plant, dt, substeps, fine=excitation != "chirp")
+    sense = quantize_encoder if quantize else (lambda q: q)
     out = []
     for k in range(n_trajectories):
         if excitation == "closed_loop_prbs":
-            q, u = _balance(sim, t, rng)
+            q, u = _balance(sim, t, rng, sense=sense)
         else:
             if excitation == "sine_sweep":
                 q0 = [rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05)]
@@ -258,7 +264,7 @@ def measured_like(
             xs = sim.roll(x0, u)
             q = xs[:, : definition.spec.n_dof]
             if definition.encoders:
-                q = quantize_encoder(q)
+                q = sense(q)
             else:
                 q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)
         out.append(Trajectory(t=t.copy(), q=q, u=u[:, None], qd=None, name=str(k)))
