@@ -171,14 +171,16 @@ class _Step:
         self.members = list(members)
 
 
+COEFFICIENT_ORDER = [SPRING.key, COM.key, COULOMB.key]  # θ of the fake refits
+
+
 class _FakeFitter:
     """Only what the confirmation step reads: settings, notes, validation sums, build."""
 
     def __init__(self):
         from types import SimpleNamespace
         self.settings, self.notes, self.built = SimpleNamespace(veto_t=2.0), [], []
-        order = [SPRING.key, COM.key, COULOMB.key]
-        self.layout = SimpleNamespace(index=order.index)
+        self.layout = SimpleNamespace(index=COEFFICIENT_ORDER.index)
 
     def validation_sums(self, theta, dyn):
         return np.ones(4)
@@ -210,7 +212,7 @@ def _confirm_with(monkeypatch, predicts_worse_unless, refit_coefficient=None):
         ok = needs <= {c.key for c in accepted}
         theta = np.ones(3)
         for other, value in (refit_coefficient or {}).get(key, {}).items():
-            theta[[SPRING.key, COM.key, COULOMB.key].index(other)] = value
+            theta[COEFFICIENT_ORDER.index(other)] = value
         return Evidence(0.1 if ok else -0.1, 5.0 if ok else -5.0, 40), theta, dyn, sums
 
     monkeypatch.setattr(_diagnose, "_try_step", fake_try)

@@ -593,32 +593,34 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
         todo = [step for step, _, _ in vetoed]
     for step, ev, flipped in vetoed:
         for c in step.members:
-            bad = evidence[c.key]
-            bad.significant, bad.status = False, "not confirmed"
-            bad.note = (f"equation-error evidence, but the refit gives {', '.join(flipped)} the non-physical sign"
-                        if flipped else
-                        f"equation-error evidence, but the refitted model predicts the fit-set validation "
-                        f"windows significantly worse (error {-ev.improvement:+.1%}, t {ev.z:.1f})")
-            fx.notes.append(f"{c.key}: {bad.note}; dropped")
-    accepted, theta = _drop_non_physical(fx, accepted, theta, dyn, evidence)
+            _not_confirmed(fx, evidence, c.key,
+                           f"the refit gives {', '.join(flipped)} the non-physical sign" if flipped else
+                           f"the refitted model predicts the fit-set validation windows significantly worse "
+                           f"(error {-ev.improvement:+.1%}, t {ev.z:.1f})")
     fx.build(dyn)
+    accepted, theta = _drop_non_physical(fx, accepted, theta, dyn, evidence)
     return accepted, theta, dyn
+
+
+def _not_confirmed(fx: _Fitter, evidence, key: str, why: str) -> None:
+    """Mark an effect the search found but the refits did not keep, with the reason."""
+    bad = evidence[key]
+    bad.significant, bad.status = False, "not confirmed"
+    bad.note = f"equation-error evidence, but {why}"
+    fx.notes.append(f"{key}: {bad.note}; dropped")
 
 
 def _drop_non_physical(fx: _Fitter, accepted, theta, dyn, evidence):
     """Effects that the refits of steps added after them left with the non-physical sign are
-    dropped and the rest refitted (the later, physical steps stay). Returns (accepted, θ)."""
+    dropped and the rest refitted (the later, physical steps stay); the regressors are those of
+    ``dyn``, built already. Returns (accepted, θ)."""
     for _ in range(len(accepted)):
         flipped = _non_physical(fx.layout, theta, accepted)
         if not flipped:
             break
         for key in flipped:
-            bad = evidence[key]
-            bad.significant, bad.status = False, "not confirmed"
-            bad.note = "equation-error evidence, but refitted with the effects added after it its sign is non-physical"
-            fx.notes.append(f"{key}: {bad.note}; dropped")
+            _not_confirmed(fx, evidence, key, "refitted with the effects added after it its sign is non-physical")
         accepted = [c for c in accepted if c.key not in flipped]
-        fx.build(dyn)
         th_ee, free = fx.fit_ee(accepted)
         theta = fx.refine(th_ee, free, dyn, "with " + ", ".join(c.key for c in accepted))
     return accepted, theta
