@@ -13,6 +13,7 @@ name                   generalized force on joint j                  unit of coe
 ``viscous_friction``   −c·q̇_j                                        N·m·s/rad or N·s/m
 ``quadratic_drag``     −c·q̇_j·|q̇_j|                                  N·m·s²/rad² or N·s²/m²
 ``constant_torque``    +τ0                                           N·m or N
+``hysteretic_spring``  −k·(q_j − r), r dragged along with play w     N·m/rad or N/m
 ``com_offset``         V(q) → V(q − δ·e_j): −∂V(q − δe_j)/∂q         rad or m
 ``input_gain``         τ_u → (1 + g)·τ_u (joint "u")                 dimensionless g
 ``input_delay``        u(t) → u(t − d) (joint "u")                   s
@@ -27,6 +28,11 @@ name                   generalized force on joint j                  unit of coe
   for the Furuta pendulum's β, a centre of mass off the pendulum's axis by the angle δ,
   V = ½·mp·g·Lp·(1 − cos(β − δ)), so it hangs at β = δ.
 * ``actuator_lag``: the amplifier / motor electrical time constant (~1–20 ms).
+* ``hysteretic_spring``: a cable whose neutral r moves: it stays put while |q_j − r| ≤ w
+  (``play``) and is dragged along beyond (the play operator, r ∈ [q_j − w, q_j + w]); it starts
+  at ``reference``. After a large swing the cable's neutral is left where the swing dragged it,
+  up to w from the joint, so a rotor oscillating afterwards is pulled towards a centre that a
+  fixed spring does not know. It has memory: :class:`CableNeutral` holds r.
 
 Coulomb friction and stiction use sgn(0) = 0, or tanh(q̇/ε) with ``coulomb_smoothing`` ε > 0.
 
@@ -58,6 +64,7 @@ __all__ = [
     "EFFECT_UNITS",
     "WithEffects",
     "ActuatorLag",
+    "CableNeutral",
     "actuator_lag_time",
 ]
 
@@ -69,12 +76,13 @@ JOINT_EFFECTS = (
     "quadratic_drag",
     "constant_torque",
     "com_offset",
+    "hysteretic_spring",
 )
 INPUT_EFFECTS = ("input_gain", "input_delay", "actuator_lag")
 #: friction bounded by a law of q̇ that can hold a joint at rest (:meth:`Effect.dry_friction_limit`)
 DRY_FRICTION = ("coulomb_friction", "stiction")
 #: effects with memory: no Lagrangian (memoryless) form, applied in the env / plant
-STATEFUL_EFFECTS = ("input_delay", "actuator_lag")
+STATEFUL_EFFECTS = ("input_delay", "actuator_lag", "hysteretic_spring")
 
 EFFECT_UNITS = {
     # (angular joint, linear joint)
@@ -85,6 +93,7 @@ EFFECT_UNITS = {
     "quadratic_drag": ("N m s^2/rad^2", "N s^2/m^2"),
     "constant_torque": ("N m", "N"),
     "com_offset": ("rad", "m"),
+    "hysteretic_spring": ("N m/rad", "N/m"),
     "input_gain": ("1", "1"),
     "input_delay": ("s", "s"),
     "actuator_lag": ("s", "s"),
@@ -95,8 +104,9 @@ EFFECT_UNITS = {
 class Effect:
     """One physical effect on one joint (``"alpha"``, ``"beta"``, ``"p"``) or on the input (``"u"``).
 
-    ``reference`` is the spring's rest position (ignored by other effects);
-    ``stribeck_velocity`` is the stiction's v_s in rad/s or m/s (ignored by other effects).
+    ``reference`` is the spring's rest position (a hysteretic spring's first neutral; ignored by
+    other effects); ``stribeck_velocity`` is the stiction's v_s in rad/s or m/s and ``play`` the
+    hysteretic spring's w in rad or m (each ignored by other effects).
     """
 
     name: str
@@ -104,6 +114,7 @@ class Effect:
     coefficient: float
     reference: float = 0.0
     stribeck_velocity: float = 0.05
+    play: float = 0.0
 
     def __post_init__(self):
         if self.name not in JOINT_EFFECTS + INPUT_EFFECTS:
@@ -113,6 +124,8 @@ class Effect:
         if (self.name in INPUT_EFFECTS) != (self.joint == "u"):
             where = "the input 'u'" if self.name in INPUT_EFFECTS else "a joint, not 'u'"
             raise ValueError(f"effect {self.name!r} acts on {where}; got joint={self.joint!r}")
+        if not (math.isfinite(self.play) and self.play >= 0):
+            raise ValueError(f"effect {self.name!r}: play must be >= 0 (rad or m), got {self.play!r}")
         if not (math.isfinite(self.stribeck_velocity) and self.stribeck_velocity > 0):
             raise ValueError(
                 f"effect {self.name!r}: stribeck_velocity must be > 0 (rad/s or m/s), "
@@ -165,6 +178,8 @@ class Effect:
                 "com_offset shifts the system's potential, V(q) -> V(q - δ e_j); its force depends "
                 "on V: use Effect.com_offset_force(potential, q, spec)"
             )
+        if self.name == "hysteretic_spring":
+            raise ValueError("hysteretic_spring has memory (its moving neutral): use CableNeutral(effect)")
         raise ValueError(f"{self.name!r} is an input effect, not a joint force")
 
     def dry_friction_limit(self, xp=jnp) -> Callable[[Any], Any]:
@@ -191,6 +206,33 @@ class Effect:
         ``potential(q)``: −∇V(q − δe_j) + ∇V(q) (jnp-traceable)."""
         shift = self.shift(spec)
         return jax.grad(potential)(q) - jax.grad(potential)(q - shift)
+
+
+class CableNeutral:
+    """The moving neutral r of a ``hysteretic_spring`` (the play operator): r starts at the
+    effect's ``reference`` and is dragged along once the joint is more than ``play`` from it.
+
+    :meth:`force` is the spring's force at q_j with r as it would be dragged to there (exact for a
+    joint moving one way within a step); :meth:`advance` moves r once a plant step is done.
+    """
+
+    def __init__(self, effect: Effect):
+        if effect.name != "hysteretic_spring":
+            raise ValueError(f"CableNeutral is a hysteretic_spring's neutral; got {effect.name!r}")
+        self.stiffness, self.play, self.start = effect.coefficient, effect.play, effect.reference
+        self.reset()
+
+    def reset(self) -> None:
+        self.neutral = self.start
+
+    def _dragged(self, q: float) -> float:
+        return min(max(self.neutral, q - self.play), q + self.play)
+
+    def force(self, q: float) -> float:
+        return -self.stiffness * (q - self._dragged(q))
+
+    def advance(self, q: float) -> None:
+        self.neutral = self._dragged(q)
 
 
 def actuator_lag_time(effects: Sequence[Effect]) -> float:
@@ -261,10 +303,10 @@ class WithEffects(AbstractLagrangianSystem):
         effects = tuple(effects)
         for e in effects:
             if e.name in STATEFUL_EFFECTS:
-                where = (
-                    "the env's actuation delay" if e.name == "input_delay"
-                    else "the env's actuation path (ActuatorLag) or MujocoBackend (actuator dynamics)"
-                )
+                where = {
+                    "input_delay": "the env's actuation delay",
+                    "actuator_lag": "the env's actuation path (ActuatorLag) or MujocoBackend (actuator dynamics)",
+                }.get(e.name, "the MuJoCo plant (MujocoBackend), which keeps its state")
                 raise ValueError(
                     f"{e.name} has no memoryless Lagrangian form (it has a state); use {where}"
                 )

@@ -276,3 +276,46 @@ def test_closed_loop_prbs_balances_with_the_rig_effects():
         measured_like("nmsd", excitation="sine_sweep")
     with pytest.raises(ValueError, match="excitation must be one of"):
         measured_like("furuta", excitation="square")
+
+
+# ----------------------------------------------------------------------------- a cable whose neutral moves
+
+
+def test_cable_neutral_is_the_play_operator():
+    from furuta_gym.effects import CableNeutral
+
+    n = CableNeutral(Effect("hysteretic_spring", "alpha", 2e-3, reference=0.1, play=0.3))
+    assert n.force(0.3) == 2e-3 * (0.1 - 0.3)  # within the play: a spring about its neutral
+    n.advance(0.3)
+    assert n.neutral == 0.1
+    assert n.force(1.0) == pytest.approx(-2e-3 * 0.3)  # beyond it the neutral is dragged along
+    n.advance(1.0)
+    assert n.neutral == pytest.approx(0.7)
+    n.advance(0.5)  # back within the play: the neutral stays where the swing left it
+    assert n.neutral == pytest.approx(0.7) and n.force(0.5) == pytest.approx(2e-3 * 0.2)
+    n.reset()
+    assert n.neutral == 0.1
+    with pytest.raises(ValueError, match="play must be >= 0"):
+        Effect("hysteretic_spring", "alpha", 2e-3, play=-0.1)
+
+
+def test_a_rotor_comes_back_to_where_a_swing_left_a_hysteretic_cable_not_to_zero():
+    effects = [Effect("hysteretic_spring", "alpha", 2e-3, play=0.3)]
+    plant = MujocoBackend("furuta", 10, effects, timestep=2e-4)
+    fixed = MujocoBackend("furuta", 10, [Effect("spring", "alpha", 2e-3)], timestep=2e-4)
+    for backend in (plant, fixed):
+        backend.reset(np.zeros(4))
+    for k in range(4000):  # half a second of 1 V at 1 Hz (one push), then 7.5 s at rest
+        u = np.array([math.sin(2 * math.pi * k * 0.002) if k < 250 else 0.0])
+        x, x_fixed = plant.step(u), fixed.step(u)
+    neutral = plant._neutrals[0][1].neutral
+    assert neutral > 0.3  # the push dragged the neutral along
+    assert x[0] == pytest.approx(neutral, abs=0.02)  # the rotor settles on the dragged neutral
+    assert abs(x_fixed[0]) < 0.02  # a fixed spring pulls it back to zero
+    plant.reset(np.zeros(4))
+    assert plant._neutrals[0][1].neutral == 0.0  # a reset restores the cable
+    # a model backend keeps no such state: a clear error, not a silently different plant
+    with pytest.raises(ValueError, match="memory"):
+        make_backend("furuta", "analytic", substeps=1, effects=effects)
+    with pytest.raises(ValueError, match="no memoryless Lagrangian form"):
+        WithEffects(Furuta(), effects)

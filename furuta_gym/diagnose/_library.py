@@ -152,7 +152,8 @@ def layout_for(system: str, learned: AbstractLagrangianSystem | None = None) -> 
     # constant torque comes after the specific mechanisms
     # constant torque comes after the specific mechanisms, and on a joint loaded by gravity a
     # shifted potential (a centre-of-mass offset) comes first
-    generic = [n for n in JOINT_EFFECTS if n not in ("constant_torque", "com_offset")] + ["constant_torque"]
+    generic = [n for n in JOINT_EFFECTS if n not in ("constant_torque", "com_offset", *STATEFUL_EFFECTS)]
+    generic += ["constant_torque"]
     cands = []
     for j in spec.joint_names:
         gravity = j in system_definition(spec).lumped.gravity_joints

@@ -36,7 +36,7 @@ from jax.flatten_util import ravel_pytree
 from .._jaxpr_to_c import CKernel, CKernelError
 from .._x64 import ensure_x64
 from ..assets import asset_path
-from ..effects import STATEFUL_EFFECTS, Effect, WithEffects, actuator_lag_time
+from ..effects import STATEFUL_EFFECTS, CableNeutral, Effect, WithEffects, actuator_lag_time
 from ..lagrangian import AbstractLagrangianSystem
 from ..models import analytic_model, system_definition
 from ..models.checkpoint import load_model
@@ -158,14 +158,16 @@ def load_mjcf(system: str, actuator_lag: bool = False) -> mujoco.MjModel:
 class PassiveForces:
     """The forces MuJoCo cannot express, for the passive callback: per dof the system's cubic
     stiffness and damping, the joint effects (their force laws, :meth:`Effect.law`), and the
-    ``com_offset`` shift of MuJoCo's gravity potential."""
+    ``com_offset`` shift of MuJoCo's gravity potential, and the moving neutrals of hysteretic
+    springs (their state: the plant advances them after each step)."""
 
     cubic: dict[int, tuple[float, float]]
     effects: dict[int, list[Effect]]
     shift: np.ndarray
+    neutrals: dict[int, list[CableNeutral]] = dataclasses.field(default_factory=dict)
 
     def __bool__(self) -> bool:
-        return bool(self.cubic or self.effects or self.shift.any())
+        return bool(self.cubic or self.effects or self.shift.any() or self.neutrals)
 
 
 def _gravity_force(model: mujoco.MjModel, scratch: mujoco.MjData, qpos, out: np.ndarray) -> np.ndarray:
@@ -261,6 +263,8 @@ def _add_effects(spec, effects, stiffness, stiff_ref, damping, extra: PassiveFor
             damping[j] += e.coefficient
         elif e.name == "com_offset":
             extra.shift[j] += e.coefficient
+        elif e.name == "hysteretic_spring":
+            extra.neutrals.setdefault(j, []).append(CableNeutral(e))
         else:
             extra.effects.setdefault(j, []).append(e)
     return gain
@@ -287,8 +291,10 @@ def _passive_callback(extra: PassiveForces, model: mujoco.MjModel):
     gravity potential, V(q) → V(q − Δ), generically: + g(q) − g(q − Δ), with g = ∂V_gravity/∂q
     computed by MuJoCo on a scratch MjData of ``model``.
     """
-    dofs = sorted(set(extra.cubic) | set(extra.effects))
-    terms = tuple((dof, *extra.cubic.get(dof, (0.0, 0.0)), tuple(e.law(xp=_FloatMath) for e in extra.effects.get(dof, ())))
+    dofs = sorted(set(extra.cubic) | set(extra.effects) | set(extra.neutrals))
+    terms = tuple((dof, *extra.cubic.get(dof, (0.0, 0.0)),
+                   tuple(e.law(xp=_FloatMath) for e in extra.effects.get(dof, ()))
+                   + tuple(lambda q, v, n=n: n.force(q) for n in extra.neutrals.get(dof, ())))
                   for dof in dofs)
     shift = extra.shift
     if shift.any() and model.nq != model.nv:
@@ -375,11 +381,14 @@ class MujocoBackend(AbstractBackend):
         extra = apply_parameters(self.model, self.system, self._parameters, self.effects, d)
         d.qpos[:], d.qvel[:], d.act[:], d.time = saved
         self._callback = _passive_callback(extra, self.model) if extra else None
+        self._neutrals = [(dof, n) for dof, ns in extra.neutrals.items() for n in ns]
 
     def reset(self, x) -> None:
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[:] = x[: self._n]
         self.data.qvel[:] = x[self._n :]
+        for _, neutral in self._neutrals:
+            neutral.reset()
 
     @contextlib.contextmanager
     def passive_forces(self):
@@ -405,6 +414,8 @@ class MujocoBackend(AbstractBackend):
             mujoco.mj_step(self.model, self.data, nstep)
         finally:
             mujoco.set_mjcb_passive(previous)
+        for dof, neutral in self._neutrals:
+            neutral.advance(float(self._qpos[dof]))
 
     def step(self, u) -> np.ndarray:
         self._ctrl[:] = u
@@ -441,7 +452,7 @@ class MujocoBackend(AbstractBackend):
         # MjModel/MjData pickle, but the callback closure does not: rebuild it on unpickling
         state = self.__dict__.copy()
         state["_callback"] = None
-        for k in ("_ctrl", "_qpos", "_qvel"):
+        for k in ("_ctrl", "_qpos", "_qvel", "_neutrals"):
             state.pop(k, None)
         return state
 
@@ -653,6 +664,10 @@ class ModelBackend(AbstractBackend):
         self.base_model = model
         self.timestep = float(timestep)
         self.substeps = int(substeps)
+        with_state = [e.name for e in effects if e.name in STATEFUL_EFFECTS and e.joint != "u"]
+        if with_state:
+            raise ValueError(f"effects {with_state} have memory that a model backend does not keep; "
+                             "use the MuJoCo plant (dynamics='mujoco')")
         self.effects = tuple(e for e in effects if e.name not in STATEFUL_EFFECTS)
         self._n = self.spec.n_dof
         self._scene = None
