@@ -220,7 +220,7 @@ FURUTA_DEFINITION = SystemDefinition(
     diagnosis_substeps=2,
     elementary_seconds=1.0,  # the paper's, for its experimental pendulum
     diagnosis_segment_seconds=2.0,
-    excitations=("chirp", "sine_sweep", "closed_loop_prbs"),
+    excitations=("chirp", "sine_sweep", "sticky_sweep", "closed_loop_prbs"),
     encoders=True,
     table_title="Table 2 — Furuta pendulum (simulation)",
     energy_panels=((1, -3.141592653589793, 3.141592653589793, 1.0, "β [rad] (α̇ = β̇ = 0)"),

@@ -10,7 +10,7 @@ from ._diagnose import DiagnosisResult, DiagnosisSettings, EffectEvidence, Error
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
 from ._report import write_figures as write_report_figures
 from ._report import write_json as write_report_json
-from ._synthetic import measured_like
+from ._synthetic import measured_like, sticky_rig
 
 __all__ = [
     "diagnose",
@@ -23,6 +23,7 @@ __all__ = [
     "layout_for",
     "nominal_base",
     "measured_like",
+    "sticky_rig",
     "write_report_figures",
     "write_report_json",
 ]

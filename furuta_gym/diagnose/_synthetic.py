@@ -16,6 +16,11 @@ Experiments (``excitation=``):
 * ``"sine_sweep"`` (Furuta): from near rest, hanging, one open-loop sine of random amplitude and
   frequency, switched off for rest periods: with dry friction against a cable spring the rotor
   comes to rest off zero and sticks there.
+* ``"sticky_sweep"`` (Furuta): open-loop sine sweeps of 10 s segments at 0.3–1.1 V and 1–20 Hz,
+  pendulum hanging, in which a rotor held by dry friction mostly repeats its encoder count: every
+  third segment is a large swing followed by a slow low-amplitude chirp (the rotor left off the
+  cable's neutral creeps and oscillates around where the swing left it), the others chirps of
+  random amplitude and band (at high frequency the rotor moves a few counts in all).
 * ``"closed_loop_prbs"`` (Furuta): upright balancing as in the MIT rig logs: a PD controller on
   the quantised angles tracking a rotor reference that ramps back and forth and a ±0.01 rad
   pendulum reference, plus a ±0.5 V feed-forward, saturated at ±10 V. The logged u is the plant
@@ -39,9 +44,9 @@ from ..models import SYSTEM_DEFINITIONS, analytic_model, system_definition
 from ..signals import chirp, quantize_encoder
 from ..simulate import rk4_zoh_step, rollout_zoh
 
-__all__ = ["measured_like", "EXCITATIONS", "BALANCE_GAINS"]
+__all__ = ["measured_like", "sticky_rig", "EXCITATIONS", "BALANCE_GAINS"]
 
-EXCITATIONS = ("chirp", "sine_sweep", "closed_loop_prbs")
+EXCITATIONS = ("chirp", "sine_sweep", "sticky_sweep", "closed_loop_prbs")
 
 #: the MIT rig logs' balance gains (their alpha = 0 upright), V/rad and V·s/rad. In our convention
 #: u = kp_theta·α + kd_theta·α̇ − kp_alpha·(β − π) − kd_alpha·β̇: of the 16 sign patterns the only
@@ -73,6 +78,33 @@ def _sine_with_rests(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     half_start = np.maximum((np.floor(angle / np.pi) * np.pi - phase) / (2 * np.pi * freq), 0.0)
     on = (half_start % cycle) < duty * cycle
     return np.where(on, amp * np.sin(angle), 0.0)
+
+
+def _sticky_segment(t: np.ndarray, rng: np.random.Generator, swing: bool) -> np.ndarray:
+    """One ``sticky_sweep`` segment (see :func:`measured_like`): a swing-then-creep segment, or a
+    linear chirp of 0.3–1.1 V between two frequencies in 1–20 Hz."""
+    if not swing:
+        f0, f1 = np.sort(rng.uniform(1.0, 20.0, 2))
+        return chirp(t, f0, f1, t[-1], amplitude=rng.uniform(0.3, 1.1), phase=rng.uniform(0, 2 * np.pi))
+    # whole periods of a 1–1.5 Hz swing at 0.9–1.1 V, then a 1–3 Hz chirp at 0.3–0.6 V
+    f_swing = rng.uniform(1.0, 1.5)
+    swing_end = np.ceil(rng.uniform(2.0, 3.5) * f_swing) / f_swing
+    pause = rng.uniform(0.5, 1.0)
+    slow = t - swing_end - pause
+    f0, f1 = rng.uniform(1.0, 1.5), rng.uniform(2.0, 3.0)
+    creep = chirp(slow, f0, f1, t[-1] - swing_end - pause, amplitude=rng.uniform(0.3, 0.6))
+    big = rng.uniform(0.9, 1.1) * np.sin(2 * np.pi * f_swing * t)
+    return np.where(t < swing_end, big, np.where(slow >= 0, creep, 0.0))
+
+
+def sticky_rig(seed: int) -> list[Effect]:
+    """A rotor that sticks, drawn from ``seed`` (for ``excitation="sticky_sweep"``): Coulomb
+    friction 3e-4–8e-4 N·m with a breakaway 2–3× that level (stiction ΔF = breakaway − Coulomb)
+    and a cable spring of 1.5e-3–2.5e-3 N·m/rad whose rest position is within ±0.1 rad."""
+    rng = np.random.default_rng([seed, 43])
+    coulomb, breakaway = rng.uniform(3e-4, 8e-4), rng.uniform(2.0, 3.0)
+    return [Effect("spring", "alpha", rng.uniform(1.5e-3, 2.5e-3), reference=rng.uniform(-0.1, 0.1)),
+            Effect("coulomb_friction", "alpha", coulomb), Effect("stiction", "alpha", (breakaway - 1.0) * coulomb)]
 
 
 def _telegraph(n: int, dt: float, rng, level: float, unit: float, most: int) -> np.ndarray:
@@ -254,10 +286,10 @@ def measured_like(
         if excitation == "closed_loop_prbs":
             q, u = _balance(sim, t, rng, sense=sense)
         else:
-            if excitation == "sine_sweep":
+            if excitation in ("sine_sweep", "sticky_sweep"):
                 q0 = [rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05)]
                 x0 = np.array([*q0, *rng.uniform(-0.01, 0.01, 2)])
-                u = _sine_with_rests(t, rng)
+                u = _sine_with_rests(t, rng) if excitation == "sine_sweep" else _sticky_segment(t, rng, k % 3 == 0)
             else:
                 x0 = np.array([rng.uniform(lo, hi) for lo, hi in definition.chirp_initial_ranges])
                 u = _inputs(system, t, rng, forced)
