@@ -147,6 +147,33 @@ def test_log_ratio_t_weighs_size_and_grows_with_consistent_blocks():
     assert log_ratio_t(np.zeros(5), np.zeros(5)) == 0.0
 
 
+def test_blocks_where_the_candidate_does_not_act_cannot_bury_its_evidence():
+    # a spring acting in 4 blocks where the rotor wanders (error halved, each a little differently)
+    # and 56 blocks where it rests or moves a few counts: the refit's small changes make those
+    # slightly worse. Every block alike, the idle blocks bury the evidence; weighted by the
+    # candidate's own regressor there, they cannot count for or against it
+    rng = np.random.default_rng(1)
+    s0 = rng.uniform(1.0, 2.0, 60)
+    s1 = s0 * np.exp(rng.normal(0.03, 0.03, 60))
+    s1[:4] = s0[:4] * np.exp(-rng.uniform(0.6, 0.8, 4))
+    energy = np.concatenate([rng.uniform(0.5, 1.0, 4), rng.uniform(0.0, 1e-3, 56)])
+    assert log_ratio_t(s0, s1) < 1.0
+    assert log_ratio_t(s0, s1, energy) > 3.0
+    # the same weights on blocks that do not improve: no evidence (the weights alone prove nothing)
+    assert log_ratio_t(s0, s0 * np.exp(rng.normal(0.0, 0.05, 60)), energy) < 3.0
+    # equal (or all-zero) weights are the ordinary t statistic
+    assert log_ratio_t(s0, s1, np.ones(60)) == pytest.approx(log_ratio_t(s0, s1))
+    assert log_ratio_t(s0, s1, np.zeros(60)) == pytest.approx(log_ratio_t(s0, s1))
+
+
+def test_evidence_says_per_recording_where_it_helps_and_where_it_hurts():
+    s0 = np.array([1.0, 1.0, 2.0, 2.0, 1.0])
+    s1 = np.array([0.5, 0.5, 2.2, 2.2, 1.0])
+    names = np.array(["run1", "run1", "run2", "run2", "run3"], dtype=object)
+    per = Evidence.of_sums(s0, s1, None, names).by_recording()
+    assert per == pytest.approx({"run1": 0.5, "run2": -0.1, "run3": 0.0})
+
+
 def test_a_pair_takes_the_specific_mechanism_of_an_indistinguishable_group():
     delay = Candidate("input_delay", "u")
     table = {

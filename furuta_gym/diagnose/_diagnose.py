@@ -22,6 +22,7 @@ from ..systems import get_spec
 from ..models import system_definition
 from ..models.checkpoint import load_model
 from . import _fit
+from . import _rests
 from . import _trace as _trace_mod
 from ._problem import Problem, fit_equation_error, free_columns
 from ._library import (
@@ -55,6 +56,16 @@ class DiagnosisSettings:
     pair_pool: int = 4  # when no single effect passes, pairs among this many largest gains
     member_z_threshold: float = 2.0  # each member of a pair, given the other
     block_seconds: float = 0.5
+    # how blocks count in the t of log ratios: "regressor" (by the energy of the candidate's own
+    # regressor there: where it does not act, a block says nothing) or "uniform" (every block alike)
+    evidence_weighting: str = "regressor"
+    # a tested candidate that removes at least this share of the held-out residual but fails the
+    # consistency test is reported "inconsistent", with where it helps and where it hurts
+    inconsistent_gain: float = 0.10
+    # rests bound dry friction from below (``_rests``): windows of this length at one encoder count;
+    # a stiction is added from rests when they held the joint against this multiple of its Coulomb level
+    rest_window: float = 0.2
+    min_breakaway_ratio: float = 1.25
     exclude_rest: bool = True  # leave a joint's equations out where its encoder does not move
     identify_t: float = 3.0  # a base parameter whose nominal size moves the residual less is held
     veto_t: float = 2.0  # an added effect is dropped if its refit predicts significantly worse
@@ -69,6 +80,8 @@ class DiagnosisSettings:
 
     def resolved(self, system: str, dt: float) -> "DiagnosisSettings":
         definition = system_definition(system)
+        if self.evidence_weighting not in ("regressor", "uniform"):
+            raise ValueError(f"evidence_weighting: expected 'regressor' or 'uniform', got {self.evidence_weighting!r}")
         if isinstance(self.start_iterations, bool) or not isinstance(self.start_iterations, (int, np.integer)) \
                 or self.start_iterations < 0:
             raise ValueError(f"start_iterations: expected an integer >= 0, got {self.start_iterations!r}")
@@ -90,9 +103,10 @@ class EffectEvidence:
     unit: str
     significant: bool
     improvement: float | None  # relative drop of the held-out residual sum of squares (CV)
-    z_score: float | None  # signed-rank z of per-block held-out improvements (CV)
-    status: str  # "selected", "tested", "absorbed", "not identifiable"
+    z_score: float | None  # weighted t of per-block held-out log ratios, as a normal quantile (CV)
+    status: str  # "selected", "inconsistent", "tested", "not confirmed", "equivalent", "absorbed", "not identifiable"
     note: str = ""
+    resolved: bool = True  # False: its size is below what the sensor resolves (one count, one sample)
 
     def to_json(self) -> dict:
         return {
@@ -107,6 +121,7 @@ class EffectEvidence:
             },
             "status": self.status,
             "note": self.note,
+            "resolved": bool(self.resolved),
         }
 
 
@@ -385,6 +400,7 @@ class _Fitter:
         self.L = int(round(settings.window / dt))
         self.substeps = system_definition(spec.name).diagnosis_substeps
         self.alternative = ""  # the input dynamics' other kind and how it fitted (a note)
+        self.resolution: dict[str, float] = {}  # encoder count per quantised joint (sensor_resolution)
         self.c_input = _fit.input_direction(layout, theta_fixed)
         self.weights = np.ones(spec.n_dof)
         self.build(_fit.NO_INPUT_DYNAMICS)
@@ -405,6 +421,12 @@ class _Fitter:
             self.fit_prob = Problem(self.fit_segs, self.c_input)
             self.held_prob = Problem(self.held_segs, self.c_input)
             self.dynamics = dynamics
+
+    def comparer(self) -> _trace_mod.Comparer:
+        """Cross-validated comparisons on the fit segments, blocks labelled by their recording."""
+        return _trace_mod.Comparer(self.fit_prob, self.layout, self.theta_fixed, self.fixed_idx, self.weights,
+                                   weighting=self.settings.evidence_weighting,
+                                   recordings=[s.name.rsplit("[", 1)[0] for s in self.fit_segs])
 
     def fit_ee(self, effects: list[Candidate]):
         free = free_columns(self.layout, effects, self.fixed_idx)
@@ -446,6 +468,11 @@ class _Fitter:
         win = self.fit_windows(dynamics, self.val_idx)
         start = self.settings.start_iterations if start_iterations is None else start_iterations
         return _fit.window_square_sums(self.layout, theta, win, self.substeps, start)
+
+    def validation_predictions(self, theta, dynamics, start_iterations: int) -> tuple[np.ndarray, np.ndarray]:
+        """(predicted, measured) positions of the fit-set validation windows, (W, L, n) each."""
+        win = self.fit_windows(dynamics, self.val_idx)
+        return _fit.predict_windows(self.layout, theta, win, self.substeps, start_iterations), win.q
 
     def refine(self, theta0, free, dynamics, tag):
         """Output-error refinement of an equation-error estimate, kept only if it also predicts
@@ -546,11 +573,18 @@ def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputD
     return dyn
 
 
-def _prediction_evidence(sums_before, sums_after) -> _trace_mod.Evidence:
-    """How much better a refit predicts the validation windows (per-window log ratios)."""
+def _prediction_evidence(sums_before, sums_after, weights=None) -> _trace_mod.Evidence:
+    """How much better a refit predicts the validation windows (per-window log ratios, weighted
+    by ``weights``: None, every window alike)."""
     if not np.all(np.isfinite(sums_after)):
         return _trace_mod.Evidence(-np.inf, -np.inf, int(sums_after.size))
-    return _trace_mod.Evidence.of_sums(sums_before, sums_after)
+    return _trace_mod.Evidence.of_sums(sums_before, sums_after, weights)
+
+
+def _square_sums(predicted: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    """(W,) squared position errors per window (inf where a prediction blew up)."""
+    ss = np.sum((predicted - measured) ** 2, axis=(1, 2))
+    return np.where(np.isfinite(ss), ss, np.inf)
 
 
 def _try_step(fx: _Fitter, accepted, dyn, sums, step):
@@ -631,21 +665,35 @@ def _non_physical(layout, theta, effects) -> list[str]:
     return [c.key for c in effects if c.name in _trace_mod.SIGNED and theta[layout.index(c.key)] <= 0]
 
 
-def _stiction_start(fx: _Fitter, theta, c: Candidate) -> np.ndarray:
+def _stiction_start(fx: _Fitter, theta, c: Candidate, held: float) -> np.ndarray:
     """The output-error start of a stiction candidate: the model so far with ΔF at the joint's
-    Coulomb level (the EE estimate is meaningless: it rests on velocities near zero, which the
-    estimates do not resolve, in intervals the equation error mostly leaves out)."""
+    Coulomb level, or up to the force its rests held, if larger (the EE estimate is meaningless:
+    it rests on velocities near zero, which the estimates do not resolve, in intervals the equation
+    error mostly leaves out)."""
     start = theta.copy()
-    start[fx.layout.index(c.key)] = theta[fx.layout.index(f"coulomb_friction:{c.joint}")]
+    coulomb = theta[fx.layout.index(f"coulomb_friction:{c.joint}")]
+    start[fx.layout.index(c.key)] = max(coulomb, held - coulomb)
     return start
+
+
+def _rest_bound(fx: _Fitter, theta, dyn, joint: str) -> _rests.RestBound:
+    """The force the fit segments' rests held ``joint`` against (0 without encoder counts)."""
+    count = fx.resolution.get(joint)
+    if count is None:
+        return _rests.RestBound(joint, 0.0, 0, 0.0)
+    return _rests.rest_bound(fx.layout, theta, fx.fit_segs, dyn, joint, count, fx.settings.rest_window)
 
 
 def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence):
     """Stiction acts only where a joint nearly stops, which the equation error cannot see, but a
-    joint that sticks shows in open-loop predictions. With a joint's Coulomb friction accepted, its
-    stiction is fitted by output error on the output-error windows and judged on the fit-set
-    validation windows by the trace's rule (gain ≥ ``min_improvement``, t ≥ ``z_threshold``),
-    ΔF > 0, against the model without it refitted the same way. Returns (accepted, θ)."""
+    joint that sticks shows in open-loop predictions and in the forces its rests held (``_rests``).
+    With a joint's Coulomb friction accepted, its stiction is fitted by output error on the
+    output-error windows and judged on the fit-set validation windows by the trace's rule (gain ≥
+    ``min_improvement``, t ≥ ``z_threshold``, each window weighted by how much the stiction changes
+    its prediction), ΔF > 0, against the model without it refitted the same way; its breakaway is
+    never left below what the rests held. Failing that, it is added from the rests when they held
+    the joint against ``min_breakaway_ratio`` × its Coulomb level and the model with it does not
+    predict significantly worse. Returns (accepted, θ)."""
     s = fx.settings
     todo = [c for c in library if c.name == "stiction" and c.key not in evidence
             and f"coulomb_friction:{c.joint}" in {a.key for a in accepted}]
@@ -659,24 +707,79 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
     def refit(th0, effects):
         free = free_columns(fx.layout, effects, fx.fixed_idx)
         th, _ = _fit.oe_fit(fx.layout, th0, free, win, fx.substeps, s.oe_max_nfev, start)
-        return th, fx.validation_sums(th, dyn, start)
+        return th, fx.validation_predictions(th, dyn, start)[0]
 
     # the baseline is refitted as the trial is, so that the gain is the stiction's own
-    base, sums = refit(theta, accepted)
+    base, pred = refit(theta, accepted)
+    measured = fx.validation_predictions(base, dyn, start)[1]
     for c in todo:
-        th, trial_sums = refit(_stiction_start(fx, base, c), accepted + [c])
-        ev = _prediction_evidence(sums, trial_sums)
+        bound = _rest_bound(fx, base, dyn, c.joint)
+        th, trial_pred = refit(_stiction_start(fx, base, c, bound.held), accepted + [c])
+        ev = _stiction_evidence(pred, trial_pred, measured)
         coef = float(th[fx.layout.index(c.key)])
+        how = "found by prediction, given the joint's Coulomb friction: gain and t on the fit-set validation windows"
         if coef > 0 and _physical(fx.layout, th) and ev.passes(s.min_improvement, s.z_threshold):
-            accepted, theta, base, sums = accepted + [c], th, th, trial_sums
-            evidence[c.key] = EffectEvidence(
-                c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z, "selected",
-                "found by prediction, given the joint's Coulomb friction: gain and t on the fit-set "
-                "validation windows")
+            th = _breakaway_at_least(fx, th, c, bound)
         else:
             fx.notes.append(f"{c.key}: tested by prediction given coulomb_friction:{c.joint}: ΔF {coef:.3g}, "
                             f"validation gain {ev.improvement:.1%}, t {ev.z:.1f}; not added")
+            found = _stiction_from_rests(fx, base, c, bound, lambda th0: refit(th0, accepted)[0], dyn, start)
+            if found is None:
+                continue
+            th, how = found
+            trial_pred = fx.validation_predictions(th, dyn, start)[0]
+            ev = _stiction_evidence(pred, trial_pred, measured)
+            if ev.z <= -s.veto_t:
+                fx.notes.append(f"{c.key}: {how}, but predicts worse with it (gain {ev.improvement:.1%}, "
+                                f"t {ev.z:.1f}): not added")
+                continue
+        accepted, theta, base, pred = accepted + [c], th, th, trial_pred
+        evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z,
+                                         "selected", how)
     return accepted, theta
+
+
+def _stiction_evidence(pred, trial_pred, measured) -> _trace_mod.Evidence:
+    """A stiction's gain on the validation windows; a window counts by how much the stiction
+    changes its prediction (the output-error form of its regressor): a joint that never nears rest
+    there says nothing about it."""
+    change = np.sum((trial_pred - pred) ** 2, axis=(1, 2))
+    return _prediction_evidence(_square_sums(pred, measured), _square_sums(trial_pred, measured),
+                                np.where(np.isfinite(change), change, 0.0))
+
+
+def _breakaway_at_least(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBound) -> np.ndarray:
+    """θ with the joint's breakaway (Coulomb + ΔF) raised to what its rests held, if it was below."""
+    i, coulomb = fx.layout.index(c.key), theta[fx.layout.index(f"coulomb_friction:{c.joint}")]
+    if coulomb + theta[i] >= bound.held:
+        return theta
+    out = theta.copy()
+    out[i] = bound.held - coulomb
+    fx.notes.append(f"{c.key}: ΔF raised {theta[i]:.3g} -> {out[i]:.3g} to the force the rests held "
+                    f"({bound.held:.3g} over {bound.n_windows} windows of {fx.settings.rest_window:g} s)")
+    return out
+
+
+def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBound, refit_others, dyn, start):
+    """(θ, note) with the stiction set from the rests — ΔF = held − Coulomb, the rest refitted with
+    it held, ΔF set again from the refitted model — or None when the rests held no more than
+    ``min_breakaway_ratio`` × the Coulomb level (or ΔF comes out non-physical)."""
+    s, i = fx.settings, fx.layout.index(c.key)
+    j = fx.layout.index(f"coulomb_friction:{c.joint}")
+    ratio = bound.held / base[j] if base[j] > 0 else 0.0
+    seen = (f"rests held the joint against up to {bound.held:.3g} ({ratio:.2f}× its Coulomb level, "
+            f"{bound.n_windows} windows of {s.rest_window:g} s)")
+    if ratio < s.min_breakaway_ratio:
+        fx.notes.append(f"{c.key}: {seen}; under {s.min_breakaway_ratio:g}×: no stiction from rests")
+        return None
+    th = base.copy()
+    th[i] = bound.held - base[j]
+    th = refit_others(th)
+    th[i] = _rest_bound(fx, th, dyn, c.joint).held - th[j]
+    if not (th[i] > 0 and _physical(fx.layout, th)):
+        fx.notes.append(f"{c.key}: {seen}; refitted, ΔF {th[i]:.3g} is not physical: not added")
+        return None
+    return th, f"found from rests: {seen}; breakaway at least {th[i] + th[j]:.3g}"
 
 
 def _anchor(spec, layout, fixed, forced, notes):
@@ -738,7 +841,7 @@ def _select(library, candidates):
 def _trace(fx: _Fitter, testable, evidence):
     """Run the search; record the accepted steps' evidence (each member given its partner)."""
     s = fx.settings
-    comparer = _trace_mod.Comparer(fx.fit_prob, fx.layout, fx.theta_fixed, fx.fixed_idx, fx.weights)
+    comparer = fx.comparer()
     same = _trace_mod.equivalent_pairs(fx.fit_prob, fx.layout, free_columns(fx.layout, [], fx.fixed_idx),
                                        fx.weights, testable)
     steps, _ = _trace_mod.search(comparer, testable, _trace_mod.SearchSettings(
@@ -762,7 +865,7 @@ def _trace(fx: _Fitter, testable, evidence):
 def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
     """Coefficients (the refit's for accepted effects; a fit with the accepted ones plus the
     candidate for the rest) and, for untested-or-rejected candidates, evidence given the final model."""
-    comparer = _trace_mod.Comparer(fx.fit_prob, fx.layout, fx.theta_fixed, fx.fixed_idx, fx.weights)
+    comparer = fx.comparer()
     for c in library:
         ev = evidence.get(c.key)
         if ev is not None and ev.status in ("absorbed", "not identifiable", "equivalent"):
@@ -780,6 +883,9 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
                                                   score.improvement, score.z, "tested")
         elif ev.status == "tested":
             ev.improvement, ev.z_score = score.improvement, score.z
+        if ev.status == "tested" and score.improvement >= fx.settings.inconsistent_gain:
+            ev.status, ev.note = "inconsistent", _inconsistency(c, score, fx.settings)
+            fx.notes.append(f"{c.key}: {ev.note}")
         free = free_columns(fx.layout, given + [c], fx.fixed_idx)
         with_delay = c == DELAY or DELAY in given
         th, d = fit_equation_error(fx.fit_prob, fx.layout, free, fx.theta_fixed, fx.weights, with_delay)
@@ -788,9 +894,56 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
     for joint, rest in _spring_rests(chosen).items():
         ev = evidence[f"constant_torque:{joint}"]
         ev.note = "; ".join(x for x in (ev.note, f"with spring:{joint}: its rest position is {rest:.3g} (tau0/k)") if x)
-    rest = sorted((e for e in evidence.values() if e.status in ("tested", "not confirmed")),
+    rest = sorted((e for e in evidence.values() if e.status in ("inconsistent", "tested", "not confirmed")),
                   key=lambda e: -(e.improvement if e.improvement is not None else -np.inf))
     return chosen + rest + [e for e in evidence.values() if e.status in ("equivalent", "absorbed", "not identifiable")]
+
+
+def _inconsistency(c: Candidate, score, settings: DiagnosisSettings) -> str:
+    """Why a candidate that removes much of the held-out residual was not added, and where it
+    helps and where it hurts, per recording."""
+    per = score.by_recording()
+    helps = ", ".join(f"{k} ({v:+.0%})" for k, v in sorted(per.items(), key=lambda kv: -kv[1]) if v > 0)
+    hurts = ", ".join(f"{k} ({v:+.0%})" for k, v in sorted(per.items(), key=lambda kv: kv[1]) if v < 0)
+    cause = ("its gain sits in a few blocks: the effect acts strongly in part of the data only, or it "
+             "changes between recordings (a cable's neutral or stiffness, friction that depends on "
+             "position), or another effect it needs is missing")
+    return (f"inconsistent: removes {score.improvement:.0%} of the held-out residual, but its t "
+            f"{score.z:.1f} < {settings.z_threshold:g}; helps on {helps or 'no recording'}; hurts on "
+            f"{hurts or 'no recording'}. Likely: {cause}")
+
+
+def sensor_resolution(trajs: Sequence[Trajectory], spec) -> dict[str, float]:
+    """{joint: the position quantum} for joints whose logged positions only move by whole counts
+    of an encoder (the smallest step; every step a multiple of it), else nothing for that joint."""
+    out = {}
+    for j, name in enumerate(spec.joint_names):
+        steps = np.abs(np.concatenate([np.diff(tr.q[:, j]) for tr in trajs]))
+        steps = steps[steps > 1e-12]
+        if steps.size == 0:
+            continue
+        quantum = float(steps.min())
+        if np.allclose(steps / quantum, np.round(steps / quantum), atol=1e-6):
+            out[name] = quantum
+    return out
+
+
+def _mark_unresolved(effects: list[EffectEvidence], resolution: dict[str, float], dt: float, notes) -> None:
+    """An added effect smaller than what the sensor resolves — a centre-of-mass offset under one
+    encoder count, an input delay or lag under one sample — is kept but reported as not resolved:
+    a sub-count offset is the encoder's zero, a sub-sample lag the sampling's own phase."""
+    for e in effects:
+        if not e.significant or e.coefficient is None:
+            continue
+        why = None
+        if e.name == "com_offset" and e.joint in resolution and abs(e.coefficient) < resolution[e.joint]:
+            why = f"{abs(e.coefficient):.2g} rad is under one encoder count ({resolution[e.joint]:.2g} rad)"
+        elif e.name in INPUT_DYNAMICS and abs(e.coefficient) < dt:
+            why = f"{abs(e.coefficient):.2g} s is under one sample period ({dt:.2g} s)"
+        if why:
+            e.resolved = False
+            e.note = "; ".join(x for x in (e.note, f"not resolved at this sensor resolution: {why}") if x)
+            notes.append(f"{e.name}:{e.joint}: not resolved at this sensor resolution ({why})")
 
 
 def _fit_declared(fx: _Fitter) -> np.ndarray:
@@ -880,6 +1033,7 @@ def diagnose(
     for k, v in fixed.items():
         theta_fixed[layout.index(k)] = v
     fx = _Fitter(spec, layout, segs, test_segs, theta_fixed, fixed_idx, settings, notes)
+    fx.resolution = sensor_resolution(trajs, spec)
     th_before = _fit_declared(fx)
     before = fx.errors(th_before, fx.held_segs, fx.held_prob)
     test_before = fx.test_errors(th_before)
@@ -892,6 +1046,7 @@ def diagnose(
     after = fx.errors(th_after, fx.held_segs, fx.held_prob) if accepted else before
     test_after = fx.test_errors(th_after) if accepted else test_before
     ordered = _finish_evidence(fx, library, accepted, th_after, dyn, evidence)
+    _mark_unresolved(ordered, fx.resolution, trajs[0].dt, notes)
     if not accepted:
         notes.append("no effect is significant on held-out data: none added")
 

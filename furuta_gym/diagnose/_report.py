@@ -29,7 +29,9 @@ def format_table(res) -> str:
     lines.append("")
     lines.append(f"{'effect':<18}{'joint':<7}{'coefficient':>13}  {'unit':<15}{'held-out gain':>14}{'z':>7}  verdict")
     for e in res.effects:
-        verdict = "SIGNIFICANT" if e.significant else e.status
+        verdict = "SIGNIFICANT" if e.significant else e.status.upper() if e.status == "inconsistent" else e.status
+        if e.significant and not e.resolved:
+            verdict += " (below the sensor's resolution)"
         gain = None if e.improvement is None else 100 * e.improvement
         lines.append(
             f"{e.name:<18}{e.joint:<7}{_g(e.coefficient):>13}  {e.unit:<15}"
@@ -37,6 +39,9 @@ def format_table(res) -> str:
         )
     if not res.significant:
         lines.append("-> none: no effect is significant on held-out data")
+    for e in res.effects:
+        if e.status == "inconsistent":  # never just "none": say where it helps and where it hurts
+            lines.append(f"-> {e.name}:{e.joint} {e.note}")
     lines.append("")
     lines += _error_rows(f"held-out errors ({res.error_before.n_windows} open-loop windows of "
                          f"{res.error_before.window_seconds} s)", res.error_before, res.error_after)

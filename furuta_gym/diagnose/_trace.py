@@ -7,10 +7,14 @@ folds, and the normalised residual sum of squares of the left-out fold is compar
 
 * the **size**: the relative drop of the total held-out sum, 1 − S₁/S₀ ≥ ``min_improvement``;
 * the **consistency**: the t statistic of the per-block log ratios log(S₀,b / S₁,b) ≥
-  ``z_threshold``. A log ratio keeps each block's size of improvement (a rank test throws it
-  away) in relative terms, so an effect that acts strongly in part of a log (a spring where the
-  rotor wanders, friction where it reverses) and little elsewhere still adds up, and its t grows
-  as √(blocks) with more data: more data never weakens a real effect's evidence.
+  ``z_threshold``, each block weighted by what it can say about the candidate: the energy of the
+  candidate's own (weighted) regressor in the block. A log ratio keeps each block's size of
+  improvement (a rank test throws it away) in relative terms; the weight keeps blocks where the
+  candidate hardly acts (a rotor resting, or moving a few counts at high frequency) from counting
+  for or against it, where they would otherwise bury the blocks that carry the evidence (a spring
+  where the rotor wanders, friction where it reverses). The variance is the weighted mean's own
+  (a sandwich estimate over blocks), so the t is honest about how few blocks carry the weight;
+  it grows as √(informative blocks) with more data: more data never weakens a real effect.
 
 The search adds, round after round, the candidate with the strongest evidence (largest t) among
 those that pass and have a physical sign, and tests every remaining candidate again against the
@@ -25,8 +29,11 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from typing import Sequence
 
 import numpy as np
+from scipy.special import ndtri_exp
+from scipy.stats import t as student_t
 
 from ._library import Candidate
 from ._problem import block_sums, fit_equation_error, free_columns, momentum_norm
@@ -37,20 +44,36 @@ __all__ = ["Evidence", "Comparer", "SearchSettings", "Step", "search", "log_rati
 @dataclasses.dataclass(frozen=True)
 class Evidence:
     """Cross-validated evidence of adding effects: relative drop of the held-out normalised
-    residual sum of squares, the t statistic ``z`` of per-block log ratios, and the block count."""
+    residual sum of squares, the t statistic ``z`` of per-block log ratios, and the block count.
+    ``sums`` keeps the per-block sums (before, after) and each block's recording, to say where an
+    effect helps and where it hurts."""
 
     improvement: float
     z: float
     n_blocks: int
+    sums: tuple | None = dataclasses.field(default=None, compare=False, repr=False)
 
     def passes(self, min_improvement: float, z_threshold: float) -> bool:
         return self.improvement >= min_improvement and self.z >= z_threshold
 
     @classmethod
-    def of_sums(cls, s0: np.ndarray, s1: np.ndarray) -> "Evidence":
-        """Evidence of the per-block (or per-window) sums ``s1`` against ``s0``."""
+    def of_sums(cls, s0: np.ndarray, s1: np.ndarray, weights=None, recordings=None) -> "Evidence":
+        """Evidence of the per-block (or per-window) sums ``s1`` against ``s0``; ``weights``: what
+        each block can say about the candidate (None: every block alike)."""
         improvement = float(1.0 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
-        return cls(improvement, log_ratio_t(s0, s1), int(s0.size))
+        return cls(improvement, log_ratio_t(s0, s1, weights), int(s0.size), (s0, s1, recordings))
+
+    def by_recording(self) -> dict[str, float]:
+        """{recording: relative drop of its held-out sum}, for the recordings with a nonzero sum."""
+        if self.sums is None or self.sums[2] is None:
+            return {}
+        s0, s1, names = self.sums
+        out = {}
+        for name in dict.fromkeys(names):
+            m = names == name
+            if s0[m].sum() > 0:
+                out[str(name)] = float(1.0 - s1[m].sum() / s0[m].sum())
+        return out
 
 
 @dataclasses.dataclass
@@ -88,24 +111,42 @@ def equivalent_pairs(prob, layout, free_base, weights, candidates, threshold: fl
     return out
 
 
-def log_ratio_t(s0: np.ndarray, s1: np.ndarray) -> float:
-    """t statistic of the per-block log ratios log(s0/s1): positive when the candidate lowers the
-    held-out residual. Blocks whose sums are zero in both models (all joints at rest) are skipped."""
+def log_ratio_t(s0: np.ndarray, s1: np.ndarray, weights=None) -> float:
+    """t statistic of the per-block log ratios log(s0/s1), weighted by ``weights`` (None or all
+    zero: equal weights): positive when the candidate lowers the held-out residual. Blocks whose
+    sums are zero in both models (all joints at rest) are skipped. The standard error is the
+    weighted mean's sandwich estimate, √(n/(n−1)·Σw²(r − r̄)²) with Σw = 1, which for equal
+    weights is the ordinary one."""
     ok = (s0 > 0) & (s1 > 0)
     r = np.log(s0[ok] / s1[ok])
     if r.size < 3:
         return 0.0
-    sd = float(np.std(r, ddof=1))
-    if sd == 0.0:
-        return 0.0 if float(np.mean(r)) == 0.0 else float(np.sign(np.mean(r)) * np.inf)
-    return float(np.mean(r) / (sd / np.sqrt(r.size)))
+    w = np.ones(r.size) if weights is None else np.asarray(weights, float)[ok]
+    w = w / w.sum() if w.sum() > 0 else np.full(r.size, 1.0 / r.size)
+    mean = float(w @ r)
+    var = float(r.size / (r.size - 1) * (w**2 @ (r - mean) ** 2))
+    if var == 0.0:
+        return 0.0 if mean == 0.0 else float(np.sign(mean) * np.inf)
+    return _as_normal(mean / np.sqrt(var), 1.0 / float(w @ w) - 1.0)
+
+
+def _as_normal(t: float, dof: float) -> float:
+    """The standard normal quantile with the tail probability of ``t`` under Student's t with
+    ``dof`` degrees of freedom (the weights' effective number of blocks − 1): a t carried by a few
+    blocks is weaker evidence than the same t over many. Fewer than 2 effective blocks: 0."""
+    if dof < 1.0:
+        return 0.0
+    return float(np.sign(t) * -ndtri_exp(student_t.logsf(abs(t), dof)))
 
 
 class Comparer:
     """Cross-validated comparisons on one problem (stacked fit-segment regressors)."""
 
-    def __init__(self, prob, layout, theta_fixed, fixed_idx, weights, n_folds: int = 6):
-        self.prob, self.layout = prob, layout
+    def __init__(self, prob, layout, theta_fixed, fixed_idx, weights, n_folds: int = 6,
+                 weighting: str = "regressor", recordings: Sequence[str] | None = None):
+        self.prob, self.layout, self.weighting = prob, layout, weighting
+        # the recording of each of the problem's segments (block_key's first column)
+        self.recordings = None if recordings is None else list(recordings)
         self.theta_fixed, self.fixed_idx, self.weights = theta_fixed, fixed_idx, weights
         groups = np.unique(prob.group)
         self.n_folds = min(len(groups), n_folds)
@@ -127,7 +168,7 @@ class Comparer:
 
     def compare(self, base: list[Candidate], added: list[Candidate]) -> Evidence:
         """Evidence for ``base + added`` against ``base``."""
-        sums0, sums1 = [], []
+        sums0, sums1, energy = [], [], []
         for f in range(self.n_folds):
             train, test = self.prob.subset(self.fold != f), self.prob.subset(self.fold == f)
             th0, d0 = self._fit(train, base)
@@ -135,7 +176,32 @@ class Comparer:
             w = self.weights
             sums0.append(block_sums(test, th0, w, d0, None, momentum_norm(train, th0, w)))
             sums1.append(block_sums(test, th1, w, d1, th0, momentum_norm(train, th1, w)))
-        return Evidence.of_sums(np.concatenate(sums0), np.concatenate(sums1))
+            energy.append(self._regressor_energy(test, th0, added))
+        weights = None
+        if self.weighting == "regressor":
+            e = np.concatenate(energy)  # each candidate's share of its own total, so that a pair's members count alike
+            weights = (e / np.maximum(e.sum(axis=0), 1e-300)).sum(axis=1)
+        recordings = np.concatenate([self.recording_of(self.prob.subset(self.fold == f)) for f in range(self.n_folds)])
+        return Evidence.of_sums(np.concatenate(sums0), np.concatenate(sums1), weights, recordings)
+
+    def _regressor_energy(self, test, theta, added: list[Candidate]) -> np.ndarray:
+        """(blocks, len(added)): per block of ``test``, the energy of each added candidate's own
+        weighted regressor (the input delay's: its first-order column at ``theta``)."""
+        _, inv = np.unique(test.block_key, axis=0, return_inverse=True)
+        n_blocks = int(inv.max()) + 1 if inv.size else 0
+        out = np.zeros((n_blocks, len(added)))
+        for i, c in enumerate(added):
+            col = test.delay_column(theta)[:, :, 0] if c.name == "input_delay" else test.R[:, :, self.layout.index(c.key)]
+            out[:, i] = np.bincount(inv.ravel(), weights=((col * self.weights[None]) ** 2).sum(axis=1),
+                                    minlength=n_blocks)
+        return out
+
+    def recording_of(self, test) -> np.ndarray:
+        """The recording (trajectory) of each block of ``test``, in :func:`block_sums`' order."""
+        segment = np.unique(test.block_key, axis=0)[:, 0].astype(int)
+        if self.recordings is None:
+            return segment.astype(str).astype(object)
+        return np.array([self.recordings[k] for k in segment], dtype=object)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,87 @@
+"""What a joint's rests say about its dry friction: the force that held it.
+
+Where a quantised encoder shows a joint at one count for a long stretch, the joint was held: the
+dry friction balanced every other force on it (input, springs, gravity, the other joints' coupling)
+up to its breakaway level. The friction that held it is the model's inverse dynamics at that state
+with the joint's velocity and acceleration zero, minus the input force. Averaged over a window of
+``window`` seconds inside a rest, it is measured well (estimated accelerations average out; a joint
+oscillating within one count at high frequency averages to no force), and to within a slack
+2·M_jj·count/window² (the largest force above the friction limit that can act a whole window without
+moving the joint by a count). The largest held force bounds the breakaway level from below: no
+velocity estimate enters, so it is free of the attenuation that smears sgn(q̇) around slow
+reversals and biases friction fitted from velocities low.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..lagrangian import inverse_dynamics
+from ..systems import get_spec
+from ._fit import InputDynamics, Segment, _compiled
+from ._library import ParameterLayout
+
+__all__ = ["RestBound", "rest_bound"]
+
+
+@dataclasses.dataclass(frozen=True)
+class RestBound:
+    """The largest friction force that held a joint at rest (N·m or N), less the slack, over
+    ``n_windows`` rest windows; 0 with no window."""
+
+    joint: str
+    held: float
+    n_windows: int
+    slack: float
+
+
+def _holding(layout: ParameterLayout, j: int):
+    """Batched friction force on joint ``j`` that holds it at rest: inverse dynamics of the model
+    without its dry friction at (q, q̇ with q̇_j = 0, q̈ with q̈_j = 0), minus the input force."""
+    def build():
+        def one(theta, q, qd, qdd, u):
+            model = layout.model(theta, dry_friction=False)
+            qd, qdd = qd.at[j].set(0.0), qdd.at[j].set(0.0)
+            return (inverse_dynamics(model, q, qd, qdd) - model.input_force(q, qd, u))[j]
+
+        return jax.jit(jax.vmap(one, in_axes=(None, 0, 0, 0, 0)))
+
+    return _compiled("holding", layout, j, build=build)
+
+
+def _rest_windows(q_j: np.ndarray, length: int) -> list[tuple[int, int]]:
+    """(start, end) of consecutive windows of ``length`` samples inside runs of one count, laid
+    back from each run's end: the force that held the joint is largest just before it broke away."""
+    change = np.flatnonzero(np.diff(q_j) != 0) + 1
+    bounds = np.concatenate([[0], change, [q_j.size]])
+    return [(k, k + length) for s, e in zip(bounds[:-1], bounds[1:]) for k in range(e - length, s - 1, -length)]
+
+
+def rest_bound(layout: ParameterLayout, theta, segments: list[Segment], dynamics: InputDynamics,
+               joint: str, count: float, window: float) -> RestBound:
+    """The largest mean force that held ``joint`` over a ``window``-second stretch at one encoder
+    ``count`` in ``segments``, less the slack (see the module docstring)."""
+    j = get_spec(layout.system).joint_names.index(joint)
+    holding = _holding(layout, j)
+    held, n, mass = 0.0, 0, 0.0
+    for seg in segments:
+        length = int(round(window / seg.dt))
+        spans = _rest_windows(seg.q[:, j], length)
+        if not spans:
+            continue
+        idx = np.concatenate([np.arange(a, b) for a, b in spans])
+        qdd = np.gradient(seg.qd, seg.dt, axis=0)
+        u = dynamics.apply(seg.u, seg.dt)
+        force = np.asarray(holding(jnp.asarray(theta), jnp.asarray(seg.q[idx]), jnp.asarray(seg.qd[idx]),
+                                   jnp.asarray(qdd[idx]), jnp.asarray(u[idx])))
+        means = np.abs(force.reshape(len(spans), length).mean(axis=1))
+        held, n = max(held, float(means.max())), n + len(spans)
+        m = layout.model(jnp.asarray(theta)).mass_matrix(jnp.asarray(seg.q[idx[0]]))
+        mass = max(mass, float(m[j, j]))
+    slack = 2.0 * mass * count / window**2
+    return RestBound(joint, max(0.0, held - slack) if n else 0.0, n, slack)
+

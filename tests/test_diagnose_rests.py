@@ -1,0 +1,71 @@
+"""What rests say about dry friction, and what is below the sensor (issue 43).
+
+A joint that stays at one encoder count was held by its dry friction against every other force on
+it: the force that held it bounds the breakaway level from below, with no velocity estimate. An
+effect smaller than one count or one sample is reported as not resolved, not as found or missed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import furuta_gym
+from furuta_gym.data import Trajectory
+from furuta_gym.diagnose import layout_for
+from furuta_gym.diagnose._diagnose import EffectEvidence, _mark_unresolved, sensor_resolution
+from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment
+from furuta_gym.diagnose._rests import rest_bound
+from furuta_gym.systems import get_spec
+
+furuta_gym.enable_x64()
+COUNT = 2 * np.pi / 2048
+DT = 0.002
+
+
+def _segment(alpha_counts: np.ndarray, u: np.ndarray) -> Segment:
+    """A rotor at the given counts, the pendulum hanging still, input ``u`` (V)."""
+    T = alpha_counts.size
+    q = np.stack([alpha_counts * COUNT, np.zeros(T)], 1)
+    return Segment("run[0]", np.arange(T) * DT, q, np.zeros((T, 2)), u[:, None], DT, 0, False)
+
+
+def test_a_rotor_held_at_one_count_bounds_its_breakaway_by_the_force_it_was_held_against():
+    layout = layout_for("furuta")
+    theta = layout.nominal()
+    theta[layout.index("spring:alpha")] = 2e-3  # a cable pulling back from 5 counts off its neutral
+    force = theta[layout.index("K")] * 0.2 - 2e-3 * 5 * COUNT  # the motor's push minus the spring's pull
+    # held at count 5 for 0.6 s (three 0.2 s windows), then moving
+    counts = np.concatenate([np.full(300, 5.0), 5.0 + np.arange(1, 101)])
+    seg = _segment(counts, np.full(counts.size, 0.2))
+    bound = rest_bound(layout, theta, [seg], NO_INPUT_DYNAMICS, "alpha", COUNT, 0.2)
+    assert bound.n_windows == 3
+    assert bound.slack == pytest.approx(2 * theta[layout.index("J1")] * COUNT / 0.2**2)
+    assert bound.held == pytest.approx(force - bound.slack, rel=1e-6)
+    # a rotor that never stays on one count for a whole window says nothing
+    moving = _segment(np.arange(400.0), np.full(400, 0.2))
+    assert rest_bound(layout, theta, [moving], NO_INPUT_DYNAMICS, "alpha", COUNT, 0.2).n_windows == 0
+
+
+def test_sensor_resolution_is_the_encoder_count_of_quantised_joints_only():
+    spec = get_spec("furuta")
+    t = np.arange(200) * DT
+    counts = np.round(np.sin(3 * t) * 200) * COUNT + np.pi  # an offset keeps the steps whole counts
+    q = np.stack([counts, np.sin(2 * t) + 0.01 * t], 1)  # the pendulum's angle is not quantised
+    res = sensor_resolution([Trajectory(t=t, q=q, u=np.zeros((200, 1)), qd=None, name="a")], spec)
+    assert res == {"alpha": pytest.approx(COUNT)}
+
+
+def test_effects_below_one_count_or_one_sample_are_kept_but_reported_not_resolved():
+    notes: list[str] = []
+    effects = [EffectEvidence("com_offset", "beta", 2e-3, "rad", True, 0.1, 5.0, "selected"),
+               EffectEvidence("com_offset", "beta", 4e-3, "rad", True, 0.1, 5.0, "selected"),
+               EffectEvidence("input_delay", "u", 1.5e-3, "s", True, 0.1, 5.0, "selected"),
+               EffectEvidence("actuator_lag", "u", 5e-3, "s", True, 0.1, 5.0, "selected"),
+               EffectEvidence("com_offset", "beta", 1e-3, "rad", False, 0.0, 0.0, "tested")]
+    _mark_unresolved(effects, {"beta": COUNT}, DT, notes)
+    assert [e.resolved for e in effects] == [False, True, False, True, True]
+    assert all(e.significant for e in effects[:4])
+    assert "under one encoder count" in effects[0].note and "under one sample period" in effects[2].note
+    assert len(notes) == 2
+    assert effects[0].to_json()["resolved"] is False
