@@ -723,7 +723,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
         else:
             fx.notes.append(f"{c.key}: tested by prediction given coulomb_friction:{c.joint}: ΔF {coef:.3g}, "
                             f"validation gain {ev.improvement:.1%}, t {ev.z:.1f}; not added")
-            found = _stiction_from_rests(fx, base, c, bound, lambda th0: refit(th0, accepted)[0], dyn, start)
+            found = _stiction_from_rests(fx, base, c, bound, lambda th0: refit(th0, accepted)[0], dyn)
             if found is None:
                 continue
             th, how = found
@@ -760,7 +760,7 @@ def _breakaway_at_least(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBoun
     return out
 
 
-def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBound, refit_others, dyn, start):
+def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBound, refit_others, dyn):
     """(θ, note) with the stiction set from the rests — ΔF = held − Coulomb, the rest refitted with
     it held, ΔF set again from the refitted model — or None when the rests held no more than
     ``min_breakaway_ratio`` × the Coulomb level (or ΔF comes out non-physical)."""
