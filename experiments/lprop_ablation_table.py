@@ -37,9 +37,9 @@ def load(folder: Path = RESULTS) -> dict[str, list[dict]]:
     return {c: sorted(docs[c], key=lambda d: d["seed"]) for c in ORDER if c in docs}
 
 
-def _stat(values, scale=1.0, digits=2) -> str:
+def _stat(values, scale=1.0, digits=2, sign="+") -> str:
     v = scale * np.asarray(values, dtype=float)
-    return f"{v.mean():+.{digits}f} ± {v.std(ddof=1):.{digits}f}" if len(v) > 1 else f"{v[0]:+.{digits}f}"
+    return f"{v.mean():{sign}.{digits}f} ± {v.std(ddof=1):.{digits}f}" if len(v) > 1 else f"{v[0]:{sign}.{digits}f}"
 
 
 def _row(label: str, runs: list[dict], shapes: list[dict], scores: list, with_itau: bool = True) -> str:
@@ -48,8 +48,10 @@ def _row(label: str, runs: list[dict], shapes: list[dict], scores: list, with_it
     start = [d["potential_along_training"]["0"]["curvature_at_top_Nm_per_rad"] for d in runs]
     ratio = [d["itau"]["learned"] / d["itau"]["truth without the delay"] for d in runs if "itau" in d and with_itau]
     score = _stat(scores, digits=2) if scores and all(v is not None for v in scores) else "–"
+    best_g = [d["gravity_profile"]["best_scale"] for d in runs if "gravity_profile" in d and with_itau]
     return (f"| {label} | {len(curv)} | {_stat(start, 1e3, 1)} | {_stat(curv, 1e3)} | {sum(c > 0 for c in curv)} of {len(curv)} "
-            f"| {_stat(rise, 1e3, 1)} | {_stat(ratio, digits=2) if ratio else '–'} | {score} "
+            f"| {_stat(rise, 1e3, 1)} | {_stat(ratio, digits=2, sign='') if ratio else '–'} "
+            f"| {_stat(best_g, digits=3, sign='') if best_g else '–'} | {score} "
             f"| {_stat([d['nominal_test']['mean_log10'] for d in runs], digits=2)} "
             f"| {np.mean([d['feedforward_rms_over_u_rms'] for d in runs]):.2f} |")
 
@@ -72,15 +74,28 @@ def rows(docs: dict[str, list[dict]]) -> list[str]:
 
 
 def findings(docs: dict[str, list[dict]]) -> str:
-    """How often upright came out a minimum, and how often the loss preferred the learned model."""
-    runs = [d for r in docs.values() for d in r]
+    """The baseline cell (the real runs' conditions) in one sentence: how often upright came out
+    a minimum, how often the learned model's L_Iτ was below the truth's, and where the loss puts
+    gravity when everything else is true."""
+    runs = docs.get("baseline", [])
+    if not runs:
+        return ""
     minima = sum(d["potential"]["curvature_at_top_Nm_per_rad"] > 0 for d in runs)
-    with_itau = [d for d in runs if "itau" in d and with_itau]
-    below = sum(d["itau"]["learned"] < d["itau"]["truth without the delay"] for d in with_itau)
-    below_nom = sum(d["itau"]["learned"] < d["itau"]["nominal analytic"] for d in with_itau)
-    return (f"Upright came out a potential minimum in **{minima} of {len(runs)}** runs. The learned model's L_Iτ on its "
-            f"own training data was below the truth's in **{below} of {len(with_itau)}** (below the nominal analytic "
-            f"model's in {below_nom} of {len(with_itau)}): on these data the loss itself prefers the wrong potential.")
+    below = sum(d["itau"]["learned"] < d["itau"]["truth without the delay"] for d in runs)
+    scales = [d["gravity_profile"]["best_scale"] for d in runs if "gravity_profile" in d]
+    text = (f"As the real runs (first two rows): upright came out a potential minimum in **{minima} of {len(runs)}** seeds, "
+            f"and the learned model's L_Iτ on its own training data was below the truth's in **{below} of {len(runs)}**.")
+    if scales:
+        text += (f" With everything else true, L_Iτ is lowest at gravity × {min(scales):.3f}–{max(scales):.3f} of the "
+                 f"truth ({len(scales)} seeds): gravity alone is not biased; the network's other freedoms are what "
+                 "buy the lower loss.")
+    exact = docs.get("exact_angles", [])
+    if exact:
+        truth = lambda rs: np.mean([d["itau"]["truth without the delay"] for d in rs])  # noqa: E731
+        text += (f" The truth's own L_Iτ is {truth(runs) / truth(exact):.0f}× higher on the encoder's counts than on "
+                 "exact angles (same plant, same seeds): on data like the real runs most of L_Iτ is the encoder's "
+                 "quantisation, seen through the velocity estimates, and that is what the network fits.")
+    return text
 
 
 def block(docs: dict[str, list[dict]]) -> str:
@@ -88,7 +103,8 @@ def block(docs: dict[str, list[dict]]) -> str:
     truth = any_doc["truth"]
     n_train = any_doc["n_train"]
     head = ("| cell | seeds | ∂²V/∂β² at β = π at the start (mN·m/rad) | ∂²V/∂β² at β = π learned (mN·m/rad) "
-            "| upright a minimum | V(π) − V(0) (mJ) | L_Iτ learned / truth | test mean log10, DeLaN "
+            "| upright a minimum | V(π) − V(0) (mJ) | L_Iτ learned / truth | gravity × s* the loss wants "
+            "| test mean log10, DeLaN "
             "| nominal analytic | rms feed-forward / rms u |")
     lines = [
         "Simulated closed-loop balancing (5 runs of 20 s, MuJoCo plant with the four effects found on the real "
@@ -98,7 +114,8 @@ def block(docs: dict[str, list[dict]]) -> str:
         f"{1e3 * truth['curvature_at_top_Nm_per_rad']:.2f} mN·m/rad, V(π) − V(0) = {1e3 * truth['rise_to_top_J']:.1f} mJ. "
         "Test: mean log10 RMSE of the four states in 0.1 s open-loop windows on two held-out runs of the same "
         "experiment; L_Iτ absolute on the training windows, truth = the analytic model with the plant's effects but its "
-        "input delay.", "", head, "|---" * 10 + "|", *rows(docs), "", findings(docs), "",
+        "input delay; s*: the gravity scale minimising L_Iτ of that truth with everything else held (L_Iτ is "
+        "quadratic in it; 1 = no bias along gravity).", "", head, "|---" * 11 + "|", *rows(docs), "", findings(docs), "",
         f"Made by `{COMMAND}` ({sum(d['seconds'] for r in docs.values() for d in r) / 60:.0f} min in all, "
         f"{max(d['date'] for r in docs.values() for d in r)}).",
     ]

@@ -13,7 +13,7 @@ prediction score on two held-out runs of the same experiment (0.1 s open-loop wi
 table). One factor is changed per cell (:data:`CELLS`):
 
 * ``baseline``: as above; its snapshot at :data:`SHORT` epochs is the short budget, its end
-  (3 × that, the learning rate constant) the long one — cause (d);
+  (2 × that, the learning rate constant) the long one — cause (d);
 * ``feedforward_x4``: the independent ±0.5 V feed-forward of the balancing loop × 4, so a
   smaller share of u is the feedback's function of the state — cause (a), closed-loop correlation;
 * ``exact_velocity``: the simulator's velocities instead of estimates — cause (b);
@@ -63,7 +63,7 @@ REAL_EFFECTS = (Effect("coulomb_friction", "alpha", 5.4e-4), Effect("spring", "a
 N_TRAIN, N_TEST, DURATION, TEST_DURATION = 5, 2, 20.0, 10.0
 #: L_Iτ epochs of the short budget (about the real DeLaN run's kept snapshot, epoch 999) and
 #: the long one's factor
-SHORT, LONG_FACTOR, SNAPSHOTS = 1000, 3, 6
+SHORT, LONG_FACTOR, SNAPSHOTS = 1000, 2, 6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -190,19 +190,45 @@ def _mean_log10(errors: dict) -> float | None:
     return None if any(isinstance(v, str) for v in cells) else float(np.mean(cells))
 
 
-def itau_comparison(model, train_pieces, rule: str) -> dict:
+def _truth(cell: Cell, gravity_scale: float = 1.0):
+    """The plant as a Lagrangian model: the analytic Furuta (gravity scaled) with the cell's
+    undeclared effects except the input delay, which has no memoryless form."""
+    from furuta_gym.effects import WithEffects
+    from furuta_gym.models import Furuta, FurutaParameters
+
+    base = Furuta(FurutaParameters(g=gravity_scale * FurutaParameters().g))
+    memoryless = [e for e in REAL_EFFECTS if e.name != "input_delay"] if cell.effects else []
+    return WithEffects(base, memoryless, coulomb_smoothing=1e-3) if memoryless else base
+
+
+def itau_comparison(model, train_pieces, rule: str, cell: Cell) -> dict:
     """L_Iτ (absolute: Σ‖Z̄ − Ā‖², N²·m²·s²) on the training windows as training tiles them, of
     the learned model and of the truth without its input delay (the analytic model with the
     plant's other effects): below the truth's, the loss prefers the learned potential."""
-    from furuta_gym.effects import WithEffects
     from furuta_gym.models import Furuta
     from furuta_gym.training.losses import integral_loss, make_windows
 
     windows = make_windows(train_pieces, 101, stride=100, cover_end=True)
-    memoryless = [e for e in REAL_EFFECTS if e.name != "input_delay"]
-    models = {"learned": model, "nominal analytic": Furuta(),
-              "truth without the delay": WithEffects(Furuta(), memoryless, coulomb_smoothing=1e-3)}
+    models = {"learned": model, "nominal analytic": Furuta(), "truth without the delay": _truth(cell)}
     return {k: float(integral_loss(m, windows, rule=rule, normalize="none")) for k, m in models.items()}
+
+
+def gravity_profile(train_pieces, rule: str, cell: Cell) -> dict:
+    """Which gravity the loss wants with everything else true: L_Iτ of the truth without its
+    delay with gravity scaled by s is quadratic in s (the residual is linear in V); its minimiser
+    s* from three evaluations. s* < 0: the data make the loss prefer upright a minimum even with
+    the true M, friction and input — the bias is in the data, not in the network's freedom."""
+    from furuta_gym.training.losses import integral_loss, make_windows
+
+    windows = make_windows(train_pieces, 101, stride=100, cover_end=True)
+
+    def loss(scale):
+        return float(integral_loss(_truth(cell, scale), windows, rule=rule, normalize="none"))
+
+    l0, l1, l2 = loss(0.0), loss(1.0), loss(2.0)
+    curvature = (l2 - 2 * l1 + l0) / 2  # L(s) = a·s² + b·s + c
+    slope = l1 - l0 - curvature
+    return {"itau_at_scale_0_1_2": [l0, l1, l2], "best_scale": -slope / (2 * curvature)}
 
 
 def short_budget(run_dir: Path, test_pieces) -> dict:
@@ -216,6 +242,23 @@ def short_budget(run_dir: Path, test_pieces) -> dict:
     return {"epochs": SHORT, "potential": potential_shape(model), "test": test}
 
 
+def at_snapshot(doc: dict, cell: Cell, run_dir: Path) -> dict:
+    """A longer run's result fields at the cell's budget, from its snapshot at that epoch (the
+    rate is constant: what a run of that length reaches, up to keep_best_itau's choice)."""
+    from furuta_gym.training.checkpoint import load_model
+
+    model = load_model(run_dir / f"model_epoch{cell.epochs:06d}.eqx", expected_system="furuta")
+    train_pieces = _pieces(simulate(cell, N_TRAIN, DURATION, doc["data_seed"])[0], SPLIT)
+    test = window_errors(model, _pieces(simulate(cell, N_TEST, TEST_DURATION, doc["data_seed"] + 500)[0], None), WINDOW)
+    test["mean_log10"] = _mean_log10(test)
+    along = {k: v for k, v in doc["potential_along_training"].items() if int(k) <= cell.epochs}
+    config = {**doc["config"], "epochs": [cell.epochs]}
+    return {"potential": potential_shape(model), "test": test, "potential_along_training": along, "config": config,
+            "itau": itau_comparison(model, train_pieces, doc["config"]["quadrature"], cell),
+            "gravity_profile": gravity_profile(train_pieces, doc["config"]["quadrature"], cell),
+            "scored_at_snapshot": f"model_epoch{cell.epochs:06d} of a {doc['config']['epochs'][0]}-epoch run"}
+
+
 def fill_missing(path: Path, work: Path) -> None:
     """Add what a result file written before it was recorded lacks: the potential at the start
     of training and a long run's :func:`short_budget`."""
@@ -224,12 +267,18 @@ def fill_missing(path: Path, work: Path) -> None:
     along = doc["potential_along_training"]
     if "0" not in along:  # the start, as train() makes it from the seed
         doc["potential_along_training"] = {"0": potential_shape(start_model(cell, doc["seed"])), **along}
-    if "itau" not in doc:
+    if doc["config"]["epochs"][0] > cell.epochs:  # a longer run: scored at the cell's budget
+        doc.update(at_snapshot(doc, cell, work / path.stem))
+    if "truth_has_effects" not in doc and cell.effects and "gravity_profile" in doc:
+        doc["truth_has_effects"] = True  # the truth was the plant with the effects all along
+    if doc.get("truth_has_effects") != cell.effects:  # made before the truth followed the cell
         from furuta_gym.training.checkpoint import load_model
 
         pieces = _pieces(simulate(cell, N_TRAIN, DURATION, doc["data_seed"])[0], SPLIT)
         model = load_model(work / path.stem / "model.eqx", expected_system="furuta")
-        doc["itau"] = itau_comparison(model, pieces, doc["config"]["quadrature"])
+        doc["itau"] = itau_comparison(model, pieces, doc["config"]["quadrature"], cell)
+        doc["gravity_profile"] = gravity_profile(pieces, doc["config"]["quadrature"], cell)
+        doc["truth_has_effects"] = cell.effects
     if cell.epochs > SHORT and "short" not in doc:
         test_pieces = _pieces(simulate(cell, N_TEST, TEST_DURATION, doc["data_seed"] + 500)[0], None)
         doc["short"] = short_budget(work / path.stem, test_pieces)
@@ -269,7 +318,9 @@ def run_one(name: str, seed: int, out: Path, work: Path) -> dict:
         doc[key]["mean_log10"] = _mean_log10(doc[key])
     if cell.epochs > SHORT:
         doc["short"] = short_budget(run_dir, test_pieces)
-    doc["itau"] = itau_comparison(model, train_pieces, config.quadrature)
+    doc["itau"] = itau_comparison(model, train_pieces, config.quadrature, cell)
+    doc["gravity_profile"] = gravity_profile(train_pieces, config.quadrature, cell)
+    doc["truth_has_effects"] = cell.effects
     (out / f"{name}_s{seed}.json").write_text(json.dumps(doc, indent=1, default=str) + "\n")
     p = doc["potential"]
     print(f"{name} s{seed}: curvature {1e3 * p['curvature_at_top_Nm_per_rad']:+.2f} mN·m/rad, rise "

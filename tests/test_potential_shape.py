@@ -2,7 +2,10 @@
 the analytic models pass, a flipped or flat potential fails, and training records and warns."""
 
 import json
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -134,3 +137,12 @@ def test_training_a_physical_potential_does_not_warn(furuta_free, tmp_path):
         warnings.simplefilter("error", PotentialShapeWarning)
         _, history = _train_briefly(_cosine_delan(-1.0), furuta_free, tmp_path / "physical")
     assert history[-1]["potential_shape"]["physical"] is True
+
+
+def test_lprop_ablation_docs_table_matches_its_results():
+    root = Path(__file__).resolve().parents[1]
+    if not any((root / "results" / "lprop_ablation").glob("*_s*.json")):
+        pytest.skip("results/lprop_ablation not generated")
+    proc = subprocess.run([sys.executable, str(root / "experiments" / "lprop_ablation_table.py"), "--check"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
