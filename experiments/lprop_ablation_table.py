@@ -63,7 +63,7 @@ def rows(docs: dict[str, list[dict]]) -> list[str]:
         final = runs[0]["config"]["epochs"][0]
         short = [d for d in runs if "short" in d]
         if short:
-            e = short[0]["short"]["epochs"]
+            e = " / ".join(sorted({str(d["short"]["epochs"]) for d in short}))  # a snapshot at or before it
             out.append(_row(f"{runs[0]['label']}, {e} epochs", short, [d["short"]["potential"] for d in short],
                             [d["short"]["test"]["mean_log10"] for d in short], with_itau=False))
             label = f"(d) the same, {final} epochs"
@@ -89,12 +89,19 @@ def findings(docs: dict[str, list[dict]]) -> str:
         text += (f" With everything else true, L_Iτ is lowest at gravity × {min(scales):.3f}–{max(scales):.3f} of the "
                  f"truth ({len(scales)} seeds): gravity alone is not biased; the network's other freedoms are what "
                  "buy the lower loss.")
-    exact = docs.get("exact_angles", [])
-    if exact:
-        truth = lambda rs: np.mean([d["itau"]["truth without the delay"] for d in rs])  # noqa: E731
-        text += (f" The truth's own L_Iτ is {truth(runs) / truth(exact):.0f}× higher on the encoder's counts than on "
-                 "exact angles (same plant, same seeds): on data like the real runs most of L_Iτ is the encoder's "
-                 "quantisation, seen through the velocity estimates, and that is what the network fits.")
+    started_max = [d for d in runs if d["potential_along_training"]["0"]["curvature_at_top_Nm_per_rad"] < 0]
+    if started_max:
+        ended_min = sum(d["potential"]["curvature_at_top_Nm_per_rad"] > 0 for d in started_max)
+        text += (f" {ended_min} of the {len(started_max)} seed(s) whose initial network had upright a maximum ended "
+                 "with it a minimum: the data pull the curvature there, they do not merely leave it where it started.")
+    truth = {d["seed"]: d["itau"]["truth without the delay"] for d in runs}
+    pairs = [(truth[d["seed"]], d["itau"]["truth without the delay"]) for d in docs.get("exact_angles", [])
+             if d["seed"] in truth]
+    if pairs:
+        ratio = np.mean([a / b for a, b in pairs])
+        text += (f" The truth's own L_Iτ is {ratio:.0f}× higher on the encoder's counts than on exact angles (same "
+                 f"plant, same seeds, {len(pairs)} pair(s)): on data like the real runs most of L_Iτ is the "
+                 "encoder's quantisation, seen through the velocity estimates — what the network can fit.")
     return text
 
 
@@ -116,7 +123,7 @@ def block(docs: dict[str, list[dict]]) -> str:
         "experiment; L_Iτ absolute on the training windows, truth = the analytic model with the plant's effects but its "
         "input delay; s*: the gravity scale minimising L_Iτ of that truth with everything else held (L_Iτ is "
         "quadratic in it; 1 = no bias along gravity).", "", head, "|---" * 11 + "|", *rows(docs), "", findings(docs), "",
-        f"Made by `{COMMAND}` ({sum(d['seconds'] for r in docs.values() for d in r) / 60:.0f} min in all, "
+        f"Made by `{COMMAND}` (each run a few minutes on one core; its seconds are in its JSON; last run "
         f"{max(d['date'] for r in docs.values() for d in r)}).",
     ]
     return "\n".join(lines)
