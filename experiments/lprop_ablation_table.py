@@ -87,8 +87,8 @@ def findings(docs: dict[str, list[dict]]) -> str:
             f"and the learned model's L_Iτ on its own training data was below the truth's in **{below} of {len(runs)}**.")
     if scales:
         text += (f" With everything else true, L_Iτ is lowest at gravity × {min(scales):.3f}–{max(scales):.3f} of the "
-                 f"truth ({len(scales)} seeds): gravity alone is not biased; the network's other freedoms are what "
-                 "buy the lower loss.")
+                 f"truth ({len(scales)} seeds): along gravity alone the loss is nearly unbiased; the network's "
+                 "other freedoms are what buy the lower loss.")
     started_max = [d for d in runs if d["potential_along_training"]["0"]["curvature_at_top_Nm_per_rad"] < 0]
     if started_max:
         ended_min = sum(d["potential"]["curvature_at_top_Nm_per_rad"] > 0 for d in started_max)
