@@ -11,7 +11,7 @@ from ._augmented import AbstractAugmentedSystem, AugmentedDeLaN
 from ._delan import DeLaN
 from ._factory import MODEL_KINDS, make_model
 from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
-from ._system import LumpedForm, SystemDefinition, first_joint_input, parameter_defaults
+from ._system import Equilibrium, LumpedForm, SystemDefinition, first_joint_input, parameter_defaults
 from .checkpoint import CheckpointError, load_model, read_header, save_model
 
 __all__ = [
@@ -22,6 +22,7 @@ __all__ = [
     "analytic_model",
     # one object per system
     "SystemDefinition",
+    "Equilibrium",
     "LumpedForm",
     "SYSTEM_DEFINITIONS",
     "system_definition",

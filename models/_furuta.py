@@ -15,7 +15,7 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import FURUTA
-from ._system import LumpedForm, MujocoTerms, SystemDefinition, parameter_defaults, scalar
+from ._system import Equilibrium, LumpedForm, MujocoTerms, SystemDefinition, parameter_defaults, scalar
 
 __all__ = ["FURUTA_DEFINITION", "FurutaParameters", "Furuta", "furuta_energy", "furuta_lumped",
            "furuta_mass_matrix", "furuta_potential"]
@@ -226,6 +226,9 @@ FURUTA_DEFINITION = SystemDefinition(
     energy_panels=((1, -3.141592653589793, 3.141592653589793, 1.0, "β [rad] (α̇ = β̇ = 0)"),
                    (3, -20.0, 20.0, 1.0, "β̇ [rad/s] (β = α̇ = 0)")),
     scale_fit_on_forced_data=True,
+    # gravity: the hanging pendulum is stable, the upright one unstable (whatever the rotor does)
+    equilibria=(Equilibrium("hanging (β = 0)", (0.0, 0.0), "beta", "minimum"),
+                Equilibrium("upright (β = π)", (0.0, math.pi), "beta", "maximum")),
     lumped_values=furuta_lumped,
     energy=furuta_energy,
     write_mujoco=write_furuta_mujoco,

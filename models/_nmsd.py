@@ -10,7 +10,7 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import NMSD as NMSD_SPEC
-from ._system import LumpedForm, MujocoTerms, SystemDefinition, scalar
+from ._system import Equilibrium, LumpedForm, MujocoTerms, SystemDefinition, scalar
 
 __all__ = ["NMSD_DEFINITION", "NMSDParameters", "NMSD", "nmsd_energy", "nmsd_potential"]
 
@@ -124,6 +124,7 @@ NMSD_DEFINITION = SystemDefinition(
     diagnosis_segment_seconds=5.0,
     table_title="Table 1 — N-MSD",
     energy_panels=((0, -1.5, 1.5, 1.0, "p [m] (ṗ = 0)"), (1, -1.5, 1.5, 3.0, "ṗ [m/s] (p = 0)")),
+    equilibria=(Equilibrium("rest (p = 0)", (0.0,), "p", "minimum"),),  # the spring's stable rest
     lumped_values=dict,
     energy=nmsd_energy,
     write_mujoco=write_nmsd_mujoco,

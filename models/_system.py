@@ -17,7 +17,7 @@ import jax.numpy as jnp
 from .._x64 import ensure_x64
 from ..lagrangian import SystemSpec
 
-__all__ = ["LumpedForm", "SystemDefinition", "first_joint_input", "parameter_defaults"]
+__all__ = ["Equilibrium", "LumpedForm", "SystemDefinition", "first_joint_input", "parameter_defaults"]
 
 #: ``b(name)``: the value of a lumped parameter (a traced array inside a fit)
 Lookup = Callable[[str], Any]
@@ -69,6 +69,22 @@ class LumpedForm:
 
 
 @dataclasses.dataclass(frozen=True)
+class Equilibrium:
+    """A rest position ``q`` (u = 0) whose potential shape the physics fixes: along ``joint`` (a
+    joint name) V has a ``"minimum"`` (stable, ∂²V/∂q² > 0) or a ``"maximum"`` (unstable, < 0).
+    A learned model must reproduce it (:func:`furuta_gym.training.consistency.check_potential_shape`)."""
+
+    name: str
+    q: tuple[float, ...]
+    joint: str
+    shape: str
+
+    def __post_init__(self):
+        if self.shape not in ("minimum", "maximum"):
+            raise ValueError(f"Equilibrium {self.name!r}: shape must be 'minimum' or 'maximum', got {self.shape!r}")
+
+
+@dataclasses.dataclass(frozen=True)
 class MujocoTerms:
     """What a system's MuJoCo writer leaves to the backend, per dof: native joint stiffness and
     damping, the cubic stiffness and damping MuJoCo cannot express (the passive callback's), and
@@ -114,6 +130,8 @@ class SystemDefinition:
     reproduction's energy figure. ``write_mujoco(model, parameters)``: writes the physical
     parameters' bodies, inertias and gravity into an ``MjModel`` of the system's MJCF and returns
     the rest as :class:`MujocoTerms` (no MuJoCo import needed: it only sets the model's arrays).
+    ``equilibria``: the rest positions whose potential shape (minimum / maximum) the physics
+    fixes, each an :class:`Equilibrium`; training checks a learned potential against them.
     """
 
     spec: SystemSpec
@@ -144,6 +162,7 @@ class SystemDefinition:
     excitations: tuple[str, ...] = ("chirp",)
     encoders: bool = False
     scale_fit_on_forced_data: bool = False
+    equilibria: tuple[Equilibrium, ...] = ()
 
     @property
     def name(self) -> str:

@@ -1,6 +1,7 @@
 """Training learned Lagrangian models: data generation, losses, the training loop, checkpoints, metrics."""
 
 from .checkpoint import CheckpointError, load_model, read_header, save_model
+from .consistency import PotentialShapeWarning, check_potential_shape, warn_potential_shape
 from .losses import (
     Windows,
     aphynity_loss,
@@ -14,6 +15,9 @@ from .train import ScaleFit, TrainConfig, data_hash, fit_scale, train
 
 __all__ = [
     "CheckpointError",
+    "PotentialShapeWarning",
+    "check_potential_shape",
+    "warn_potential_shape",
     "load_model",
     "read_header",
     "save_model",

@@ -44,6 +44,7 @@ from ..models import make_model
 from ..systems import get_spec
 from . import _step_cache
 from . import checkpoint as ckpt
+from .consistency import check_potential_shape, warn_potential_shape
 from .losses import (
     AUGMENTATION_PARTS,
     Windows,
@@ -699,6 +700,9 @@ def _save_epoch(out: Path | None, record: dict, run: _RunState, static, run_info
         return
     model_now = eqx.combine(run.params, static)
     epoch = record["epoch"]
+    snapshot = bool(config.checkpoint_every and epoch % config.checkpoint_every == 0)
+    if snapshot:  # cheap (two second derivatives of V): the shape's course through training
+        record["potential_shape"] = check_potential_shape(model_now)
     # the history is appended line by line (the state file stays small); written before the
     # state so a resumed run always finds every finished epoch's line
     with (out / HISTORY_FILE).open("a") as fh:
@@ -710,8 +714,9 @@ def _save_epoch(out: Path | None, record: dict, run: _RunState, static, run_info
         extra["best_itau"] = {k: v for k, v in run.best.items() if k != "params"}
         best_model = eqx.combine(run.best["params"], static)
     ckpt.save_training_state(out / STATE_FILE, model_now, run.opt_state, extra, best_model=best_model)
-    if config.checkpoint_every and epoch % config.checkpoint_every == 0:
-        ckpt.save_model(out / f"model_epoch{epoch:06d}.eqx", model_now, meta, overwrite=True)
+    if snapshot:
+        ckpt.save_model(out / f"model_epoch{epoch:06d}.eqx", model_now,
+                        {**meta, "potential_shape": record["potential_shape"]}, overwrite=True)
 
 
 def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: int, steps: int) -> None:
@@ -781,6 +786,10 @@ def _finish(model, history: list, config: TrainConfig, loss: str, dhash: str, tr
     elif not any(np.any(np.asarray(tr.u) != 0) for tr in trajs):
         meta["scale_fit"] = None
         meta["scale_note"] = "trained on free data only: the overall scale of L and τ_NC is unidentified"
+    # after the scale fit, which multiplies V too; one warning if the shape is not physical
+    meta["potential_shape"] = warn_potential_shape(model, stacklevel=3)
+    if history:
+        history[-1]["potential_shape"] = meta["potential_shape"]
     if out is not None:
         if bool(_all_finite(model)):
             ckpt.save_model(out / MODEL_FILE, model, meta, overwrite=True)

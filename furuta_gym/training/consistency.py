@@ -1,0 +1,85 @@
+"""Is a learned potential physical? Its shape at the system's equilibria.
+
+Data that only visit part of the configuration space, or that a feedback loop makes the input a
+function of the state, can leave an equation-error loss free to learn a potential of the wrong
+shape (on the shipped closed-loop QUBE runs, L_prop learned the upright pendulum as a *minimum*,
+docs/learning.md). Prediction scores near the data do not show it; a controller designed on such
+a model fails much later. The physics fixes the sign of ∂²V/∂q² at each equilibrium the system's
+definition lists (:attr:`furuta_gym.models.SystemDefinition.equilibria`); :func:`check_potential_shape`
+measures it (autodiff, ``jax.grad`` of ``jax.grad``) and :func:`warn_potential_shape` warns with
+:class:`PotentialShapeWarning` when one is wrong. Training calls both (``train``: every snapshot's
+history line and the final record).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ..lagrangian import SystemSpec
+from ..models import system_definition
+
+__all__ = ["PotentialShapeWarning", "check_potential_shape", "warn_potential_shape"]
+
+
+class PotentialShapeWarning(UserWarning):
+    """A learned potential has the wrong shape (minimum / maximum) at an equilibrium."""
+
+
+@eqx.filter_jit
+def _curvatures(model, points, joints):
+    """∂²V/∂q_j² at each point (rows of ``points``) along its joint index."""
+
+    def one(q, j):
+        along = lambda s: model.potential(q.at[j].set(s))  # noqa: E731
+        return jax.grad(jax.grad(along))(q[j])
+
+    return jnp.stack([one(points[k], j) for k, j in enumerate(joints)])
+
+
+def check_potential_shape(model, system: str | SystemSpec | None = None) -> dict:
+    """The learned potential's curvature at each equilibrium of the system's definition.
+
+    ``system`` defaults to ``model.spec``. Returns ``{"physical": bool, "equilibria": [{"name",
+    "q", "joint", "expected", "curvature", "ok"}, ...]}``; ``curvature`` is ∂²V/∂q² along the
+    equilibrium's joint in the model's units (N·m/rad, N/m), ``ok`` whether its sign is the one
+    ``expected`` (a flat potential, curvature 0, is neither a minimum nor a maximum).
+    """
+    spec = system if system is not None else getattr(model, "spec", None)
+    if spec is None:
+        raise ValueError("check_potential_shape: the model has no .spec; pass system='furuta' or 'nmsd'")
+    definition = system_definition(spec)
+    eqs = definition.equilibria
+    if not eqs:
+        return {"physical": True, "equilibria": []}
+    names = definition.spec.joint_names
+    joints = tuple(names.index(e.joint) for e in eqs)
+    points = jnp.asarray([e.q for e in eqs], dtype=float)
+    curv = [float(c) for c in _curvatures(model, points, joints)]
+    rows = [{"name": e.name, "q": list(e.q), "joint": e.joint, "expected": e.shape, "curvature": c,
+             "ok": bool(c > 0 if e.shape == "minimum" else c < 0)} for e, c in zip(eqs, curv)]
+    return {"physical": all(r["ok"] for r in rows), "equilibria": rows}
+
+
+def shape_message(result: dict) -> str | None:
+    """One sentence naming every equilibrium with the wrong shape, or ``None`` if all are right."""
+    wrong = [r for r in result["equilibria"] if not r["ok"]]
+    if not wrong:
+        return None
+    parts = [f"{r['name']} must be a {r['expected']} (∂²V/∂{r['joint']}² {'>' if r['expected'] == 'minimum' else '<'} 0) "
+             f"but the learned curvature is {r['curvature']:.3g}" for r in wrong]
+    return ("learned potential is not physical: " + "; ".join(parts)
+            + ". The data may not determine the potential there (e.g. closed-loop data near one "
+              "equilibrium); a swing-up or LQR designed on this model rests on the wrong shape.")
+
+
+def warn_potential_shape(model, system: str | SystemSpec | None = None, *, stacklevel: int = 2) -> dict:
+    """:func:`check_potential_shape`, and one :class:`PotentialShapeWarning` if any shape is wrong."""
+    result = check_potential_shape(model, system)
+    message = shape_message(result)
+    if message is not None:
+        warnings.warn(message, PotentialShapeWarning, stacklevel=stacklevel + 1)
+    return result
