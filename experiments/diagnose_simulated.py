@@ -4,8 +4,9 @@
   controller and ±0.5 V excitation, encoder-quantised, velocities estimated — the declared model
   is the plant. At most 1 in 20 may report an effect.
 * **Realistic cases** (power): sine sweeps of a rotor held by dry friction against a cable spring
-  (the spring only pays once the friction is modelled; with stiction); closed-loop balancing with
-  Coulomb friction, a pendulum centre-of-mass offset and an actuator lag.
+  (the spring only pays once the friction is modelled; with stiction); sticky sweeps, whose rotor
+  mostly repeats its encoder count (a rig drawn per log, :func:`furuta_gym.diagnose.sticky_rig`);
+  closed-loop balancing with Coulomb friction, a pendulum centre-of-mass offset and an actuator lag.
 
 Every threshold of the diagnosis is chosen on these logs, never on the real ones. Writes one JSON
 per log into ``results/diagnose_sim/``; ``experiments/diagnose_tables.py`` makes the docs tables.
@@ -17,6 +18,9 @@ per log into ``results/diagnose_sim/``; ``experiments/diagnose_tables.py`` makes
     # the same closed-loop logs with exact angles: what the encoder's resolution costs
     python experiments/diagnose_simulated.py --excitations closed_loop_prbs --no-quantize \
         --only coulomb_com_lag coulomb_com_lag5 --out results/diagnose_sim_exact_angles
+    # the sticky sweeps with every block weighted alike (the evidence before its weighting)
+    python experiments/diagnose_simulated.py --only sticky_cable --evidence-weighting uniform \
+        --out results/diagnose_sim_uniform_blocks
 """
 
 from __future__ import annotations
@@ -26,16 +30,18 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.diagnose import diagnose, measured_like  # noqa: E402
+from furuta_gym.diagnose import diagnose, measured_like, sticky_rig  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
 
 LOG = dict(n_trajectories=6, duration=10.0)
 # the documented settings per experiment: 0.1 s windows for an inverted (unstable) pendulum
-SETTINGS = {"sine_sweep": {}, "closed_loop_prbs": dict(window=0.1, oe_max_windows=64)}
+SETTINGS = {"sine_sweep": {}, "sticky_sweep": {}, "closed_loop_prbs": dict(window=0.1, oe_max_windows=64)}
 CASES = {
     "none": [],
     "spring_dry_friction": [Effect("spring", "alpha", 1.5e-3), Effect("coulomb_friction", "alpha", 8e-4)],
@@ -46,10 +52,35 @@ CASES = {
                         Effect("actuator_lag", "u", 2e-3)],
     "coulomb_com_lag5": [Effect("coulomb_friction", "alpha", 3e-4), Effect("com_offset", "beta", 2e-3),
                          Effect("actuator_lag", "u", 5e-3)],
+    # a cable whose neutral is dragged along (outside the diagnosis library): what the library's
+    # effects make of it
+    "sticky_hysteresis": [Effect("hysteretic_spring", "alpha", 2e-3, play=0.3), Effect("coulomb_friction", "alpha", 5e-4),
+                          Effect("stiction", "alpha", 5e-4)],
 }
-PLAN = [("sine_sweep", "none"), ("closed_loop_prbs", "none"), ("sine_sweep", "spring_dry_friction"),
-        ("sine_sweep", "spring_weak_friction"), ("sine_sweep", "cable_stiction"),
+DRAWN = {"sticky_cable": sticky_rig}  # cases whose plant is drawn per log
+# a sticky log: at least this share of consecutive samples repeats the rotor's count (else redrawn)
+MIN_REPEATS = {"sticky_cable": 0.6, "sticky_hysteresis": 0.6}
+PLAN = [("sine_sweep", "none"), ("closed_loop_prbs", "none"), ("sticky_sweep", "none"),
+        ("sine_sweep", "spring_dry_friction"), ("sine_sweep", "spring_weak_friction"),
+        ("sine_sweep", "cable_stiction"), ("sticky_sweep", "sticky_cable"), ("sticky_sweep", "sticky_hysteresis"),
         ("closed_loop_prbs", "coulomb_com_lag"), ("closed_loop_prbs", "coulomb_com_lag5")]
+
+
+def repeat_share(data) -> float:
+    """Share of consecutive samples at which the rotor's logged angle does not change."""
+    return float(np.mean(np.concatenate([np.diff(tr.q[:, 0]) == 0 for tr in data])))
+
+
+def simulate(excitation: str, case: str, seed: int, quantize: bool = True):
+    """(effects, data, draws) of one log; a drawn case is drawn again (from seed + 1000·k) until
+    it meets its share of repeated rotor counts."""
+    for draw in range(20):
+        s = seed + 1000 * draw
+        effects = DRAWN[case](s) if case in DRAWN else CASES[case]
+        data = measured_like("furuta", effects, seed=s, excitation=excitation, quantize=quantize, **LOG)
+        if repeat_share(data) >= MIN_REPEATS.get(case, 0.0):
+            return effects, data, draw + 1
+    raise RuntimeError(f"{case} seed {seed}: no draw in 20 met the share of repeated rotor counts")
 
 
 def run_one(excitation: str, case: str, seed: int, out: Path, quantize: bool = True, **overrides) -> dict:
@@ -57,13 +88,13 @@ def run_one(excitation: str, case: str, seed: int, out: Path, quantize: bool = T
     if target.exists():
         return json.loads(target.read_text())
     t0 = time.time()
-    effects = CASES[case]
-    data = measured_like("furuta", effects, seed=seed, excitation=excitation, quantize=quantize, **LOG)
+    effects, data, draws = simulate(excitation, case, seed, quantize)
     res = diagnose(data, "furuta", **{**SETTINGS[excitation], **overrides})
     doc = res.to_json()
     doc.update(excitation=excitation, case=case, seed=seed, quantized=quantize, seconds=round(time.time() - t0, 1),
-               planted=[dict(name=e.name, joint=e.joint, coefficient=e.coefficient, reference=e.reference)
-                        for e in effects])
+               rotor_repeat_share=round(repeat_share(data), 3), draws=draws,
+               planted=[dict(name=e.name, joint=e.joint, coefficient=e.coefficient, reference=e.reference,
+                             **({"play": e.play} if e.play else {})) for e in effects])
     target.write_text(json.dumps(doc, indent=1) + "\n")
     found = [(e["name"], e["joint"], e["coefficient"]) for e in doc["effects"] if e["significant"]]
     print(f"{excitation:17s} {case:22s} seed {seed:3d}: {found}", flush=True)
@@ -79,8 +110,12 @@ def main() -> None:
     ap.add_argument("--excitations", nargs="*", help="experiments to run (default: all)")
     ap.add_argument("--start-iterations", type=int, help="DiagnosisSettings.start_iterations (default: its default)")
     ap.add_argument("--no-quantize", action="store_true", help="log exact angles (no encoder resolution)")
+    ap.add_argument("--evidence-weighting", choices=("regressor", "uniform"),
+                    help="DiagnosisSettings.evidence_weighting (default: its default)")
     args = ap.parse_args()
     overrides = {} if args.start_iterations is None else {"start_iterations": args.start_iterations}
+    if args.evidence_weighting:
+        overrides["evidence_weighting"] = args.evidence_weighting
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for excitation, case in PLAN:

@@ -114,14 +114,6 @@ def test_sticky_sweep_rotor_mostly_repeats_its_count_and_its_rig_is_found():
     _check_sticky_rig(diagnose(data, "furuta"), rig)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("seed", range(101, 106))
-def test_sticky_sweeps_over_seeds(seed):
-    rig = sticky_rig(seed)
-    data = measured_like("furuta", rig, excitation="sticky_sweep", seed=seed, **LOG)
-    _check_sticky_rig(diagnose(data, "furuta"), rig)
-
-
 @pytest.mark.parametrize("excitation", ["sine_sweep", "sticky_sweep", "closed_loop_prbs"])
 def test_no_effect_logs_report_nothing(excitation):
     kw = CLOSED_LOOP if excitation == "closed_loop_prbs" else {}
