@@ -469,10 +469,10 @@ class _Fitter:
         start = self.settings.start_iterations if start_iterations is None else start_iterations
         return _fit.window_square_sums(self.layout, theta, win, self.substeps, start)
 
-    def validation_predictions(self, theta, dynamics, start_iterations: int) -> tuple[np.ndarray, np.ndarray]:
-        """(predicted, measured) positions of the fit-set validation windows, (W, L, n) each."""
-        win = self.fit_windows(dynamics, self.val_idx)
-        return _fit.predict_windows(self.layout, theta, win, self.substeps, start_iterations), win.q
+    def validation_predictions(self, theta, dynamics, start_iterations: int) -> np.ndarray:
+        """(W, L, n): predicted positions of the fit-set validation windows."""
+        return _fit.predict_windows(self.layout, theta, self.fit_windows(dynamics, self.val_idx), self.substeps,
+                                    start_iterations)
 
     def refine(self, theta0, free, dynamics, tag):
         """Output-error refinement of an equation-error estimate, kept only if it also predicts
@@ -707,11 +707,11 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
     def refit(th0, effects):
         free = free_columns(fx.layout, effects, fx.fixed_idx)
         th, _ = _fit.oe_fit(fx.layout, th0, free, win, fx.substeps, s.oe_max_nfev, start)
-        return th, fx.validation_predictions(th, dyn, start)[0]
+        return th, fx.validation_predictions(th, dyn, start)
 
     # the baseline is refitted as the trial is, so that the gain is the stiction's own
     base, pred = refit(theta, accepted)
-    measured = fx.validation_predictions(base, dyn, start)[1]
+    measured = fx.fit_windows(dyn, fx.val_idx).q
     for c in todo:
         bound = _rest_bound(fx, base, dyn, c.joint)
         th, trial_pred = refit(_stiction_start(fx, base, c, bound.held), accepted + [c])
@@ -727,7 +727,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
             if found is None:
                 continue
             th, how = found
-            trial_pred = fx.validation_predictions(th, dyn, start)[0]
+            trial_pred = fx.validation_predictions(th, dyn, start)
             ev = _stiction_evidence(pred, trial_pred, measured)
             if ev.z <= -s.veto_t:
                 fx.notes.append(f"{c.key}: {how}, but predicts worse with it (gain {ev.improvement:.1%}, "

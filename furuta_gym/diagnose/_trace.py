@@ -168,7 +168,7 @@ class Comparer:
 
     def compare(self, base: list[Candidate], added: list[Candidate]) -> Evidence:
         """Evidence for ``base + added`` against ``base``."""
-        sums0, sums1, energy = [], [], []
+        sums0, sums1, energy, recordings = [], [], [], []
         for f in range(self.n_folds):
             train, test = self.prob.subset(self.fold != f), self.prob.subset(self.fold == f)
             th0, d0 = self._fit(train, base)
@@ -177,12 +177,12 @@ class Comparer:
             sums0.append(block_sums(test, th0, w, d0, None, momentum_norm(train, th0, w)))
             sums1.append(block_sums(test, th1, w, d1, th0, momentum_norm(train, th1, w)))
             energy.append(self._regressor_energy(test, th0, added))
+            recordings.append(self.recording_of(test))
         weights = None
         if self.weighting == "regressor":
             e = np.concatenate(energy)  # each candidate's share of its own total, so that a pair's members count alike
             weights = (e / np.maximum(e.sum(axis=0), 1e-300)).sum(axis=1)
-        recordings = np.concatenate([self.recording_of(self.prob.subset(self.fold == f)) for f in range(self.n_folds)])
-        return Evidence.of_sums(np.concatenate(sums0), np.concatenate(sums1), weights, recordings)
+        return Evidence.of_sums(np.concatenate(sums0), np.concatenate(sums1), weights, np.concatenate(recordings))
 
     def _regressor_energy(self, test, theta, added: list[Candidate]) -> np.ndarray:
         """(blocks, len(added)): per block of ``test``, the energy of each added candidate's own
