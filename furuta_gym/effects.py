@@ -36,6 +36,10 @@ name                   generalized force on joint j                  unit of coe
 
 Coulomb friction and stiction use sgn(0) = 0, or tanh(q̇/ε) with ``coulomb_smoothing`` ε > 0.
 
+Each name is an :class:`EffectKind`, registered once (:data:`EFFECT_KINDS`): it holds the law,
+the units, the MuJoCo form (:class:`MujocoForm`), the diagnosis library's scale and the physical
+sign, so code elsewhere asks ``effect.kind`` and never compares names.
+
 :class:`WithEffects` adds joint effects to any Lagrangian system (springs and ``com_offset``
 into V, so energy stays right; the rest into τ_NC; the input gain into τ_u). ``input_delay`` and
 ``actuator_lag`` have no memoryless form: they live in the env/plant (an input buffer; the lag
@@ -57,55 +61,270 @@ from .lagrangian import AbstractLagrangianSystem, SystemSpec
 
 __all__ = [
     "Effect",
+    "EffectKind",
+    "EFFECT_KINDS",
+    "effect_kind",
+    "MujocoForm",
     "JOINT_EFFECTS",
     "INPUT_EFFECTS",
     "DRY_FRICTION",
     "STATEFUL_EFFECTS",
     "EFFECT_UNITS",
+    "INPUT_DYNAMICS_EFFECTS",
     "WithEffects",
     "ActuatorLag",
     "CableNeutral",
     "actuator_lag_time",
+    "effects_potential",
 ]
 
-JOINT_EFFECTS = (
-    "spring",
-    "coulomb_friction",
-    "stiction",
-    "viscous_friction",
-    "quadratic_drag",
-    "constant_torque",
-    "com_offset",
-    "hysteretic_spring",
-)
-INPUT_EFFECTS = ("input_gain", "input_delay", "actuator_lag")
+
+# ----------------------------------------------------------------------------- the registry
+
+#: every effect kind by name, in registration order (which is the diagnosis library's order)
+EFFECT_KINDS: dict[str, "EffectKind"] = {}
+
+
+@dataclasses.dataclass
+class MujocoForm:
+    """What effects write into a MuJoCo model (see :meth:`EffectKind.to_mujoco`): native joint
+    stiffness (with Σ k·q_ref), damping and actuator gain, and the forces MuJoCo cannot express,
+    which a passive-force callback applies (laws per dof, moving cable neutrals, a shift of the
+    gravity potential)."""
+
+    stiffness: np.ndarray
+    stiff_ref: np.ndarray
+    damping: np.ndarray
+    gain: float = 1.0
+    laws: dict[int, list["Effect"]] = dataclasses.field(default_factory=dict)
+    neutrals: dict[int, list["CableNeutral"]] = dataclasses.field(default_factory=dict)
+    shift: np.ndarray | None = None
+
+
+class EffectKind:
+    """One kind of physical effect, registered once by subclassing: the class attributes are its
+    data (units, where it acts, its diagnosis scale), the methods its force law and its forms in a
+    Lagrangian model and in MuJoCo. Everything that differs between kinds lives here, so code
+    elsewhere asks a kind, never compares names; adding an effect is one subclass plus tests."""
+
+    name: ClassVar[str]
+    #: unit of the coefficient on an (angular, linear) joint
+    units: ClassVar[tuple[str, str]]
+    on_input: ClassVar[bool] = False
+    #: has a state (no memoryless Lagrangian form); ``home`` says where it is applied instead
+    has_memory: ClassVar[bool] = False
+    home: ClassVar[str] = ""
+    #: enters the potential: a term of its own (a spring) or a shift of its zero (a CoM offset)
+    in_potential: ClassVar[bool] = False
+    shifts_potential: ClassVar[bool] = False
+    #: a law of q̇ that can hold a joint at rest (:meth:`dry_friction_limit`)
+    is_dry_friction: ClassVar[bool] = False
+    #: the coefficient of the physical effect is positive (restoring or dissipative)
+    physically_positive: ClassVar[bool] = False
+    #: the diagnosis library's typical coefficient on an (angular, linear) joint; None: no candidate
+    typical: ClassVar[tuple[float, float] | None] = None
+    #: library order on a joint (ties between effects the data cannot tell apart go to the lower)
+    library_rank: ClassVar[int] = 0
+    #: a candidate only on joints that gravity loads
+    gravity_joints_only: ClassVar[bool] = False
+    #: the diagnosis' input-dynamics form ("delay", "lag") of an input effect with memory
+    input_dynamics: ClassVar[str | None] = None
+    #: a constant force on its joint moves its rest position (−k·q + τ0 = −k·(q − τ0/k))
+    absorbs_constant_force: ClassVar[bool] = False
+    #: a constant force (what a spring absorbs)
+    is_constant_force: ClassVar[bool] = False
+    #: the dry friction this one is the breakaway above (a stiction's Coulomb friction)
+    breakaway_above: ClassVar[str | None] = None
+    #: scales the input force
+    scales_input: ClassVar[bool] = False
+    #: what the sensor must resolve for a found value to mean something: "position" (one count)
+    #: or "sample" (one sample period)
+    resolution: ClassVar[str | None] = None
+
+    def __init_subclass__(cls, **kw):
+        super().__init_subclass__(**kw)
+        if "name" in cls.__dict__:
+            if cls.name in EFFECT_KINDS:
+                raise ValueError(f"effect kind {cls.name!r} is registered twice")
+            EFFECT_KINDS[cls.name] = cls()
+
+    def __repr__(self) -> str:
+        return f"<effect kind {self.name}>"
+
+    def law(self, effect: "Effect", smoothing: float, xp) -> Callable[[Any, Any], Any] | None:
+        """Its force f(q_j, q̇_j) in τ_NC; None when it enters the model elsewhere."""
+        return None
+
+    def potential_energy(self, effect: "Effect", q_j):
+        """Its term of the potential (a spring's ½k(q_j − q_ref)²), if ``in_potential``."""
+        return 0.0
+
+    def potential_shift(self, effect: "Effect") -> float:
+        """How far it moves the zero of the system's potential along its joint (δ), if
+        ``shifts_potential``."""
+        return 0.0
+
+    def input_gain(self, effect: "Effect") -> float:
+        """Its share g of the input force's factor (1 + Σ g)."""
+        return 0.0
+
+    def dry_friction_limit(self, effect: "Effect", xp) -> Callable[[Any], Any]:
+        raise ValueError(f"{self.name!r} is not dry friction; expected one of {DRY_FRICTION}")
+
+    def to_mujoco(self, effect: "Effect", dof: int, form: MujocoForm) -> None:
+        """Write it into ``form``: by default its law, through the passive-force callback."""
+        form.laws.setdefault(dof, []).append(effect)
+
+
+class _Spring(EffectKind):
+    name, units, physically_positive = "spring", ("N m/rad", "N/m"), True
+    typical, library_rank, in_potential = (1e-3, 1.0), 1, True
+    absorbs_constant_force = True
+
+    def law(self, effect, smoothing, xp):
+        c, reference = effect.coefficient, effect.reference
+        return lambda q, qd: -c * (q - reference)
+
+    def potential_energy(self, effect, q_j):
+        return 0.5 * effect.coefficient * (q_j - effect.reference) ** 2
+
+    def to_mujoco(self, effect, dof, form):
+        form.stiffness[dof] += effect.coefficient
+        form.stiff_ref[dof] += effect.coefficient * effect.reference
+
+
+class _DryFriction(EffectKind):
+    is_dry_friction, physically_positive = True, True
+
+    def law(self, effect, smoothing, xp):
+        sgn = xp.sign if smoothing <= 0 else (lambda v: xp.tanh(v / smoothing))
+        limit = self.dry_friction_limit(effect, xp)
+        return lambda q, qd: -limit(qd) * sgn(qd)
+
+
+class _CoulombFriction(_DryFriction):
+    name, units, typical, library_rank = "coulomb_friction", ("N m", "N"), (1e-4, 0.1), 2
+
+    def dry_friction_limit(self, effect, xp):
+        c = effect.coefficient
+        return lambda qd: c + 0.0 * qd
+
+
+class _Stiction(_DryFriction):
+    name, units, typical, library_rank = "stiction", ("N m", "N"), (1e-4, 0.1), 3
+    breakaway_above = "coulomb_friction"
+
+    def dry_friction_limit(self, effect, xp):
+        c, v_s = effect.coefficient, effect.stribeck_velocity
+        return lambda qd: c * xp.exp(-((qd / v_s) ** 2))
+
+
+class _ViscousFriction(EffectKind):
+    name, units, physically_positive = "viscous_friction", ("N m s/rad", "N s/m"), True
+    typical, library_rank = (1e-5, 0.1), 4
+
+    def law(self, effect, smoothing, xp):
+        c = effect.coefficient
+        return lambda q, qd: -c * qd
+
+    def to_mujoco(self, effect, dof, form):
+        form.damping[dof] += effect.coefficient
+
+
+class _QuadraticDrag(EffectKind):
+    name, units, physically_positive = "quadratic_drag", ("N m s^2/rad^2", "N s^2/m^2"), True
+    typical, library_rank = (1e-6, 0.01), 5
+
+    def law(self, effect, smoothing, xp):
+        c = effect.coefficient
+        return lambda q, qd: -c * qd * xp.abs(qd)
+
+
+class _ConstantTorque(EffectKind):
+    # the catch-all comes after the specific mechanisms in the library
+    name, units, typical, library_rank = "constant_torque", ("N m", "N"), (1e-4, 0.1), 9
+    is_constant_force = True
+
+    def law(self, effect, smoothing, xp):
+        c = effect.coefficient
+        return lambda q, qd: c + 0.0 * q
+
+
+class _ComOffset(EffectKind):
+    # on a joint loaded by gravity a shifted potential comes first in the library
+    name, units, typical, library_rank = "com_offset", ("rad", "m"), (1e-3, 1e-3), 0
+    gravity_joints_only, resolution, shifts_potential = True, "position", True
+
+    def potential_shift(self, effect):
+        return effect.coefficient
+
+    def to_mujoco(self, effect, dof, form):
+        assert form.shift is not None
+        form.shift[dof] += effect.coefficient
+
+
+class _HystereticSpring(EffectKind):
+    name, units, physically_positive = "hysteretic_spring", ("N m/rad", "N/m"), True
+    has_memory, home = True, "the MuJoCo plant (MujocoBackend), which keeps its state"
+
+    def to_mujoco(self, effect, dof, form):
+        form.neutrals.setdefault(dof, []).append(CableNeutral(effect))
+
+
+class _InputEffect(EffectKind):
+    on_input = True
+
+    def to_mujoco(self, effect, dof, form):
+        pass  # an input effect with memory lives in the env's actuation path (see ``home``)
+
+
+class _InputGain(_InputEffect):
+    name, units, typical, library_rank = "input_gain", ("1", "1"), (0.1, 0.1), 0
+    scales_input = True
+
+    def input_gain(self, effect):
+        return effect.coefficient
+
+    def to_mujoco(self, effect, dof, form):
+        form.gain += effect.coefficient
+
+
+class _InputDelay(_InputEffect):
+    name, units, has_memory, home = "input_delay", ("s", "s"), True, "the env's actuation delay"
+    input_dynamics, resolution = "delay", "sample"
+
+
+class _ActuatorLag(_InputEffect):
+    name, units, has_memory = "actuator_lag", ("s", "s"), True
+    home = "the env's actuation path (ActuatorLag) or MujocoBackend (actuator dynamics)"
+    input_dynamics, resolution = "lag", "sample"
+
+
+def effect_kind(name: str) -> EffectKind:
+    """The registered kind called ``name``; a clear error for an unknown one."""
+    try:
+        return EFFECT_KINDS[name]
+    except KeyError:
+        raise ValueError(f"unknown effect {name!r}; expected one of {tuple(EFFECT_KINDS)}") from None
+
+
+JOINT_EFFECTS = tuple(n for n, k in EFFECT_KINDS.items() if not k.on_input)
+INPUT_EFFECTS = tuple(n for n, k in EFFECT_KINDS.items() if k.on_input)
 #: friction bounded by a law of q̇ that can hold a joint at rest (:meth:`Effect.dry_friction_limit`)
-DRY_FRICTION = ("coulomb_friction", "stiction")
+DRY_FRICTION = tuple(n for n, k in EFFECT_KINDS.items() if k.is_dry_friction)
 #: effects with memory: no Lagrangian (memoryless) form, applied in the env / plant
-STATEFUL_EFFECTS = ("input_delay", "actuator_lag", "hysteretic_spring")
-
-EFFECT_UNITS = {
-    # (angular joint, linear joint)
-    "spring": ("N m/rad", "N/m"),
-    "coulomb_friction": ("N m", "N"),
-    "stiction": ("N m", "N"),
-    "viscous_friction": ("N m s/rad", "N s/m"),
-    "quadratic_drag": ("N m s^2/rad^2", "N s^2/m^2"),
-    "constant_torque": ("N m", "N"),
-    "com_offset": ("rad", "m"),
-    "hysteretic_spring": ("N m/rad", "N/m"),
-    "input_gain": ("1", "1"),
-    "input_delay": ("s", "s"),
-    "actuator_lag": ("s", "s"),
-}
-
+STATEFUL_EFFECTS = tuple(n for n, k in EFFECT_KINDS.items() if k.has_memory)
+EFFECT_UNITS = {n: k.units for n, k in EFFECT_KINDS.items()}
+#: the input effect of each input-dynamics form ("delay", "lag")
+INPUT_DYNAMICS_EFFECTS = {k.input_dynamics: n for n, k in EFFECT_KINDS.items() if k.input_dynamics}
 
 @dataclasses.dataclass(frozen=True)
 class Effect:
     """One physical effect on one joint (``"alpha"``, ``"beta"``, ``"p"``) or on the input (``"u"``).
 
-    ``reference`` is the spring's rest position (a hysteretic spring's first neutral; ignored by
-    other effects); ``stribeck_velocity`` is the stiction's v_s in rad/s or m/s and ``play`` the
+    ``name`` is a registered kind (:data:`EFFECT_KINDS`; :attr:`kind` is its type). ``reference``
+    is the spring's rest position (a hysteretic spring's first neutral; ignored by other
+    effects); ``stribeck_velocity`` is the stiction's v_s in rad/s or m/s and ``play`` the
     hysteretic spring's w in rad or m (each ignored by other effects).
     """
 
@@ -117,12 +336,9 @@ class Effect:
     play: float = 0.0
 
     def __post_init__(self):
-        if self.name not in JOINT_EFFECTS + INPUT_EFFECTS:
-            raise ValueError(
-                f"unknown effect {self.name!r}; expected one of {JOINT_EFFECTS + INPUT_EFFECTS}"
-            )
-        if (self.name in INPUT_EFFECTS) != (self.joint == "u"):
-            where = "the input 'u'" if self.name in INPUT_EFFECTS else "a joint, not 'u'"
+        kind = effect_kind(self.name)
+        if kind.on_input != (self.joint == "u"):
+            where = "the input 'u'" if kind.on_input else "a joint, not 'u'"
             raise ValueError(f"effect {self.name!r} acts on {where}; got joint={self.joint!r}")
         if not (math.isfinite(self.play) and self.play >= 0):
             raise ValueError(f"effect {self.name!r}: play must be >= 0 (rad or m), got {self.play!r}")
@@ -131,6 +347,10 @@ class Effect:
                 f"effect {self.name!r}: stribeck_velocity must be > 0 (rad/s or m/s), "
                 f"got {self.stribeck_velocity!r}"
             )
+
+    @property
+    def kind(self) -> EffectKind:
+        return EFFECT_KINDS[self.name]
 
     def joint_index(self, spec: SystemSpec) -> int:
         """Index of this effect's joint in ``spec``; a clear error for a joint it lacks."""
@@ -144,7 +364,7 @@ class Effect:
     def unit(self, spec: SystemSpec) -> str:
         """Unit of the coefficient on this joint of ``spec`` (angular or linear)."""
         angular = self.joint == "u" or spec.angular[self.joint_index(spec)]
-        return EFFECT_UNITS[self.name][0 if angular else 1]
+        return self.kind.units[0 if angular else 1]
 
     def generalized_force(self, q_j, qd_j, coulomb_smoothing: float = 0.0, xp=jnp):
         """Force on its joint from joint position/velocity (see :meth:`law`). Springs included."""
@@ -156,56 +376,50 @@ class Effect:
         ``coulomb_smoothing`` > 0 replaces sgn(v) by tanh(v / smoothing) (for integrators), in
         Coulomb friction and stiction alike. ``xp``: the namespace of sign/tanh/exp/abs
         (``jax.numpy``: traceable; MuJoCo's passive-force callback passes one for plain floats).
-        ``com_offset`` depends on the whole potential: see :meth:`com_offset_force`.
+        A ``com_offset`` depends on the whole potential: see :meth:`com_offset_force`.
         """
-        c = self.coefficient
-        if self.name == "spring":
-            reference = self.reference
-            return lambda q, qd: -c * (q - reference)
-        if self.name in DRY_FRICTION:
-            smoothing = coulomb_smoothing
-            sgn = xp.sign if smoothing <= 0 else (lambda v: xp.tanh(v / smoothing))
-            limit = self.dry_friction_limit(xp)
-            return lambda q, qd: -limit(qd) * sgn(qd)
-        if self.name == "viscous_friction":
-            return lambda q, qd: -c * qd
-        if self.name == "quadratic_drag":
-            return lambda q, qd: -c * qd * xp.abs(qd)
-        if self.name == "constant_torque":
-            return lambda q, qd: c + 0.0 * q
-        if self.name == "com_offset":
+        law = self.kind.law(self, coulomb_smoothing, xp)
+        if law is not None:
+            return law
+        if self.kind.shifts_potential:
             raise ValueError(
-                "com_offset shifts the system's potential, V(q) -> V(q - δ e_j); its force depends "
+                f"{self.name} shifts the system's potential, V(q) -> V(q - δ e_j); its force depends "
                 "on V: use Effect.com_offset_force(potential, q, spec)"
             )
-        if self.name == "hysteretic_spring":
-            raise ValueError("hysteretic_spring has memory (its moving neutral): use CableNeutral(effect)")
-        raise ValueError(f"{self.name!r} is an input effect, not a joint force")
+        if self.kind.has_memory and not self.kind.on_input:
+            raise ValueError(f"{self.name} has memory (its moving neutral): use CableNeutral(effect)")
+        raise ValueError(f"{self.name!r} is not a force law on a joint (it acts through {self.kind.home or 'the input'})")
 
     def dry_friction_limit(self, xp=jnp) -> Callable[[Any], Any]:
         """The largest force this dry friction exerts, as a law of q̇_j (N·m or N): F_c for
         ``coulomb_friction``, ΔF·exp(−(q̇_j/v_s)²) for ``stiction``. Sliding, the friction is
         −limit·sgn(q̇_j) (:meth:`law`); at rest it holds the joint against any smaller force
         (:func:`furuta_gym.lagrangian.forward_dynamics_with_dry_friction`)."""
-        c = self.coefficient
-        if self.name == "coulomb_friction":
-            return lambda qd: c + 0.0 * qd
-        if self.name == "stiction":
-            v_s = self.stribeck_velocity
-            return lambda qd: c * xp.exp(-((qd / v_s) ** 2))
-        raise ValueError(f"{self.name!r} is not dry friction; expected one of {DRY_FRICTION}")
+        return self.kind.dry_friction_limit(self, xp)
 
     def shift(self, spec: SystemSpec):
-        """δ·e_j: the vector a ``com_offset`` subtracts from q in the potential."""
-        if self.name != "com_offset":
-            raise ValueError(f"shift is the com_offset's δ·e_j; {self.name!r} has none")
-        return jnp.zeros(spec.n_dof).at[self.joint_index(spec)].set(self.coefficient)
+        """δ·e_j: the vector by which it moves the zero of the potential (zero for most kinds)."""
+        return jnp.zeros(spec.n_dof).at[self.joint_index(spec)].set(self.kind.potential_shift(self))
 
     def com_offset_force(self, potential, q, spec: SystemSpec):
-        """Extra generalized force (all joints) of a ``com_offset`` on a system with potential
-        ``potential(q)``: −∇V(q − δe_j) + ∇V(q) (jnp-traceable)."""
+        """Extra generalized force (all joints) of a potential shift (a ``com_offset``) on a system
+        with potential ``potential(q)``: −∇V(q − δe_j) + ∇V(q) (jnp-traceable)."""
         shift = self.shift(spec)
         return jax.grad(potential)(q) - jax.grad(potential)(q - shift)
+
+
+def effects_potential(potential, effects: Sequence[Effect], q, spec: SystemSpec):
+    """``potential`` seen through the effects: its zero moved by their shifts (centre-of-mass
+    offsets), plus their own terms (springs). Written once for every model with effects."""
+    shift = jnp.zeros_like(q)
+    for e in effects:
+        if e.kind.shifts_potential:
+            shift = shift + e.shift(spec).astype(q.dtype)
+    v = potential(q - shift)
+    for e in effects:
+        if e.kind.in_potential:
+            v = v + e.kind.potential_energy(e, q[e.joint_index(spec)])
+    return v
 
 
 class CableNeutral:
@@ -217,7 +431,7 @@ class CableNeutral:
     """
 
     def __init__(self, effect: Effect):
-        if effect.name != "hysteretic_spring":
+        if not isinstance(effect.kind, _HystereticSpring):
             raise ValueError(f"CableNeutral is a hysteretic_spring's neutral; got {effect.name!r}")
         self.stiffness, self.play, self.start = effect.coefficient, effect.play, effect.reference
         self.reset()
@@ -237,7 +451,7 @@ class CableNeutral:
 
 def actuator_lag_time(effects: Sequence[Effect]) -> float:
     """τ of the ``actuator_lag`` among ``effects`` (0.0: none); at most one, τ ≥ 0 finite."""
-    lags = [e.coefficient for e in effects if e.name == "actuator_lag"]
+    lags = [e.coefficient for e in effects if e.kind.input_dynamics == "lag"]
     if len(lags) > 1:
         raise ValueError(
             f"at most one actuator_lag effect (two first-order lags in series are not one "
@@ -302,13 +516,9 @@ class WithEffects(AbstractLagrangianSystem):
     ):
         effects = tuple(effects)
         for e in effects:
-            if e.name in STATEFUL_EFFECTS:
-                where = {
-                    "input_delay": "the env's actuation delay",
-                    "actuator_lag": "the env's actuation path (ActuatorLag) or MujocoBackend (actuator dynamics)",
-                }.get(e.name, "the MuJoCo plant (MujocoBackend), which keeps its state")
+            if e.kind.has_memory:
                 raise ValueError(
-                    f"{e.name} has no memoryless Lagrangian form (it has a state); use {where}"
+                    f"{e.name} has no memoryless Lagrangian form (it has a state); use {e.kind.home}"
                 )
             if e.joint != "u":
                 e.joint_index(base.spec)
@@ -320,26 +530,17 @@ class WithEffects(AbstractLagrangianSystem):
         return self.base.mass_matrix(q)
 
     def potential(self, q):
-        shifted = q
-        for e in self.effects:
-            if e.name == "com_offset":
-                shifted = shifted - e.shift(self.spec).astype(q.dtype)
-        v = self.base.potential(shifted)
-        for e in self.effects:
-            if e.name == "spring":
-                j = e.joint_index(self.spec)
-                v = v + 0.5 * e.coefficient * (q[j] - e.reference) ** 2
-        return v
+        return effects_potential(self.base.potential, self.effects, q, self.spec)
 
     def nonconservative_force(self, q, qd):
         tau = self.base.nonconservative_force(q, qd)
         for e in self.effects:
-            if e.joint == "u" or e.name in ("spring", "com_offset"):
+            if e.kind.on_input or e.kind.in_potential or e.kind.shifts_potential:
                 continue
             j = e.joint_index(self.spec)
             tau = tau.at[j].add(e.generalized_force(q[j], qd[j], self.coulomb_smoothing))
         return tau
 
     def input_force(self, q, qd, u):
-        gain = 1.0 + sum(e.coefficient for e in self.effects if e.name == "input_gain")
+        gain = 1.0 + sum(e.kind.input_gain(e) for e in self.effects)
         return gain * self.base.input_force(q, qd, u)

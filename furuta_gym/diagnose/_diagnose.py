@@ -14,7 +14,7 @@ from scipy.optimize import minimize_scalar
 
 from .._x64 import ensure_x64
 from ..data import DataError, Trajectory, load_trajectories
-from ..effects import Effect, WithEffects
+from ..effects import EFFECT_KINDS, INPUT_DYNAMICS_EFFECTS, Effect, EffectKind, WithEffects
 from ..lagrangian import AbstractLagrangianSystem
 from ..measured import estimate_velocities
 from ..signals import ENCODER_COUNTS_PER_REV
@@ -34,9 +34,9 @@ from ._library import (
 
 __all__ = ["diagnose", "DiagnosisResult", "EffectEvidence", "ErrorSummary", "DiagnosisSettings"]
 
-DELAY = Candidate("input_delay", "u")
-# effects between the logged input and the plant (not memoryless: applied to the input itself)
-INPUT_DYNAMICS = ("input_delay", "actuator_lag")
+# the input dynamics' candidate (a delay or a lag between the logged input and the plant, not
+# memoryless: applied to the input itself; which of the two is decided after it is accepted)
+DELAY = Candidate(INPUT_DYNAMICS_EFFECTS["delay"], "u")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,6 +108,10 @@ class EffectEvidence:
     note: str = ""
     resolved: bool = True  # False: its size is below what the sensor resolves (one count, one sample)
 
+    @property
+    def kind(self) -> EffectKind:
+        return EFFECT_KINDS[self.name]
+
     def to_json(self) -> dict:
         return {
             "name": self.name,
@@ -128,10 +132,10 @@ class EffectEvidence:
 def _spring_rests(effects) -> dict[str, float]:
     """{joint: rest position τ0/k} where ``effects`` hold a positive spring and a constant torque
     on one joint: −k·q + τ0 is one spring whose rest position is not zero (a cable's neutral)."""
-    by = {(e.name, e.joint): e for e in effects}
-    return {j: float(by[("constant_torque", j)].coefficient) / float(e.coefficient)
-            for (name, j), e in by.items()
-            if name == "spring" and e.coefficient is not None and e.coefficient > 0 and ("constant_torque", j) in by}
+    constant = {e.joint: e for e in effects if e.kind.is_constant_force}
+    return {e.joint: float(constant[e.joint].coefficient) / float(e.coefficient)
+            for e in effects if e.kind.absorbs_constant_force and e.joint in constant
+            and e.coefficient is not None and e.coefficient > 0}
 
 
 def _f(x):
@@ -200,9 +204,9 @@ class DiagnosisResult:
         rests = _spring_rests(self.significant)
         out = []
         for e in self.significant:
-            if e.joint in rests and e.name == "spring":
-                out.append(Effect("spring", e.joint, float(e.coefficient), reference=rests[e.joint]))
-            elif not (e.joint in rests and e.name == "constant_torque"):
+            if e.joint in rests and e.kind.absorbs_constant_force:
+                out.append(Effect(e.name, e.joint, float(e.coefficient), reference=rests[e.joint]))
+            elif not (e.joint in rests and e.kind.is_constant_force):
                 out.append(Effect(e.name, e.joint, float(e.coefficient)))
         return out
 
@@ -216,7 +220,7 @@ class DiagnosisResult:
         """The declared model plus the found memoryless effects, as ``WithEffects``."""
         base_theta = np.array(self.theta_after, dtype=float)
         base_theta[len(self.layout.base) :] = 0.0
-        effects = [e for e in self.found if e.name not in INPUT_DYNAMICS]
+        effects = [e for e in self.found if not e.kind.input_dynamics]
         return WithEffects(self.layout.model(base_theta), effects)
 
     def to_json(self) -> dict:
@@ -360,10 +364,10 @@ def _test_segments(test, spec, settings, column_map, signs, offsets, dt) -> list
 
 def _in_span(prob, layout, free, candidate, fixed_idx) -> str | None:
     """Why a candidate cannot be tested (a combination of the model's own regressors), or None."""
-    if candidate.name == "input_delay":
+    if candidate.kind.input_dynamics:
         return None
     j = layout.index(candidate.key)
-    if candidate.name == "input_gain" and layout.learned is None:
+    if candidate.kind.scales_input and layout.learned is None:
         gain_idx = layout.index(system_definition(layout.system).lumped.gain)
         if gain_idx not in fixed_idx:
             return "absorbed: the motor/input gain is a fitted parameter of the declared model"
@@ -563,7 +567,7 @@ def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputD
     ev = _prediction_evidence(found["delay"][0], found["lag"][0])
     lag_wins = ev.passes(fx.settings.min_improvement, fx.settings.z_threshold)
     dyn = _fit.InputDynamics("lag", found["lag"][1]) if lag_wins else _fit.InputDynamics("delay", found["delay"][1])
-    other = ("input_delay", found["delay"][1]) if lag_wins else ("actuator_lag", found["lag"][1])
+    other = (INPUT_DYNAMICS_EFFECTS["delay"], found["delay"][1]) if lag_wins else (INPUT_DYNAMICS_EFFECTS["lag"], found["lag"][1])
     fx.alternative = (f"{other[0]} {other[1]:.4g} s {'fits worse' if lag_wins else 'fits as well'} "
                       f"(validation gain of the lag over the delay {ev.improvement:.1%}, t {ev.z:.1f})")
     fx.notes.append(f"input dynamics: {dyn.kind} {dyn.seconds:.4g} s; {fx.alternative}")
@@ -662,7 +666,7 @@ def _drop_non_physical(fx: _Fitter, accepted, theta, dyn, evidence):
 
 def _non_physical(layout, theta, effects) -> list[str]:
     """Keys of ``effects`` whose coefficient in ``theta`` has the non-physical sign."""
-    return [c.key for c in effects if c.name in _trace_mod.SIGNED and theta[layout.index(c.key)] <= 0]
+    return [c.key for c in effects if c.kind.physically_positive and theta[layout.index(c.key)] <= 0]
 
 
 def _stiction_start(fx: _Fitter, theta, c: Candidate, held: float) -> np.ndarray:
@@ -671,7 +675,7 @@ def _stiction_start(fx: _Fitter, theta, c: Candidate, held: float) -> np.ndarray
     it rests on velocities near zero, which the estimates do not resolve, in intervals the equation
     error mostly leaves out)."""
     start = theta.copy()
-    coulomb = theta[fx.layout.index(f"coulomb_friction:{c.joint}")]
+    coulomb = theta[fx.layout.index(f"{c.kind.breakaway_above}:{c.joint}")]
     start[fx.layout.index(c.key)] = max(coulomb, held - coulomb)
     return start
 
@@ -695,8 +699,8 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
     the joint against ``min_breakaway_ratio`` × its Coulomb level and the model with it does not
     predict significantly worse. Returns (accepted, θ)."""
     s = fx.settings
-    todo = [c for c in library if c.name == "stiction" and c.key not in evidence
-            and f"coulomb_friction:{c.joint}" in {a.key for a in accepted}]
+    todo = [c for c in library if c.kind.breakaway_above and c.key not in evidence
+            and f"{c.kind.breakaway_above}:{c.joint}" in {a.key for a in accepted}]
     if not todo:
         return accepted, theta
     # whether a joint stops within a window depends on its start velocity, which a smoothed
@@ -750,7 +754,7 @@ def _stiction_evidence(pred, trial_pred, measured) -> _trace_mod.Evidence:
 
 def _breakaway_at_least(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBound) -> np.ndarray:
     """θ with the joint's breakaway (Coulomb + ΔF) raised to what its rests held, if it was below."""
-    i, coulomb = fx.layout.index(c.key), theta[fx.layout.index(f"coulomb_friction:{c.joint}")]
+    i, coulomb = fx.layout.index(c.key), theta[fx.layout.index(f"{c.kind.breakaway_above}:{c.joint}")]
     if coulomb + theta[i] >= bound.held:
         return theta
     out = theta.copy()
@@ -765,7 +769,7 @@ def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBoun
     it held, ΔF set again from the refitted model — or None when the rests held no more than
     ``min_breakaway_ratio`` × the Coulomb level (or ΔF comes out non-physical)."""
     s, i = fx.settings, fx.layout.index(c.key)
-    j = fx.layout.index(f"coulomb_friction:{c.joint}")
+    j = fx.layout.index(f"{c.kind.breakaway_above}:{c.joint}")
     ratio = bound.held / base[j] if base[j] > 0 else 0.0
     seen = (f"rests held the joint against up to {bound.held:.3g} ({ratio:.2f}× its Coulomb level, "
             f"{bound.n_windows} windows of {s.rest_window:g} s)")
@@ -873,7 +877,7 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
         if c in accepted:
             ev.coefficient = dyn.seconds if c == DELAY else float(theta[fx.layout.index(c.key)])
             if c == DELAY:
-                ev.name = "actuator_lag" if dyn.kind == "lag" else "input_delay"
+                ev.name = INPUT_DYNAMICS_EFFECTS[dyn.kind]
                 ev.note = "; ".join(x for x in (ev.note, fx.alternative) if x)
             continue
         given = [a for a in accepted if a != c]
@@ -891,8 +895,9 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
         th, d = fit_equation_error(fx.fit_prob, fx.layout, free, fx.theta_fixed, fx.weights, with_delay)
         ev.coefficient = d if c == DELAY else float(th[fx.layout.index(c.key)])
     chosen = [evidence[c.key] for c in accepted]
-    for joint, rest in _spring_rests(chosen).items():
-        ev = evidence[f"constant_torque:{joint}"]
+    rests = _spring_rests(chosen)
+    for ev in (e for e in chosen if e.kind.is_constant_force and e.joint in rests):
+        joint, rest = ev.joint, rests[ev.joint]
         ev.note = "; ".join(x for x in (ev.note, f"with spring:{joint}: its rest position is {rest:.3g} (tau0/k)") if x)
     rest = sorted((e for e in evidence.values() if e.status in ("inconsistent", "tested", "not confirmed")),
                   key=lambda e: -(e.improvement if e.improvement is not None else -np.inf))
@@ -936,9 +941,9 @@ def _mark_unresolved(effects: list[EffectEvidence], resolution: dict[str, float]
         if not e.significant or e.coefficient is None:
             continue
         why = None
-        if e.name == "com_offset" and e.joint in resolution and abs(e.coefficient) < resolution[e.joint]:
+        if e.kind.resolution == "position" and e.joint in resolution and abs(e.coefficient) < resolution[e.joint]:
             why = f"{abs(e.coefficient):.2g} rad is under one encoder count ({resolution[e.joint]:.2g} rad)"
-        elif e.name in INPUT_DYNAMICS and abs(e.coefficient) < dt:
+        elif e.kind.resolution == "sample" and abs(e.coefficient) < dt:
             why = f"{abs(e.coefficient):.2g} s is under one sample period ({dt:.2g} s)"
         if why:
             e.resolved = False

@@ -29,13 +29,13 @@ force in newtons).
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+from typing import Callable, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..effects import DRY_FRICTION, EFFECT_UNITS, INPUT_EFFECTS, JOINT_EFFECTS, STATEFUL_EFFECTS, Effect
+from ..effects import EFFECT_KINDS, Effect, EffectKind, effects_potential
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..models import system_definition
 from ..systems import get_spec
@@ -55,9 +55,13 @@ class Candidate:
     def key(self) -> str:
         return f"{self.name}:{self.joint}"
 
+    @property
+    def kind(self) -> EffectKind:
+        return EFFECT_KINDS[self.name]
+
     def unit(self, spec: SystemSpec) -> str:
         angular = self.joint == "u" or spec.angular[spec.joint_names.index(self.joint)]
-        return EFFECT_UNITS[self.name][0 if angular else 1]
+        return self.kind.units[0 if angular else 1]
 
 
 def nominal_base(system: str) -> dict[str, float]:
@@ -97,7 +101,7 @@ class ParameterLayout:
         spec = get_spec(self.system)
         n_base = len(self.base)
         limit = [0.0 * qd[j] for j in range(spec.n_dof)]
-        for e in _library_effects(theta, self.system, n_base, DRY_FRICTION):
+        for e in _library_effects(theta, self.system, n_base, lambda k: k.is_dry_friction):
             j = e.joint_index(spec)
             limit[j] = limit[j] + jnp.maximum(e.dry_friction_limit()(qd[j]), 0.0)
         return jnp.stack(limit)
@@ -127,20 +131,8 @@ class ParameterLayout:
         spec = get_spec(self.system)
         out = list(np.abs(self.nominal()[: len(self.base)]))
         for c in self.candidates:
-            if c.name == "input_gain":
-                out.append(0.1)
-                continue
-            angular = spec.angular[spec.joint_names.index(c.joint)]
-            typical = {
-                "spring": 1e-3 if angular else 1.0,
-                "coulomb_friction": 1e-4 if angular else 0.1,
-                "stiction": 1e-4 if angular else 0.1,
-                "com_offset": 1e-3,
-                "viscous_friction": 1e-5 if angular else 0.1,
-                "quadratic_drag": 1e-6 if angular else 0.01,
-                "constant_torque": 1e-4 if angular else 0.1,
-            }[c.name]
-            out.append(typical)
+            angular = c.joint == "u" or spec.angular[spec.joint_names.index(c.joint)]
+            out.append(c.kind.typical[0 if angular else 1])
         return np.array(out)
 
 
@@ -148,43 +140,32 @@ def layout_for(system: str, learned: AbstractLagrangianSystem | None = None) -> 
     """The lumped base parameters of ``system`` plus every memoryless library effect; with a
     ``learned`` model, that model (scale 1) instead of the lumped declared model."""
     spec = get_spec(system)
-    # library order breaks ties between effects the data cannot tell apart: the catch-all
-    # constant torque comes after the specific mechanisms
-    # constant torque comes after the specific mechanisms, and on a joint loaded by gravity a
-    # shifted potential (a centre-of-mass offset) comes first
-    generic = [n for n in JOINT_EFFECTS if n not in ("constant_torque", "com_offset", *STATEFUL_EFFECTS)]
-    generic += ["constant_torque"]
+    # library order (each kind's rank) breaks ties between effects the data cannot tell apart
+    kinds = sorted((k for k in EFFECT_KINDS.values() if k.typical is not None and not k.has_memory),
+                   key=lambda k: k.library_rank)
     cands = []
     for j in spec.joint_names:
         gravity = j in system_definition(spec).lumped.gravity_joints
-        cands += [Candidate(n, j) for n in (["com_offset"] if gravity else []) + generic]
-    cands += [Candidate(n, "u") for n in INPUT_EFFECTS if n not in STATEFUL_EFFECTS]
+        cands += [Candidate(k.name, j) for k in kinds if not k.on_input and (gravity or not k.gravity_joints_only)]
+    cands += [Candidate(k.name, "u") for k in kinds if k.on_input]
     if learned is not None:
         return ParameterLayout(spec.name, ("scale",), ("1",), tuple(cands), learned)
     lumped = system_definition(spec).lumped
     return ParameterLayout(system=spec.name, base=lumped.names, base_units=lumped.units, candidates=tuple(cands))
 
 
-def _library_effects(theta, system: str, n_base: int, names) -> list[Effect]:
-    """The library effects ``names`` with their coefficients in ``theta`` (jnp-traceable)."""
+def _library_effects(theta, system: str, n_base: int, which: Callable[[EffectKind], bool]) -> list[Effect]:
+    """The library effects whose kind ``which`` accepts, with their coefficients in ``theta``
+    (jnp-traceable)."""
     cands = layout_for(system).candidates
-    return [Effect(c.name, c.joint, theta[n_base + i]) for i, c in enumerate(cands) if c.name in names]
+    return [Effect(c.name, c.joint, theta[n_base + i]) for i, c in enumerate(cands) if which(c.kind)]
 
 
 def _library_potential(theta, system, n_base, q, declared_potential):
     """The declared potential seen through the centre-of-mass offsets (linear in δ at δ = 0,
     where the equation-error regressors are taken), plus the springs' ½k·q²."""
-    spec = get_spec(system)
-    effects = _library_effects(theta, system, n_base, ("com_offset", "spring"))
-    shift = sum((e.shift(spec) for e in effects if e.name == "com_offset"), jnp.zeros_like(q))
-    v = declared_potential(q - shift)
-    for e in effects:
-        if e.name == "spring":
-            v = v + 0.5 * e.coefficient * q[e.joint_index(spec)] ** 2
-    return v
-
-
-_FORCE_EFFECTS = ("viscous_friction", "quadratic_drag", "constant_torque")
+    effects = _library_effects(theta, system, n_base, lambda k: k.in_potential or k.shifts_potential)
+    return effects_potential(declared_potential, effects, q, get_spec(system))
 
 
 def _library_force(theta, system, n_base, q, qd, dry_friction: bool):
@@ -192,15 +173,19 @@ def _library_force(theta, system, n_base, q, qd, dry_friction: bool):
     (dry friction with sgn(q̇), or left out)."""
     spec = get_spec(system)
     tau = [0.0 * qd[j] for j in range(spec.n_dof)]
-    names = _FORCE_EFFECTS + (DRY_FRICTION if dry_friction else ())
-    for e in _library_effects(theta, system, n_base, names):
+
+    def in_tau_nc(k: EffectKind) -> bool:
+        return (not (k.on_input or k.in_potential or k.shifts_potential)
+                and (dry_friction or not k.is_dry_friction))
+
+    for e in _library_effects(theta, system, n_base, in_tau_nc):
         j = e.joint_index(spec)
         tau[j] = tau[j] + e.generalized_force(q[j], qd[j])
     return jnp.stack(tau)
 
 
 def _library_gain(theta, system, n_base):
-    return 1.0 + sum(e.coefficient for e in _library_effects(theta, system, n_base, ("input_gain",)))
+    return 1.0 + sum(e.coefficient for e in _library_effects(theta, system, n_base, lambda k: k.scales_input))
 
 
 class LumpedModel(AbstractLagrangianSystem):

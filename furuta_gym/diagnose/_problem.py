@@ -48,7 +48,7 @@ def free_columns(layout, chosen: list[Candidate], fixed_idx: set[int]):
     free = np.ones(layout.size, bool)
     free[len(layout.base) :] = False
     for c in chosen:
-        if c.name != "input_delay":
+        if not c.kind.input_dynamics:  # the input dynamics have no column in θ
             free[layout.index(c.key)] = True
     for i in fixed_idx:
         free[i] = False

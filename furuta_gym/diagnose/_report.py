@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..effects import EFFECT_KINDS
 from ..models import system_definition
 from ..systems import get_spec
 from . import _fit
@@ -331,7 +332,7 @@ def _effect_regressor(res, eff, prob):
 
     A missing effect leaves r ≈ −coefficient × x in the declared model's residual. The input
     dynamics have no column in θ; a delay or a lag both first show as −d·u̇ (the delay column)."""
-    if eff.name in ("input_delay", "actuator_lag"):
+    if getattr(EFFECT_KINDS.get(eff.name), "input_dynamics", None):  # an unknown name has a column or none
         x = prob.delay_column(res.theta_before)[:, :, 0]
         return x, f"−(change of u over the interval) × gain, the signature of {eff.name}"
     key = f"{eff.name}:{eff.joint}"

@@ -142,9 +142,9 @@ class _Plant:
         self, system: str, effects: Sequence[Effect], plant: str, dt: float, substeps: int, fine: bool
     ):
         self.dt = dt
-        self.shift = int(round(sum(e.coefficient for e in effects if e.name == "input_delay") / dt))
+        self.shift = int(round(sum(e.coefficient for e in effects if e.kind.input_dynamics == "delay") / dt))
         tau = actuator_lag_time(effects)
-        mem = [e for e in effects if e.name != "input_delay"]
+        mem = [e for e in effects if e.kind.input_dynamics != "delay"]
         self.backend, self.lag = None, None
         if plant == "mujoco":
             from ..envs import MujocoBackend
@@ -155,7 +155,7 @@ class _Plant:
             self.backend = MujocoBackend(system, n, mem, timestep=dt / n if fine else None)
             assert abs(self.backend.control_dt - dt) < 1e-12
         elif plant == "analytic":
-            mem = [e for e in mem if e.name != "actuator_lag"]
+            mem = [e for e in mem if e.kind.input_dynamics != "lag"]
             base = analytic_model(system)
             model = WithEffects(base, mem, coulomb_smoothing=1e-3) if mem else base
             self._rollout = jax.jit(lambda x0, us: rollout_zoh(model, x0, us, dt, substeps))

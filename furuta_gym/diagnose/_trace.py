@@ -91,7 +91,7 @@ def equivalent_pairs(prob, layout, free_base, weights, candidates, threshold: fl
     with the declared model's own free columns projected out, are correlated beyond ``threshold``
     (a pendulum's centre-of-mass offset and a constant torque when the pendulum stays near one
     angle). The input delay is not a column of θ and is never grouped."""
-    cols = [c for c in candidates if c.name != "input_delay"]
+    cols = [c for c in candidates if not c.kind.input_dynamics]
     W = weights[None, :, None]
     X = (prob.R[:, :, free_base] * W).reshape(prob.R.shape[0] * prob.R.shape[1], int(free_base.sum()))
     Q = np.linalg.qr(X / np.maximum(np.linalg.norm(X, axis=0), 1e-300))[0] if X.shape[1] else X
@@ -155,13 +155,13 @@ class Comparer:
 
     def _fit(self, train, effects: list[Candidate], theta_for_delay=None):
         free = free_columns(self.layout, effects, self.fixed_idx)
-        with_delay = any(c.name == "input_delay" for c in effects)
+        with_delay = any(c.kind.input_dynamics for c in effects)
         return fit_equation_error(train, self.layout, free, self.theta_fixed, self.weights, with_delay,
                                   theta_for_delay)
 
     def physical_sign(self, base: list[Candidate], candidate: Candidate) -> bool:
         """Whether ``candidate``, fitted on all fit data beside ``base``, has a physical sign."""
-        if candidate.name not in SIGNED:
+        if not candidate.kind.physically_positive:
             return True
         th, _ = self._fit(self.prob, base + [candidate])
         return bool(th[self.layout.index(candidate.key)] > 0)
@@ -191,7 +191,7 @@ class Comparer:
         n_blocks = int(inv.max()) + 1 if inv.size else 0
         out = np.zeros((n_blocks, len(added)))
         for i, c in enumerate(added):
-            col = test.delay_column(theta)[:, :, 0] if c.name == "input_delay" else test.R[:, :, self.layout.index(c.key)]
+            col = test.delay_column(theta)[:, :, 0] if c.kind.input_dynamics else test.R[:, :, self.layout.index(c.key)]
             out[:, i] = np.bincount(inv.ravel(), weights=((col * self.weights[None]) ** 2).sum(axis=1),
                                     minlength=n_blocks)
         return out
@@ -254,9 +254,6 @@ def _pick(passing, scores, remaining, equivalents):
     pick = next(c for c in remaining if c in group and c in passing)
     return pick, {c.key: pick.key for c in group if c != pick}
 
-
-# effects whose coefficient is positive when physical (restoring or dissipative)
-SIGNED = ("spring", "coulomb_friction", "stiction", "viscous_friction", "quadratic_drag")
 
 
 def search(comparer: Comparer, testable: list[Candidate], s: SearchSettings, equivalents=None):

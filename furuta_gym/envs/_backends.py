@@ -36,7 +36,7 @@ from jax.flatten_util import ravel_pytree
 from .._jaxpr_to_c import CKernel, CKernelError
 from .._x64 import ensure_x64
 from ..assets import asset_path
-from ..effects import STATEFUL_EFFECTS, CableNeutral, Effect, WithEffects, actuator_lag_time
+from ..effects import CableNeutral, Effect, MujocoForm, WithEffects, actuator_lag_time
 from ..lagrangian import AbstractLagrangianSystem
 from ..models import analytic_model, system_definition
 from ..models.checkpoint import load_model
@@ -218,19 +218,19 @@ def apply_parameters(
     spec = get_spec(system)
     n = spec.n_dof
     terms = system_definition(system).write_mujoco(model, p)
-    stiffness, damping = np.array(terms.stiffness, float), np.array(terms.damping, float)
-    stiff_ref = np.zeros(n)  # Σ k·q_ref of the springs
+    form = MujocoForm(np.array(terms.stiffness, float), np.zeros(n), np.array(terms.damping, float), shift=np.zeros(n))
+    for e in effects:  # each kind writes itself: native terms, or laws for the callback
+        e.kind.to_mujoco(e, -1 if e.kind.on_input else e.joint_index(spec), form)
     extra = PassiveForces({dof: cubic for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping))
-                           if any(cubic)}, {}, np.zeros(n))
-    gain = _add_effects(spec, effects, stiffness, stiff_ref, damping, extra)
+                           if any(cubic)}, form.laws, form.shift, form.neutrals)
     # masses changed: refresh MuJoCo's derived constants (e.g. the constant mass of a body that
     # only slides, dof_M0, which the N-MSD uses instead of body_mass)
     mujoco.mj_setConst(model, mujoco.MjData(model) if data is None else data)
-    model.jnt_stiffness[:] = stiffness
-    model.qpos_spring[:] = np.divide(stiff_ref, stiffness, out=np.zeros(n), where=stiffness != 0)
-    model.dof_damping[:] = damping
-    model.actuator_gainprm[0, 0] = gain * terms.motor_gain
-    model.actuator_biasprm[0, :3] = (0.0, 0.0, gain * terms.motor_bias)
+    model.jnt_stiffness[:] = form.stiffness
+    model.qpos_spring[:] = np.divide(form.stiff_ref, form.stiffness, out=np.zeros(n), where=form.stiffness != 0)
+    model.dof_damping[:] = form.damping
+    model.actuator_gainprm[0, 0] = form.gain * terms.motor_gain
+    model.actuator_biasprm[0, :3] = (0.0, 0.0, form.gain * terms.motor_bias)
     tau = actuator_lag_time(effects)
     if tau > 0:
         if model.na != 1:
@@ -240,34 +240,9 @@ def apply_parameters(
             )
         model.actuator_dynprm[0, 0] = tau
     for e in effects:
-        if e.name == "com_offset":
+        if e.kind.shifts_potential:
             _check_gravitational(model, system, e.joint, e.joint_index(spec))
     return extra
-
-
-def _add_effects(spec, effects, stiffness, stiff_ref, damping, extra: PassiveForces) -> float:
-    """Springs and viscous friction into the native terms, the rest into the callback's
-    forces; returns the input gain factor (1 + Σ g)."""
-    gain = 1.0
-    for e in effects:
-        if e.name == "input_gain":
-            gain += e.coefficient
-            continue
-        if e.name in ("input_delay", "actuator_lag"):
-            continue  # the env's input buffer; the actuator dynamics
-        j = e.joint_index(spec)
-        if e.name == "spring":
-            stiffness[j] += e.coefficient
-            stiff_ref[j] += e.coefficient * e.reference
-        elif e.name == "viscous_friction":
-            damping[j] += e.coefficient
-        elif e.name == "com_offset":
-            extra.shift[j] += e.coefficient
-        elif e.name == "hysteretic_spring":
-            extra.neutrals.setdefault(j, []).append(CableNeutral(e))
-        else:
-            extra.effects.setdefault(j, []).append(e)
-    return gain
 
 
 class _FloatMath:
@@ -664,11 +639,11 @@ class ModelBackend(AbstractBackend):
         self.base_model = model
         self.timestep = float(timestep)
         self.substeps = int(substeps)
-        with_state = [e.name for e in effects if e.name in STATEFUL_EFFECTS and e.joint != "u"]
+        with_state = [e.name for e in effects if e.kind.has_memory and not e.kind.on_input]
         if with_state:
             raise ValueError(f"effects {with_state} have memory that a model backend does not keep; "
                              "use the MuJoCo plant (dynamics='mujoco')")
-        self.effects = tuple(e for e in effects if e.name not in STATEFUL_EFFECTS)
+        self.effects = tuple(e for e in effects if not e.kind.has_memory)
         self._n = self.spec.n_dof
         self._scene = None
         # the model's own parameter values (an analytic model may carry non-pinned ones)

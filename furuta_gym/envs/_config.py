@@ -99,6 +99,6 @@ class Actuation:
         steps = check_int("actuation_delay_steps", actuation_delay_steps, 0)
         delay = substeps_of_delay(float(actuation_delay), timestep, "actuation_delay") + steps * frame_skip
         for e in effects:
-            if e.name == "input_delay":
+            if e.kind.input_dynamics == "delay":
                 delay += substeps_of_delay(e.coefficient, timestep, "effect input_delay")
         return cls(delay, actuator_lag_time(effects))

@@ -12,7 +12,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..effects import INPUT_EFFECTS, JOINT_EFFECTS, Effect
+from ..effects import Effect
 from ..models import SYSTEM_DEFINITIONS, parameter_defaults, system_definition
 from ..systems import get_spec
 
@@ -94,8 +94,8 @@ def resolve_effects(
             )
         out.append(e)
     for e in out:
-        if e.name in JOINT_EFFECTS:
+        if not e.kind.on_input:
             e.joint_index(spec)  # clear error for a joint the system lacks
-        elif e.name in INPUT_EFFECTS and e.name == "input_delay" and e.coefficient < 0:
-            raise ValueError(f"input_delay must be >= 0 s, got {e.coefficient}")
+        elif e.kind.input_dynamics and e.coefficient < 0:
+            raise ValueError(f"{e.name} must be >= 0 s, got {e.coefficient}")
     return tuple(out)
