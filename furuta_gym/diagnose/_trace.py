@@ -7,14 +7,17 @@ folds, and the normalised residual sum of squares of the left-out fold is compar
 
 * the **size**: the relative drop of the total held-out sum, 1 − S₁/S₀ ≥ ``min_improvement``;
 * the **consistency**: the t statistic of the per-block log ratios log(S₀,b / S₁,b) ≥
-  ``z_threshold``, each block weighted by what it can say about the candidate: the energy of the
-  candidate's own (weighted) regressor in the block. A log ratio keeps each block's size of
-  improvement (a rank test throws it away) in relative terms; the weight keeps blocks where the
-  candidate hardly acts (a rotor resting, or moving a few counts at high frequency) from counting
-  for or against it, where they would otherwise bury the blocks that carry the evidence (a spring
-  where the rotor wanders, friction where it reverses). The variance is the weighted mean's own
-  (a sandwich estimate over blocks), so the t is honest about how few blocks carry the weight;
-  it grows as √(informative blocks) with more data: more data never weakens a real effect.
+  ``z_threshold``, each block weighted by what it can say about the candidate: e/(e + ē), e the
+  energy of the candidate's own (weighted) regressor in the block and ē its mean over blocks. A
+  log ratio keeps each block's size of improvement (a rank test throws it away) in relative terms;
+  the weight keeps blocks where the candidate hardly acts (a rotor resting, or moving a few counts
+  at high frequency) from counting for or against it, where they would otherwise bury the blocks
+  that carry the evidence (a spring where the rotor wanders, friction where it reverses), and it
+  saturates, so that the active blocks count alike rather than the few with the largest regressor.
+  The input dynamics weigh every block alike (see :meth:`Comparer._regressor_energy`). The
+  variance is the weighted mean's own (a sandwich estimate over blocks), so the t is honest about
+  how few blocks carry the weight; it grows as √(informative blocks) with more data: more data
+  never weakens a real effect.
 
 The search adds, round after round, the candidate with the strongest evidence (largest t) among
 those that pass and have a physical sign, and tests every remaining candidate again against the
@@ -130,6 +133,16 @@ def log_ratio_t(s0: np.ndarray, s1: np.ndarray, weights=None) -> float:
     return _as_normal(mean / np.sqrt(var), 1.0 / float(w @ w) - 1.0)
 
 
+def block_weights(energy: np.ndarray) -> np.ndarray:
+    """Per-block evidence weights from (blocks, candidates) regressor energies: e/(e + ē) per
+    candidate (ē its mean over blocks), averaged over a pair's members. Blocks in which the
+    candidate's regressor is idle weigh almost nothing, so they cannot dilute the evidence, while
+    the active blocks count alike: the evidence is not left to the handful of blocks where the
+    regressor is largest."""
+    mean = np.maximum(energy.mean(axis=0), 1e-300)
+    return (energy / (energy + mean)).mean(axis=1)
+
+
 def _as_normal(t: float, dof: float) -> float:
     """The standard normal quantile with the tail probability of ``t`` under Student's t with
     ``dof`` degrees of freedom (the weights' effective number of blocks − 1): a t carried by a few
@@ -176,22 +189,24 @@ class Comparer:
             w = self.weights
             sums0.append(block_sums(test, th0, w, d0, None, momentum_norm(train, th0, w)))
             sums1.append(block_sums(test, th1, w, d1, th0, momentum_norm(train, th1, w)))
-            energy.append(self._regressor_energy(test, th0, added))
+            energy.append(self._regressor_energy(test, added))
             recordings.append(self.recording_of(test))
-        weights = None
-        if self.weighting == "regressor":
-            e = np.concatenate(energy)  # each candidate's share of its own total, so that a pair's members count alike
-            weights = (e / np.maximum(e.sum(axis=0), 1e-300)).sum(axis=1)
+        weights = None if self.weighting == "uniform" else block_weights(np.concatenate(energy))
         return Evidence.of_sums(np.concatenate(sums0), np.concatenate(sums1), weights, np.concatenate(recordings))
 
-    def _regressor_energy(self, test, theta, added: list[Candidate]) -> np.ndarray:
+    def _regressor_energy(self, test, added: list[Candidate]) -> np.ndarray:
         """(blocks, len(added)): per block of ``test``, the energy of each added candidate's own
-        weighted regressor (the input delay's: its first-order column at ``theta``)."""
+        weighted regressor. The input dynamics count every block alike: their column, the input's
+        rate of change, is present wherever the input moves, and under feedback it is mostly the
+        controller's answer to encoder steps, so its size says nothing of what a block can tell."""
         _, inv = np.unique(test.block_key, axis=0, return_inverse=True)
         n_blocks = int(inv.max()) + 1 if inv.size else 0
         out = np.zeros((n_blocks, len(added)))
         for i, c in enumerate(added):
-            col = test.delay_column(theta)[:, :, 0] if c.kind.input_dynamics else test.R[:, :, self.layout.index(c.key)]
+            if c.kind.input_dynamics:
+                out[:, i] = 1.0
+                continue
+            col = test.R[:, :, self.layout.index(c.key)]
             out[:, i] = np.bincount(inv.ravel(), weights=((col * self.weights[None]) ** 2).sum(axis=1),
                                     minlength=n_blocks)
         return out
@@ -253,7 +268,6 @@ def _pick(passing, scores, remaining, equivalents):
     group = [c for c in remaining if c == best or c.key in equivalents.get(best.key, ())]
     pick = next(c for c in remaining if c in group and c in passing)
     return pick, {c.key: pick.key for c in group if c != pick}
-
 
 
 def search(comparer: Comparer, testable: list[Candidate], s: SearchSettings, equivalents=None):
