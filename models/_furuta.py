@@ -170,20 +170,46 @@ _PINNED = parameter_defaults(FurutaParameters)
 _POINT_MASS_INERTIA = 1e-14
 
 
+def _write_furuta_bodies(model, rotor_inertia, arm, mass, com, pendulum_inertia, g) -> None:
+    """The rotor's inertia about its axis, the pendulum hinge at ``arm`` on it, the pendulum a
+    point ``mass`` at ``com`` down its length plus hinge armature = ``pendulum_inertia`` (about
+    its centre of mass), and gravity ``g``: M and V exactly as the paper's."""
+    rotor, pend = model.body("rotor").id, model.body("pendulum").id
+    model.body_inertia[rotor] = rotor_inertia
+    model.body_pos[pend] = (arm, 0.0, 0.0)
+    model.body_mass[pend] = mass
+    model.body_ipos[pend] = (0.0, 0.0, -com)
+    model.body_inertia[pend] = _POINT_MASS_INERTIA
+    model.dof_armature[:] = (0.0, pendulum_inertia - _POINT_MASS_INERTIA)
+    model.opt.gravity[:] = (0.0, 0.0, -g)
+
+
 def write_furuta_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
     """The QUBE-Servo 2's bodies (the pendulum a point mass at Lp/2 plus hinge armature = the
     rest of Jp) and gravity; viscous friction native, the motor with its back-EMF as bias."""
-    rotor, pend = model.body("rotor").id, model.body("pendulum").id
-    model.body_mass[rotor] = p["mr"]
-    model.body_inertia[rotor] = p["mr"] * p["Lr"] ** 2 / 12.0
-    model.body_pos[pend] = (p["Lr"], 0.0, 0.0)
-    model.body_mass[pend] = p["mp"]
-    model.body_ipos[pend] = (0.0, 0.0, -0.5 * p["Lp"])
-    model.body_inertia[pend] = _POINT_MASS_INERTIA
-    model.dof_armature[:] = (0.0, p["mp"] * p["Lp"] ** 2 / 12.0 - _POINT_MASS_INERTIA)
-    model.opt.gravity[:] = (0.0, 0.0, -p["g"])
+    model.body_mass[model.body("rotor").id] = p["mr"]
+    _write_furuta_bodies(model, p["mr"] * p["Lr"] ** 2 / 12.0, p["Lr"], p["mp"], 0.5 * p["Lp"],
+                         p["mp"] * p["Lp"] ** 2 / 12.0, p["g"])
     return MujocoTerms(stiffness=(0.0, 0.0), damping=(p["c_r"], p["c_p"]),
                        motor_gain=p["kt"] / p["Rm"], motor_bias=-p["kt"] * p["km"] / p["Rm"])
+
+
+def write_furuta_lumped_mujoco(model, b: Mapping[str, float]) -> MujocoTerms:
+    """The lumped parameters (what the diagnosis fits) as bodies: with g pinned, the pendulum's
+    mass m and centre-of-mass distance l from G = m·g·l and J1b = m·l², the arm r from
+    Jc = m·r·l, the rotor's inertia J1 − m·r² and the pendulum's J2 − J1b. The rotor damping
+    c_alpha holds the back-EMF (the data cannot split them), so the motor has no bias."""
+    g = _PINNED["g"]
+    com = b["J1b"] * g / b["G"] if b["G"] > 0 else float("nan")
+    mass, arm = b["G"] / (g * com), b["Jc"] * g / b["G"]
+    rotor_inertia, pendulum_inertia = b["J1"] - mass * arm**2, b["J2"] - b["J1b"]
+    for name, value in (("G", b["G"]), ("J1b", b["J1b"]), ("Jc", b["Jc"]), ("J1 - m*r^2", rotor_inertia),
+                        ("J2 - J1b", pendulum_inertia - _POINT_MASS_INERTIA)):
+        if not value > 0:
+            raise ValueError(f"lumped parameters {dict(b)}: {name} = {value:.3g} must be > 0 for a MuJoCo "
+                             "body (no rigid pendulum on an arm has these values)")
+    _write_furuta_bodies(model, rotor_inertia, arm, mass, com, pendulum_inertia, g)
+    return MujocoTerms(stiffness=(0.0, 0.0), damping=(b["c_alpha"], b["c_beta"]), motor_gain=b["K"])
 
 
 FURUTA_DEFINITION = SystemDefinition(
@@ -232,4 +258,5 @@ FURUTA_DEFINITION = SystemDefinition(
     lumped_values=furuta_lumped,
     energy=furuta_energy,
     write_mujoco=write_furuta_mujoco,
+    write_lumped_mujoco=write_furuta_lumped_mujoco,
 )

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from typing import ClassVar, Mapping
 
 import equinox as eqx
@@ -88,6 +90,13 @@ def write_nmsd_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
                        cubic_damping=(p["b2"],))
 
 
+def write_nmsd_lumped_mujoco(model, b: Mapping[str, float]) -> MujocoTerms:
+    """The lumped parameters are the physical ones, plus the input's gain."""
+    if not b["m"] > 0:
+        raise ValueError(f"lumped parameters {dict(b)}: m = {b['m']:.3g} must be > 0 for a MuJoCo body")
+    return dataclasses.replace(write_nmsd_mujoco(model, b), motor_gain=b["gain"])
+
+
 NMSD_DEFINITION = SystemDefinition(
     spec=NMSD_SPEC,
     title="the N-MSD",
@@ -128,4 +137,5 @@ NMSD_DEFINITION = SystemDefinition(
     lumped_values=dict,
     energy=nmsd_energy,
     write_mujoco=write_nmsd_mujoco,
+    write_lumped_mujoco=write_nmsd_lumped_mujoco,
 )

@@ -130,6 +130,8 @@ class SystemDefinition:
     reproduction's energy figure. ``write_mujoco(model, parameters)``: writes the physical
     parameters' bodies, inertias and gravity into an ``MjModel`` of the system's MJCF and returns
     the rest as :class:`MujocoTerms` (no MuJoCo import needed: it only sets the model's arrays).
+    ``write_lumped_mujoco(model, lumped)``: the same from the lumped form's values (what the
+    diagnosis fits: :class:`furuta_gym.envs.Plant`), or ``None``.
     ``equilibria``: the rest positions whose potential shape (minimum / maximum) the physics
     fixes, each an :class:`Equilibrium`; training checks a learned potential against them.
     """
@@ -163,6 +165,7 @@ class SystemDefinition:
     encoders: bool = False
     scale_fit_on_forced_data: bool = False
     equilibria: tuple[Equilibrium, ...] = ()
+    write_lumped_mujoco: Callable[[Any, Any], MujocoTerms] | None = None
 
     @property
     def name(self) -> str:

@@ -31,6 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "of the analytic one: it is kept as it is, the library's effects are fitted around it")
     parser.add_argument("--json", metavar="OUT", help="write the result as JSON (pinned schema)")
     parser.add_argument("--report", metavar="DIR", help="write figures into DIR")
+    parser.add_argument("--mjcf", metavar="OUT.xml",
+                        help="write the diagnosed plant as MJCF (native terms in their elements, the rest as "
+                             "<custom> data that furuta-gym's plant= reads back)")
     parser.add_argument("--overwrite", action="store_true", help="replace existing --json/--report outputs")
     parser.add_argument(
         "--column-map", metavar="CANON=FILECOL,...",
@@ -62,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnose import write_report_figures as write_figures
     from ..diagnose import write_report_json as write_json
 
-    for out in (args.json,):
+    for out in (args.json, args.mjcf):
         if out and Path(out).exists() and not args.overwrite:
             raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
     trajs = _load(args.data, args)
@@ -87,4 +90,8 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         for p in write_figures(res, args.report, overwrite=args.overwrite):
             print(f"wrote {p}")
+    if args.mjcf:
+        from ..envs import save_mjcf
+
+        print(f"wrote {save_mjcf(res.plant(), args.mjcf, overwrite=args.overwrite)}")
     return 0

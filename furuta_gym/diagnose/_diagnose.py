@@ -15,6 +15,7 @@ from scipy.optimize import minimize_scalar
 from .._x64 import ensure_x64
 from ..data import DataError, Trajectory, load_trajectories
 from ..effects import EFFECT_KINDS, INPUT_DYNAMICS_EFFECTS, Effect, EffectKind, WithEffects
+from ..envs import Plant
 from ..lagrangian import AbstractLagrangianSystem
 from ..measured import estimate_velocities
 from ..signals import ENCODER_COUNTS_PER_REV
@@ -223,6 +224,18 @@ class DiagnosisResult:
         effects = [e for e in self.found if not e.kind.input_dynamics]
         return WithEffects(self.layout.model(base_theta), effects)
 
+    def plant(self) -> Plant:
+        """The diagnosed rig as a simulator: the fitted lumped parameters and the found effects
+        (input delay or lag included) as a :class:`~furuta_gym.envs.Plant`, for
+        ``gym.make(..., plant=res)``, ``MujocoBackend(plant=...)`` and
+        :func:`~furuta_gym.envs.save_mjcf`. A diagnosis of a given (learned) model has none: use
+        :attr:`model_after` as ``dynamics=``."""
+        if self.layout.learned is not None:
+            raise ValueError("a diagnosis of a given model has no MuJoCo plant (its M and V are a "
+                             "network's); pass res.model_after as dynamics= instead")
+        found = ", ".join(f"{e.name}:{e.joint}" for e in self.found) or "no effect"
+        return Plant(self.system, self.parameters_after, tuple(self.found), f"diagnosis ({found})")
+
     def to_json(self) -> dict:
         return {
             "system": self.system,
@@ -237,6 +250,7 @@ class DiagnosisResult:
             "fixed_parameters": self.fixed,
             "notes": self.notes,
             "settings": dataclasses.asdict(self.settings),
+            "plant": None if self.layout.learned is not None else self.plant().to_json(),
         }
 
     def table(self) -> str:

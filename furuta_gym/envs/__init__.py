@@ -11,7 +11,9 @@ See docs/envs.md.
 from ._backends import AbstractBackend, ModelBackend, MujocoBackend, load_checkpoint, make_backend
 from ._base import EnvArgumentError, LagrangianEnv
 from ._config import Actuation, Sensors
+from ._mjcf_out import plant_mjcf, save_mjcf
 from ._parameters import default_parameters
+from ._plant import Plant
 from ._tasks import DEFAULT_STATE_BOUND, FurutaSwingUp, NMSDReach, is_diverged, tolerance
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv
@@ -26,6 +28,9 @@ __all__ = [
     "EnvArgumentError",
     "Sensors",
     "Actuation",
+    "Plant",
+    "save_mjcf",
+    "plant_mjcf",
     "FurutaEnv",
     "NMSDEnv",
     "FurutaSwingUp",

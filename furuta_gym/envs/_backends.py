@@ -43,6 +43,7 @@ from ..models.checkpoint import load_model
 from ..simulate import rk4_step, small_kernel_compiler_options
 from ..systems import get_spec
 from ._parameters import PARAMETER_CLASSES, default_parameters
+from ._plant import Plant
 
 __all__ = [
     "AbstractBackend",
@@ -138,9 +139,16 @@ def load_mjcf(system: str, actuator_lag: bool = False) -> mujoco.MjModel:
     (``data.act`` = u_m, 0 after ``mj_resetData``) that the force uses instead of ``ctrl``; τ is
     written into ``actuator_dynprm[0, 0]`` by :func:`apply_parameters`.
     """
+    if not actuator_lag:
+        return mujoco.MjModel.from_xml_path(str(asset_path(f"{get_spec(system).name}.xml")))
+    return mujoco.MjModel.from_xml_string(mjcf_text(system, actuator_lag))
+
+
+def mjcf_text(system: str, actuator_lag: bool = False) -> str:
+    """The MJCF text :func:`load_mjcf` compiles."""
     path = asset_path(f"{get_spec(system).name}.xml")
     if not actuator_lag:
-        return mujoco.MjModel.from_xml_path(str(path))
+        return path.read_text()
     # the activation changes the model's sizes (na), so it is added before compiling
     root = ET.parse(path).getroot()
     (actuator,) = list(root.find("actuator"))
@@ -151,7 +159,7 @@ def load_mjcf(system: str, actuator_lag: bool = False) -> mujoco.MjModel:
     # derivative counts the decay twice (u_m 4 % short of 1 − 1/e at t = τ, h = τ/5)
     actuator.set("dyntype", "filter")
     actuator.set("dynprm", "1")
-    return mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    return ET.tostring(root, encoding="unicode")
 
 
 @dataclasses.dataclass
@@ -206,6 +214,7 @@ def apply_parameters(
     p: Mapping[str, float],
     effects: Sequence[Effect] = (),
     data: mujoco.MjData | None = None,
+    lumped: bool = False,
 ) -> PassiveForces:
     """Write physical parameters (and the natively expressible effects) into ``model``.
 
@@ -213,11 +222,15 @@ def apply_parameters(
     :class:`PassiveForces`). Springs, viscous friction, the input
     gain and the actuator lag are native (joint stiffness with a combined rest position, joint
     damping, actuator gain and bias, actuator dynamics: ``model`` must then come from
-    ``load_mjcf(system, actuator_lag=True)``).
+    ``load_mjcf(system, actuator_lag=True)``). With ``lumped``, ``p`` holds the lumped form's
+    values (a :class:`~furuta_gym.envs.Plant`'s) instead of the physical parameters.
     """
     spec = get_spec(system)
     n = spec.n_dof
-    terms = system_definition(system).write_mujoco(model, p)
+    definition = system_definition(system)
+    if lumped and definition.write_lumped_mujoco is None:
+        raise ValueError(f"{system} has no MuJoCo form of its lumped parameters (write_lumped_mujoco)")
+    terms = (definition.write_lumped_mujoco if lumped else definition.write_mujoco)(model, p)
     form = MujocoForm(np.array(terms.stiffness, float), np.zeros(n), np.array(terms.damping, float), shift=np.zeros(n))
     for e in effects:  # each kind writes itself: native terms, or laws for the callback
         e.kind.to_mujoco(e, -1 if e.kind.on_input else e.joint_index(spec), form)
@@ -321,8 +334,15 @@ class MujocoBackend(AbstractBackend):
         effects: Sequence[Effect] = (),
         parameters: Mapping[str, float] | None = None,
         timestep: float | None = None,
+        plant: Plant | None = None,
     ):
         self.system = get_spec(system).name
+        self.plant = plant
+        if plant is not None:
+            if plant.system != self.system or effects or parameters:
+                raise ValueError(f"plant= is a whole {plant.system} plant: give it alone (no effects= or "
+                                 f"parameters=) to a {self.system} backend")
+            effects = plant.effects
         self.effects = tuple(effects)
         self.model = load_mjcf(self.system, actuator_lag=actuator_lag_time(self.effects) > 0)
         if timestep is not None:  # default: the MJCF's (what every env uses)
@@ -333,7 +353,7 @@ class MujocoBackend(AbstractBackend):
         self._n = self.spec.n_dof
         self._callback = None
         self._bind_views()
-        self.set_parameters(parameters or default_parameters(self.system))
+        self.set_parameters(parameters or (plant.lumped if plant is not None else default_parameters(self.system)))
 
     def _bind_views(self) -> None:
         # MjData's array attributes build a new NumPy view on every access; the step path reuses
@@ -341,10 +361,12 @@ class MujocoBackend(AbstractBackend):
         self._ctrl, self._qpos, self._qvel = self.data.ctrl, self.data.qpos, self.data.qvel
 
     def set_parameters(self, values: Mapping[str, float]) -> None:
-        nominal = default_parameters(self.system)
+        """Physical parameters (any subset), or for a ``plant=`` backend its lumped ones."""
+        nominal = dict(self.plant.lumped) if self.plant is not None else default_parameters(self.system)
         unknown = sorted(set(values) - set(nominal))
         if unknown:
-            raise ValueError(f"unknown {self.system} parameter(s) {unknown}; expected {list(nominal)}")
+            what = "lumped parameter(s) of its plant" if self.plant is not None else "parameter(s)"
+            raise ValueError(f"unknown {self.system} {what} {unknown}; expected {list(nominal)}")
         self._parameters = {**nominal, **{k: float(v) for k, v in values.items()}}
         self._apply_parameters()
 
@@ -353,7 +375,7 @@ class MujocoBackend(AbstractBackend):
         state survives: mj_setConst works in ``self.data`` and leaves qpos at qpos0."""
         d = self.data
         saved = (d.qpos.copy(), d.qvel.copy(), d.act.copy(), d.time)
-        extra = apply_parameters(self.model, self.system, self._parameters, self.effects, d)
+        extra = apply_parameters(self.model, self.system, self._parameters, self.effects, d, lumped=self.plant is not None)
         d.qpos[:], d.qvel[:], d.act[:], d.time = saved
         self._callback = _passive_callback(extra, self.model) if extra else None
         self._neutrals = [(dof, n) for dof, ns in extra.neutrals.items() for n in ns]

@@ -1,0 +1,156 @@
+"""A diagnosed plant as a simulator: lumped parameters and effects in MuJoCo (exact against the
+lumped Lagrangian model), the MJCF written for other tools and read back, and a diagnosis's
+plant end to end (object, JSON, ``diagnose --mjcf``)."""
+
+import json
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+import furuta_gym.lagrangian as lag
+from furuta_gym.diagnose import diagnose, measured_like
+from furuta_gym.diagnose._library import layout_for
+from furuta_gym.effects import Effect
+from furuta_gym.envs import MujocoBackend, Plant, plant_mjcf, save_mjcf
+
+FURUTA_EFFECTS = (Effect("spring", "alpha", 2e-3, reference=0.1), Effect("coulomb_friction", "alpha", 5e-4),
+                  Effect("viscous_friction", "beta", 1e-5), Effect("com_offset", "beta", 0.01),
+                  Effect("input_gain", "u", -0.1), Effect("actuator_lag", "u", 3e-3))
+NATIVE = (Effect("spring", "alpha", 2e-3, reference=0.1), Effect("viscous_friction", "beta", 1e-5),
+          Effect("input_gain", "u", -0.1), Effect("actuator_lag", "u", 3e-3))
+
+
+def _rollout(backend, x0, n=400):
+    backend.reset(x0)
+    u = np.sin(np.linspace(0.0, 8.0, n))
+    return np.array([backend.step([2.0 * ui]) for ui in u])
+
+
+def _off_nominal(system):
+    """Lumped values away from the pinned model's, still a rigid body on an arm."""
+    nominal = Plant.nominal(system).lumped
+    factors = {"J1": 1.3, "J1b": 0.8, "Jc": 1.1, "J2": 0.9, "G": 1.2, "c_alpha": 2.0, "c_beta": 0.5, "K": 0.9,
+               "m": 1.5, "k1": 0.7, "k2": 2.0, "b1": 1.4, "b2": 0.5, "gain": 1.1}
+    return {k: v * factors[k] for k, v in nominal.items()}
+
+
+@pytest.mark.parametrize("system,effects", [("furuta", FURUTA_EFFECTS[:4] + FURUTA_EFFECTS[5:]),
+                                            ("nmsd", (Effect("spring", "p", 2.0), Effect("input_gain", "u", -0.1)))])
+def test_nominal_plant_is_the_default_plant(system, effects):
+    """(Not with the Furuta's input gain: the lumped form holds the back-EMF in the rotor's damping,
+    where the gain does not scale it, as in the lumped model the diagnosis fits.)"""
+    x0 = np.array([0.1, 0.5, 0.0, 0.0]) if system == "furuta" else np.array([0.2, 0.0])
+    with_plant = _rollout(MujocoBackend(system, plant=Plant.nominal(system, effects)), x0)
+    default = _rollout(MujocoBackend(system, effects=effects), x0)
+    assert np.max(np.abs(with_plant - default)) < 1e-12 * max(1.0, np.max(np.abs(default)))
+
+
+@pytest.mark.parametrize("system", ["furuta", "nmsd"])
+def test_lumped_plant_is_the_lumped_model(system):
+    """Off-nominal lumped values in MuJoCo give the lumped Lagrangian model's M, forces and input
+    to round-off: every lumped parameter lands in MuJoCo, none is lost to the MJCF's fixed ratios."""
+    lumped = _off_nominal(system)
+    backend = MujocoBackend(system, plant=Plant(system, lumped))
+    layout = layout_for(system)
+    model = layout.model(jnp.asarray([lumped[b] for b in layout.base] + [0.0] * len(layout.candidates)))
+    rng = np.random.default_rng(0)
+    n = backend.model.nv
+    for _ in range(20):
+        q, qd, u = rng.uniform(-3, 3, n), rng.uniform(-5, 5, n), rng.uniform(-5, 5, 1)
+        d = backend.data
+        d.qpos[:], d.qvel[:], d.ctrl[:] = q, qd, u
+        with backend.passive_forces():
+            mujoco.mj_forward(backend.model, d)
+        M = np.zeros((n, n))
+        mujoco.mj_fullM(backend.model, d, M)
+        jq, jqd = jnp.asarray(q), jnp.asarray(qd)
+        np.testing.assert_allclose(M, np.asarray(model.mass_matrix(jq)), rtol=1e-9, atol=1e-15)
+        rhs_ref = (lag.potential_derived_force(model, jq, jqd) - lag.coriolis_force(model, jq, jqd)
+                   + model.nonconservative_force(jq, jqd) + model.input_force(jq, jqd, jnp.asarray(u)))
+        rhs = d.qfrc_passive + d.qfrc_actuator - d.qfrc_bias
+        np.testing.assert_allclose(rhs, np.asarray(rhs_ref), rtol=1e-9, atol=1e-12 * np.max(np.abs(rhs)))
+
+
+def test_plant_checks_its_parameters():
+    lumped = dict(Plant.nominal("furuta").lumped)
+    with pytest.raises(ValueError, match=r"missing \['K'\], unknown \['gain'\]"):
+        Plant("furuta", {**{k: v for k, v in lumped.items() if k != "K"}, "gain": 1.0})
+    with pytest.raises(ValueError, match="joint 'p' is not a joint of furuta"):
+        Plant("furuta", lumped, (Effect("spring", "p", 1.0),))
+    with pytest.raises(ValueError, match="J2 - J1b = .* must be > 0"):  # a pendulum lighter than a point mass
+        MujocoBackend("furuta", plant=Plant("furuta", {**lumped, "J2": 0.5 * lumped["J1b"]}))
+    with pytest.raises(ValueError, match="give it alone"):
+        MujocoBackend("furuta", effects=NATIVE, plant=Plant("furuta", lumped))
+
+
+def test_mjcf_round_trips(tmp_path):
+    """The written MJCF: plain MuJoCo steps the native terms exactly as the plant; furuta-gym reads
+    the whole plant back, the callback's effects included; nothing is overwritten."""
+    x0 = np.array([0.1, 0.5, 0.0, 0.0])
+    native = Plant("furuta", _off_nominal("furuta"), NATIVE, "test")
+    path = save_mjcf(native, tmp_path / "rig.xml")
+    plain = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(plain)
+    data.qpos[:], data.qvel[:] = x0[:2], x0[2:]
+    steps = []
+    for ui in np.sin(np.linspace(0.0, 8.0, 400)):
+        data.ctrl[:] = 2.0 * ui
+        mujoco.mj_step(plain, data)
+        steps.append(np.concatenate([data.qpos, data.qvel]))
+    reference = _rollout(MujocoBackend("furuta", plant=native), x0)
+    assert np.max(np.abs(np.array(steps) - reference)) < 1e-10
+
+    full = Plant("furuta", _off_nominal("furuta"), FURUTA_EFFECTS, "test")
+    save_mjcf(full, tmp_path / "full.xml")
+    loaded = Plant.load(tmp_path / "full.xml")
+    assert loaded == full
+    np.testing.assert_array_equal(_rollout(MujocoBackend("furuta", plant=loaded), x0),
+                                  _rollout(MujocoBackend("furuta", plant=full), x0))
+    before = path.read_text()
+    with pytest.raises(FileExistsError, match="rig.xml exists"):
+        save_mjcf(full, path)
+    assert path.read_text() == before
+    (tmp_path / "plain.xml").write_text(plant_mjcf(native).replace("furuta_gym_plant", "other"))
+    with pytest.raises(ValueError, match="not an MJCF written by furuta-gym"):
+        Plant.load(tmp_path / "plain.xml")
+
+
+def test_a_diagnosis_gives_its_plant(tmp_path):
+    """A diagnosed cable spring ends up in the plant, the JSON carries it, ``--mjcf`` writes it."""
+    log = measured_like("furuta", [Effect("spring", "alpha", 5e-3)], seed=3, n_trajectories=4, duration=5.0,
+                        quantize=False)
+    res = diagnose(log, "furuta", candidates=["spring:alpha", "coulomb_friction:alpha"])
+    plant = res.plant()
+    springs = [e for e in plant.effects if e.name == "spring"]
+    assert len(springs) == 1 and springs[0].coefficient == pytest.approx(5e-3, rel=0.2)
+    assert plant.lumped == res.parameters_after and "spring:alpha" in plant.source
+    (tmp_path / "res.json").write_text(json.dumps(res.to_json()))
+    assert Plant.load(tmp_path / "res.json") == plant
+    # the plant predicts the log it came from about as the diagnosed model does
+    tr = log[0]
+    backend = MujocoBackend("furuta", plant=plant)
+    backend.reset(np.concatenate([tr.q[0], np.gradient(tr.q[:5], tr.t[:5], axis=0)[0]]))
+    sim = np.array([backend.step(u)[:2] for u in tr.u[:250]])
+    assert np.sqrt(np.mean((sim[:, 0] - tr.q[1:251, 0]) ** 2)) < 0.05
+
+
+def test_cli_writes_the_mjcf(tmp_path):
+    log = measured_like("furuta", [Effect("spring", "alpha", 5e-3)], seed=3, n_trajectories=4, duration=5.0,
+                        quantize=False)
+    from furuta_gym.data import save_trajectories
+
+    save_trajectories(tmp_path / "log.csv", log, "furuta")
+    out = tmp_path / "rig.xml"
+    cmd = [sys.executable, "-m", "furuta_gym", "diagnose", str(tmp_path / "log.csv"), "--system", "furuta",
+           "--candidates", "spring:alpha", "--mjcf", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert [e.name for e in Plant.load(out).effects] == ["spring"]
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert again.returncode != 0 and "refusing to overwrite" in again.stderr
+    jax.clear_caches()
