@@ -11,6 +11,7 @@ from ._augmented import AbstractAugmentedSystem, AugmentedDeLaN
 from ._delan import DeLaN
 from ._factory import MODEL_KINDS, make_model
 from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
+from ._lumped import LumpedSystem
 from ._system import Equilibrium, LumpedForm, SystemDefinition, first_joint_input, parameter_defaults
 from .checkpoint import CheckpointError, load_model, read_header, save_model
 
@@ -24,6 +25,7 @@ __all__ = [
     "SystemDefinition",
     "Equilibrium",
     "LumpedForm",
+    "LumpedSystem",
     "SYSTEM_DEFINITIONS",
     "system_definition",
     "first_joint_input",
