@@ -7,14 +7,12 @@ folds, and the normalised residual sum of squares of the left-out fold is compar
 
 * the **size**: the relative drop of the total held-out sum, 1 − S₁/S₀ ≥ ``min_improvement``;
 * the **consistency**: the t statistic of the per-block log ratios log(S₀,b / S₁,b) ≥
-  ``z_threshold``, each block weighted by what it can say about the candidate: e/(e + ē), e the
-  energy of the candidate's own (weighted) regressor in the block and ē its mean over blocks. A
-  log ratio keeps each block's size of improvement (a rank test throws it away) in relative terms;
-  the weight keeps blocks where the candidate hardly acts (a rotor resting, or moving a few counts
-  at high frequency) from counting for or against it, where they would otherwise bury the blocks
-  that carry the evidence (a spring where the rotor wanders, friction where it reverses), and it
-  saturates, so that the active blocks count alike rather than the few with the largest regressor.
-  The input dynamics weigh every block alike (see :meth:`Comparer._regressor_energy`). The
+  ``z_threshold``, each block weighted by what it can say about the candidate: the energy of the
+  candidate's own (weighted) regressor in the block. A log ratio keeps each block's size of
+  improvement (a rank test throws it away) in relative terms; the weight keeps blocks where the
+  candidate hardly acts (a rotor resting, or moving a few counts at high frequency) from counting
+  for or against it, where they would otherwise bury the blocks that carry the evidence (a spring
+  where the rotor wanders, friction where it reverses). The input dynamics weigh every block alike (see :meth:`Comparer._regressor_energy`). The
   variance is the weighted mean's own (a sandwich estimate over blocks), so the t is honest about
   how few blocks carry the weight; it grows as √(informative blocks) with more data: more data
   never weakens a real effect.
@@ -134,13 +132,10 @@ def log_ratio_t(s0: np.ndarray, s1: np.ndarray, weights=None) -> float:
 
 
 def block_weights(energy: np.ndarray) -> np.ndarray:
-    """Per-block evidence weights from (blocks, candidates) regressor energies: e/(e + ē) per
-    candidate (ē its mean over blocks), averaged over a pair's members. Blocks in which the
-    candidate's regressor is idle weigh almost nothing, so they cannot dilute the evidence, while
-    the active blocks count alike: the evidence is not left to the handful of blocks where the
-    regressor is largest."""
-    mean = np.maximum(energy.mean(axis=0), 1e-300)
-    return (energy / (energy + mean)).mean(axis=1)
+    """Per-block evidence weights from (blocks, candidates) regressor energies: each block's
+    share of each candidate's own total, summed over a pair's members (so that they count alike).
+    A block weighs what it can say about the candidate; where its regressor is idle, nothing."""
+    return (energy / np.maximum(energy.sum(axis=0), 1e-300)).sum(axis=1)
 
 
 def _as_normal(t: float, dof: float) -> float:
