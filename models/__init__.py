@@ -1,6 +1,6 @@
 """Models implementing the Lagrangian-system protocol (:mod:`furuta_gym.lagrangian`).
 
-Analytic: :class:`Furuta`, :class:`NMSD`. Learned (issue 3): DeLaN, APHYNITY, augmented DeLaN.
+Analytic: :class:`Furuta`, :class:`NMSD`. Learned: DeLaN, APHYNITY, augmented DeLaN.
 """
 
 from ._definitions import SYSTEM_DEFINITIONS, system_definition
@@ -35,7 +35,7 @@ __all__ = [
     "furuta_mass_matrix",
     "furuta_potential",
     "nmsd_potential",
-    # learned (issue 3)
+    # learned
     "AbstractLearnedSystem",
     "AbstractAugmentedSystem",
     "DeLaN",
