@@ -470,8 +470,8 @@ class ActuatorLag:
     :meth:`advance` returns the MEAN of u_m over the interval (the plant then receives the exact
     impulse of the lagged input, held over the interval) and moves u_m to its value at the end.
     MuJoCo instead integrates u_m with the state at every RK4 stage; the two agree to O(dt/τ)
-    of what the lag changes (tests/test_effects_plants.py measures it), where holding u_m's value
-    at the start or the end of the period would be off by O(1) of it.
+    of what the lag changes (tests/test_effects_plants.py measures it); the mean is what keeps
+    the agreement close, where u_m's value at the start or the end of the period would not.
     """
 
     def __init__(self, tau: float, n_inputs: int = 1):
