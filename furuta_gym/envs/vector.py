@@ -20,6 +20,7 @@ not a JAX function: vectorise it with Gymnasium's Sync/Async vector envs — :fu
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Sequence
@@ -38,9 +39,10 @@ from ..models import analytic_model
 from ..signals import quantize_joints
 from ..simulate import small_kernel_compiler_options
 from ._backends import ModelBackend
-from ._base import EnvArgumentError, LagrangianEnv, check_int
+from ._base import LagrangianEnv
 from ._jax_rollout import Rollout, controlled_step, map_chunks, rollout, scan_closed_loop
 from ._parameters import PARAMETER_CLASSES
+from ._settings import EnvArgumentError, check_int
 from ._tasks import divergence_bounds
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv
@@ -215,13 +217,13 @@ class _ConcurrentChunks:
 class LagrangianVectorEnv(VectorEnv):
     """N copies of a model-backed :class:`~furuta_gym.envs.LagrangianEnv`, stepped with ``jax.vmap``.
 
-    Constructor: ``num_envs`` and the single env's keywords (``dynamics`` defaults to
-    ``"analytic"`` here; ``max_voltage``/``max_force``, ``frame_skip``, ``episode_seconds``,
-    ``reset_noise_scale``, ``plant``/``effects`` without delay, ``encoder_counts`` /
-    ``position_resolution``, task keywords). Options that need per-copy Python state in the single
-    env — ``measurement_noise``, ``velocity="filter"``, actuation delays, ``randomize`` — and
-    rendering are rejected with a clear error: use ``gymnasium.make_vec(...,
-    vectorization_mode="sync")`` for those.
+    Constructor: ``num_envs``, how to split the work (``autoreset_mode``, ``chunks``,
+    ``workers``) and the single env's keywords, the same signature (``dynamics`` defaults to
+    ``"analytic"`` here): ``plant`` without delay, ``episode``, ``actuation`` (its limit),
+    ``sensors`` (``encoder_counts`` / ``position_resolution``), ``task``. Options that need
+    per-copy Python state in the single env — ``measurement_noise``, ``velocity="filter"``,
+    actuation delays, ``randomize`` — and rendering are rejected with a clear error: use
+    ``gymnasium.make_vec(..., vectorization_mode="sync")`` for those.
 
     Semantics (the same as a :class:`~gymnasium.vector.SyncVectorEnv` of single envs):
 
@@ -290,7 +292,7 @@ class LagrangianVectorEnv(VectorEnv):
         self._energy_model = eqx.tree_at(
             lambda m: m.params, analytic_model(backend.system), analytic_params
         )
-        self._quantizer = _Quantizer(template.sensors.quantization)
+        self._quantizer = _Quantizer(tuple(float(s) for s in template.encoder_steps))
         self._workers = None
         self._set_task(template.task)
         if workers:
@@ -663,6 +665,20 @@ class LagrangianVectorEnv(VectorEnv):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(num_envs={self.num_envs}, dynamics={type(self.system).__name__})"
+
+
+def _with_env_keywords(init):
+    """``init``'s signature with the single env's keywords in place of its ``**env_kwargs``: the
+    keywords are written once, on :meth:`LagrangianEnv.__init__`."""
+    own = [p for p in inspect.signature(init).parameters.values() if p.kind is not p.VAR_KEYWORD]
+    names = {p.name for p in own}
+    env = [p for name, p in inspect.signature(LagrangianEnv.__init__).parameters.items()
+           if name != "self" and name not in names]
+    init.__signature__ = inspect.Signature(own + env)
+    return init
+
+
+_with_env_keywords(LagrangianVectorEnv.__init__)
 
 
 _ENERGY_CACHE: dict = {}
