@@ -62,8 +62,8 @@ def _check_bool(name: str, value: Any) -> bool:
 
 
 def _number(value: Any) -> float:
-    """``value`` as a float, NaN when it is not a real number (bools are not)."""
-    if isinstance(value, (bool, np.bool_)):
+    """``value`` as a float, NaN when it is not a real number (bools and strings are not)."""
+    if isinstance(value, (bool, np.bool_, str, bytes)):
         return math.nan
     try:
         return float(value)

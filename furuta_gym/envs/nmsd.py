@@ -56,57 +56,62 @@ class NMSDEnv(LagrangianEnv):
     it there. ``dynamics=`` swaps the world as for ``Furuta-v0``.
 
     ## Action Space
-    ``Box(-max_force, max_force, (1,), float64)``
+    ``Box(-max_force, max_force, (1,), dtype)`` (max_force = ``Actuation.max_action``, default
+    20 N), or ``Box(-1, 1, (1,), dtype)`` with ``Spaces(normalize_action=True)``.
 
     | Num | Action | Min        | Max       | Joint | Unit      |
     |-----|--------|------------|-----------|-------|-----------|
     | 0   | force  | −max_force | max_force | p     | force (N) |
 
-    Out-of-range actions are clipped to ±``max_force`` (default 20 N); NaN/inf raises ValueError.
+    Out-of-range actions are clipped to ±max_force; NaN/inf raises ValueError.
 
     ## Observation Space
-    ``Box(-inf, inf, (2,), dtype)`` (default float64), ``(3,)`` with ``observe_target=True``:
+    ``Box(-inf, inf, (2,), dtype)`` (default float64), ``(3,)`` with ``Target(observe=True)``:
 
     | Num | Observation   | Min  | Max | Joint | Unit           |
     |-----|---------------|------|-----|-------|----------------|
     | 0   | position p    | -Inf | Inf | p     | position (m)   |
     | 1   | velocity ṗ    | -Inf | Inf | p     | velocity (m/s) |
-    | 2   | target (only with ``observe_target=True``) | -Inf | Inf | | position (m) |
+    | 2   | target (only with ``Target(observe=True)``) | -Inf | Inf | | position (m) |
 
-    The target is fixed per episode: ``target`` kwarg (a position in m; ``"random"``: uniform in
-    [−1, 1] m drawn at every reset from the env's seeded generator; ``(low, high)``: uniform in
-    that range per reset) or ``reset(options={"target": ...})`` (overrides the draw for that
-    episode). A random target needs ``observe_target=True`` for a policy to see it.
-    ``observation`` must be ``"raw"`` (no angle to wrap).
+    The target is fixed per episode: ``task=Target(position)`` (m, default 0.5; ``"random"``:
+    uniform in [−1, 1] m drawn at every reset from the env's seeded generator; ``(low, high)``:
+    uniform in that range per reset) or ``reset(options={"target": ...})`` (overrides the draw
+    for that episode). A random target needs ``Target(observe=True)`` for a policy to see it.
+    ``Spaces.observation`` must be ``"raw"`` (no angle to wrap).
 
     ## Rewards
     :class:`furuta_gym.envs.NMSDReach`: at target tol(p − target, ±2 cm, margin 0.5 m) × small
     control (4 + tol(u/max_force))/5 × small velocity (1 + tol(ṗ, margin 1 m/s))/2, in [0, 1].
 
     ## Starting State
-    At rest at p = 0 plus uniform noise of ``reset_noise_scale`` (default 0.01), or
+    At rest at p = 0 plus uniform noise of ``Episode.reset_noise_scale`` (default 0.01), or
     ``options={"state": [p, ṗ]}``.
 
     ## Episode End
     Terminated only on divergence (non-finite or |component| > 1e4, ``info["diverged"]``);
-    truncated after ``episode_seconds`` (default 10 s = 1 000 steps).
+    truncated after ``Episode.seconds`` (default 10 s = 1 000 steps).
 
     ## Info
     ``time``, ``energy`` (½mṗ² + ½k1p² + ¼k2p⁴, J), ``diverged``, ``state``, ``action``,
     ``target``.
 
     ## Arguments
-    As ``Furuta-v0`` (``dynamics``, ``kernel``, ``frame_skip`` — 10 ms RK4 steps, default 1 = 100 Hz —,
-    ``episode_seconds``, ``reset_noise_scale``, ``plant`` — ``"coulomb"``, ``"quadratic_drag"``,
-    ``"stiff_spring"``, ``"weak_actuator"``, ``"delay"`` —, ``effects``, ``randomize``,
-    ``position_resolution`` (m), ``measurement_noise``, ``velocity``, ``actuation_delay``
-    (a multiple of 10 ms), ``actuation_delay_steps``, ``render_mode``, ``width``, ``height``),
-    with ``max_force`` (N, default 20) instead of ``max_voltage``, ``target`` (m, default 0.5;
-    ``"random"`` or ``(low, high)``: drawn per reset), ``observe_target`` (bool, default False:
-    append the target to the observation), ``normalize_action`` (actions in [−1, 1] × max_force)
-    and ``dtype`` (``"float32"`` / ``"float64"``). ``encoder_counts`` and an ``observation`` other
-    than ``"raw"`` are refused: the N-MSD has no angle to quantise or wrap. The batched JAX env supports neither a random
-    target nor ``observe_target``: with them ``make_vec`` gives a SyncVectorEnv of single envs.
+    The keywords of ``Furuta-v0`` (`dynamics`, `kernel`, `plant`, `task`, `episode`, `actuation`,
+    `sensors`, `spaces`, `camera`, `render_mode`) with these differences:
+
+    | Setting                      | Default       | Description |
+    |------------------------------|---------------|-------------|
+    | `task`                       | `Target()`    | `Target(position=0.5, observe=False)`: the target (m, `"random"` or `(low, high)`) and whether it is observed |
+    | `Plant.presets`              | `()`          | `"coulomb"`, `"quadratic_drag"`, `"stiff_spring"`, `"weak_actuator"`, `"delay"` |
+    | `Episode.frame_skip`         | `1`           | 10 ms RK4 steps per action (default 100 Hz) |
+    | `Actuation.max_action`       | `20.0` (N)    | force limit; `Actuation.delay` is a multiple of 10 ms |
+    | `Sensors.position_resolution`| `None`        | quantise the observed position (m); `encoder_counts` is refused (no angle) |
+
+    The older plain keywords work as for ``Furuta-v0`` (with ``max_force=`` for the limit,
+    ``target=`` and ``observe_target=`` for the ``Target``), each with a ``DeprecationWarning``.
+    The batched JAX env supports neither a random target nor an observed one: with them
+    ``make_vec`` gives a SyncVectorEnv of single envs.
     """
 
     system: ClassVar[str] = "nmsd"
