@@ -27,6 +27,7 @@ from ._actuation import Actuator, delay_substeps
 from ._backends import AbstractBackend, make_backend
 from ._observation import Observer
 from ._parameters import default_parameters, parse_randomization, randomize_parameters, resolve_effects
+from ._pickling import episode_state, restore_episode
 from ._rendering import SceneRenderer, check_render_mode
 from ._settings import (
     LEGACY_KEYWORDS,
@@ -41,11 +42,38 @@ from ._settings import (
     settings_from_keywords,
 )
 from ._tasks import divergence_bounds
+from ._template import BatchTemplate
 
 __all__ = ["LagrangianEnv", "EnvArgumentError"]
 
 
-class LagrangianEnv(gymnasium.Env):
+def _start_state(state: Any, names: Sequence[str]) -> np.ndarray:
+    """``reset(options={"state": ...})`` as a finite float64 state of the system's shape."""
+    x0 = np.asarray(state, dtype=np.float64)
+    if x0.shape != (len(names),):
+        raise EnvArgumentError(f"options['state'] must have shape ({len(names)},) = {names}, got shape {x0.shape}")
+    if not np.all(np.isfinite(x0)):
+        raise EnvArgumentError(f"options['state'] must be finite, got {x0}")
+    return x0
+
+
+def _as_action(action: Any, name: str) -> tuple[np.ndarray, float]:
+    """Any one-value action as a float64 array of shape (1,) and its value."""
+    u = np.asarray(action, dtype=np.float64)
+    if u.size != 1:
+        raise ValueError(f"action must be a single {name} value (shape (1,)), got shape {u.shape}")
+    u = u.reshape(1)
+    return u, float(u[0])
+
+
+def _clipped(value: float, limit: float) -> float:
+    """An action beyond ±limit clipped to it; NaN or infinite is an error."""
+    if not math.isfinite(value):
+        raise ValueError(f"action must be finite, got {value} (NaN/inf actions are rejected)")
+    return limit if value > 0 else -limit
+
+
+class LagrangianEnv(BatchTemplate, gymnasium.Env):
     """Base of the furuta_gym envs (see :class:`furuta_gym.envs.FurutaEnv` for the user docs).
 
     Subclasses set :attr:`system`, :attr:`env_id`, :attr:`plant_presets` and
@@ -88,14 +116,10 @@ class LagrangianEnv(gymnasium.Env):
     ):
         """See the class docs of :class:`~furuta_gym.envs.FurutaEnv` (the same keywords for
         every system and for the batched :class:`~furuta_gym.envs.vector.LagrangianVectorEnv`)."""
-        settings = settings_from_keywords(
-            type(self).__name__,
-            dict(plant=plant, task=task, episode=episode, actuation=actuation, sensors=sensors,
-                 spaces=spaces, camera=camera),
-            {**SETTINGS_TYPES, "task": self.task_settings_type},
-            legacy,
-            self.legacy_keywords,
-        )
+        given = dict(plant=plant, task=task, episode=episode, actuation=actuation, sensors=sensors,
+                     spaces=spaces, camera=camera)
+        types = {**SETTINGS_TYPES, "task": self.task_settings_type}
+        settings = settings_from_keywords(type(self).__name__, given, types, legacy, self.legacy_keywords)
         # for pickling: rebuilt from the settings objects
         self._init_kwargs = dict(dynamics=dynamics, kernel=kernel, render_mode=render_mode, **settings)
         self.plant, self.task_settings = settings["plant"], settings["task"]
@@ -152,7 +176,6 @@ class LagrangianEnv(gymnasium.Env):
     def _init_observation(self) -> None:
         """The sensor model, the observation layout, dtype and action scale, the system's own."""
         self._observer = Observer(self._spec, self.sensors, self.spaces, self.dt, lambda: self.np_random)
-        self._filter = self._observer.filter
         self.velocity = self.sensors.velocity
         self.observation = self.spaces.observation
         self.dtype = np.dtype(self.spaces.dtype)
@@ -160,12 +183,8 @@ class LagrangianEnv(gymnasium.Env):
         self._action_high = 1.0 if self.normalize_action else self.max_action
         self._configure()
         # obs is the backend's state array itself: no sensor model, raw, float64
-        self._exact_observation = (
-            self._observer.exact_sensors
-            and self.observation == "raw"
-            and self.dtype == np.float64
-            and not self._extra_observation_size()
-        )
+        self._exact_observation = (self._observer.exact_sensors and self.observation == "raw"
+                                   and self.dtype == np.float64 and not self._extra_observation_size())
 
     @property
     def task(self):
@@ -180,69 +199,6 @@ class LagrangianEnv(gymnasium.Env):
         self._state_bound = self._observer.state_bound = float(task.state_bound)
         # angles are never bounded: a rotor may turn for ever (only a non-finite angle diverges)
         self._bounds = divergence_bounds(task.state_bound, self._spec.angular)
-
-    # ------------------------------------------------------------------ read-only settings
-    # (what a batched copy of this env needs to know; see vector.py)
-    @property
-    def system_spec(self):
-        """The system's :class:`~furuta_gym.lagrangian.SystemSpec` (joints, state and input names)."""
-        return self._spec
-
-    @property
-    def encoder_steps(self) -> np.ndarray:
-        """Quantisation step of each measured joint position (0: exact), in rad or m."""
-        return self._observer.quant.copy()
-
-    def presentation_options(self) -> list[str]:
-        """The configured non-default observation / action presentation (``observation``,
-        ``dtype``, ``normalize_action``): what the batched JAX env does not reproduce."""
-        options = []
-        if self.observation != "raw":
-            options.append(f"observation={self.observation!r}")
-        if self.dtype != np.float64:
-            options.append(f"dtype={self.dtype.name!r}")
-        if self.normalize_action:
-            options.append("normalize_action=True")
-        return options
-
-    @property
-    def max_episode_steps(self) -> int | None:
-        """env.steps before truncation (None: never truncated)."""
-        return self._max_steps
-
-    def per_episode_state_features(self) -> list[str]:
-        """The configured sensor / plant options whose effect depends on more than the state and
-        the step count (random draws or a signal history): what a stateless batched copy cannot
-        reproduce. Empty for a deterministic, memoryless env."""
-        features = []
-        if np.any(self._observer.noise):
-            features.append("measurement_noise")
-        if self._filter is not None:
-            features.append("velocity='filter'")
-        if self._has_delay:
-            features.append("actuation delay (actuation_delay, actuation_delay_steps, "
-                            "plant='delay' or an input_delay effect)")
-        if self._lag_tau > 0:
-            features.append("actuator_lag (the lagged input is a state)")
-        if self._randomize:
-            features.append("randomize")
-        return features
-
-    def sample_initial_state(self, rng: np.random.Generator | None) -> np.ndarray:
-        """A start state drawn from this env's initial-state distribution with ``rng`` (what
-        :meth:`reset` draws with its own generator; the nominal start without ``rng``)."""
-        return self._initial_state(rng)
-
-    def apply_reset_options(self, options: Mapping[str, Any]) -> None:
-        """Apply the system-specific reset options (``reset_option_names`` other than ``state``,
-        e.g. N-MSD's ``target``) to the task without starting an episode; unknown keys are an
-        error."""
-        unknown = sorted(set(options) - set(self.reset_option_names))
-        if unknown:
-            raise EnvArgumentError(
-                f"unknown reset option(s) {unknown}; expected any of {sorted(self.reset_option_names)}"
-            )
-        self._options(options)
 
     # ------------------------------------------------------------------ subclass hooks
     def _make_task(self):
@@ -297,15 +253,8 @@ class LagrangianEnv(gymnasium.Env):
                 randomize_parameters(self._nominal_parameters, self._randomize, self.np_random)
             )
             self._on_parameters(self.physical_parameters())
-        if "state" in options and options["state"] is not None:
-            x0 = np.asarray(options["state"], dtype=np.float64)
-            if x0.shape != (2 * self._n,):
-                raise EnvArgumentError(
-                    f"options['state'] must have shape ({2 * self._n},) = {self._spec.state_names}, "
-                    f"got shape {x0.shape}"
-                )
-            if not np.all(np.isfinite(x0)):
-                raise EnvArgumentError(f"options['state'] must be finite, got {x0}")
+        if options.get("state") is not None:
+            x0 = _start_state(options["state"], self._spec.state_names)
         else:
             x0 = self._initial_state(self.np_random)
         self._reset_episode(x0)
@@ -346,18 +295,9 @@ class LagrangianEnv(gymnasium.Env):
             u = action
             value = float(action[0])
         else:
-            u = np.asarray(action, dtype=np.float64)
-            if u.size != 1:
-                raise ValueError(
-                    f"action must be a single {self._spec.input_names[0]} value (shape (1,)), "
-                    f"got shape {u.shape}"
-                )
-            u = u.reshape(1)
-            value = float(u[0])
+            u, value = _as_action(action, self._spec.input_names[0])
         if not -limit <= value <= limit:  # also catches NaN
-            if not math.isfinite(value):
-                raise ValueError(f"action must be finite, got {value} (NaN/inf actions are rejected)")
-            value = limit if value > 0 else -limit
+            value = _clipped(value, limit)
             u = np.array([value])
         if self.normalize_action:
             value *= self.max_action
@@ -425,40 +365,7 @@ class LagrangianEnv(gymnasium.Env):
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self):
-        # rebuild from the constructor's settings, then restore the episode and its memory
-        actuator = self._actuator
-        return {
-            "kwargs": self._init_kwargs,
-            "x": self._x,
-            "steps": self._steps,
-            "diverged": self._diverged,
-            "parameters": self.backend.parameters,
-            "np_random": self._np_random,
-            "task": self.task,
-            "u": self._u,
-            "last_obs": self._last_obs,
-            "buffer": list(actuator.buffer) if self._has_delay else None,
-            "lag": actuator.lag.state.copy() if actuator is not None and actuator.lag is not None
-            else getattr(self.backend, "lagged_input", None),
-            "filter_z": None if self._filter is None else np.array(self._filter._z),
-        }
+        return episode_state(self)
 
     def __setstate__(self, state):
-        self.__init__(**state["kwargs"])
-        self.task = state["task"]
-        if state["parameters"] != self.backend.parameters:
-            self.backend.set_parameters(state["parameters"])
-            self._on_parameters(self.physical_parameters())
-        self._reset_episode(state["x"])  # (may draw sensor noise: restore the RNG after it)
-        self._np_random = state["np_random"]
-        self._steps, self._diverged, self._u = state["steps"], state["diverged"], state["u"]
-        self._last_obs = state["last_obs"]
-        if state["buffer"] is not None:
-            self._actuator.buffer.extend(state["buffer"])
-        if state["lag"] is not None:
-            if self._actuator is not None and self._actuator.lag is not None:
-                self._actuator.lag.state = np.array(state["lag"], dtype=np.float64)
-            elif getattr(self.backend, "lagged_input", None) is not None:
-                self.backend.lagged_input = state["lag"]
-        if state["filter_z"] is not None:
-            self._filter._z = np.array(state["filter_z"])
+        restore_episode(self, state)

@@ -170,7 +170,8 @@ class NMSDEnv(LagrangianEnv):
         return features
 
     def presentation_options(self) -> list[str]:
-        return super().presentation_options() + (["Target(observe=True) (observe_target=True)"] if self.observe_target else [])
+        observed = ["Target(observe=True) (observe_target=True)"] if self.observe_target else []
+        return super().presentation_options() + observed
 
     def _info(self, diverged):
         info = super()._info(diverged)
