@@ -22,6 +22,7 @@ import contextlib
 import dataclasses
 import math
 import os
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -33,7 +34,7 @@ import mujoco
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from .._jaxpr_to_c import CKernel, CKernelError
+from .._ckernel import CKernel, CKernelError, CKernelTranslationError, CKernelWarning
 from .._x64 import ensure_x64
 from ..assets import asset_path
 from ..effects import STATEFUL_EFFECTS, CableNeutral, Effect, WithEffects, actuator_lag_time
@@ -543,7 +544,7 @@ class _XlaStepper:
 
 
 class _CStepper:
-    """The same period step lowered to one C function (:mod:`furuta_gym._jaxpr_to_c`), called
+    """The same period step lowered to one C function (:mod:`furuta_gym._ckernel`), called
     on fixed numpy buffers: the model's arrays are copied in once per model, the state is
     updated in place. A DeLaN step takes ~5 µs where one XLA call costs ~19 µs, mostly fixed
     dispatch and per-kernel overheads."""
@@ -562,6 +563,8 @@ class _CStepper:
         self._has_state = False
         self._period = self._bind("period")  # built now: a model C cannot take fails here
         self._split = None
+        self._xla_split = None
+        self._xla_arguments = (static, rebuild, treedef_key, timestep, substeps)
 
     def _kernel(self, which: str):
         """The compiled kernel of this model structure, or the CKernelError it gave: a failure is
@@ -580,6 +583,9 @@ class _CStepper:
                     kernel = CKernel(split, self._dynamic, x, u, np.int64(0), u, name=f"split step of {self._model_name}")
             except CKernelError as exc:
                 kernel = exc
+                if isinstance(exc, CKernelTranslationError):  # once per model structure: cached below
+                    warnings.warn(f"the {which} step of {self._model_name} has no C translation, XLA "
+                                  f"steps it: {exc}", CKernelWarning, stacklevel=2)
             try:
                 _C_KERNEL_CACHE[key] = kernel
             except TypeError:  # unhashable static structure: no sharing, still correct
@@ -611,8 +617,14 @@ class _CStepper:
         return self._x_buf.copy()
 
     def step_split(self, u_first, n_first: int, u) -> np.ndarray:
-        if self._split is None:
-            self._split = self._bind("split")
+        if self._split is None and self._xla_split is None:
+            try:
+                self._split = self._bind("split")
+            except CKernelError:  # the period step stays C; this one XLA (warned if untranslatable)
+                self._xla_split = _compiled_steps(*self._xla_arguments)[1]
+        if self._xla_split is not None:
+            self._x_buf[:] = np.asarray(self._xla_split(self._dynamic, jnp.asarray(self._x_buf), u_first, n_first, u))
+            return self._x_buf.copy()
         call, (u_first_buf, n_buf, u_buf) = self._split
         u_first_buf[:] = u_first
         n_buf[...] = n_first
@@ -637,7 +649,7 @@ class ModelBackend(AbstractBackend):
     ``kernel`` chooses what runs the period step (the same JAX function either way):
 
     * ``"c"``: the step's jaxpr lowered to one C function and compiled with the system's C
-      compiler (:mod:`furuta_gym._jaxpr_to_c`; cached on disk, ~1–2 s the first time). A single
+      compiler (:mod:`furuta_gym._ckernel`; cached on disk, ~1–2 s the first time). A single
       env steps 3–4× faster than through XLA, whose fixed cost per call dominates one small step.
     * ``"xla"``: one jitted XLA call per step.
     * ``"auto"`` (default): ``"c"`` when a C compiler is on PATH and every primitive of the model's
