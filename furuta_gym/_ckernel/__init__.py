@@ -1,14 +1,14 @@
 """A small JAX function lowered to C and compiled with the system's C compiler.
 
-Why: one XLA:CPU execution costs a fixed ~6 µs to call plus ~100 ns per kernel, whatever the
-arithmetic. A single learned-model env step (one RK4 step of a 2-DOF DeLaN: ~12 k multiply-adds
-in ~1 500 tiny operations) spends most of its ~19 µs there. The same program written out as one C
-function runs in a few µs.
+Why: one XLA:CPU execution has a fixed cost per call and per kernel, whatever the arithmetic, and
+a single learned-model env step (one RK4 step of a small DeLaN, many tiny operations) spends most
+of its time there. The same program written out as one C function avoids both (docs/envs.md and
+BENCHMARKS.md have the numbers).
 
 The spine is unchanged: JAX still derives the dynamics (forward dynamics by autodiff of the
 Lagrangian, the integrator), and :class:`CKernel` only translates the resulting jaxpr, primitive by
-primitive, with every shape static. Nothing is re-derived by hand; a primitive this module does not
-know is one clear error naming it.
+primitive, with every shape static. Nothing is re-derived by hand; a primitive this package does
+not know is one clear error naming it.
 
 The translation keeps XLA's arithmetic (float64, no fast-math, NaN propagating through
 max/min/sign; only a dot product's sum may be split into SIMD lanes, as XLA's own blocked sums

@@ -59,7 +59,7 @@ class CKernel:
 
     ``example_args`` fix the shapes and dtypes (a pytree of arrays; only the leaves' shapes and
     dtypes are used). :meth:`bind` returns a zero-argument callable over fixed numpy buffers:
-    write inputs into ``inputs[k]``, call, read ``outputs[k]`` — the form that costs ~1 µs per
+    write inputs into ``inputs[k]``, call, read ``outputs[k]`` — the form with the least cost per
     call. An output buffer may also be an input buffer (an in-place update): the results are
     staged and written out after the last input is read.
     """

@@ -546,8 +546,7 @@ class _XlaStepper:
 class _CStepper:
     """The same period step lowered to one C function (:mod:`furuta_gym._ckernel`), called
     on fixed numpy buffers: the model's arrays are copied in once per model, the state is
-    updated in place. A DeLaN step takes ~5 µs where one XLA call costs ~19 µs, mostly fixed
-    dispatch and per-kernel overheads."""
+    updated in place: no XLA dispatch or per-kernel overhead, which dominate one small step."""
 
     name = "c"
 
@@ -649,8 +648,9 @@ class ModelBackend(AbstractBackend):
     ``kernel`` chooses what runs the period step (the same JAX function either way):
 
     * ``"c"``: the step's jaxpr lowered to one C function and compiled with the system's C
-      compiler (:mod:`furuta_gym._ckernel`; cached on disk, ~1–2 s the first time). A single
-      env steps 3–4× faster than through XLA, whose fixed cost per call dominates one small step.
+      compiler (:mod:`furuta_gym._ckernel`; cached on disk, built once per model structure).
+      A single env steps several times faster than through XLA, whose fixed cost per call
+      dominates one small step (BENCHMARKS.md).
     * ``"xla"``: one jitted XLA call per step.
     * ``"auto"`` (default): ``"c"`` when a C compiler is on PATH and every primitive of the model's
       step has a C translation, else ``"xla"``; :attr:`kernel` says which, and

@@ -89,12 +89,13 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
     vector_entry_point: ClassVar[str | None] = None
     #: named plant variants (``Plant(presets=...)``): the ground truth plus effects it lacks
     plant_presets: ClassVar[Mapping[str, tuple[Effect, ...]]] = {"nominal": ()}
-    #: the action limit when ``Actuation.max_action`` is None, and its former keyword
+    #: the action limit when ``Actuation.max_action`` is None, and its former plain keyword
     default_max_action: ClassVar[float]
     action_limit_name: ClassVar[str]
     #: the type of the ``task=`` settings (None: the system's task has none)
     task_settings_type: ClassVar[type | None] = None
-    #: the plain keywords this env took before its settings were objects (see ``_settings``)
+    #: the plain keywords this env took before its settings were objects (see ``_settings``),
+    #: besides its ``action_limit_name``
     legacy_keywords: ClassVar[Mapping[str, tuple[str, str]]] = LEGACY_KEYWORDS
     reset_option_names: ClassVar[tuple[str, ...]] = ("state",)
     default_camera_config: ClassVar[dict[str, Any]] = {}
@@ -119,7 +120,8 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
         given = dict(plant=plant, task=task, episode=episode, actuation=actuation, sensors=sensors,
                      spaces=spaces, camera=camera)
         types = {**SETTINGS_TYPES, "task": self.task_settings_type}
-        settings = settings_from_keywords(type(self).__name__, given, types, legacy, self.legacy_keywords)
+        table = {**self.legacy_keywords, self.action_limit_name: ("actuation", "max_action")}
+        settings = settings_from_keywords(type(self).__name__, given, types, legacy, table)
         # for pickling: rebuilt from the settings objects
         self._init_kwargs = dict(dynamics=dynamics, kernel=kernel, render_mode=render_mode, **settings)
         self.plant, self.task_settings = settings["plant"], settings["task"]

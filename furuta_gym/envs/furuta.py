@@ -6,7 +6,6 @@ from typing import ClassVar, Mapping
 
 from ..effects import Effect
 from ._base import LagrangianEnv
-from ._settings import LEGACY_KEYWORDS
 from ._tasks import FurutaSwingUp
 
 __all__ = ["FurutaEnv"]
@@ -163,8 +162,6 @@ class FurutaEnv(LagrangianEnv):
     vector_entry_point: ClassVar[str | None] = "furuta_gym.envs.vector:furuta_vector_entry_point"
     default_max_action: ClassVar[float] = 5.0
     action_limit_name: ClassVar[str] = "max_voltage"
-    legacy_keywords: ClassVar[Mapping[str, tuple[str, str]]] = {
-        **LEGACY_KEYWORDS, "max_voltage": ("actuation", "max_action")}
     # magnitudes visible within a few seconds that leave the pendulum controllable
     plant_presets: ClassVar[Mapping[str, tuple[Effect, ...]]] = {
         "nominal": (),

@@ -129,8 +129,7 @@ class NMSDEnv(LagrangianEnv):
     default_max_action: ClassVar[float] = 20.0
     task_settings_type: ClassVar[type | None] = Target
     legacy_keywords: ClassVar[Mapping[str, tuple[str, str]]] = {
-        **LEGACY_KEYWORDS, "max_force": ("actuation", "max_action"), "target": ("task", "position"),
-        "observe_target": ("task", "observe")}
+        **LEGACY_KEYWORDS, "target": ("task", "position"), "observe_target": ("task", "observe")}
     #: (low, high) of a random target per reset, None for a fixed target
     _target_range: tuple[float, float] | None = None
     reset_option_names: ClassVar[tuple[str, ...]] = ("state", "target")

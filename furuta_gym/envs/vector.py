@@ -1,4 +1,4 @@
-"""Batched model-backed envs: N copies stepped by one jitted, vmapped JAX call (issue 4, item 3).
+"""Batched model-backed envs: N copies stepped by one jitted, vmapped JAX call.
 
 :class:`FurutaVectorEnv` and :class:`NMSDVectorEnv` are :class:`gymnasium.vector.VectorEnv`\\ s
 over a *model* backend (``dynamics="analytic"``, a checkpoint path, or any
