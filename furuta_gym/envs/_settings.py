@@ -17,9 +17,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import sys
 import warnings
 from typing import Any, Mapping, Sequence
 
+import gymnasium
 import numpy as np
 
 from ..effects import Effect
@@ -325,7 +328,7 @@ def settings_from_keywords(owner: str, settings: dict[str, Any], types: Mapping[
                  for target, values in fields.items()]
         warnings.warn(
             f"{owner}: the keyword(s) {', '.join(k + '=' for k in legacy)} are deprecated; write "
-            f"{', '.join(hints)} (furuta_gym.envs)", DeprecationWarning, stacklevel=4)
+            f"{', '.join(hints)} (furuta_gym.envs)", DeprecationWarning, stacklevel=_outside_stacklevel())
     for keyword, value in legacy.items():
         target, field = table[keyword]
         try:
@@ -333,3 +336,17 @@ def settings_from_keywords(owner: str, settings: dict[str, Any], types: Mapping[
         except EnvArgumentError as exc:
             raise EnvArgumentError(f"{keyword}={value!r}: {exc}") from None
     return out
+
+
+#: the folders whose frames a deprecation warning skips to point at the user's line
+_INTERNAL = tuple(os.path.dirname(m.__file__) + os.sep for m in (gymnasium, sys.modules[__name__.split(".")[0]]))
+
+
+def _outside_stacklevel() -> int:
+    """The ``warnings.warn`` stacklevel, from its caller, of the first frame outside furuta_gym
+    and Gymnasium: the user's line, whether the env was made directly, by ``gymnasium.make`` or
+    by a vector env."""
+    frame, level = sys._getframe(1), 1
+    while frame is not None and frame.f_code.co_filename.startswith(_INTERNAL):
+        frame, level = frame.f_back, level + 1
+    return level
