@@ -159,11 +159,11 @@ def main(argv=None) -> int:
         near_rest_starts, pick_k_e,
     )
     from furuta_gym.effects import WithEffects
-    from furuta_gym.envs import PLANT_PRESETS
+    from furuta_gym.envs import PLANT_PRESETS, Episode, Sensors
     from furuta_gym.models import Furuta
 
     def env_factory(**kw):
-        return lambda: gym.make("furuta_gym/Furuta-v0", episode_seconds=None, **kw)
+        return lambda: gym.make("furuta_gym/Furuta-v0", episode=Episode(seconds=None), **kw)
 
     def starts(n):
         return np.concatenate([np.zeros((1, 4)), near_rest_starts(n, args.seed, False)])
@@ -192,7 +192,7 @@ def main(argv=None) -> int:
     run("swing-up + LQR (volts)", "analytic", "mujoco cable_spring", ctrl, n, plant="cable_spring")
     run("swing-up + LQR (volts)", "analytic", "mujoco coulomb", ctrl, n, plant="coulomb")
     run("swing-up + LQR (volts)", "analytic", "mujoco, encoders + filtered velocity", ctrl, n2,
-        encoder_counts=2048, velocity="filter")
+        sensors=Sensors(encoder_counts=2048, velocity="filter"))
     for preset in ("quadratic_drag", "weak_motor", "delay"):
         run("swing-up + LQR (volts)", "analytic", f"mujoco {preset}", ctrl, n2, plant=preset)
     ctrl_pfl = SwingUpLQR.from_model(model, acts_on="pfl")

@@ -55,13 +55,14 @@ def main(argv=None) -> int:
     from furuta_gym.controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
     from furuta_gym.datasets import load_qube_closed_loop
     from furuta_gym.diagnose import diagnose
+    from furuta_gym.envs import Episode, Plant
     from furuta_gym.training.checkpoint import load_model
 
     res = diagnose(load_qube_closed_loop(range(1, 6)), "furuta", window=0.1, oe_max_windows=64)
     found = [e for e in res.found if e.name not in ("input_delay", "actuator_lag")]
     plant = ", ".join(f"{e.name}:{e.joint} {e.coefficient:.2g}" for e in found) or "none"
     starts = np.concatenate([np.zeros((1, 4)), near_rest_starts(args.episodes, args.seed, False)])
-    make_env = lambda: gym.make("furuta_gym/Furuta-v0", episode_seconds=None, effects=found)  # noqa: E731
+    make_env = lambda: gym.make("furuta_gym/Furuta-v0", episode=Episode(seconds=None), plant=Plant(effects=found))  # noqa: E731
     rows, notes = [], []
     for label, model in _designs(res, load_model):
         try:

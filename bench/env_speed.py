@@ -145,7 +145,7 @@ def main(argv=None) -> int:
         "With `kernel=\"xla\"` it is one jitted XLA call per env.step: a DeLaN step compiles to "
         "~150 XLA:CPU kernels and the call costs ~19 µs or more of fixed dispatch and per-kernel "
         "overhead for ~12 k multiply-adds. The default `kernel=\"auto\"` lowers the same jaxpr to "
-        "one C function (`furuta_gym/_jaxpr_to_c.py`, compiled once per model structure with the "
+        "one C function (`furuta_gym/_ckernel/`, compiled once per model structure with the "
         "system's C compiler and cached on disk) called through ctypes on fixed buffers: ~5 µs for "
         "the DeLaN step. `furuta_gym.inline_cpu_dispatch()` (opt-in, process-wide, before any JAX "
         "computation) runs JAX's CPU computations on the calling thread; its rows come from a child "

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import furuta_gym
-from furuta_gym._jaxpr_to_c import CKernel, CKernelError, c_compiler
+from furuta_gym._ckernel import CKernel, CKernelError, c_compiler
 from furuta_gym.envs import _backends
 from furuta_gym.models import make_model
 
@@ -229,9 +229,9 @@ def test_batched_env_refuses_a_kernel_and_its_template_builds_none():
 
 
 def test_a_step_too_large_for_the_stack_is_refused_and_auto_takes_xla(monkeypatch):
-    import furuta_gym._jaxpr_to_c as lowering
+    from furuta_gym._ckernel import translate
 
-    monkeypatch.setattr(lowering, "MAX_STACK_BYTES", 4096)
+    monkeypatch.setattr(translate, "MAX_STACK_BYTES", 4096)
     monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
     with pytest.raises(CKernelError, match=r"MiB of intermediates"):
         CKernel(lambda w, v: jnp.tanh(jnp.outer(v, v) @ jnp.ones((4, 200))), W, V)
@@ -252,18 +252,16 @@ def test_a_failing_compiler_is_one_clear_error_and_auto_takes_xla(monkeypatch, t
 def test_auto_tries_the_c_translation_once_per_model_structure(monkeypatch):
     """With domain randomisation every reset rebuilds the step for new parameters: a model whose
     step C cannot take must fall back without tracing and translating it again each time."""
-    import furuta_gym._jaxpr_to_c as lowering
-
     monkeypatch.setenv("CC", "/nonexistent/cc")
     monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
     attempts = []
-    original = lowering.CKernel.__init__
+    original = CKernel.__init__
 
     def counting(self, *args, **kwargs):
         attempts.append(1)
         original(self, *args, **kwargs)
 
-    monkeypatch.setattr(lowering.CKernel, "__init__", counting)
+    monkeypatch.setattr(CKernel, "__init__", counting)
     env = gym.make(NMSD_ID, dynamics="analytic", randomize=0.1)
     for seed in range(4):
         env.reset(seed=seed)

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 import furuta_gym  # noqa: F401  (registers the envs, enables float64)
-import furuta_gym._jaxpr_to_c as lowering
-from furuta_gym._jaxpr_to_c import CKernel, CKernelError, CKernelWarning, c_compiler
+from furuta_gym._ckernel import CKernel, CKernelError, CKernelWarning, c_compiler
+from furuta_gym._ckernel import cache as kernel_cache
+from furuta_gym._ckernel import translate
 from furuta_gym.envs import _backends
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler on PATH")
@@ -33,8 +34,8 @@ def cache(monkeypatch, tmp_path):
     """A fresh cache root (and temporary dir) per test: nothing compiled or checked before."""
     monkeypatch.setenv("FURUTA_GYM_CACHE", str(tmp_path / "cache"))
     (tmp_path / "tmp").mkdir()
-    monkeypatch.setattr(lowering.tempfile, "tempdir", str(tmp_path / "tmp"))
-    monkeypatch.setattr(lowering, "_VERIFIED", set())
+    monkeypatch.setattr(kernel_cache.tempfile, "tempdir", str(tmp_path / "tmp"))
+    monkeypatch.setattr(kernel_cache, "_VERIFIED", set())
     monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
     return tmp_path / "cache" / "furuta_gym" / "c_kernels"
 
@@ -48,7 +49,7 @@ def _script(path, body):
 # ----------------------------------------------------------------- 1. checked against XLA
 
 def test_a_kernel_that_disagrees_with_xla_is_refused_with_a_warning(cache, monkeypatch):
-    monkeypatch.setitem(lowering._UNARY, "sin", "cos({0})")  # a translation bug
+    monkeypatch.setitem(translate._UNARY, "sin", "cos({0})")  # a translation bug
     with pytest.warns(CKernelWarning, match=r"disagrees with XLA on output 0.*sin"):
         with pytest.raises(CKernelError, match="disagrees with XLA"):
             CKernel(lambda v: jnp.sin(v) * 2.0, V)
@@ -77,7 +78,7 @@ def test_a_good_kernel_is_checked_once_and_marked(cache, monkeypatch):
     monkeypatch.setattr(CKernel, "_verify", lambda self, *a: calls.append(1) or original(self, *a))
     first = CKernel(lambda v: jnp.tanh(v) + 1.0, V)
     assert first.library_path.with_suffix(".verified").exists()
-    monkeypatch.setattr(lowering, "_VERIFIED", set())  # a new process: the marker on disk suffices
+    monkeypatch.setattr(kernel_cache, "_VERIFIED", set())  # a new process: the marker on disk suffices
     CKernel(lambda v: jnp.tanh(v) + 1.0, V)
     assert len(calls) == 1
 
@@ -139,7 +140,7 @@ def test_eviction_keeps_the_newest_kernels(tmp_path):
             path = tmp_path / f"kernel_{k}{suffix}"
             path.touch()
             os.utime(path, (1000 + k, 1000 + k))
-    lowering._evict(tmp_path, keep=3)
+    kernel_cache._evict(tmp_path, keep=3)
     assert sorted(p.name for p in tmp_path.glob("*.so")) == ["kernel_3.so", "kernel_4.so", "kernel_5.so"]
     assert sorted(p.name for p in tmp_path.glob("*.verified")) == ["kernel_3.verified", "kernel_4.verified",
                                                                    "kernel_5.verified"]
@@ -148,7 +149,7 @@ def test_eviction_keeps_the_newest_kernels(tmp_path):
 _WORKER = textwrap.dedent("""
     import numpy as np, jax.numpy as jnp
     import furuta_gym
-    from furuta_gym._jaxpr_to_c import CKernel
+    from furuta_gym._ckernel import CKernel
     v = np.arange(4.0)
     np.testing.assert_allclose(CKernel(lambda x: jnp.cos(x) * 17.0, v)(v), np.cos(v) * 17.0)
 """)
@@ -216,7 +217,7 @@ def test_reduce_precision_is_refused_unless_it_is_the_identity(cache):
 
 
 def test_a_parameter_value_the_translation_lacks_is_refused(cache, monkeypatch):
-    monkeypatch.setitem(lowering._PARAMS, "tanh", {})  # as if 'accuracy' were a new parameter
+    monkeypatch.setitem(translate._PARAMS, "tanh", {})  # as if 'accuracy' were a new parameter
     with pytest.raises(CKernelError, match=r"does not implement 'tanh' with accuracy=None"):
         CKernel(lambda v: jnp.tanh(v), V)
     with pytest.raises(CKernelError, match=r"does not implement 'reshape' with dimensions"):

@@ -140,3 +140,93 @@ def test_no_function_is_longer_than_80_lines():
                 if length > 80:
                     long.append(f"{path}:{node.lineno} {node.name} ({length} lines)")
     assert not long, "\n".join(long)
+
+
+def _imported_modules(name: str, path: Path, is_package: bool, modules) -> set[str]:
+    """The package's modules ``name`` imports, at module level or inside a function: ``import a.b``
+    imports a.b; ``from x import y`` imports x.y when that is a module, else x. A module's own
+    packages are left out: Python has started them before the module runs, so importing them
+    cannot close a loop that the package's own imports did not."""
+    base = name.split(".") if is_package else name.split(".")[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            anchor = base[: len(base) - node.level + 1] if node.level else []
+            mod = ".".join(anchor + ([node.module] if node.module else []))
+            for alias in node.names:
+                found.add(f"{mod}.{alias.name}" if f"{mod}.{alias.name}" in modules else mod)
+    ancestors = {".".join(name.split(".")[:i]) for i in range(1, name.count(".") + 1)}
+    return {m for m in found if m in modules and m != name and m not in ancestors}
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Each module of the package -> the package's modules it imports."""
+    modules = _modules()
+    return {name: _imported_modules(name, path, is_package, modules)
+            for name, (path, is_package) in modules.items()}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import circles of ``graph``: one per strongly connected component of two or more
+    modules (Tarjan), each named as a loop through the component."""
+    index, low, stack, on_stack, components = {}, {}, [], set(), []
+
+    def visit(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for nxt in sorted(graph.get(node, ())):
+            if nxt not in index:
+                visit(nxt)
+                low[node] = min(low[node], low[nxt])
+            elif nxt in on_stack:
+                low[node] = min(low[node], index[nxt])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                components.append(component)
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return [_loop_through(graph, set(c)) for c in components]
+
+
+def _loop_through(graph, component: set[str]) -> list[str]:
+    """A closed path inside ``component`` starting at its first module (breadth-first back to it)."""
+    start = min(component)
+    parents, frontier = {start: None}, [start]
+    while frontier:
+        nxt_frontier = []
+        for node in frontier:
+            for nxt in sorted(graph[node] & component):
+                if nxt == start:
+                    path = [node]
+                    while parents[path[-1]] is not None:
+                        path.append(parents[path[-1]])
+                    return [start, *reversed(path[:-1]), start] if node != start else [start, start]
+                if nxt not in parents:
+                    parents[nxt] = node
+                    nxt_frontier.append(nxt)
+        frontier = nxt_frontier
+    return sorted(component)
+
+
+def test_no_module_imports_itself_around_a_loop():
+    # modules importing each other, directly or around a circle, at module level or in functions
+    cycles = _cycles(_import_graph())
+    assert not cycles, "import circles:\n" + "\n".join(" -> ".join(c) for c in cycles)
+
+
+def test_the_cycle_finder_names_a_loop():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": set(), "e": {"e2"}, "e2": {"e"}}
+    assert sorted(_cycles(graph)) == [["a", "b", "c", "a"], ["e", "e2", "e"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []

@@ -17,6 +17,7 @@ from furuta_gym.diagnose import diagnose, measured_like
 from furuta_gym.diagnose._library import layout_for
 from furuta_gym.effects import Effect
 from furuta_gym.envs import MujocoBackend, Plant, plant_mjcf, save_mjcf
+from furuta_gym.models import analytic_model
 
 FURUTA_EFFECTS = (Effect("spring", "alpha", 2e-3, reference=0.1), Effect("coulomb_friction", "alpha", 5e-4),
                   Effect("viscous_friction", "beta", 1e-5), Effect("com_offset", "beta", 0.01),
@@ -55,7 +56,7 @@ def test_lumped_plant_is_the_lumped_model(system):
     """Off-nominal lumped values in MuJoCo give the lumped Lagrangian model's M, forces and input
     to round-off: every lumped parameter lands in MuJoCo, none is lost to the MJCF's fixed ratios."""
     lumped = _off_nominal(system)
-    backend = MujocoBackend(system, plant=Plant(system, lumped))
+    backend = MujocoBackend(system, plant=Plant(lumped=lumped, system=system))
     layout = layout_for(system)
     model = layout.model(jnp.asarray([lumped[b] for b in layout.base] + [0.0] * len(layout.candidates)))
     rng = np.random.default_rng(0)
@@ -79,20 +80,20 @@ def test_lumped_plant_is_the_lumped_model(system):
 def test_plant_checks_its_parameters():
     lumped = dict(Plant.nominal("furuta").lumped)
     with pytest.raises(ValueError, match=r"missing \['K'\], unknown \['gain'\]"):
-        Plant("furuta", {**{k: v for k, v in lumped.items() if k != "K"}, "gain": 1.0})
+        Plant(lumped={**{k: v for k, v in lumped.items() if k != "K"}, "gain": 1.0}, system="furuta")
     with pytest.raises(ValueError, match="joint 'p' is not a joint of furuta"):
-        Plant("furuta", lumped, (Effect("spring", "p", 1.0),))
+        Plant(effects=(Effect("spring", "p", 1.0),), lumped=lumped, system="furuta")
     with pytest.raises(ValueError, match="J2 - J1b = .* must be > 0"):  # a pendulum lighter than a point mass
-        MujocoBackend("furuta", plant=Plant("furuta", {**lumped, "J2": 0.5 * lumped["J1b"]}))
+        MujocoBackend("furuta", plant=Plant(lumped={**lumped, "J2": 0.5 * lumped["J1b"]}, system="furuta"))
     with pytest.raises(ValueError, match="give it alone"):
-        MujocoBackend("furuta", effects=NATIVE, plant=Plant("furuta", lumped))
+        MujocoBackend("furuta", effects=NATIVE, plant=Plant(lumped=lumped, system="furuta"))
 
 
 def test_mjcf_round_trips(tmp_path):
     """The written MJCF: plain MuJoCo steps the native terms exactly as the plant; furuta-gym reads
     the whole plant back, the callback's effects included; nothing is overwritten."""
     x0 = np.array([0.1, 0.5, 0.0, 0.0])
-    native = Plant("furuta", _off_nominal("furuta"), NATIVE, "test")
+    native = Plant(effects=NATIVE, lumped=_off_nominal("furuta"), system="furuta", source="test")
     path = save_mjcf(native, tmp_path / "rig.xml")
     plain = mujoco.MjModel.from_xml_path(str(path))
     data = mujoco.MjData(plain)
@@ -105,7 +106,7 @@ def test_mjcf_round_trips(tmp_path):
     reference = _rollout(MujocoBackend("furuta", plant=native), x0)
     assert np.max(np.abs(np.array(steps) - reference)) < 1e-10
 
-    full = Plant("furuta", _off_nominal("furuta"), FURUTA_EFFECTS, "test")
+    full = Plant(effects=FURUTA_EFFECTS, lumped=_off_nominal("furuta"), system="furuta", source="test")
     save_mjcf(full, tmp_path / "full.xml")
     loaded = Plant.load(tmp_path / "full.xml")
     assert loaded == full
@@ -163,8 +164,41 @@ def test_the_lumped_model_backend_steps_as_the_plant():
     from furuta_gym.models import LumpedSystem
 
     effects = (Effect("spring", "alpha", 2e-3, reference=0.1), Effect("viscous_friction", "beta", 1e-5))
-    plant = Plant("furuta", _off_nominal("furuta"), effects)
+    plant = Plant(effects=effects, lumped=_off_nominal("furuta"), system="furuta")
     x0 = np.array([0.1, 0.5, 0.0, 0.0])
     model = ModelBackend(LumpedSystem.of("furuta", plant.lumped), 0.002, effects=effects, kernel="xla")
     mj = _rollout(MujocoBackend("furuta", plant=plant), x0)
     assert np.max(np.abs(_rollout(model, x0) - mj)) < 1e-8
+
+
+def test_the_env_takes_a_plant_a_diagnosis_or_a_file(tmp_path):
+    """``gym.make(..., plant=...)`` with a Plant, anything with a ``plant()`` (a diagnosis) or a
+    file gives the same env; MuJoCo and the lumped model agree on it; it says where it came from."""
+    import gymnasium as gym
+
+    plant = Plant(effects=(Effect("spring", "alpha", 2e-3),), lumped=_off_nominal("furuta"), system="furuta",
+                  source="diagnosis (spring:alpha)")
+    (tmp_path / "p.json").write_text(json.dumps({"plant": plant.to_json()}))
+
+    class _Diagnosis:
+        def plant(self):
+            return plant
+
+    runs = {}
+    for name, given, dynamics in (("object", plant, "mujoco"), ("diagnosis", _Diagnosis(), "mujoco"),
+                                  ("file", str(tmp_path / "p.json"), "mujoco"), ("analytic", plant, "analytic")):
+        env = gym.make("furuta_gym/Furuta-v0", plant=given, dynamics=dynamics)
+        assert env.unwrapped.plant.source == "diagnosis (spring:alpha)"
+        env.reset(seed=1)
+        runs[name] = np.array([env.step(np.array([2.0 * np.sin(0.02 * k)]))[0] for k in range(300)])
+        env.close()
+    np.testing.assert_array_equal(runs["object"], runs["diagnosis"])
+    np.testing.assert_array_equal(runs["object"], runs["file"])
+    assert np.max(np.abs(runs["analytic"] - runs["object"])) < 1e-8
+    nominal = gym.make("furuta_gym/Furuta-v0")
+    nominal.reset(seed=1)
+    assert np.max(np.abs(nominal.step(np.array([2.0]))[0] - runs["object"][0])) > 0  # the plant is not the pinned one
+    with pytest.raises(ValueError, match="a furuta plant .* for a nmsd env"):
+        gym.make("furuta_gym/NMSD-v0", plant=plant)
+    with pytest.raises(ValueError, match="runs on dynamics='mujoco' or 'analytic'"):
+        gym.make("furuta_gym/Furuta-v0", plant=plant, dynamics=analytic_model("furuta"))

@@ -70,9 +70,9 @@ def plant_env_factory(plant: str, voltage_limit: float, sensor: bool, render: bo
     """A zero-argument function making the Furuta env for ``--plant``."""
     import gymnasium as gym
 
-    from furuta_gym.envs import FurutaEnv
+    from furuta_gym.envs import Actuation, Episode, FurutaEnv, Sensors
 
-    kwargs: dict = dict(max_voltage=voltage_limit, episode_seconds=None)
+    kwargs: dict = dict(actuation=Actuation(max_action=voltage_limit), episode=Episode(seconds=None))
     presets = FurutaEnv.plant_presets
     if plant in ("mujoco", "analytic"):
         kwargs["dynamics"] = plant
@@ -86,7 +86,7 @@ def plant_env_factory(plant: str, voltage_limit: float, sensor: bool, render: bo
             f"({', '.join(sorted(presets))}) or an existing checkpoint file"
         )
     if sensor:
-        kwargs.update(encoder_counts=2048, velocity="filter")
+        kwargs.update(sensors=Sensors(encoder_counts=2048, velocity="filter"))
     if render:
         kwargs.update(render_mode="rgb_array")
     return lambda: gym.make(FurutaEnv.env_id, **kwargs)

@@ -234,7 +234,7 @@ class DiagnosisResult:
             raise ValueError("a diagnosis of a given model has no MuJoCo plant (its M and V are a "
                              "network's); pass res.model_after as dynamics= instead")
         found = ", ".join(f"{e.name}:{e.joint}" for e in self.found) or "no effect"
-        return Plant(self.system, self.parameters_after, tuple(self.found), f"diagnosis ({found})")
+        return Plant(effects=self.found, lumped=self.parameters_after, system=self.system, source=f"diagnosis ({found})")
 
     def to_json(self) -> dict:
         return {

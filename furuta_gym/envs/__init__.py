@@ -2,21 +2,22 @@
 
 ``import furuta_gym`` registers ``furuta_gym/Furuta-v0`` (:class:`FurutaEnv`),
 ``furuta_gym/NMSD-v0`` (:class:`NMSDEnv`) and the RL preset ``furuta_gym/FurutaSwingUp-v0``
-(:data:`SWINGUP_PRESET`). The world is a backend (:class:`MujocoBackend`,
+(:data:`SWINGUP_PRESET`). Their settings are a few objects, the same for every system
+(:class:`Plant`, :class:`Episode`, :class:`Actuation`, :class:`Sensors`, :class:`Spaces`,
+:class:`Camera`, and the N-MSD's :class:`Target`). The world is a backend (:class:`MujocoBackend`,
 :class:`ModelBackend`, chosen by ``dynamics=``); the goal is a task (:class:`FurutaSwingUp`,
 :class:`NMSDReach`) whose reward/termination are pure functions usable on NumPy and JAX arrays.
 See docs/envs.md.
 """
 
 from ._backends import AbstractBackend, ModelBackend, MujocoBackend, load_checkpoint, make_backend
-from ._base import EnvArgumentError, LagrangianEnv
-from ._config import Actuation, Sensors
+from ._base import LagrangianEnv
+from ._settings import Actuation, Camera, EnvArgumentError, Episode, Plant, Sensors, Spaces
 from ._mjcf_out import plant_mjcf, save_mjcf
 from ._parameters import default_parameters
-from ._plant import Plant
 from ._tasks import DEFAULT_STATE_BOUND, FurutaSwingUp, NMSDReach, is_diverged, tolerance
 from .furuta import FurutaEnv
-from .nmsd import NMSDEnv
+from .nmsd import NMSDEnv, Target
 
 __all__ = [
     "AbstractBackend",
@@ -26,9 +27,13 @@ __all__ = [
     "load_checkpoint",
     "LagrangianEnv",
     "EnvArgumentError",
-    "Sensors",
-    "Actuation",
     "Plant",
+    "Episode",
+    "Actuation",
+    "Sensors",
+    "Spaces",
+    "Camera",
+    "Target",
     "save_mjcf",
     "plant_mjcf",
     "FurutaEnv",
@@ -59,7 +64,8 @@ PLANT_PRESETS = {cls.system: dict(cls.plant_presets) for cls in ENV_CLASSES}
 #: 500 steps (10 s) per episode through Gymnasium's TimeLimit (``env.spec.max_episode_steps``).
 SWINGUP_ID = "furuta_gym/FurutaSwingUp-v0"
 SWINGUP_PRESET = dict(
-    frame_skip=10, observation="trig", normalize_action=True, dtype="float32", episode_seconds=None
+    episode=Episode(frame_skip=10, seconds=None),
+    spaces=Spaces(observation="trig", dtype="float32", normalize_action=True),
 )
 SWINGUP_EPISODE_STEPS = 500
 

@@ -22,6 +22,7 @@ import contextlib
 import dataclasses
 import math
 import os
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -33,17 +34,17 @@ import mujoco
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from .._jaxpr_to_c import CKernel, CKernelError
+from .._ckernel import CKernel, CKernelError, CKernelTranslationError, CKernelWarning
 from .._x64 import ensure_x64
 from ..assets import asset_path
 from ..effects import CableNeutral, Effect, MujocoForm, WithEffects, actuator_lag_time
 from ..lagrangian import AbstractLagrangianSystem
-from ..models import analytic_model, system_definition
+from ..models import LumpedSystem, analytic_model, system_definition
 from ..models.checkpoint import load_model
 from ..simulate import rk4_step, small_kernel_compiler_options
 from ..systems import get_spec
 from ._parameters import PARAMETER_CLASSES, default_parameters
-from ._plant import Plant
+from ._settings import Plant
 
 __all__ = [
     "AbstractBackend",
@@ -339,9 +340,9 @@ class MujocoBackend(AbstractBackend):
         self.system = get_spec(system).name
         self.plant = plant
         if plant is not None:
-            if plant.system != self.system or effects or parameters:
-                raise ValueError(f"plant= is a whole {plant.system} plant: give it alone (no effects= or "
-                                 f"parameters=) to a {self.system} backend")
+            if plant.lumped is None or plant.presets or plant.system != self.system or effects or parameters:
+                raise ValueError(f"plant= is a whole {self.system} plant with its lumped parameters (presets "
+                                 "resolved into effects): give it alone, no effects= or parameters=")
             effects = plant.effects
         self.effects = tuple(effects)
         self.model = load_mjcf(self.system, actuator_lag=actuator_lag_time(self.effects) > 0)
@@ -540,10 +541,9 @@ class _XlaStepper:
 
 
 class _CStepper:
-    """The same period step lowered to one C function (:mod:`furuta_gym._jaxpr_to_c`), called
+    """The same period step lowered to one C function (:mod:`furuta_gym._ckernel`), called
     on fixed numpy buffers: the model's arrays are copied in once per model, the state is
-    updated in place. A DeLaN step takes ~5 µs where one XLA call costs ~19 µs, mostly fixed
-    dispatch and per-kernel overheads."""
+    updated in place: no XLA dispatch or per-kernel overhead, which dominate one small step."""
 
     name = "c"
 
@@ -559,6 +559,8 @@ class _CStepper:
         self._has_state = False
         self._period = self._bind("period")  # built now: a model C cannot take fails here
         self._split = None
+        self._xla_split = None
+        self._xla_arguments = (static, rebuild, treedef_key, timestep, substeps)
 
     def _kernel(self, which: str):
         """The compiled kernel of this model structure, or the CKernelError it gave: a failure is
@@ -577,6 +579,9 @@ class _CStepper:
                     kernel = CKernel(split, self._dynamic, x, u, np.int64(0), u, name=f"split step of {self._model_name}")
             except CKernelError as exc:
                 kernel = exc
+                if isinstance(exc, CKernelTranslationError):  # once per model structure: cached below
+                    warnings.warn(f"the {which} step of {self._model_name} has no C translation, XLA "
+                                  f"steps it: {exc}", CKernelWarning, stacklevel=2)
             try:
                 _C_KERNEL_CACHE[key] = kernel
             except TypeError:  # unhashable static structure: no sharing, still correct
@@ -608,8 +613,14 @@ class _CStepper:
         return self._x_buf.copy()
 
     def step_split(self, u_first, n_first: int, u) -> np.ndarray:
-        if self._split is None:
-            self._split = self._bind("split")
+        if self._split is None and self._xla_split is None:
+            try:
+                self._split = self._bind("split")
+            except CKernelError:  # the period step stays C; this one XLA (warned if untranslatable)
+                self._xla_split = _compiled_steps(*self._xla_arguments)[1]
+        if self._xla_split is not None:
+            self._x_buf[:] = np.asarray(self._xla_split(self._dynamic, jnp.asarray(self._x_buf), u_first, n_first, u))
+            return self._x_buf.copy()
         call, (u_first_buf, n_buf, u_buf) = self._split
         u_first_buf[:] = u_first
         n_buf[...] = n_first
@@ -634,8 +645,9 @@ class ModelBackend(AbstractBackend):
     ``kernel`` chooses what runs the period step (the same JAX function either way):
 
     * ``"c"``: the step's jaxpr lowered to one C function and compiled with the system's C
-      compiler (:mod:`furuta_gym._jaxpr_to_c`; cached on disk, ~1–2 s the first time). A single
-      env steps 3–4× faster than through XLA, whose fixed cost per call dominates one small step.
+      compiler (:mod:`furuta_gym._ckernel`; cached on disk, built once per model structure).
+      A single env steps several times faster than through XLA, whose fixed cost per call
+      dominates one small step (BENCHMARKS.md).
     * ``"xla"``: one jitted XLA call per step.
     * ``"auto"`` (default): ``"c"`` when a C compiler is on PATH and every primitive of the model's
       step has a C translation, else ``"xla"``; :attr:`kernel` says which, and
@@ -793,6 +805,17 @@ def load_checkpoint(path: str | os.PathLike, system: str | None = None) -> Abstr
     return load_model(path, expected_system=system)
 
 
+def _lumped_backend(system, dynamics, substeps, effects, lumped, kernel) -> AbstractBackend:
+    """A diagnosed plant's backend: MuJoCo with its bodies, or its lumped model (``"analytic"``)."""
+    if isinstance(dynamics, str) and dynamics == "mujoco":
+        return MujocoBackend(system, substeps, plant=Plant(effects=effects, lumped=lumped, system=system))
+    if isinstance(dynamics, str) and dynamics == "analytic":
+        timestep = float(load_mjcf(system).opt.timestep)
+        return ModelBackend(LumpedSystem.of(system, lumped), timestep, substeps, effects, kernel=kernel)
+    raise ValueError(f"dynamics={dynamics!r}: a diagnosed plant (its lumped parameters) runs on "
+                     "dynamics='mujoco' or 'analytic' (its lumped model); a learned model has its own")
+
+
 def make_backend(
     system: str,
     dynamics="mujoco",
@@ -801,15 +824,19 @@ def make_backend(
     effects: Sequence[Effect] = (),
     parameters: Mapping[str, float] | None = None,
     kernel: str = "auto",
+    lumped: Mapping[str, float] | None = None,
 ) -> AbstractBackend:
     """The backend the envs' ``dynamics=`` keyword names, for ``system`` ("furuta"/"nmsd").
 
     Model backends use the MJCF model's ``timestep`` so they integrate exactly as MuJoCo does;
-    ``kernel`` is the model backends' step kernel (:class:`ModelBackend`).
+    ``kernel`` is the model backends' step kernel (:class:`ModelBackend`). ``lumped``: a
+    diagnosed plant's lumped parameters instead of the pinned physical ones.
     """
     system = get_spec(system).name
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {list(KERNELS)}, got {kernel!r}")
+    if lumped is not None:
+        return _lumped_backend(system, dynamics, substeps, effects, lumped, kernel)
     if isinstance(dynamics, AbstractLagrangianSystem):
         model = dynamics
     elif isinstance(dynamics, (str, os.PathLike)):

@@ -13,7 +13,8 @@ import mujoco
 import numpy as np
 
 from ._backends import MujocoBackend, mjcf_text
-from ._plant import PLANT_TEXT, Plant
+from ._plant import PLANT_TEXT
+from ._settings import Plant
 
 __all__ = ["plant_mjcf", "save_mjcf"]
 

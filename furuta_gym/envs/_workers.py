@@ -12,7 +12,7 @@ local socket, not ``multiprocessing`` children: those re-import the user's main 
 needs an ``if __name__ == "__main__"`` guard (and JAX is not fork-safe). The model and task travel
 pickled, so a model class must be importable by name. Data travel through two shared-memory
 blocks (inputs: state and action; outputs: the packed step's columns, see
-:func:`furuta_gym.envs.vector.unpack_outputs`); the connections carry only "step" / "task"
+:func:`furuta_gym.envs._batched_step.unpack_outputs`); the connections carry only "step" / "task"
 messages.
 """
 
@@ -31,7 +31,7 @@ from multiprocessing.connection import Client, Listener
 import numpy as np
 
 from ._jax_rollout import chunk_bounds
-from .vector import packed_output_width, unpack_outputs
+from ._batched_step import packed_output_width, step_function, unpack_outputs
 
 __all__ = ["ProcessChunks"]
 
@@ -73,8 +73,6 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
                 os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
             except OSError:
                 pass
-        from .vector import _step_function
-
         try:
             settings = pickle.loads(payload)
         except Exception as exc:
@@ -88,7 +86,7 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
         outputs = np.ndarray(
             (num_envs, packed_output_width(n_state, n_input)), dtype=np.float64, buffer=shm_out.buf
         )
-        step, args = _step_function(**settings, packed=True)
+        step, args = step_function(**settings, packed=True)
 
         def run():
             outputs[lo:hi] = np.asarray(step(*args, inputs[lo:hi]))
@@ -101,7 +99,7 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
                 break
             if message[0] == "task":
                 settings["task"] = message[1]
-                step, args = _step_function(**settings, packed=True)
+                step, args = step_function(**settings, packed=True)
             else:
                 run()
             conn.send(("ok", None))
@@ -189,7 +187,7 @@ def _shutdown(processes, connections, blocks) -> None:
 class ProcessChunks:
     """Step ``num_envs`` copies as ``workers`` processes, each owning a contiguous slice.
 
-    ``settings`` are the keyword arguments of :func:`furuta_gym.envs.vector._step_function`
+    ``settings`` are the keyword arguments of :func:`furuta_gym.envs._batched_step.step_function`
     (model, energy model, task, integration settings); they are pickled to the workers, which
     build and compile the same jitted step (each worker's XLA thread pool is sized for one core,
     see ``_worker_main``). :meth:`close` (or garbage collection, or interpreter exit)

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import os
-from typing import ClassVar, Mapping, Sequence
+from typing import ClassVar, Mapping
 
 from ..effects import Effect
-from ..lagrangian import AbstractLagrangianSystem
-from ._base import LagrangianEnv, env_arguments
+from ._base import LagrangianEnv
 from ._tasks import FurutaSwingUp
 
 __all__ = ["FurutaEnv"]
@@ -25,8 +23,9 @@ class FurutaEnv(LagrangianEnv):
     checkpoint, or any Lagrangian model — spaces, reward, ``info`` and rendering are the same.
 
     ## Action Space
-    ``Box(-max_voltage, max_voltage, (1,), dtype)`` (``dtype`` default float64), or with
-    ``normalize_action=True`` ``Box(-1, 1, (1,), dtype)``: the action is a fraction of
+    ``Box(-max_voltage, max_voltage, (1,), dtype)`` (max_voltage = ``Actuation.max_action``, default
+    5 V; ``dtype`` default float64), or with ``Spaces(normalize_action=True)``
+    ``Box(-1, 1, (1,), dtype)``: the action is a fraction of
     ``max_voltage`` (clipped to [−1, 1], then scaled; ``info["action"]`` is in volts).
 
     | Num | Action        | Min          | Max         | Joint | Unit        |
@@ -38,11 +37,11 @@ class FurutaEnv(LagrangianEnv):
     not silently become a voltage). Positive voltage drives positive α.
 
     ## Observation Space
-    Chosen by ``observation=`` (in ``dtype``, default float64); always of the measured state
-    (the true state unless sensor options are set, see Arguments), while ``info["state"]`` is the
+    Chosen by ``Spaces.observation`` (in ``Spaces.dtype``, default float64); always of the measured state
+    (the true state unless ``sensors=`` says otherwise, see Arguments), while ``info["state"]`` is the
     true raw (α, β, α̇, β̇).
 
-    ``observation="raw"`` (default): ``Box(-inf, inf, (4,))``, the state as integrated (α keeps
+    ``"raw"`` (default): ``Box(-inf, inf, (4,))``, the state as integrated (α keeps
     counting turns).
 
     | Num | Observation                 | Min  | Max | Joint | Unit                     |
@@ -52,7 +51,7 @@ class FurutaEnv(LagrangianEnv):
     | 2   | rotor velocity α̇            | -Inf | Inf | alpha | angular velocity (rad/s) |
     | 3   | pendulum velocity β̇         | -Inf | Inf | beta  | angular velocity (rad/s) |
 
-    ``observation="wrapped"``: ``Box((4,))``, angles wrapped to (−π, π].
+    ``"wrapped"``: ``Box((4,))``, angles wrapped to (−π, π].
 
     | Num | Observation       | Min  | Max | Unit    |
     |-----|-------------------|------|-----|---------|
@@ -61,7 +60,7 @@ class FurutaEnv(LagrangianEnv):
     | 2   | α̇                 | −1e4 | 1e4 | rad/s   |
     | 3   | β̇                 | −1e4 | 1e4 | rad/s   |
 
-    ``observation="trig"``: ``Box((6,))``, continuous across the wrap.
+    ``"trig"``: ``Box((6,))``, continuous across the wrap.
 
     | Num | Observation | Min  | Max | Unit  |
     |-----|-------------|------|-----|-------|
@@ -82,8 +81,8 @@ class FurutaEnv(LagrangianEnv):
     (1 + tol(β̇, margin 5 rad/s))/2. 1 only upright, at rest, centred, with no voltage; 0 hanging.
 
     ## Starting State
-    Hanging at rest plus uniform noise in [−reset_noise_scale, reset_noise_scale] on all four
-    components (default 0.01), or exactly ``reset(options={"state": [α, β, α̇, β̇]})``.
+    Hanging at rest plus uniform noise in [−s, s] on all four components
+    (s = ``Episode.reset_noise_scale``, default 0.01), or exactly ``reset(options={"state": [α, β, α̇, β̇]})``.
 
     ## Episode End
     * Termination: only on **divergence** — a non-finite state or a velocity beyond
@@ -91,7 +90,7 @@ class FurutaEnv(LagrangianEnv):
       a non-finite angle diverges): ``terminated=True``, ``info["diverged"]=True``,
       and the observation is the last good one (no NaN ever leaves the env; stepping further
       keeps returning it).
-    * Truncation: after ``episode_seconds`` (default 10 s = 5 000 steps at 500 Hz).
+    * Truncation: after ``Episode.seconds`` (default 10 s = 5 000 steps at 500 Hz).
 
     ## Info
     ``time`` (s), ``energy`` (J, T + V of the paper's model at the plant's parameters),
@@ -99,40 +98,60 @@ class FurutaEnv(LagrangianEnv):
     ``action`` (the clipped voltage commanded this step).
 
     ## Arguments (``gymnasium.make("furuta_gym/Furuta-v0", **kwargs)``)
+    The same keywords for every system and for the batched env; settings are objects from
+    :mod:`furuta_gym.envs` (frozen, each field checked when the object is built):
 
-    | Parameter               | Type          | Default     | Description |
-    |-------------------------|---------------|-------------|-------------|
-    | `dynamics`              | str / model   | `"mujoco"`  | `"mujoco"`, `"analytic"`, a checkpoint path, or an `AbstractLagrangianSystem` |
-    | `kernel`                | str           | `"auto"`    | model backends: `"c"` (the JAX step lowered to C), `"xla"` (jitted), `"auto"` (C when a compiler exists); docs/envs.md |
-    | `max_voltage`           | float         | `5.0`       | action limit (V); actions are clipped to it |
-    | `frame_skip`            | int           | `1`         | 2 ms RK4 steps per action: control period = 2 ms × frame_skip (500 Hz) |
-    | `episode_seconds`       | float / None  | `10.0`      | truncation time (None: never) |
-    | `reset_noise_scale`     | float         | `0.01`      | uniform start noise (rad, rad/s) |
-    | `plant`                 | str / list    | `None`      | plant variant preset(s): `"cable_spring"`, `"coulomb"`, `"quadratic_drag"`, `"weak_motor"`, `"delay"` |
-    | `effects`               | list[Effect]  | `None`      | extra `furuta_gym.effects.Effect`s on the plant (any backend) |
-    | `randomize`             | float / dict  | `None`      | domain randomisation per reset: relative spread for all parameters (not g) or `{name: spread}` |
-    | `encoder_counts`        | int / None    | `None`      | quantise observed angles to 2π/counts (hardware: 2048) |
-    | `position_resolution`   | float / None  | `None`      | quantise observed non-angular joints (none on this system: the Furuta has encoders) |
-    | `measurement_noise`     | float / (4,)  | `0.0`       | Gaussian std added to each observed component |
-    | `velocity`              | str           | `"exact"`   | `"filter"`: velocities from the paper's derivative filter on measured angles |
-    | `actuation_delay`       | float         | `0.0`       | input delay in s (a multiple of 2 ms) |
-    | `actuation_delay_steps` | int           | `0`         | input delay in control periods |
-    | `observation`           | str           | `"raw"`     | `"raw"`, `"wrapped"` (angles in (−π, π]) or `"trig"` (cos, sin of each angle); see Observation Space |
-    | `normalize_action`      | bool          | `False`     | `True`: actions in [−1, 1], scaled to ±max_voltage |
-    | `dtype`                 | str           | `"float64"` | `"float32"` or `"float64"`: dtype of both spaces and of the observations (physics always float64) |
-    | `render_mode`           | str / None    | `None`      | `"rgb_array"` or `"human"` |
-    | `width`, `height`       | int           | `480`       | frame size |
+    | Keyword       | Type                 | Default        | Description |
+    |---------------|----------------------|----------------|-------------|
+    | `dynamics`    | str / model          | `"mujoco"`     | `"mujoco"`, `"analytic"`, a checkpoint path, or an `AbstractLagrangianSystem` |
+    | `kernel`      | str                  | `"auto"`       | model backends: `"c"` (the JAX step lowered to C), `"xla"` (jitted), `"auto"` (C when a compiler exists); docs/envs.md |
+    | `plant`       | `Plant` / str / list | `Plant()`      | the device: presets, extra effects, randomisation (below); `plant="coulomb"` is short for `Plant("coulomb")` |
+    | `task`        | None                 | `None`         | the swing-up has no task settings (N-MSD: `Target`) |
+    | `episode`     | `Episode`            | `Episode()`    | control period, horizon, start noise |
+    | `actuation`   | `Actuation`          | `Actuation()`  | action limit and input delay |
+    | `sensors`     | `Sensors`            | `Sensors()`    | encoder quantisation, noise, velocity (default: the true state) |
+    | `spaces`      | `Spaces`             | `Spaces()`     | observation layout, dtype, normalised action |
+    | `camera`      | `Camera`             | `Camera()`     | frame size |
+    | `render_mode` | str / None           | `None`         | `"rgb_array"` or `"human"` |
+
+    | Field                                | Default     | Description |
+    |--------------------------------------|-------------|-------------|
+    | `Plant.presets`                      | `()`        | preset name(s): `"cable_spring"`, `"coulomb"`, `"quadratic_drag"`, `"weak_motor"`, `"delay"` |
+    | `Plant.effects`                      | `()`        | extra `furuta_gym.effects.Effect`s on the plant (any backend) |
+    | `Plant.randomize`                    | `None`      | per reset: relative spread for all parameters (not g) or `{name: spread}` |
+    | `Episode.frame_skip`                 | `1`         | 2 ms RK4 steps per action: control period = 2 ms × frame_skip (500 Hz) |
+    | `Episode.seconds`                    | `10.0`      | truncation time in s (None: never) |
+    | `Episode.reset_noise_scale`          | `0.01`      | uniform start noise (rad, rad/s) |
+    | `Actuation.max_action`               | `5.0` (V)   | action limit; actions are clipped to it |
+    | `Actuation.delay`, `.delay_steps`    | `0.0`, `0`  | input delay in s (a multiple of 2 ms) plus whole control periods |
+    | `Sensors.encoder_counts`             | `None`      | quantise observed angles to 2π/counts (hardware: 2048) |
+    | `Sensors.position_resolution`        | `None`      | quantise non-angular joints (none here: the Furuta has encoders) |
+    | `Sensors.measurement_noise`          | `0.0`       | Gaussian std, scalar or one per component (4,) |
+    | `Sensors.velocity`                   | `"exact"`   | `"filter"`: the paper's derivative filter on the measured angles |
+    | `Spaces.observation`                 | `"raw"`     | `"raw"`, `"wrapped"` or `"trig"`; see Observation Space |
+    | `Spaces.dtype`                       | `"float64"` | dtype of both spaces and the observations (physics always float64) |
+    | `Spaces.normalize_action`            | `False`     | `True`: actions in [−1, 1], scaled to ±max_action |
+    | `Camera.width`, `.height`            | `480`       | frame size in pixels |
+
+    For example ``gymnasium.make("furuta_gym/Furuta-v0", sensors=Sensors(encoder_counts=2048,
+    velocity="filter"), actuation=Actuation(max_action=3.0))``. The older plain keywords
+    (``max_voltage=``, ``frame_skip=``, ``episode_seconds=``, ``reset_noise_scale=``, ``effects=``,
+    ``randomize=``, ``encoder_counts=``, ``position_resolution=``, ``measurement_noise=``,
+    ``velocity=``, ``actuation_delay=``, ``actuation_delay_steps=``, ``observation=``,
+    ``normalize_action=``, ``dtype=``, ``width=``, ``height=``) still work: each sets its field,
+    on top of the objects given, with a ``DeprecationWarning`` naming the new spelling.
 
     Documented warnings of ``gymnasium.utils.env_checker.check_env`` with the defaults: the
     infinite observation bounds (the raw state is unbounded) and "we recommend using a symmetric
-    and normalized space" (the action is in volts by design); ``observation="trig"`` (or
+    and normalized space" (the action is in volts by design); ``Spaces("trig")`` (or
     ``"wrapped"``) with ``normalize_action=True`` has none.
 
     ## RL preset ``furuta_gym/FurutaSwingUp-v0``
-    This env with ``frame_skip=10`` (50 Hz, ``metadata["render_fps"]`` = 50, one frame per control
-    period), ``observation="trig"``, ``normalize_action=True``, ``dtype="float32"``, and a 500-step
-    (10 s) horizon through Gymnasium's ``max_episode_steps`` (``env.spec.max_episode_steps``;
-    the env itself has ``episode_seconds=None``). Any keyword above overrides it. ``render_mode="human"`` needs a display; without
+    This env with ``episode=Episode(frame_skip=10, seconds=None)`` (50 Hz,
+    ``metadata["render_fps"]`` = 50, one frame per control period; the 500-step (10 s) horizon is
+    Gymnasium's ``max_episode_steps``) and ``spaces=Spaces("trig", "float32",
+    normalize_action=True)``. Any keyword overrides it (an older plain keyword sets its one field).
+    ``render_mode="human"`` needs a display; without
     one (DISPLAY/WAYLAND_DISPLAY unset on Linux) the constructor raises a clear ValueError rather
     than letting GLFW abort the process, so run ``check_env(..., skip_render_check=True)``
     headless.
@@ -141,6 +160,7 @@ class FurutaEnv(LagrangianEnv):
     system: ClassVar[str] = "furuta"
     env_id: ClassVar[str] = "furuta_gym/Furuta-v0"
     vector_entry_point: ClassVar[str | None] = "furuta_gym.envs.vector:furuta_vector_entry_point"
+    default_max_action: ClassVar[float] = 5.0
     action_limit_name: ClassVar[str] = "max_voltage"
     # magnitudes visible within a few seconds that leave the pendulum controllable
     plant_presets: ClassVar[Mapping[str, tuple[Effect, ...]]] = {
@@ -162,34 +182,6 @@ class FurutaEnv(LagrangianEnv):
         "azimuth": 135.0,
         "lookat": (0.0, 0.0, 0.09),
     }
-
-    def __init__(
-        self,
-        *,
-        dynamics: str | os.PathLike | AbstractLagrangianSystem = "mujoco",
-        kernel: str = "auto",
-        max_voltage: float = 5.0,
-        frame_skip: int = 1,
-        episode_seconds: float | None = 10.0,
-        reset_noise_scale: float = 0.01,
-        plant: str | Sequence[str] | None = None,
-        effects: Sequence[Effect] | None = None,
-        randomize: float | Mapping[str, float] | None = None,
-        encoder_counts: int | None = None,
-        position_resolution: float | None = None,
-        measurement_noise: float | Sequence[float] = 0.0,
-        velocity: str = "exact",
-        actuation_delay: float = 0.0,
-        actuation_delay_steps: int = 0,
-        observation: str = "raw",
-        normalize_action: bool = False,
-        dtype: str = "float64",
-        render_mode: str | None = None,
-        width: int = 480,
-        height: int = 480,
-        **unexpected,
-    ):
-        super().__init__(**env_arguments(locals()))
 
     def _make_task(self):
         return FurutaSwingUp(max_voltage=self.max_action)

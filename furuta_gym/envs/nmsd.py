@@ -2,21 +2,49 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
-import os
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
 from ..effects import Effect
-from ..lagrangian import AbstractLagrangianSystem
-from ._base import EnvArgumentError, LagrangianEnv, env_arguments
+from ._base import LagrangianEnv
+from ._settings import LEGACY_KEYWORDS, EnvArgumentError
 from ._tasks import NMSDReach
 
-__all__ = ["NMSDEnv", "DEFAULT_TARGET_RANGE"]
+__all__ = ["NMSDEnv", "Target", "DEFAULT_TARGET_RANGE"]
 
 #: targets drawn by ``target="random"`` (m): the force limit holds the mass up to ~1.2 m
 DEFAULT_TARGET_RANGE = (-1.0, 1.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """The N-MSD task's settings (``task=Target(...)``): the ``position`` to reach in m (a number;
+    ``"random"``: uniform in :data:`DEFAULT_TARGET_RANGE` at every reset; ``(low, high)``: uniform
+    in that range per reset) and whether the agent sees it (``observe``: appended to the
+    observation)."""
+
+    position: float | str | tuple[float, float] = 0.5
+    observe: bool = False
+
+    def __post_init__(self):
+        if isinstance(self.position, str) or (np.ndim(self.position) == 1
+                                              and not isinstance(self.position, (int, float))):
+            object.__setattr__(self, "position", self.position if isinstance(self.position, str)
+                               else _target_range(self.position))
+            _target_range(self.position)
+        else:
+            object.__setattr__(self, "position", _check_target(self.position, "Target.position"))
+        if not isinstance(self.observe, (bool, np.bool_)):
+            raise EnvArgumentError(f"Target.observe must be a bool, got {self.observe!r}")
+        object.__setattr__(self, "observe", bool(self.observe))
+
+    @property
+    def range(self) -> tuple[float, float] | None:
+        """(low, high) of a target drawn per reset; None for a fixed target."""
+        return None if isinstance(self.position, float) else _target_range(self.position)
 
 
 class NMSDEnv(LagrangianEnv):
@@ -28,57 +56,62 @@ class NMSDEnv(LagrangianEnv):
     it there. ``dynamics=`` swaps the world as for ``Furuta-v0``.
 
     ## Action Space
-    ``Box(-max_force, max_force, (1,), float64)``
+    ``Box(-max_force, max_force, (1,), dtype)`` (max_force = ``Actuation.max_action``, default
+    20 N), or ``Box(-1, 1, (1,), dtype)`` with ``Spaces(normalize_action=True)``.
 
     | Num | Action | Min        | Max       | Joint | Unit      |
     |-----|--------|------------|-----------|-------|-----------|
     | 0   | force  | −max_force | max_force | p     | force (N) |
 
-    Out-of-range actions are clipped to ±``max_force`` (default 20 N); NaN/inf raises ValueError.
+    Out-of-range actions are clipped to ±max_force; NaN/inf raises ValueError.
 
     ## Observation Space
-    ``Box(-inf, inf, (2,), dtype)`` (default float64), ``(3,)`` with ``observe_target=True``:
+    ``Box(-inf, inf, (2,), dtype)`` (default float64), ``(3,)`` with ``Target(observe=True)``:
 
     | Num | Observation   | Min  | Max | Joint | Unit           |
     |-----|---------------|------|-----|-------|----------------|
     | 0   | position p    | -Inf | Inf | p     | position (m)   |
     | 1   | velocity ṗ    | -Inf | Inf | p     | velocity (m/s) |
-    | 2   | target (only with ``observe_target=True``) | -Inf | Inf | | position (m) |
+    | 2   | target (only with ``Target(observe=True)``) | -Inf | Inf | | position (m) |
 
-    The target is fixed per episode: ``target`` kwarg (a position in m; ``"random"``: uniform in
-    [−1, 1] m drawn at every reset from the env's seeded generator; ``(low, high)``: uniform in
-    that range per reset) or ``reset(options={"target": ...})`` (overrides the draw for that
-    episode). A random target needs ``observe_target=True`` for a policy to see it.
-    ``observation`` must be ``"raw"`` (no angle to wrap).
+    The target is fixed per episode: ``task=Target(position)`` (m, default 0.5; ``"random"``:
+    uniform in [−1, 1] m drawn at every reset from the env's seeded generator; ``(low, high)``:
+    uniform in that range per reset) or ``reset(options={"target": ...})`` (overrides the draw
+    for that episode). A random target needs ``Target(observe=True)`` for a policy to see it.
+    ``Spaces.observation`` must be ``"raw"`` (no angle to wrap).
 
     ## Rewards
     :class:`furuta_gym.envs.NMSDReach`: at target tol(p − target, ±2 cm, margin 0.5 m) × small
     control (4 + tol(u/max_force))/5 × small velocity (1 + tol(ṗ, margin 1 m/s))/2, in [0, 1].
 
     ## Starting State
-    At rest at p = 0 plus uniform noise of ``reset_noise_scale`` (default 0.01), or
+    At rest at p = 0 plus uniform noise of ``Episode.reset_noise_scale`` (default 0.01), or
     ``options={"state": [p, ṗ]}``.
 
     ## Episode End
     Terminated only on divergence (non-finite or |component| > 1e4, ``info["diverged"]``);
-    truncated after ``episode_seconds`` (default 10 s = 1 000 steps).
+    truncated after ``Episode.seconds`` (default 10 s = 1 000 steps).
 
     ## Info
     ``time``, ``energy`` (½mṗ² + ½k1p² + ¼k2p⁴, J), ``diverged``, ``state``, ``action``,
     ``target``.
 
     ## Arguments
-    As ``Furuta-v0`` (``dynamics``, ``kernel``, ``frame_skip`` — 10 ms RK4 steps, default 1 = 100 Hz —,
-    ``episode_seconds``, ``reset_noise_scale``, ``plant`` — ``"coulomb"``, ``"quadratic_drag"``,
-    ``"stiff_spring"``, ``"weak_actuator"``, ``"delay"`` —, ``effects``, ``randomize``,
-    ``position_resolution`` (m), ``measurement_noise``, ``velocity``, ``actuation_delay``
-    (a multiple of 10 ms), ``actuation_delay_steps``, ``render_mode``, ``width``, ``height``),
-    with ``max_force`` (N, default 20) instead of ``max_voltage``, ``target`` (m, default 0.5;
-    ``"random"`` or ``(low, high)``: drawn per reset), ``observe_target`` (bool, default False:
-    append the target to the observation), ``normalize_action`` (actions in [−1, 1] × max_force)
-    and ``dtype`` (``"float32"`` / ``"float64"``). ``encoder_counts`` and an ``observation`` other
-    than ``"raw"`` are refused: the N-MSD has no angle to quantise or wrap. The batched JAX env supports neither a random
-    target nor ``observe_target``: with them ``make_vec`` gives a SyncVectorEnv of single envs.
+    The keywords of ``Furuta-v0`` (`dynamics`, `kernel`, `plant`, `task`, `episode`, `actuation`,
+    `sensors`, `spaces`, `camera`, `render_mode`) with these differences:
+
+    | Setting                      | Default       | Description |
+    |------------------------------|---------------|-------------|
+    | `task`                       | `Target()`    | `Target(position=0.5, observe=False)`: the target (m, `"random"` or `(low, high)`) and whether it is observed |
+    | `Plant.presets`              | `()`          | `"coulomb"`, `"quadratic_drag"`, `"stiff_spring"`, `"weak_actuator"`, `"delay"` |
+    | `Episode.frame_skip`         | `1`           | 10 ms RK4 steps per action (default 100 Hz) |
+    | `Actuation.max_action`       | `20.0` (N)    | force limit; `Actuation.delay` is a multiple of 10 ms |
+    | `Sensors.position_resolution`| `None`        | quantise the observed position (m); `encoder_counts` is refused (no angle) |
+
+    The older plain keywords work as for ``Furuta-v0`` (with ``max_force=`` for the limit,
+    ``target=`` and ``observe_target=`` for the ``Target``), each with a ``DeprecationWarning``.
+    The batched JAX env supports neither a random target nor an observed one: with them
+    ``make_vec`` gives a SyncVectorEnv of single envs.
     """
 
     system: ClassVar[str] = "nmsd"
@@ -93,8 +126,10 @@ class NMSDEnv(LagrangianEnv):
         "weak_actuator": (Effect("input_gain", "u", -0.2),),
         "delay": (Effect("input_delay", "u", 0.02),),
     }
-    task_keywords: ClassVar[tuple[str, ...]] = ("target",)
-    extra_keywords: ClassVar[tuple[str, ...]] = ("observe_target",)
+    default_max_action: ClassVar[float] = 20.0
+    task_settings_type: ClassVar[type | None] = Target
+    legacy_keywords: ClassVar[Mapping[str, tuple[str, str]]] = {
+        **LEGACY_KEYWORDS, "target": ("task", "position"), "observe_target": ("task", "observe")}
     #: (low, high) of a random target per reset, None for a fixed target
     _target_range: tuple[float, float] | None = None
     reset_option_names: ClassVar[tuple[str, ...]] = ("state", "target")
@@ -105,40 +140,9 @@ class NMSDEnv(LagrangianEnv):
         "lookat": (0.0, 0.0, 0.2),
     }
 
-    def __init__(
-        self,
-        *,
-        dynamics: str | os.PathLike | AbstractLagrangianSystem = "mujoco",
-        kernel: str = "auto",
-        max_force: float = 20.0,
-        target: float | str | tuple[float, float] = 0.5,
-        observe_target: bool = False,
-        frame_skip: int = 1,
-        episode_seconds: float | None = 10.0,
-        reset_noise_scale: float = 0.01,
-        plant: str | Sequence[str] | None = None,
-        effects: Sequence[Effect] | None = None,
-        randomize: float | Mapping[str, float] | None = None,
-        encoder_counts: int | None = None,
-        position_resolution: float | None = None,
-        measurement_noise: float | Sequence[float] = 0.0,
-        velocity: str = "exact",
-        actuation_delay: float = 0.0,
-        actuation_delay_steps: int = 0,
-        observation: str = "raw",
-        normalize_action: bool = False,
-        dtype: str = "float64",
-        render_mode: str | None = None,
-        width: int = 480,
-        height: int = 480,
-        **unexpected,
-    ):
-        super().__init__(**env_arguments(locals()))
-
-    def _configure(self, observe_target: bool) -> None:
-        if not isinstance(observe_target, (bool, np.bool_)):
-            raise EnvArgumentError(f"observe_target must be a bool, got {observe_target!r}")
-        self.observe_target = bool(observe_target)
+    def _configure(self) -> None:
+        self.observe_target = self.task_settings.observe
+        self._target_range = self.task_settings.range
 
     def _extra_observation_size(self) -> int:
         return 1 if self.observe_target else 0
@@ -146,12 +150,9 @@ class NMSDEnv(LagrangianEnv):
     def _extra_observation(self) -> list[float]:
         return [self.task.target] if self.observe_target else []
 
-    def _make_task(self, target):
-        if isinstance(target, str) or (np.ndim(target) == 1 and not isinstance(target, (int, float))):
-            # a random target per reset: start from the middle of the range until the first reset
-            self._target_range = _target_range(target)
-            target = 0.5 * sum(self._target_range)
-        target = _check_target(target, "target")
+    def _make_task(self):
+        # a random target per reset: the middle of the range until the first reset
+        target = self.task_settings.position if self._target_range is None else 0.5 * sum(self._target_range)
         return NMSDReach(target=target, max_force=self.max_action)
 
     def _options(self, options):
@@ -159,17 +160,17 @@ class NMSDEnv(LagrangianEnv):
         if target is None and self._target_range is not None:
             target = float(self.np_random.uniform(*self._target_range))
         if target is not None:
-            self._task_kwargs = {"target": _check_target(target, "options['target']")}
-            self.task = self._make_task(**self._task_kwargs)
+            self.task = dataclasses.replace(self.task, target=_check_target(target, "options['target']"))
 
     def per_episode_state_features(self) -> list[str]:
         features = super().per_episode_state_features()
         if self._target_range is not None:
-            features.append("a random target per reset (target='random' or a range)")
+            features.append("a random target per reset (Target('random') or a range)")
         return features
 
     def presentation_options(self) -> list[str]:
-        return super().presentation_options() + (["observe_target=True"] if self.observe_target else [])
+        observed = ["Target(observe=True) (observe_target=True)"] if self.observe_target else []
+        return super().presentation_options() + observed
 
     def _info(self, diverged):
         info = super()._info(diverged)

@@ -1,4 +1,4 @@
-"""Batched model-backed envs: N copies stepped by one jitted, vmapped JAX call (issue 4, item 3).
+"""Batched model-backed envs: N copies stepped by one jitted, vmapped JAX call.
 
 :class:`FurutaVectorEnv` and :class:`NMSDVectorEnv` are :class:`gymnasium.vector.VectorEnv`\\ s
 over a *model* backend (``dynamics="analytic"``, a checkpoint path, or any
@@ -19,7 +19,7 @@ not a JAX function: vectorise it with Gymnasium's Sync/Async vector envs — :fu
 
 from __future__ import annotations
 
-import dataclasses
+import inspect
 import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Sequence
@@ -35,13 +35,14 @@ from gymnasium.vector.utils import batch_space
 
 from ..lagrangian import AbstractLagrangianSystem, energy
 from ..models import analytic_model
-from ..signals import quantize_joints
-from ..simulate import small_kernel_compiler_options
 from ._backends import ModelBackend
-from ._base import EnvArgumentError, LagrangianEnv, check_int
-from ._jax_rollout import Rollout, controlled_step, map_chunks, rollout, scan_closed_loop
+from ._base import LagrangianEnv
+from ._batched_step import Quantizer, step_function
+from ._jax_rollout import Rollout, map_chunks, rollout, scan_closed_loop
 from ._parameters import PARAMETER_CLASSES
+from ._settings import EnvArgumentError, check_int
 from ._tasks import divergence_bounds
+from ._workers import ProcessChunks
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv
 
@@ -58,110 +59,6 @@ __all__ = [
     "rollout",
     "Rollout",
 ]
-
-
-@dataclasses.dataclass(frozen=True)
-class _Quantizer:
-    """The env's encoder model as a hashable, jittable observation function (exact when 0)."""
-
-    steps: tuple[float, ...]  # quantisation step per joint, 0 = exact
-
-    def __call__(self, x):
-        n = len(self.steps)
-        return jnp.concatenate([quantize_joints(x[..., :n], self.steps), x[..., n:]], axis=-1)
-
-
-_STEP_CACHE: dict = {}
-
-
-def _batched_step(
-    static, treedef, energy_treedef, *, dt, substeps, action_limit, task, quantizer, packed=False
-):
-    """One jitted ``(model leaves, energy-model leaves, xs, us) -> outputs`` for a model structure
-    and task; cached so a second vector env of the same model and settings does not recompile.
-    Taking flat lists of arrays (not the Equinox modules) keeps the per-call dispatch cheap.
-
-    ``packed=True`` (the worker processes' form): ``(leaves, energy leaves, [xs | us]) -> one
-    float64 array`` of the outputs side by side (booleans as 0/1), one contiguous array in and one
-    out instead of two strided inputs and seven outputs to copy every step."""
-    key = (treedef, static, energy_treedef, dt, substeps, action_limit, task, quantizer, packed)
-    try:
-        return _STEP_CACHE[key]
-    except (KeyError, TypeError):
-        pass
-    n_dof = len(quantizer.steps)
-
-    def one(system, energy_model, x, u):
-        out = controlled_step(
-            system,
-            x,
-            u,
-            dt=dt,
-            substeps=substeps,
-            action_limit=action_limit,
-            state_bound=divergence_bounds(task.state_bound, system.spec.angular),
-            reward_fn=task.reward,
-            terminated_fn=task.terminated,
-        )
-        e = energy(energy_model, out.state[:n_dof], out.state[n_dof:])
-        return out.state, quantizer(out.state), out.action, out.reward, out.terminated, out.diverged, e
-
-    def step(leaves, energy_leaves, xs, us):
-        system = eqx.combine(jax.tree_util.tree_unflatten(treedef, leaves), static)
-        energy_model = jax.tree_util.tree_unflatten(energy_treedef, energy_leaves)
-        return jax.vmap(one, in_axes=(None, None, 0, 0))(system, energy_model, xs, us)
-
-    def packed_step(leaves, energy_leaves, block):  # layout: packed_output_width / unpack_outputs
-        n_state = 2 * n_dof
-        outs = step(leaves, energy_leaves, block[:, :n_state], block[:, n_state:])
-        return jnp.concatenate([jnp.reshape(o, (block.shape[0], -1)).astype(block.dtype) for o in outs], axis=1)
-
-    fn = jax.jit(packed_step if packed else step, compiler_options=small_kernel_compiler_options())
-    try:
-        _STEP_CACHE[key] = fn
-    except TypeError:  # unhashable static structure: no sharing, still correct
-        pass
-    return fn
-
-
-def packed_output_width(n_state: int, n_input: int) -> int:
-    """Columns of the packed step's output: x_next, obs, u, reward, terminated, diverged, energy."""
-    return 2 * n_state + n_input + 4
-
-
-def unpack_outputs(block: np.ndarray, n_state: int, n_input: int) -> tuple[np.ndarray, ...]:
-    """The packed step's output block as the unpacked step's seven arrays (copies)."""
-    s, m = n_state, n_input
-    return (
-        block[:, :s].copy(),
-        block[:, s : 2 * s].copy(),
-        block[:, 2 * s : 2 * s + m].copy(),
-        block[:, 2 * s + m].copy(),
-        block[:, 2 * s + m + 1] != 0.0,
-        block[:, 2 * s + m + 2] != 0.0,
-        block[:, 2 * s + m + 3].copy(),
-    )
-
-
-def _step_function(*, system, energy_model, dt, substeps, action_limit, task, quantizer, packed=False):
-    """The jitted batched step ``(model leaves, energy leaves, xs, us) -> outputs`` of a vector env
-    (``packed``: see :func:`_batched_step`) and its first two arguments. One function for the
-    env's own process and its workers, so both compute the same thing."""
-    dynamic, static = eqx.partition(system, eqx.is_array)
-    leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-    energy_leaves, energy_treedef = jax.tree_util.tree_flatten(energy_model)
-    fn = _batched_step(
-        static,
-        treedef,
-        energy_treedef,
-        dt=dt,
-        substeps=substeps,
-        action_limit=action_limit,
-        task=task,
-        quantizer=quantizer,
-        packed=packed,
-    )
-    return fn, (leaves, energy_leaves)
 
 
 def auto_chunks(num_envs: int, cores: int | None = None) -> int:
@@ -215,13 +112,13 @@ class _ConcurrentChunks:
 class LagrangianVectorEnv(VectorEnv):
     """N copies of a model-backed :class:`~furuta_gym.envs.LagrangianEnv`, stepped with ``jax.vmap``.
 
-    Constructor: ``num_envs`` and the single env's keywords (``dynamics`` defaults to
-    ``"analytic"`` here; ``max_voltage``/``max_force``, ``frame_skip``, ``episode_seconds``,
-    ``reset_noise_scale``, ``plant``/``effects`` without delay, ``encoder_counts`` /
-    ``position_resolution``, task keywords). Options that need per-copy Python state in the single
-    env — ``measurement_noise``, ``velocity="filter"``, actuation delays, ``randomize`` — and
-    rendering are rejected with a clear error: use ``gymnasium.make_vec(...,
-    vectorization_mode="sync")`` for those.
+    Constructor: ``num_envs``, how to split the work (``autoreset_mode``, ``chunks``,
+    ``workers``) and the single env's keywords, the same signature (``dynamics`` defaults to
+    ``"analytic"`` here): ``plant`` without delay, ``episode``, ``actuation`` (its limit),
+    ``sensors`` (``encoder_counts`` / ``position_resolution``), ``task``. Options that need
+    per-copy Python state in the single env — ``measurement_noise``, ``velocity="filter"``,
+    actuation delays, ``randomize`` — and rendering are rejected with a clear error: use
+    ``gymnasium.make_vec(..., vectorization_mode="sync")`` for those.
 
     Semantics (the same as a :class:`~gymnasium.vector.SyncVectorEnv` of single envs):
 
@@ -290,12 +187,10 @@ class LagrangianVectorEnv(VectorEnv):
         self._energy_model = eqx.tree_at(
             lambda m: m.params, analytic_model(backend.system), analytic_params
         )
-        self._quantizer = _Quantizer(template.sensors.quantization)
+        self._quantizer = Quantizer(tuple(float(s) for s in template.encoder_steps))
         self._workers = None
         self._set_task(template.task)
         if workers:
-            from ._workers import ProcessChunks
-
             self._workers = ProcessChunks(
                 self.num_envs, int(workers), 2 * self._n, self.spec_system.n_inputs, self._step_settings()
             )
@@ -399,7 +294,7 @@ class LagrangianVectorEnv(VectorEnv):
 
     def _set_task(self, task) -> None:
         self.task = task
-        self._step_fn, self._step_args = _step_function(**self._step_settings())
+        self._step_fn, self._step_args = step_function(**self._step_settings())
         if self._workers is not None:
             self._workers.set_task(task)
 
@@ -663,6 +558,20 @@ class LagrangianVectorEnv(VectorEnv):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(num_envs={self.num_envs}, dynamics={type(self.system).__name__})"
+
+
+def _with_env_keywords(init):
+    """``init``'s signature with the single env's keywords in place of its ``**env_kwargs``: the
+    keywords are written once, on :meth:`LagrangianEnv.__init__`."""
+    own = [p for p in inspect.signature(init).parameters.values() if p.kind is not p.VAR_KEYWORD]
+    names = {p.name for p in own}
+    env = [p for name, p in inspect.signature(LagrangianEnv.__init__).parameters.items()
+           if name != "self" and name not in names]
+    init.__signature__ = inspect.Signature(own + env)
+    return init
+
+
+_with_env_keywords(LagrangianVectorEnv.__init__)
 
 
 _ENERGY_CACHE: dict = {}

@@ -20,10 +20,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..models import system_definition
+from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 from .checkpoint import load_model
 from .datagen import system_data
 from .metrics import _terms_along, _true_accelerations, energy_along, predict
-from .reproduce import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 
 
 def _load_models(out: Path, system: str, config) -> list[tuple[str, str, object]]:

@@ -46,6 +46,8 @@ from .. import __version__, enable_x64, ensure_x64
 from ..data import load_trajectories
 from ..models import analytic_model, make_model, system_definition
 from ..systems import get_spec
+from . import _reproduce_figures
+from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 from .checkpoint import load_model, package_versions, read_header
 from .datagen import SYSTEM_DATA, generate, system_data
 from .metrics import evaluate_model, metrics_to_json
@@ -81,8 +83,6 @@ PAPER_PAIRS: tuple[tuple[str, str], ...] = (
     ("adln", "aph"),
     ("adln", "prop"),
 )
-#: The paper's test-set labels and our dataset names.
-TEST_SETS = {name: dict(d.test_labels) for name, d in SYSTEM_DATA.items()}
 #: What a selection run (``split="validation"``) is scored on instead: the validation datasets
 #: (:func:`~furuta_gym.training.datagen.generate_validation`), which share no excitation with
 #: the test sets; the Furuta scale is then fitted on ``val_scale_fit``, not ``scale_fit``.
@@ -97,8 +97,6 @@ METRIC_COLUMNS = {
 }
 #: Table value of a model whose training failed (no finite model; reason in metrics.json).
 FAILED = "fail"
-MODEL_LABELS = {"dln": "DLN", "aph": "APH", "adln": "ADLN"}
-LOSS_LABELS = {"traj": "L_traj", "aph": "L_aph", "prop": "L_prop"}
 # The paper's result tables, shipped with the package.
 _PAPER_CSV_CANDIDATES = (Path(__file__).resolve().parent / "paper_tables.csv",)
 
@@ -447,12 +445,10 @@ def _figures_task(system: str, out: Path, config: ReproduceConfig, data=None, tr
     seconds)``. A failure is returned, not raised: figures must never lose the tables."""
     t0 = time.perf_counter()
     try:
-        from ._reproduce_figures import make_figures
-
         if data is None:  # in a worker process
             data, truth = _worker_inputs(system, out, config)
         one = dataclasses.replace(config, systems=(system,))
-        result = make_figures(out, one, {system: {"data": data, "truth": truth}})
+        result = _reproduce_figures.make_figures(out, one, {system: {"data": data, "truth": truth}})
     except Exception as exc:
         result = f"{type(exc).__name__}: {exc}"
     return result, round(time.perf_counter() - t0, 1)

@@ -1,64 +1,30 @@
-"""A small JAX function lowered to C and compiled with the system's C compiler.
+"""A closed jaxpr written out as the body of one C function, primitive by primitive.
 
-Why: one XLA:CPU execution costs a fixed ~6 µs to call plus ~100 ns per kernel, whatever the
-arithmetic. A single learned-model env step (one RK4 step of a 2-DOF DeLaN: ~12 k multiply-adds
-in ~1 500 tiny operations) spends most of its ~19 µs there. The same program written out as one C
-function runs in a few µs.
-
-The spine is unchanged: JAX still derives the dynamics (forward dynamics by autodiff of the
-Lagrangian, the integrator), and :class:`CKernel` only translates the resulting jaxpr, primitive by
-primitive, with every shape static. Nothing is re-derived by hand; a primitive this module does not
-know is one clear error naming it.
-
-The translation keeps XLA's arithmetic (float64, no fast-math, NaN propagating through
-max/min/sign; only a dot product's sum may be split into SIMD lanes, as XLA's own blocked sums
-are) so results agree with the jitted function to round-off; the tests compare them. Equal
-subexpressions are computed once and values known before the step runs (index arithmetic) are
-folded by JAX itself. Shared libraries are cached on disk by a hash of the C source and the
-compiler command.
-
-Nothing is trusted blindly: every new kernel is run against XLA on the example inputs and a few
-random ones near them, and one that disagrees is refused (a :class:`CKernelWarning`, then XLA);
-a primitive parameter the translation does not implement is refused, not ignored. The cache
-directory is made 0700 and a library is loaded only when it and its directory belong to this
-user and are not group- or world-writable (loading a library runs its code); a lock makes
-concurrent workers compile a kernel once, and only the newest :data:`MAX_CACHED_KERNELS` are
-kept. POSIX only: on Windows, or without a working compiler, the callers take XLA.
+:func:`translate` is the entry point: it returns the C source of ``fg_kernel(ins, outs)`` and the
+primitives it translated. A form it does not know is a :class:`CKernelTranslationError` naming it.
 """
 
 from __future__ import annotations
 
-import atexit
 import contextlib
-import ctypes
-import hashlib
 import math
-import os
-import shlex
-import shutil
-import stat
-import subprocess
-import tempfile
-import warnings
-from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Callable, Sequence
 
 import jax
 import numpy as np
 
-from ._paths import cache_root
+from .errors import CKernelError, CKernelTranslationError
 
-__all__ = ["CKernel", "CKernelError", "CKernelWarning", "c_compiler"]
-
-
-class CKernelError(RuntimeError):
-    """The function cannot be lowered to C or the C compiler failed."""
+__all__ = ["translate", "MAX_STACK_BYTES"]
 
 
-class CKernelWarning(RuntimeWarning):
-    """A C kernel was built but not trusted (it disagrees with XLA, or its cached library is not
-    safely ours): the caller falls back to XLA."""
+class Aval:
+    def __init__(self, shape, dtype):
+        self.shape, self.dtype = shape, dtype
 
+
+#: the most stack one kernel call may use for its intermediates
+MAX_STACK_BYTES = 1 << 20
 
 # ---------------------------------------------------------------------------------------------
 # C types and scalar formatting
@@ -83,7 +49,7 @@ def _ctype(dtype) -> str:
     try:
         return _C_TYPES[name]
     except KeyError:
-        raise CKernelError(f"dtype {name} has no C translation (known: {sorted(_C_TYPES)})") from None
+        raise CKernelTranslationError(f"dtype {name} has no C translation (known: {sorted(_C_TYPES)})") from None
 
 
 def _c_literal(value, dtype) -> str:
@@ -305,7 +271,7 @@ def _check_params(name: str, params: dict) -> None:
     for key, value in params.items():
         accepts = allowed.get(key)
         if accepts is None or not accepts(value):
-            raise CKernelError(f"the C kernel does not implement {name!r} with {key}={value!r}; "
+            raise CKernelTranslationError(f"the C kernel does not implement {name!r} with {key}={value!r}; "
                                "use the XLA kernel for this model")
 
 
@@ -491,7 +457,7 @@ class _Translator:
         known = {k: ins[k].value for k in index_args(len(ins))}
         missing = [k for k, v in known.items() if v is None]
         if missing:
-            raise CKernelError(
+            raise CKernelTranslationError(
                 f"the C kernel translates {eqn.primitive.name!r} only with indices known before "
                 f"the step runs (here they are computed in it); use the XLA kernel for this model"
             )
@@ -529,7 +495,7 @@ class _Translator:
             return handler(ins, avals, **p)
         if name in _UNARY or name in _BINARY:
             return [self.elementwise(name, ins, avals[0])]
-        raise CKernelError(
+        raise CKernelTranslationError(
             f"the C kernel has no translation of the JAX primitive {name!r} "
             f"(used as {eqn}); use the XLA kernel for this model"
         )
@@ -552,7 +518,7 @@ class _Translator:
             template = "({0} > {1} ? {0} : {1})" if name == "max" else "({0} < {1} ? {0} : {1})"
         if name in ("div", "rem") and integer:
             # C traps on a zero divisor where XLA returns a value: never risk the process
-            raise CKernelError(f"integer {name} has no C translation (a zero divisor would trap); "
+            raise CKernelTranslationError(f"integer {name} has no C translation (a zero divisor would trap); "
                                "use the XLA kernel for this model")
         operands = [self.broadcast_reader(x, out.shape) for x in ins]
         self.loop(out.size, lambda i: f"{out.name}[{i}] = {template.format(*(read(i) for read in operands))};")
@@ -600,7 +566,7 @@ class _Translator:
         info = np.finfo(ins[0].dtype)
         if exponent_bits < info.nexp or mantissa_bits < info.nmant:
             # rounding to a narrower format (bfloat16-like) is not implemented bit-exactly
-            raise CKernelError(f"the C kernel does not implement 'reduce_precision' to "
+            raise CKernelTranslationError(f"the C kernel does not implement 'reduce_precision' to "
                                f"{exponent_bits} exponent / {mantissa_bits} mantissa bits on "
                                f"{ins[0].dtype}; use the XLA kernel for this model")
         return [ins[0]]  # as wide as the type: exactly the identity
@@ -639,7 +605,7 @@ class _Translator:
     # -- structural: aliases and index-run copies ---------------------------------------------
     def op_reshape(self, ins, avals, dimensions=None, **_):
         if dimensions is not None:
-            raise CKernelError("reshape with 'dimensions' has no C translation")
+            raise CKernelTranslationError("reshape with 'dimensions' has no C translation")
         return [self.alias(ins[0], avals[0])]
 
     def op_squeeze(self, ins, avals, **_):
@@ -703,7 +669,7 @@ class _Translator:
 
         def pad(a):
             if any(int(i) < 0 for _, _, i in padding_config):
-                raise CKernelError("pad with negative interior padding has no C translation")
+                raise CKernelTranslationError("pad with negative interior padding has no C translation")
             shape = list(a.shape)
             for d, (lo, hi, interior) in enumerate(padding_config):
                 lo, hi, interior = int(lo), int(hi), int(interior)
@@ -787,7 +753,7 @@ class _Translator:
         lhs, rhs = ins
         if any(x.dtype != np.dtype(avals[0].dtype) for x in ins):
             # mixed types accumulate in a wider type in XLA; C would multiply in the narrow one
-            raise CKernelError(f"the C kernel does not implement 'dot_general' of {lhs.dtype} x {rhs.dtype} "
+            raise CKernelTranslationError(f"the C kernel does not implement 'dot_general' of {lhs.dtype} x {rhs.dtype} "
                                f"into {avals[0].dtype}; use the XLA kernel for this model")
         out = self.fresh(avals[0])
         lfree = [d for d in range(len(lhs.shape)) if d not in lc and d not in lb]
@@ -849,7 +815,7 @@ class _Translator:
     def _fresh_copies(self, values: Sequence[_Var]) -> list[_Var]:
         copies = []
         for value in values:
-            copy = self.fresh(_Aval(value.shape, value.dtype))
+            copy = self.fresh(Aval(value.shape, value.dtype))
             self._copy_into(copy, value)
             copies.append(copy)
         return copies
@@ -916,386 +882,50 @@ class _Translator:
         return outs
 
 
-class _Aval:
-    def __init__(self, shape, dtype):
-        self.shape, self.dtype = shape, dtype
+def translate(closed) -> tuple[str, set[str]]:
+    """The C source of ``void fg_kernel(void *const *ins, void *const *outs)`` computing the closed
+    jaxpr ``closed`` (inputs and outputs as flat buffers, in order), and the primitives it uses.
 
-
-# ---------------------------------------------------------------------------------------------
-# Compiling and calling
-# ---------------------------------------------------------------------------------------------
-
-def _compiler_command() -> list[str] | None:
-    """``$CC`` (or ``cc``) as a command line, its program resolved on PATH; None when absent.
-    Parsed as a shell would: ``CC="ccache gcc"`` is a launcher and its compiler."""
-    try:
-        words = shlex.split(os.environ.get("CC") or "cc")
-    except ValueError:  # unbalanced quotes: no usable command
-        return None
-    program = shutil.which(words[0]) if words else None
-    return None if program is None else [program, *words[1:]]
-
-
-def c_compiler() -> str | None:
-    """The C compiler command used (``$CC`` or ``cc``), or None when there is none on PATH."""
-    command = _compiler_command()
-    return None if command is None else shlex.join(command)
-
-
-def _require_compiler() -> list[str]:
-    """The compiler command, or the CKernelError saying why there is none (checked before the
-    step is translated: no work is wasted on a machine that cannot build it)."""
-    if os.name == "nt":  # the cache's ownership checks and the flags below are POSIX-only
-        raise CKernelError("the C kernel is built on POSIX systems only (not on Windows); "
-                           "kernel='xla' works everywhere")
-    command = _compiler_command()
-    if command is None:
-        raise CKernelError(
-            f"kernel='c' needs a C compiler: none found as {os.environ.get('CC', 'cc')!r} on PATH "
-            "(install gcc or clang, or set CC); kernel='xla' needs none"
-        )
-    return command
-
-
-#: the most stack one kernel call may use for its intermediates
-MAX_STACK_BYTES = 1 << 20
-
-#: compiled kernels kept in a cache directory (the most recently used); older ones are removed
-MAX_CACHED_KERNELS = 64
-
-_CFLAGS = ("-O2", "-std=c99", "-shared", "-fPIC", "-fno-math-errno", "-fopenmp-simd")
-
-
-def _untrusted(path: Path, directory: bool) -> str | None:
-    """Why ``path`` may have been written by someone else (so loading code from it would run
-    their code), or None. POSIX: ours, not a symbolic link, not group- or world-writable."""
-    info = os.lstat(path)
-    if stat.S_ISLNK(info.st_mode):
-        return "is a symbolic link"
-    if directory != stat.S_ISDIR(info.st_mode) or (not directory and not stat.S_ISREG(info.st_mode)):
-        return "is not a " + ("directory" if directory else "regular file")
-    if info.st_uid != os.getuid():
-        return f"is owned by uid {info.st_uid}, not by this user (uid {os.getuid()})"
-    if info.st_mode & 0o022:
-        return f"is group- or world-writable (mode {stat.S_IMODE(info.st_mode):o})"
-    return None
-
-
-def _usable_dir(path: Path) -> bool:
-    """Make ``path`` (mode 0700) if needed; True when it is ours, private and writable."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with contextlib.suppress(FileExistsError):
-            path.mkdir(mode=0o700)
-        info = os.lstat(path)
-        if stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and info.st_mode & 0o077:
-            os.chmod(path, 0o700)  # ours, made loose by an older version: tighten, keep the kernels
-        problem = _untrusted(path, directory=True)
-        if problem:
-            warnings.warn(f"not using the C kernel cache {path}: it {problem}", CKernelWarning, stacklevel=4)
-            return False
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".probe-"):  # unique: no race on the name
-            pass
-        return True
-    except OSError:  # read-only or missing home, full disk
-        return False
-
-
-_PRIVATE_DIR: Path | None = None
-
-
-def _private_dir() -> Path:
-    """A fresh directory only this process knows (mkdtemp: 0700, unpredictable name), removed at
-    exit: the last resort when no shared cache directory can be trusted."""
-    global _PRIVATE_DIR
-    if _PRIVATE_DIR is None:
-        _PRIVATE_DIR = Path(tempfile.mkdtemp(prefix="furuta_gym_c_kernels_"))
-        atexit.register(shutil.rmtree, _PRIVATE_DIR, ignore_errors=True)
-    return _PRIVATE_DIR
-
-
-def _cache_dir() -> Path:
-    for path in (cache_root() / "c_kernels",
-                 Path(tempfile.gettempdir()) / f"furuta_gym_c_kernels_{os.getuid()}"):  # read-only home
-        if _usable_dir(path):
-            return path
-    return _private_dir()
-
-
-@contextlib.contextmanager
-def _locked(directory: Path):
-    """Hold the cache directory's lock: concurrent workers wanting the same kernel compile it
-    once (the others wait, then find it). Without fcntl there is no lock, only duplicate work."""
-    try:
-        import fcntl
-    except ImportError:
-        yield
-        return
-    try:
-        fd = os.open(directory / ".lock", os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
-    except OSError:  # no lock file possible: correct still (atomic replace), maybe duplicate work
-        yield
-        return
-    try:
-        with contextlib.suppress(OSError):  # a file system without flock (some NFS): as above
-            fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        os.close(fd)  # releases the lock
-
-
-def _mtime(path: Path) -> float:
-    try:
-        return path.stat().st_mtime
-    except OSError:
-        return 0.0
-
-
-def _evict(directory: Path, keep: int | None = None) -> None:
-    """Keep the ``keep`` most recently used kernels (a hit refreshes its mtime). A library a
-    running process has loaded stays mapped in it after removal."""
-    keep = MAX_CACHED_KERNELS if keep is None else keep
-    kernels = sorted(directory.glob("kernel_*.so"), key=_mtime, reverse=True)
-    for old in kernels[keep:]:
-        for path in (old, old.with_suffix(".verified")):
-            with contextlib.suppress(OSError):
-                path.unlink()
-
-
-def _compiler_works(command: list[str], directory: Path) -> bool:
-    """Whether ``command`` compiles a trivial file (a stub ``cc``, as on a Mac without the
-    command line tools, does not)."""
-    with tempfile.TemporaryDirectory(dir=directory) as tmp:
-        c_file = Path(tmp) / "trial.c"
-        c_file.write_text("int fg_trial(int x) { return x + 1; }\n")
-        try:
-            result = subprocess.run([*command, *_CFLAGS, str(c_file), "-o", str(Path(tmp) / "trial.so")],
-                                    capture_output=True, timeout=120)
-        except (OSError, subprocess.SubprocessError):
-            return False
-        return result.returncode == 0
-
-
-def _build(command: list[str], source: str, directory: Path, library: Path) -> None:
-    cc = shlex.join(command)
-    try:
-        with tempfile.TemporaryDirectory(dir=directory) as tmp:
-            c_file = Path(tmp) / "kernel.c"
-            c_file.write_text(source)
-            partial = Path(tmp) / "kernel.so"
-            result = subprocess.run([*command, *_CFLAGS, str(c_file), "-o", str(partial), "-lm"],
-                                    capture_output=True, text=True, timeout=600)
-            if result.returncode != 0:
-                # tell a broken compiler from a kernel it rejects
-                why = "" if _compiler_works(command, directory) else \
-                    " (it fails on a trivial test file too: not a working C compiler)"
-                raise CKernelError(f"the C compiler {cc} failed on the generated kernel{why}:\n"
-                                   f"{result.stderr[-2000:]}")
-            os.chmod(partial, 0o700)
-            os.replace(partial, library)  # atomic: a process without the lock sees all of it or none
-    except (OSError, subprocess.SubprocessError) as exc:
-        raise CKernelError(f"compiling the C kernel with {cc} failed: {type(exc).__name__}: {exc}") from exc
-
-
-def _compile_and_load(source: str) -> tuple[Path, ctypes.CDLL]:
-    """The kernel's library (cached by a hash of the source and the compiler command), checked
-    to be ours and private before it is loaded: loading a library runs its code."""
-    command = _require_compiler()
-    digest = hashlib.sha256((" ".join([*command, *_CFLAGS]) + "\n" + source).encode()).hexdigest()[:24]
-    directory = _cache_dir()
-    library = directory / f"kernel_{digest}.so"
-    with _locked(directory):
-        if os.path.lexists(library):
-            with contextlib.suppress(OSError):
-                os.utime(library, follow_symlinks=False)  # recently used: eviction keeps it
-        else:
-            _build(command, source, directory, library)
-            _evict(directory)
-        try:
-            problem = _untrusted(library, directory=False)
-        except OSError as exc:  # removed under us by a process that ignored the lock
-            raise CKernelError(f"the compiled C kernel {library} vanished: {exc}") from exc
-        if problem:
-            message = f"refusing to load the cached C kernel {library}: it {problem}; XLA steps this model"
-            warnings.warn(message, CKernelWarning, stacklevel=4)
-            raise CKernelError(message)
-        try:
-            return library, ctypes.CDLL(str(library))
-        except OSError as exc:
-            raise CKernelError(f"loading the compiled C kernel {library} failed: {exc}") from exc
-
-
-#: library file names already checked against XLA in this process (same source, same function)
-_VERIFIED: set[str] = set()
-
-#: random input sets compared with XLA after the example inputs
-_VERIFY_TRIALS = 3
-
-#: (rtol, atol relative to the output's scale) when comparing C with XLA, by float type
-_TOLERANCES = {"float64": (1e-9, 1e-12), "float32": (1e-4, 1e-6)}
-
-
-def _verified_on_disk(marker: Path) -> bool:
-    try:
-        return _untrusted(marker, directory=False) is None
-    except OSError:  # none
-        return False
-
-
-def _trial_input(example, aval, rng) -> np.ndarray:
-    """The example input (rng None) or a random one near it: floats move by 5 % of their size,
-    or by N(0, 0.5) where zero (states and inputs are zeros in the examples; angles and rates
-    of order one are their typical range). Integers and booleans may be indices or loop
-    counts: kept as given."""
-    x = np.array(example, dtype=aval.dtype).reshape(aval.shape)
-    if rng is None or not np.issubdtype(x.dtype, np.floating):
-        return x
-    scale = np.where(x == 0, 0.5, 0.05 * np.abs(x))
-    noisy = x + rng.normal(size=x.shape) * np.nan_to_num(scale, nan=0.0, posinf=0.0)
-    return np.array(noisy, dtype=x.dtype)  # a fresh C-contiguous array, 0-d kept 0-d
-
-
-def _disagreement(got: np.ndarray, want: np.ndarray) -> str | None:
-    """Why ``got`` (C) is not ``want`` (XLA), or None when they agree to round-off."""
-    if got.shape != want.shape:
-        return f"shape {got.shape} vs {want.shape}"
-    if not np.issubdtype(want.dtype, np.inexact):
-        bad = got != want
-        return None if not bad.any() else f"{int(bad.sum())} element(s) differ exactly, e.g. {got[bad][0]} vs {want[bad][0]}"
-    rtol, atol = _TOLERANCES.get(want.dtype.name, (1e-4, 1e-6))
-    finite = np.abs(want[np.isfinite(want)])
-    atol *= max(1.0, float(finite.max()) if finite.size else 1.0)  # cancellation scales with the output
-    close = np.isclose(got, want, rtol=rtol, atol=atol, equal_nan=True)
-    if close.all():
-        return None
-    k = np.flatnonzero(~close.ravel())[0]
-    return f"{int((~close).sum())} element(s) differ, e.g. C {got.ravel()[k]!r} vs XLA {want.ravel()[k]!r}"
-
-
-class CKernel:
-    """``fn(*args)`` for arrays of fixed shapes and dtypes, run as one compiled C function.
-
-    ``example_args`` fix the shapes and dtypes (a pytree of arrays; only the leaves' shapes and
-    dtypes are used). :meth:`bind` returns a zero-argument callable over fixed numpy buffers:
-    write inputs into ``inputs[k]``, call, read ``outputs[k]`` — the form that costs ~1 µs per
-    call. An output buffer may also be an input buffer (an in-place update): the results are
-    staged and written out after the last input is read.
+    A form the translation does not know is a :class:`CKernelTranslationError`, whatever JAX
+    changed under it; a step too large for the stack is a :class:`CKernelError`.
     """
+    try:
+        return _translate(closed)
+    except CKernelError:
+        raise
+    except Exception as exc:  # jaxpr internals this translation does not know (a newer JAX)
+        raise CKernelTranslationError(
+            f"the C kernel cannot translate this jaxpr ({type(exc).__name__}: {exc}); use the XLA kernel"
+        ) from exc
 
-    def __init__(self, fn: Callable, *example_args: Any, name: str = "kernel"):
-        _require_compiler()
-        leaves, self.in_tree = jax.tree_util.tree_flatten(example_args)
-        self.in_avals = [_Aval(np.shape(x), x.dtype if hasattr(x, "dtype") else np.asarray(x).dtype) for x in leaves]
 
-        def flat_fn(*flat):
-            return fn(*jax.tree_util.tree_unflatten(self.in_tree, flat))
-
-        self.name = name
-        closed, out_shapes = jax.make_jaxpr(flat_fn, return_shape=True)(*leaves)  # one trace
-        # the traced types, not the examples': without jax_enable_x64 a float64 example is float32
-        self.in_avals = [_Aval(v.aval.shape, v.aval.dtype) for v in closed.jaxpr.invars]
-        self.out_avals = [_Aval(v.aval.shape, v.aval.dtype) for v in closed.jaxpr.outvars]
-        self.out_tree = jax.tree_util.tree_structure(out_shapes)
-        self.source = self._translate(closed)
-        self.library_path, library = _compile_and_load(self.source)
-        self._function = library.fg_kernel
-        self._function.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-        self._function.restype = None
-        self._library = library
-        # checked once per library: when it is built, or loaded from a cache that never checked it
-        marker = self.library_path.with_suffix(".verified")
-        if self.library_path.name not in _VERIFIED and not _verified_on_disk(marker):
-            self._verify(flat_fn, leaves)
-            with contextlib.suppress(OSError):
-                marker.touch()
-        _VERIFIED.add(self.library_path.name)
-
-    def _verify(self, flat_fn, leaves) -> None:
-        """Run the C function and XLA on the example inputs and a few random ones near them: a
-        translation bug (or a primitive whose C semantics differ) must never silently change a
-        model's dynamics, so a kernel that disagrees is refused and the caller takes XLA."""
-        reference = jax.jit(flat_fn)
-        rng = np.random.default_rng(0)
-        for trial in range(1 + _VERIFY_TRIALS):
-            inputs = [_trial_input(x, a, rng if trial else None) for x, a in zip(leaves, self.in_avals)]
-            _, got = self.new_buffers()
-            self.bind(inputs, got)()
-            want = [np.asarray(w) for w in jax.tree_util.tree_leaves(reference(*inputs))]
-            for k, (g, w) in enumerate(zip(got, want)):
-                problem = _disagreement(g, w)
-                if problem:
-                    message = (f"the C kernel {self.name!r} disagrees with XLA on output {k} "
-                               f"({'example' if trial == 0 else 'random'} inputs, trial {trial}): "
-                               f"{problem}; primitives translated: {', '.join(sorted(self.primitives))}. "
-                               "Refusing it: XLA steps this model")
-                    warnings.warn(message, CKernelWarning, stacklevel=3)
-                    raise CKernelError(message)
-
-    def _translate(self, closed) -> str:
-        t = _Translator()
-        args = []
-        for k, aval in enumerate(closed.jaxpr.invars):
-            a = aval.aval
-            args.append(_Var(f"in{k}", a.shape, a.dtype))
-            t.emit(f"{_ctype(a.dtype)} *in{k} = ({_ctype(a.dtype)} *)ins[{k}];")
-        # staged in fresh copies: an output buffer may be an input buffer
-        results = t._fresh_copies(t.closed(closed, args))
-        if t.stack_bytes > MAX_STACK_BYTES:
-            # every intermediate lives on the calling thread's stack (reentrant, no allocation);
-            # a thread's stack may be as small as 2 MiB. Models this large are compute-bound,
-            # where XLA's fixed cost per call matters little.
-            raise CKernelError(
-                f"the step needs {t.stack_bytes / 2**20:.1f} MiB of intermediates (limit "
-                f"{MAX_STACK_BYTES / 2**20:.0f} MiB on the stack); use the XLA kernel for this model"
-            )
-        for k, (res, var) in enumerate(zip(results, closed.jaxpr.outvars)):
-            ct = _ctype(var.aval.dtype)
-            t.emit(f"{{ {ct} *o = ({ct} *)outs[{k}];")
-            t.indent += 1
-            t._copy_into(_Var("o", var.aval.shape, var.aval.dtype), res)
-            t.indent -= 1
-            t.emit("}")
-        staged = "\n".join(t.lines)
-        self.primitives = t.primitives
-        return (
-            _PRELUDE + "\n".join(t.static_arrays) + "\n"
-            + "void fg_kernel(void *const *ins, void *const *outs) {\n" + staged + "\n}\n"
+def _translate(closed) -> tuple[str, set[str]]:
+    t = _Translator()
+    args = []
+    for k, aval in enumerate(closed.jaxpr.invars):
+        a = aval.aval
+        args.append(_Var(f"in{k}", a.shape, a.dtype))
+        t.emit(f"{_ctype(a.dtype)} *in{k} = ({_ctype(a.dtype)} *)ins[{k}];")
+    # staged in fresh copies: an output buffer may be an input buffer
+    results = t._fresh_copies(t.closed(closed, args))
+    if t.stack_bytes > MAX_STACK_BYTES:
+        # every intermediate lives on the calling thread's stack (reentrant, no allocation);
+        # a thread's stack may be as small as 2 MiB. Models this large are compute-bound,
+        # where XLA's fixed cost per call matters little.
+        raise CKernelError(
+            f"the step needs {t.stack_bytes / 2**20:.1f} MiB of intermediates (limit "
+            f"{MAX_STACK_BYTES / 2**20:.0f} MiB on the stack); use the XLA kernel for this model"
         )
-
-    def new_buffers(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Fresh, zeroed input and output buffers with the kernel's shapes and dtypes."""
-        ins = [np.zeros(a.shape, dtype=a.dtype) for a in self.in_avals]
-        outs = [np.zeros(a.shape, dtype=a.dtype) for a in self.out_avals]
-        return ins, outs
-
-    def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> Callable[[], None]:
-        """A zero-argument call reading ``inputs`` and writing ``outputs`` (fixed buffers)."""
-        for k, (buf, aval) in enumerate(zip(inputs, self.in_avals)):
-            self._check(buf, aval, f"inputs[{k}]")
-        for k, (buf, aval) in enumerate(zip(outputs, self.out_avals)):
-            self._check(buf, aval, f"outputs[{k}]")
-        in_ptrs = (ctypes.c_void_p * max(len(inputs), 1))(*[b.ctypes.data for b in inputs])
-        out_ptrs = (ctypes.c_void_p * max(len(outputs), 1))(*[b.ctypes.data for b in outputs])
-        function = self._function
-        keep = (list(inputs), list(outputs), in_ptrs, out_ptrs)  # the buffers must outlive the call
-
-        def call(_keep=keep):
-            function(in_ptrs, out_ptrs)
-
-        return call
-
-    @staticmethod
-    def _check(buf, aval, what):
-        if not isinstance(buf, np.ndarray) or buf.shape != tuple(aval.shape) or buf.dtype != aval.dtype \
-                or not buf.flags.c_contiguous:
-            raise ValueError(f"{what}: expected a C-contiguous numpy array of shape {tuple(aval.shape)} "
-                             f"and dtype {aval.dtype}, got {getattr(buf, 'shape', type(buf))} "
-                             f"{getattr(buf, 'dtype', '')}")
-
-    def __call__(self, *args):
-        """Convenience call (allocates; for tests and one-off use): same pytree as ``fn``."""
-        leaves = jax.tree_util.tree_leaves(args)
-        inputs = [np.ascontiguousarray(np.asarray(x, dtype=a.dtype).reshape(a.shape)) for x, a in zip(leaves, self.in_avals)]
-        _, outputs = self.new_buffers()
-        self.bind(inputs, outputs)()
-        return jax.tree_util.tree_unflatten(self.out_tree, outputs)
+    for k, (res, var) in enumerate(zip(results, closed.jaxpr.outvars)):
+        ct = _ctype(var.aval.dtype)
+        t.emit(f"{{ {ct} *o = ({ct} *)outs[{k}];")
+        t.indent += 1
+        t._copy_into(_Var("o", var.aval.shape, var.aval.dtype), res)
+        t.indent -= 1
+        t.emit("}")
+    staged = "\n".join(t.lines)
+    source = (
+        _PRELUDE + "\n".join(t.static_arrays) + "\n"
+        + "void fg_kernel(void *const *ins, void *const *outs) {\n" + staged + "\n}\n"
+    )
+    return source, t.primitives
