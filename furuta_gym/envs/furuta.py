@@ -105,7 +105,7 @@ class FurutaEnv(LagrangianEnv):
     |---------------|----------------------|----------------|-------------|
     | `dynamics`    | str / model          | `"mujoco"`     | `"mujoco"`, `"analytic"`, a checkpoint path, or an `AbstractLagrangianSystem` |
     | `kernel`      | str                  | `"auto"`       | model backends: `"c"` (the JAX step lowered to C), `"xla"` (jitted), `"auto"` (C when a compiler exists); docs/envs.md |
-    | `plant`       | `Plant` / str / list | `Plant()`      | the device: presets, extra effects, randomisation (below); `plant="coulomb"` is short for `Plant("coulomb")` |
+    | `plant`       | `Plant` / str / list | `Plant()`      | the device: presets, extra effects, randomisation (below); `plant="coulomb"` is short for `Plant("coulomb")`; a diagnosis (`plant=res`), its JSON or its MJCF gives the diagnosed rig (`env.plant.source` says which) |
     | `task`        | None                 | `None`         | the swing-up has no task settings (N-MSD: `Target`) |
     | `episode`     | `Episode`            | `Episode()`    | control period, horizon, start noise |
     | `actuation`   | `Actuation`          | `Actuation()`  | action limit and input delay |
