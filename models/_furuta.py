@@ -207,7 +207,8 @@ def write_furuta_lumped_mujoco(model, b: Mapping[str, float]) -> MujocoTerms:
                         ("J2 - J1b", pendulum_inertia - _POINT_MASS_INERTIA)):
         if not value > 0:
             raise ValueError(f"lumped parameters {dict(b)}: {name} = {value:.3g} must be > 0 for a MuJoCo "
-                             "body (no rigid pendulum on an arm has these values)")
+                             "body (no rigid pendulum on an arm has these values; their lumped model runs "
+                             "them: dynamics='analytic')")
     _write_furuta_bodies(model, rotor_inertia, arm, mass, com, pendulum_inertia, g)
     return MujocoTerms(stiffness=(0.0, 0.0), damping=(b["c_alpha"], b["c_beta"]), motor_gain=b["K"])
 

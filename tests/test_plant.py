@@ -202,3 +202,23 @@ def test_the_env_takes_a_plant_a_diagnosis_or_a_file(tmp_path):
         gym.make("furuta_gym/NMSD-v0", plant=plant)
     with pytest.raises(ValueError, match="runs on dynamics='mujoco' or 'analytic'"):
         gym.make("furuta_gym/Furuta-v0", plant=plant, dynamics=analytic_model("furuta"))
+
+
+def test_the_shipped_real_data_plant():
+    """The README's diagnosis of the 15 QUBE runs: its fitted J1b exceeds J2, which no rigid
+    pendulum has (J2 − J1b is the pendulum's Ixx − Iyy + Izz ≥ 0), so MuJoCo refuses it by name
+    and its lumped model runs it."""
+    import gymnasium as gym
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "docs" / "diagnose_qube.json"
+    plant = Plant.load(path)
+    assert plant.source.startswith("diagnosis (") and plant.lumped["J1b"] > plant.lumped["J2"]
+    assert json.loads(path.read_text())["plant"] == plant.to_json()
+    with pytest.raises(ValueError, match="J2 - J1b .* dynamics='analytic'"):
+        gym.make("furuta_gym/Furuta-v0", plant=plant)
+    env = gym.make("furuta_gym/Furuta-v0", plant=str(path), dynamics="analytic")
+    obs, _ = env.reset(seed=0)
+    for _ in range(100):
+        obs, *_ = env.step(np.array([1.0]))
+    assert np.all(np.isfinite(obs))

@@ -127,9 +127,9 @@ class Plant:
 
     def to_json(self) -> dict[str, Any]:
         """The plant as JSON (a diagnosed plant: its system, lumped values, effects, source)."""
-        return {"system": self.system, "lumped": None if self.lumped is None else dict(self.lumped),
-                "effects": [effect_json(e) for e in self.effects], "presets": list(self.presets),
-                "source": self.source}
+        doc = {"system": self.system, "lumped": None if self.lumped is None else dict(self.lumped),
+               "source": self.source, "effects": [effect_json(e) for e in self.effects]}
+        return {**doc, "presets": list(self.presets)} if self.presets else doc
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any], where: str = "plant") -> "Plant":
