@@ -271,8 +271,7 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
     def _on_parameters(self, parameters: Mapping[str, float]) -> None:
         """Physical parameters changed (domain randomisation): a subclass that overrides this
         calls ``super()._on_parameters``."""
-        lumped = self.plant.lumped
-        self._energy_values = lumped if lumped is not None else self._definition.lumped_values(parameters)
+        self._energy_values = self.plant.lumped or self._definition.lumped_values(parameters)
 
     def physical_parameters(self) -> dict[str, float]:
         """The plant's physical parameters (for a learned model: the pinned nominal ones, which
