@@ -90,6 +90,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quadrature", choices=["trapezoid", "simpson", "hermite"],
                         help="L_Iτ rule (default trapezoid, the paper's; hermite resolves the motion "
                              "between samples from q and q̇ and all but removes the quadrature floor)")
+    parser.add_argument("--integral-span", type=int,
+                        help="quadrature intervals summed into one L_Iτ residual (default 1, the paper's); "
+                             "a few estimator time constants on encoder logs with estimated velocities")
     parser.add_argument("--hidden", type=_ints, help="MLP widths, e.g. 16,16")
     parser.add_argument("--seed", type=int, help="random seed (weights, shuffling)")
     parser.add_argument("--checkpoint-every", type=int, help="model snapshot every N epochs")
@@ -120,7 +123,7 @@ def _config(args):
     overrides = {}
     for name, key in [("epochs", "epochs"), ("horizons", "horizons"), ("lr", "learning_rate"),
                       ("weight_decay", "weight_decay"), ("lam", "lambda_traj"), ("lambda_step", "lambda_step"),
-                      ("quadrature", "quadrature"), ("seed", "seed"), ("checkpoint_every", "checkpoint_every")]:
+                      ("quadrature", "quadrature"), ("integral_span", "integral_span"), ("seed", "seed"), ("checkpoint_every", "checkpoint_every")]:
         value = getattr(args, name)
         if value is not None:
             overrides[key] = value

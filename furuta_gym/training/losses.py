@@ -63,6 +63,7 @@ __all__ = [
     "aphynity_lambda_update",
     "resolve_normalization",
     "resolution_weights",
+    "span_sum",
     "Normalization",
 ]
 
@@ -226,24 +227,40 @@ def resolution_weights(windows: Windows, n_dof: int, rule: QuadratureRule,
     return jax.vmap(one)(windows.t, windows.x)
 
 
+def span_sum(x: Float[Array, "K *rest"], span: int) -> Float[Array, "G *rest"]:
+    """Sums of ``span`` consecutive quadrature intervals (the last group may be shorter).
+
+    The integral residual is additive over intervals (the momentum difference telescopes), so a
+    group's sum is exactly the residual over the group's longer interval: the paper's equation
+    on [t_k, t_{k+span}] with the integrands still resolved at every sample.
+    """
+    if span == 1:
+        return x
+    groups = -(-x.shape[0] // span)
+    pad = jnp.zeros((groups * span - x.shape[0], *x.shape[1:]), x.dtype)
+    return jnp.concatenate([x, pad]).reshape(groups, span, *x.shape[1:]).sum(axis=1)
+
+
 def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmentation: bool = False,
-                    augmentation_part: str = "full"):
+                    augmentation_part: str = "full", span: int = 1):
     """Per window: the residual Z̄ − Ā and the model's momentum changes Δp̂ over the quadrature
-    intervals and, if asked, the velocity changes the data-driven force accounts for, ∫M̂⁻¹F_a dt,
-    with the data's own velocity changes Δq̇ over the same intervals."""
+    intervals (summed ``span`` at a time) and, if asked, the velocity changes the data-driven
+    force accounts for, ∫M̂⁻¹F_a dt, with the data's own velocity changes Δq̇ over the same
+    intervals."""
     n = model.spec.n_dof
 
     def one(t, x, u):
         q, qd = x[:, :n], x[:, n:]
         dt = t[1] - t[0]
-        r = integral_residual(model, q, qd, u, dt, rule)
+        r = span_sum(integral_residual(model, q, qd, u, dt, rule), span)
         p = jax.vmap(lambda q_, qd_: momentum(model, q_, qd_))(q, qd)
+        dp = span_sum(interval_difference(p, rule), span)
         if not with_augmentation:
-            return r, interval_difference(p, rule), None, None
+            return r, dp, None, None
         force = model.augmentation if augmentation_part == "full" else model.augmentation_beyond_linear
         acc = interval_quadrature(lambda q_, qd_, u_: solve_mass_matrix(model.mass_matrix(q_), force(q_, qd_)),
                                   q, qd, u, dt, rule)
-        return r, interval_difference(p, rule), acc, interval_difference(qd, rule)
+        return r, dp, span_sum(acc, span), span_sum(interval_difference(qd, rule), span)
 
     return jax.vmap(one)(windows.t, windows.x, windows.u)
 
@@ -267,15 +284,16 @@ def integral_loss(
     rule: QuadratureRule = "trapezoid",
     normalize: Normalization = "auto",
     resolution_tolerance: float | None = None,
+    span: int = 1,
 ) -> Float[Array, ""]:
     """L_Iτ = Σ‖Z̄ − Ā‖² over windows, intervals and joints, divided by the normaliser.
 
     See the module docstring for ``normalize``; with ``"momentum"`` the value is the squared
     residual relative to the model's own momentum changes (dimensionless).
-    ``resolution_tolerance``: see :func:`integral_loss_terms`.
+    ``resolution_tolerance`` and ``span``: see :func:`integral_loss_terms`.
     """
     return integral_loss_terms(model, windows, rule=rule, normalize=normalize,
-                               resolution_tolerance=resolution_tolerance)[0]
+                               resolution_tolerance=resolution_tolerance, span=span)[0]
 
 
 def integral_loss_terms(
@@ -287,6 +305,7 @@ def integral_loss_terms(
     with_augmentation: bool = False,
     augmentation_part: str = "full",
     resolution_tolerance: float | None = None,
+    span: int = 1,
 ) -> tuple[Float[Array, ""], Float[Array, ""] | None]:
     """``(L_Iτ, P_a)``: L_Iτ as :func:`integral_loss` and, with ``with_augmentation``, the share
     of the data's velocity changes that the data-driven force accounts for,
@@ -310,14 +329,25 @@ def integral_loss_terms(
 
     ``resolution_tolerance`` (position units, rad or m; None: off) weights each interval's
     squared residual, and its Δp̂² in the normaliser, by :func:`resolution_weights`.
+
+    ``span`` (1: the paper's intervals) sums the residual over ``span`` consecutive quadrature
+    intervals before squaring (:func:`span_sum`). Velocities estimated from encoder counts carry
+    an error that enters each interval's residual through the momentum at its two ends; over a
+    longer interval that error stays the same size while the physics' impulse grows with the
+    interval, so on such data a span of a few estimator time constants lets the potential, not
+    the estimator's noise, decide the fit.
     """
+    if not (isinstance(span, (int, np.integer)) and span >= 1):
+        raise ValueError(f"span must be a positive integer (quadrature intervals per residual), got {span!r}")
+    if span > 1 and resolution_tolerance is not None:
+        raise ValueError("span > 1 and resolution_tolerance cannot be combined: the weights are per interval")
     if augmentation_part not in AUGMENTATION_PARTS:
         raise ValueError(f"augmentation_part must be one of {AUGMENTATION_PARTS}, got {augmentation_part!r}")
     if normalize == "auto":
         normalize = resolve_normalization(windows)
     if resolution_tolerance is not None and not resolution_tolerance > 0:
         raise ValueError(f"resolution_tolerance must be positive or None, got {resolution_tolerance!r}")
-    r, dp, acc, dqd = _integral_parts(model, windows, rule, with_augmentation, augmentation_part)
+    r, dp, acc, dqd = _integral_parts(model, windows, rule, with_augmentation, augmentation_part, int(span))
     if resolution_tolerance is None:
         itau = _normalised(jnp.sum(r**2), dp, normalize, r.size)
     else:

@@ -108,6 +108,10 @@ class TrainConfig:
     the sampling under-resolves the motion the true model's residual is quadrature error of the
     size of e; unweighted, the few such intervals (a pendulum whirling at 30 rad/s at 100 Hz)
     make most of L_Iτ's floor, and a flexible model bends its physics to fit that error.
+    ``integral_span`` (1: the paper) quadrature intervals summed into one L_Iτ residual
+    (:func:`~furuta_gym.training.losses.span_sum`): the same equation over a longer interval, so
+    an error in the estimated velocities, which enters at the interval's ends, weighs less
+    against the physics' impulse.
     ``fast_compile`` compiles the steps with a trajectory loss (an ODE solve: L_traj, L_aph and
     L_prop's stages after the L_Iτ-alone one) with XLA's backend optimisation level 0: such a
     step compiles in ~2/3 of the time and runs ~2.7× slower, and results agree to rounding, not
@@ -132,6 +136,7 @@ class TrainConfig:
     augmentation_weight: float | None = None
     augmentation_part: str = "beyond_linear"
     resolution_tolerance: float | None = None
+    integral_span: int = 1
     rtol: float = 1e-3
     atol: float = 1e-6
     max_steps: int = 4096
@@ -172,6 +177,10 @@ class TrainConfig:
             raise ValueError(f"augmentation_weight must be non-negative or None, got {self.augmentation_weight!r}")
         if self.resolution_tolerance is not None and not float(self.resolution_tolerance) > 0:
             raise ValueError(f"resolution_tolerance must be positive or None, got {self.resolution_tolerance!r}")
+        if not (isinstance(self.integral_span, (int, np.integer)) and self.integral_span >= 1):
+            raise ValueError(f"integral_span must be a positive integer, got {self.integral_span!r}")
+        if self.integral_span > 1 and self.resolution_tolerance is not None:
+            raise ValueError("integral_span > 1 and resolution_tolerance cannot be combined")
         if self.batch_size is not None and self.batch_size < 1:
             raise ValueError(f"batch_size must be positive or None, got {self.batch_size}")
 
@@ -355,6 +364,7 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
                 terms["itau"], share = integral_loss_terms(
                     model, int_b, rule=config.quadrature, normalize=normalization, with_augmentation=use_share,
                     augmentation_part=config.augmentation_part, resolution_tolerance=config.resolution_tolerance,
+                    span=config.integral_span,
                 )
                 total = total + terms["itau"]
                 if use_share:
