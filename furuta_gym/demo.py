@@ -103,6 +103,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     models = {loss: timed(f"train_{loss}", _train, cfg, out, datasets, loss, progress, overwrite)
               for loss in ("prop", "traj")}
     t_fine, tracks, summary["tracking"] = timed("swap", _swap_into_env, cfg, models, progress)
+    summary["physics"] = timed("physics", _physics_vs_truth, models, datasets)
     records, summary["control"] = timed("control", _control, cfg, models["prop"], progress)
     summary["diagnose"] = timed("diagnose", _diagnose_log, cfg, out, progress, overwrite)
     summary["video"] = timed("report", _report, cfg, out, t_fine, tracks, records[0], progress)
@@ -182,6 +183,23 @@ def _swap_into_env(cfg: DemoConfig, models: dict, progress: bool):
     return np.arange(steps) / 500.0, tracks, tracking
 
 
+def _physics_vs_truth(models: dict, datasets: dict) -> dict:
+    """3b. What the paper's loss is for: each learned model's energy and its force decomposition
+    (inertial, Coriolis, potential-derived terms) against the analytic truth, along the held-out
+    trajectories' recorded states (log10 RMSE; the forces' the mean over the three terms)."""
+    from .models import Furuta
+    from .training.metrics import FORCE_TERMS, energy_error, force_decomposition_errors
+
+    held_out = datasets["test_free"] + datasets["test_forced"]
+    physics = {}
+    for loss, model in models.items():
+        forces = force_decomposition_errors(model, held_out, Furuta())
+        physics[loss] = {"energy": float(energy_error(model, datasets["test_free"], Furuta())),
+                         "forces": float(np.mean([forces[k] for k in FORCE_TERMS])),
+                         **{k: float(forces[k]) for k in FORCE_TERMS}}
+    return physics
+
+
 def _control(cfg: DemoConfig, model, progress: bool):
     """4. Swing-up + LQR designed on ``model``, run on MuJoCo from rest and seeded starts near it."""
     with _bar(2, "4/6 swing-up + LQR from the learned model on MuJoCo", progress) as bar:
@@ -249,12 +267,17 @@ def _report(cfg: DemoConfig, out: Path, t_fine, tracks, record, progress: bool) 
 
 def summary_table(summary: dict) -> str:
     """The demo's one summary table (plain text)."""
-    tr, co, dg = summary["tracking"], summary["control"], summary["diagnose"]
+    tr, co, dg, ph = summary["tracking"], summary["control"], summary["diagnose"], summary["physics"]
     eb, ea = dg["error_before"], dg["error_after"]
+    closer = "closer" if ph["prop"]["forces"] < ph["traj"]["forces"] else "NOT closer"
     rows = [
         ("Learned vs true (held-out free run, env)", "RMSE α / β [rad]", f"{summary['config']['tracking_seconds']:g} s, 500 Hz"),
         ("  DeLaN L_prop", f"{tr['prop']['rmse_alpha']:.3g} / {tr['prop']['rmse_beta']:.3g}", ""),
         ("  DeLaN L_traj", f"{tr['traj']['rmse_alpha']:.3g} / {tr['traj']['rmse_beta']:.3g}", ""),
+        ("Physics vs true (held-out states)", "log10 RMSE energy / forces", "forces: inertial, Coriolis, gravity"),
+        ("  DeLaN L_prop", f"{ph['prop']['energy']:.2f} / {ph['prop']['forces']:.2f}", ""),
+        ("  DeLaN L_traj", f"{ph['traj']['energy']:.2f} / {ph['traj']['forces']:.2f}",
+         f"L_prop's forces {closer} to the truth"),
         ("Swing-up on MuJoCo (L_prop design)",
          f"{co['success_rate'] * 100:.0f} % of {co['episodes']}",
          f"from rest: {'yes' if co['from_rest_success'] else 'no'}"

@@ -34,6 +34,12 @@ def test_demo_summary_numbers_are_finite_and_sensible(demo_dir):
     for loss in ("prop", "traj"):
         for v in s["tracking"][loss].values():
             assert math.isfinite(v) and v >= 0
+        physics = s["physics"][loss]
+        # log10 RMSE against the truth: finite, and the mean over the three force terms
+        assert all(math.isfinite(physics[k]) for k in ("energy", "forces", "inertial", "coriolis", "potential"))
+        assert abs(physics["forces"] - (physics["inertial"] + physics["coriolis"] + physics["potential"]) / 3) < 1e-12
+    closer = s["physics"]["prop"]["forces"] < s["physics"]["traj"]["forces"]
+    assert ("L_prop's forces closer" if closer else "L_prop's forces NOT closer") in stdout
     c = s["control"]
     assert 0.0 <= c["success_rate"] <= 1.0 and c["episodes"] >= 2
     assert c["peak_voltage"] <= 5.0 + 1e-9  # the env's default voltage limit holds
