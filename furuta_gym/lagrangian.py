@@ -288,8 +288,8 @@ def linearize(system: AbstractLagrangianSystem, x, u):
 
 
 def interval_integral(
-    f: Float[Array, "T *rest"], dt: float, rule: QuadratureRule = "trapezoid"
-) -> Float[Array, "K *rest"]:
+    f: Float[Array, " T *rest"], dt: float, rule: QuadratureRule = "trapezoid"
+) -> Float[Array, " K *rest"]:
     """∫ f dt over consecutive intervals of uniformly sampled ``f``.
 
     ``"trapezoid"``: K = T − 1 intervals [t_{j−1}, t_j] (the paper's eq. 9-10).
@@ -334,7 +334,7 @@ def hermite_states(
 def interval_quadrature(
     g, q: Float[Array, "T n"], qd: Float[Array, "T n"], u: Float[Array, "T m"], dt: float,
     rule: QuadratureRule = "trapezoid",
-) -> Float[Array, "K *rest"]:
+) -> Float[Array, " K *rest"]:
     """∫ g(q, q̇, u) dt over the intervals of ``rule``, for a per-sample function ``g``.
 
     ``"trapezoid"`` / ``"simpson"`` evaluate g at the samples (:func:`interval_integral`).
@@ -355,8 +355,8 @@ def interval_quadrature(
 
 
 def interval_difference(
-    p: Float[Array, "T *rest"], rule: QuadratureRule = "trapezoid"
-) -> Float[Array, "K *rest"]:
+    p: Float[Array, " T *rest"], rule: QuadratureRule = "trapezoid"
+) -> Float[Array, " K *rest"]:
     """p(end) − p(start) over the same intervals as :func:`interval_integral` (``"hermite"``
     uses the trapezoid's intervals)."""
     if rule in ("trapezoid", "hermite"):

@@ -2,7 +2,6 @@
 (``TrainConfig.resolution_tolerance``; :func:`furuta_gym.training.losses.resolution_weights`)."""
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 

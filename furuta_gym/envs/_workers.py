@@ -111,7 +111,7 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
         except Exception:
             pass
     finally:
-        del inputs, outputs
+        inputs = outputs = None  # drop the views before their buffers close
         for block in (shm_in, shm_out):
             if block is not None:
                 block.close()

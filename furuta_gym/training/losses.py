@@ -227,7 +227,7 @@ def resolution_weights(windows: Windows, n_dof: int, rule: QuadratureRule,
     return jax.vmap(one)(windows.t, windows.x)
 
 
-def span_sum(x: Float[Array, "K *rest"], span: int) -> Float[Array, "G *rest"]:
+def span_sum(x: Float[Array, " K *rest"], span: int) -> Float[Array, " G *rest"]:
     """Sums of ``span`` consecutive quadrature intervals (the last group may be shorter).
 
     The integral residual is additive over intervals (the momentum difference telescopes), so a
