@@ -80,6 +80,7 @@ class Cell:
     effects: bool = True
     epochs: int = SHORT
     physical_start: bool = False
+    integral_span: int = 1
 
 
 CELLS = {
@@ -90,6 +91,10 @@ CELLS = {
     "exact_angles": Cell("(c) exact angles (no encoder)", quantize=False),
     "no_effects": Cell("(e) no undeclared effects", effects=False),
     "physical_start": Cell("(f) as the baseline, started from a physical potential", physical_start=True),
+    "span_5": Cell("(g) as the real runs, L_Iτ over 20 ms (5 Simpson intervals)", integral_span=5),
+    "span_25": Cell("(h) as the real runs, L_Iτ over 100 ms (25 Simpson intervals)", integral_span=25),
+    "span_50": Cell("(i) as the real runs, L_Iτ over 200 ms (50 Simpson intervals: one per window)",
+                    integral_span=50),
 }
 
 
@@ -100,7 +105,6 @@ def physical_start(seed: int):
     net keeps its random weights (their curvature adds a few mN·m/rad)."""
     import equinox as eqx
     import jax
-    import jax.numpy as jnp
 
     from furuta_gym.models import make_model
 
@@ -186,7 +190,7 @@ def config_for(cell: Cell, seed: int):
     lr = base.learning_rate[0] if isinstance(base.learning_rate, tuple) else base.learning_rate
     # snapshots at multiples of SHORT / 4, so a long run has one at the short budget
     return dataclasses.replace(base, epochs=(cell.epochs,), horizons=(None,), learning_rate=lr,
-                               checkpoint_every=max(1, SHORT // 4))
+                               checkpoint_every=max(1, SHORT // 4), integral_span=cell.integral_span)
 
 
 def _mean_log10(errors: dict) -> float | None:
@@ -214,7 +218,9 @@ def itau_comparison(model, train_pieces, rule: str, cell: Cell) -> dict:
 
     windows = make_windows(train_pieces, 101, stride=100, cover_end=True)
     models = {"learned": model, "nominal analytic": Furuta(), "truth without the delay": _truth(cell)}
-    return {k: float(integral_loss(m, windows, rule=rule, normalize="none")) for k, m in models.items()}
+    # the loss the cell trained on: its span of quadrature intervals per residual
+    return {k: float(integral_loss(m, windows, rule=rule, normalize="none", span=cell.integral_span))
+            for k, m in models.items()}
 
 
 def gravity_profile(train_pieces, rule: str, cell: Cell) -> dict:
@@ -227,7 +233,8 @@ def gravity_profile(train_pieces, rule: str, cell: Cell) -> dict:
     windows = make_windows(train_pieces, 101, stride=100, cover_end=True)
 
     def loss(scale):
-        return float(integral_loss(_truth(cell, scale), windows, rule=rule, normalize="none"))
+        return float(integral_loss(_truth(cell, scale), windows, rule=rule, normalize="none",
+                                   span=cell.integral_span))
 
     l0, l1, l2 = loss(0.0), loss(1.0), loss(2.0)
     curvature = (l2 - 2 * l1 + l0) / 2  # L(s) = a·s² + b·s + c
@@ -286,6 +293,14 @@ def fill_missing(path: Path, work: Path) -> None:
         doc["itau"] = itau_comparison(model, pieces, doc["config"]["quadrature"], cell)
         doc["gravity_profile"] = gravity_profile(pieces, doc["config"]["quadrature"], cell)
         doc["truth_has_effects"] = cell.effects
+    if cell.integral_span > 1 and doc.get("itau_span") != cell.integral_span:  # made before L_Iτ followed the span
+        from furuta_gym.training.checkpoint import load_model
+
+        pieces = _pieces(simulate(cell, N_TRAIN, DURATION, doc["data_seed"])[0], SPLIT)
+        model = load_model(work / path.stem / "model.eqx", expected_system="furuta")
+        doc["itau"] = itau_comparison(model, pieces, doc["config"]["quadrature"], cell)
+        doc["gravity_profile"] = gravity_profile(pieces, doc["config"]["quadrature"], cell)
+    doc["itau_span"] = cell.integral_span
     if cell.epochs > SHORT and "short" not in doc:
         test_pieces = _pieces(simulate(cell, N_TEST, TEST_DURATION, doc["data_seed"] + 500)[0], None)
         doc["short"] = short_budget(work / path.stem, test_pieces)

@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "real_models"
 DOC = ROOT / "docs" / "learning.md"
 NAME = "real-models"
-ORDER = ("nominal", "fitted", "diagnosed", "dln_prop", "dln_traj", "adln_prop", "adln_aph")
+ORDER = ("nominal", "fitted", "diagnosed", "dln_prop", "dln_prop_span", "dln_traj", "adln_prop", "adln_prop_span",
+         "adln_aph")
 STATES = (("alpha", "α"), ("beta", "β"), ("alpha_dot", "α̇"), ("beta_dot", "β̇"))
 COMMAND = "python experiments/real_models.py && python experiments/real_models_table.py"
 
@@ -84,7 +85,10 @@ def training_table(docs: list[dict]) -> str:
                        for h in c["horizons"])
         lr = c["learning_rate"]
         lr = ", ".join(f"{v:g}" for v in lr) if isinstance(lr, list) else f"{lr:g}"
-        quad = c["quadrature"] if d["name"].endswith("_prop") else "–"  # L_Iτ's rule: L_prop only
+        quad = "–"  # L_Iτ's rule (and its intervals per residual): L_prop only
+        if "_prop" in d["name"]:
+            span = c.get("integral_span", 1)
+            quad = c["quadrature"] + (f", {span} intervals per residual" if span > 1 else "")
         rows.append(f"| {d['label']} | {', '.join(map(str, c['epochs']))} | {hz} | {quad} | {lr} "
                     f"| {tr['training_seconds']:.0f} | {tr['selected']} "
                     f"| {tr['validation'][tr['selected']]:.3f} / {tr['validation']['model.eqx']:.3f} |")
