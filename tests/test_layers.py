@@ -23,6 +23,7 @@ FORBIDDEN = {
     "envs": {"training", "diagnose", "cli", "demo"},
     "controllers": {"training", "diagnose", "cli", "demo"},
     "training": {"diagnose", "cli", "demo"},
+    "rl": {"training", "diagnose", "cli", "demo"},
 }
 SPINE = {"lagrangian", "systems", "signals", "effects", "simulate", "data"}
 

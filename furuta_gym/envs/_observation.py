@@ -8,6 +8,7 @@ component, the derivative filter's memory, the observation layout and its Box.
 from __future__ import annotations
 
 import math
+import types
 from typing import Callable
 
 import numpy as np
@@ -18,7 +19,30 @@ from ..signals import DerivativeFilter, quantize_joints
 from ._settings import EnvArgumentError, Sensors, Spaces
 from ._tasks import wrap_angle
 
-__all__ = ["Observer"]
+__all__ = ["Observer", "present_components"]
+
+# The float fast path of present_components: the single env presents a few Python floats.
+_FLOATS = types.SimpleNamespace(cos=math.cos, sin=math.sin, clip=lambda v, lo, hi: min(max(v, lo), hi))
+
+
+def present_components(z, angular, observation: str, bound: float, xp=_FLOATS) -> list:
+    """The components of a measured state ``z`` = (q, q̇) in the bounded layouts, as a list.
+
+    "trig": each angle as (cos, sin); "wrapped": angles in (−π, π]; in both, the other components
+    clipped to ±``bound``. ``z`` is a sequence of Python floats (``xp`` default) or of JAX/NumPy
+    arrays with ``xp`` their namespace, so the single env and the functional JAX env present the
+    state with the same code. ``angular``: one bool per joint.
+    """
+    n = len(angular)
+    parts = []
+    for j, is_angle in enumerate(angular):
+        if is_angle and observation == "trig":
+            parts += [xp.cos(z[j]), xp.sin(z[j])]
+        elif is_angle:
+            parts.append(wrap_angle(z[j]))
+        else:
+            parts.append(xp.clip(z[j], -bound, bound))
+    return parts + [xp.clip(v, -bound, bound) for v in z[n:2 * n]]
 
 
 class Observer:
@@ -78,16 +102,7 @@ class Observer:
             if extra:
                 z = np.concatenate((z, extra))
             return z.astype(self.dtype, copy=False)
-        n, bound = self.n, self.state_bound
-        parts = []
-        for j, angular in enumerate(self.spec.angular):
-            if angular and self.observation == "trig":
-                parts += [math.cos(z[j]), math.sin(z[j])]
-            elif angular:
-                parts.append(wrap_angle(float(z[j])))
-            else:
-                parts.append(min(max(float(z[j]), -bound), bound))
-        parts += np.clip(z[n:], -bound, bound).tolist()
+        parts = present_components(z.tolist(), self.spec.angular, self.observation, self.state_bound)
         return np.array(parts + extra, dtype=self.dtype)
 
     def space(self, extra: int) -> spaces.Box:

@@ -30,6 +30,21 @@ class BatchTemplate:
         return self._observer.quant.copy()
 
     @property
+    def noise_std(self) -> np.ndarray:
+        """Gaussian measurement noise std per observed state component (q, q̇); 0: none."""
+        return self._observer.noise.copy()
+
+    @property
+    def parameter_spreads(self) -> dict[str, float]:
+        """Domain randomisation: relative spread per physical parameter, drawn at each reset."""
+        return dict(self._randomize)
+
+    @property
+    def observation_bound(self) -> float:
+        """The bound the "wrapped" / "trig" layouts clip non-angle components to."""
+        return self._observer.state_bound
+
+    @property
     def max_episode_steps(self) -> int | None:
         """env.steps before truncation (None: never truncated)."""
         return self._max_steps

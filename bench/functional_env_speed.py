@@ -1,0 +1,134 @@
+"""Functional env speed: steps/s of the gymnax-API swing-up beside gymnax's Pendulum-v1.
+
+Measures, in one run, the env steps per second (copies × steps / s) of ``env.step`` — gymnax's,
+with its autoreset — vmapped over N copies and scanned over time inside one ``jit``, uniform
+random actions drawn in the loop, for
+
+* ``furuta_gym/FurutaSwingUp-v0`` as a functional env (:mod:`furuta_gym.envs.functional`) on the
+  analytic model and on the reproduction's DeLaN L_prop checkpoint (one env step = one 20 ms
+  control period = 10 RK4 steps of the model);
+* gymnax's ``Pendulum-v1`` (one explicit Euler step per env step), the reference,
+
+at N = 1 … 4096, and the ratio analytic ÷ Pendulum-v1 at each N. Best of ``--repeats`` after a
+compiling warm-up. Writes ``results/functional_env_speed/results.json`` and its BENCHMARKS.md
+section from it (``--no-write``: neither).
+
+    python bench/functional_env_speed.py           # a few minutes on 2 cores
+    python bench/functional_env_speed.py --quick   # N = 1, 64, 4096 with fewer steps
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import time
+from pathlib import Path
+
+from _benchmarks_md import machine, write_section
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "results" / "functional_env_speed" / "results.json"
+DELAN = ROOT / "results" / "reproduce" / "runs" / "furuta" / "dln_prop" / "seed0" / "model.eqx"
+START, END = "<!-- bench/functional_env_speed.py:start -->", "<!-- bench/functional_env_speed.py:end -->"
+SIZES = (1, 4, 16, 64, 256, 1024, 4096)
+STEP_BUDGET = 1_000_000  # copies × steps per timed call (fewer copies: more steps, 200 to 20 000)
+
+
+def runner(env, params, n: int, steps: int):
+    """A jitted function of a key: ``steps`` autoresetting steps of ``n`` copies, random actions."""
+    import jax
+    import jax.numpy as jnp
+
+    space = env.action_space(params)
+    step = jax.vmap(env.step, in_axes=(0, 0, 0, None))
+
+    def run(key):
+        _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(key, n), params)
+
+        def body(carry, key):
+            state, total = carry
+            k_act, k_step = jax.random.split(key)
+            action = jax.random.uniform(k_act, (n, *space.shape), minval=space.low, maxval=space.high)
+            _, state, reward, _, _, _ = step(jax.random.split(k_step, n), state, action, params)
+            return (state, total + reward.sum()), None
+
+        return jax.lax.scan(body, (state, jnp.zeros(())), jax.random.split(key, steps))[0][1]
+
+    return jax.jit(run)
+
+
+def steps_per_second(env, params, n: int, repeats: int, budget: int) -> float:
+    import jax
+
+    steps = min(20_000, max(200, budget // n))
+    run = runner(env, params, n, steps)
+    jax.block_until_ready(run(jax.random.PRNGKey(0)))  # compile
+    best = float("inf")
+    for k in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(run(jax.random.PRNGKey(k + 1)))
+        best = min(best, time.perf_counter() - start)
+    return n * steps / best
+
+
+def measure(sizes, repeats: int, budget: int) -> dict:
+    import gymnax
+
+    import furuta_gym
+    from furuta_gym.envs import functional
+
+    furuta_gym.enable_x64()
+    envs = {"analytic": functional.make(dynamics="analytic"), "delan": functional.make(dynamics=str(DELAN)),
+            "gymnax Pendulum-v1": gymnax.make("Pendulum-v1")}
+    rates = {name: {} for name in envs}
+    for n in sizes:
+        for name, (env, params) in envs.items():
+            rates[name][n] = steps_per_second(env, params, n, repeats, budget)
+            print(f"N = {n:5d}  {name:20s} {rates[name][n]:14,.0f} steps/s", flush=True)
+    return {"machine": machine(), "date": datetime.date.today().isoformat(), "sizes": list(sizes),
+            "repeats": repeats, "budget": budget, "steps_per_second": rates}
+
+
+def section(results: dict) -> str:
+    rates, sizes = results["steps_per_second"], results["sizes"]
+    pendulum = rates["gymnax Pendulum-v1"]
+    rows = [f"| {n:,} | {rates['analytic'][n]:,.0f} | {rates['delan'][n]:,.0f} | {pendulum[n]:,.0f} | "
+            f"{rates['analytic'][n] / pendulum[n]:.2f} |" for n in sizes]
+    return "\n".join([
+        START,
+        "## Functional env vs gymnax Pendulum-v1 (`bench/functional_env_speed.py`)",
+        "",
+        "Env steps per second (copies × steps / s) of gymnax's `env.step` (autoreset included), vmapped "
+        "over N copies and scanned inside one `jit`, uniform random actions, best of "
+        f"{results['repeats']}. `FurutaSwingUp-v0` as a functional env (one step: a 20 ms control period, "
+        "10 RK4 steps of the model; analytic model and the reproduction's DeLaN L_prop) beside gymnax's "
+        f"Pendulum-v1 (one Euler step) in the same run. Generated from "
+        f"`results/functional_env_speed/results.json` ({results['machine']}, {results['date']}).",
+        "",
+        "| N | analytic | DeLaN | gymnax Pendulum-v1 | analytic ÷ Pendulum-v1 |",
+        "|---|---|---|---|---|",
+        *rows,
+        END,
+    ])
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="N = 1, 64, 4096 and a smaller step budget")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-write", action="store_true")
+    args = parser.parse_args(argv)
+    sizes, budget = ((1, 64, 4096), STEP_BUDGET // 4) if args.quick else (SIZES, STEP_BUDGET)
+    results = measure(sizes, args.repeats, budget)
+    if not args.no_write:
+        RESULTS.parent.mkdir(parents=True, exist_ok=True)
+        RESULTS.write_text(json.dumps(results, indent=1))
+        write_section(section(json.loads(RESULTS.read_text()) | {"steps_per_second": {
+            k: {int(n): v for n, v in r.items()} for k, r in results["steps_per_second"].items()}}),
+            START, END)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
