@@ -25,7 +25,7 @@ RESULTS = ROOT / "results" / "lprop_ablation"
 DOC = ROOT / "docs" / "learning.md"
 NAME = "lprop-ablation"
 ORDER = ("baseline", "feedforward_x4", "exact_velocity", "exact_angles", "no_effects", "physical_start", "span_5",
-         "span_25", "span_50")
+         "span_25")
 COMMAND = "python experiments/lprop_closed_loop_ablation.py && python experiments/lprop_ablation_table.py"
 
 
@@ -107,11 +107,11 @@ def findings(docs: dict[str, list[dict]]) -> str:
 
 
 def span_findings(docs: dict[str, list[dict]], baseline: list[dict]) -> str:
-    """The fix tried within the loss family: L_Iτ summed over longer intervals (cells g-i)."""
+    """The fix tried within the loss family: L_Iτ summed over longer intervals (cells g, h)."""
     base_score = np.mean([d["short"]["test"]["mean_log10"] if "short" in d else d["test"]["mean_log10"]
                           for d in baseline])
     parts = []
-    for cell in ("span_5", "span_25", "span_50"):
+    for cell in ("span_5", "span_25"):
         runs = docs.get(cell, [])
         if not runs:
             continue

@@ -93,8 +93,6 @@ CELLS = {
     "physical_start": Cell("(f) as the baseline, started from a physical potential", physical_start=True),
     "span_5": Cell("(g) as the real runs, L_Iτ over 20 ms (5 Simpson intervals)", integral_span=5),
     "span_25": Cell("(h) as the real runs, L_Iτ over 100 ms (25 Simpson intervals)", integral_span=25),
-    "span_50": Cell("(i) as the real runs, L_Iτ over 200 ms (50 Simpson intervals: one per window)",
-                    integral_span=50),
 }
 
 
