@@ -28,7 +28,7 @@ from control_benchmark import SECONDS, TABLE_HEADER, _row
 
 ROOT = Path(__file__).resolve().parents[1]
 START, END = "<!-- control_real_models:start -->", "<!-- control_real_models:end -->"
-LEARNED = ("adln_aph", "dln_traj", "adln_prop", "dln_prop")
+LEARNED = ("adln_aph", "dln_traj", "adln_prop", "dln_prop", "adln_prop_span", "dln_prop_span")
 
 
 def _designs(res, load_model):

@@ -59,3 +59,12 @@ def test_demo_refuses_to_overwrite_a_previous_run(demo_dir):
     )
     assert proc.returncode == 2 and "previous demo" in proc.stderr
     assert (out / "summary.json").read_bytes() == before
+
+
+def test_demo_seeds_docs_block_matches_its_results():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, str(root / "experiments" / "demo_seeds.py"), "--check"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
