@@ -8,10 +8,11 @@ combination of parameters the data do not pin down. We take that eigen handling 
 :func:`own_calculate_intervals`, the same algorithm, when mujoco's optional ``sysid`` extra is
 absent) to decide which intervals are unbounded, and nothing else: its variance assumes
 independent residuals, and ours are not. The position errors of one open-loop prediction window
-share the window's start-state error (an estimated velocity) and grow along the window, and the
-equation-error residuals of one block share slowly varying errors of the velocity estimate; within
-a window or block they are strongly autocorrelated, so s²(JᵀJ)⁻¹ is several times too narrow.
-The covariance is cluster-robust instead, windows (or blocks) as clusters (:func:`cluster_intervals`).
+share the window's start-state error (an estimated velocity) and grow along it: positively
+correlated, so s²(JᵀJ)⁻¹ is far too narrow. Consecutive equation-error residuals share the
+momentum estimate at their common interval end with opposite signs, which telescopes over a
+block: negatively correlated, so there it is too wide. Either way the covariance is cluster-robust
+instead, windows (or blocks) as clusters (:func:`cluster_intervals`).
 """
 
 from __future__ import annotations
