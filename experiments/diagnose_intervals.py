@@ -42,7 +42,8 @@ LOGS = 25  # seeds 0..LOGS-1 per scenario
 SCENARIOS = {
     "furuta_cable_spring": dict(system="furuta", effects=[Effect("spring", "alpha", 2e-3)],
                                 log=dict(n_trajectories=6, duration=5.0), absorbed={}),
-    "nmsd_force_and_spring": dict(system="nmsd", effects=[Effect("constant_torque", "p", 0.5), Effect("spring", "p", 2.0)],
+    "nmsd_force_and_spring": dict(system="nmsd",
+                                  effects=[Effect("constant_torque", "p", 0.5), Effect("spring", "p", 2.0)],
                                   log=dict(n_trajectories=6, duration=8.0), absorbed={"spring:p": "k1"}),
 }
 
@@ -115,8 +116,9 @@ def main() -> None:
             rows += run_log(name, seed)
         sc = SCENARIOS[name]
         doc["scenarios"][name] = {
-            "system": sc["system"], "effects": [{"name": e.name, "joint": e.joint, "coefficient": e.coefficient} for e in sc["effects"]], "log": sc["log"],
-            "seconds": round(time.perf_counter() - t0, 1), "summary": summary(rows), "rows": rows}
+            "system": sc["system"],
+            "effects": [{"name": e.name, "joint": e.joint, "coefficient": e.coefficient} for e in sc["effects"]],
+            "log": sc["log"], "seconds": round(time.perf_counter() - t0, 1), "summary": summary(rows), "rows": rows}
         print(name, json.dumps(doc["scenarios"][name]["summary"], indent=1))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(doc, indent=1) + "\n")

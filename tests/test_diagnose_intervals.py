@@ -21,7 +21,8 @@ import pytest
 
 from furuta_gym.diagnose import diagnose, measured_like
 from furuta_gym.diagnose import _intervals
-from furuta_gym.diagnose._intervals import Interval, cluster_intervals, own_calculate_intervals, sysid_calculate_intervals
+from furuta_gym.diagnose._intervals import (Interval, cluster_intervals, own_calculate_intervals,
+                                            sysid_calculate_intervals)
 from furuta_gym.envs import Plant
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -52,7 +52,8 @@ def format_table(res) -> str:
         lines += _error_rows(f"test-log errors ({res.test_before.n_windows} windows, logs never fitted)",
                              res.test_before, res.test_after)
     lines.append("")
-    lines.append("fitted parameters (before -> after ± 95 % interval)" + (f"; fixed: {res.fixed}" if res.fixed else ""))
+    fixed = f"; fixed: {res.fixed}" if res.fixed else ""
+    lines.append(f"fitted parameters (before -> after ± 95 % interval){fixed}")
     for k in res.parameters_before:
         lines.append(f"  {k:<10}{res.parameters_before[k]:>13.5g} -> {res.parameters_after[k]:<13.5g}"
                      f"{_pm(res.intervals.get(k)):<11}{res.parameter_units[k]}")
