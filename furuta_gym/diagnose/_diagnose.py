@@ -23,8 +23,10 @@ from ..systems import get_spec
 from ..models import system_definition
 from ..models.checkpoint import load_model
 from . import _fit
+from . import _intervals
 from . import _rests
 from . import _trace as _trace_mod
+from ._intervals import FitOrigin, Interval
 from ._problem import Problem, fit_equation_error, free_columns
 from ._library import (
     Candidate,
@@ -34,6 +36,9 @@ from ._library import (
 )
 
 __all__ = ["diagnose", "DiagnosisResult", "EffectEvidence", "ErrorSummary", "DiagnosisSettings"]
+
+# 2: intervals ("parameter_intervals", "interval_method", each effect's "interval"); 1 had no key
+SCHEMA_VERSION = 2
 
 # the input dynamics' candidate (a delay or a lag between the logged input and the plant, not
 # memoryless: applied to the input itself; which of the two is decided after it is accepted)
@@ -108,6 +113,7 @@ class EffectEvidence:
     status: str  # "selected", "inconsistent", "tested", "not confirmed", "equivalent", "absorbed", "not identifiable"
     note: str = ""
     resolved: bool = True  # False: its size is below what the sensor resolves (one count, one sample)
+    interval: Interval | None = None  # 95 % interval of an added effect's coefficient (see _intervals)
 
     @property
     def kind(self) -> EffectKind:
@@ -127,6 +133,7 @@ class EffectEvidence:
             "status": self.status,
             "note": self.note,
             "resolved": bool(self.resolved),
+            "interval": None if self.interval is None else self.interval.to_json(),
         }
 
 
@@ -185,6 +192,10 @@ class DiagnosisResult:
     input_dynamics: _fit.InputDynamics = _fit.NO_INPUT_DYNAMICS
     test_before: ErrorSummary | None = None  # on logs never used by any fit or decision (``test=``)
     test_after: ErrorSummary | None = None
+    # 95 % intervals of ``parameters_after`` (None: fixed, or held rather than fitted) and how
+    # they were made; the effects' own are on each EffectEvidence
+    intervals: dict[str, Interval | None] = dataclasses.field(default_factory=dict)
+    interval_method: dict | None = None
     # kept for figures
     _segments: list = dataclasses.field(default_factory=list, repr=False)
     _test_segments: list = dataclasses.field(default_factory=list, repr=False)
@@ -238,6 +249,7 @@ class DiagnosisResult:
 
     def to_json(self) -> dict:
         return {
+            "schema_version": SCHEMA_VERSION,
             "system": self.system,
             "effects": [e.to_json() for e in self.effects],
             "error_before": self.error_before.to_json(),
@@ -245,6 +257,9 @@ class DiagnosisResult:
             "parameters_before": self.parameters_before,
             "parameters_after": self.parameters_after,
             "parameter_units": self.parameter_units,
+            "parameter_intervals": {k: None if self.intervals.get(k) is None else self.intervals[k].to_json()
+                                    for k in self.parameters_after},
+            "interval_method": self.interval_method,
             "test_error_before": None if self.test_before is None else self.test_before.to_json(),
             "test_error_after": None if self.test_after is None else self.test_after.to_json(),
             "fixed_parameters": self.fixed,
@@ -419,6 +434,7 @@ class _Fitter:
         self.substeps = system_definition(spec.name).diagnosis_substeps
         self.alternative = ""  # the input dynamics' other kind and how it fitted (a note)
         self.resolution: dict[str, float] = {}  # encoder count per quantised joint (sensor_resolution)
+        self.origins: dict[bytes, FitOrigin] = {}  # which fit each returned θ is (for its intervals)
         self.c_input = _fit.input_direction(layout, theta_fixed)
         self.weights = np.ones(spec.n_dof)
         self.build(_fit.NO_INPUT_DYNAMICS)
@@ -492,11 +508,22 @@ class _Fitter:
         return _fit.predict_windows(self.layout, theta, self.fit_windows(dynamics, self.val_idx), self.substeps,
                                     start_iterations)
 
+    def record(self, theta, origin: FitOrigin) -> np.ndarray:
+        """Remember which fit ``theta`` came from (its intervals are that fit's); returns it."""
+        self.origins[np.asarray(theta, dtype=float).tobytes()] = origin
+        return theta
+
+    def origin(self, theta) -> FitOrigin | None:
+        return self.origins.get(np.asarray(theta, dtype=float).tobytes())
+
     def refine(self, theta0, free, dynamics, tag):
         """Output-error refinement of an equation-error estimate, kept only if it also predicts
-        better on fit-set validation windows it did not see."""
+        better on fit-set validation windows it did not see. Records which fit the returned θ is
+        (:meth:`record`): the output-error one, or the equation-error one (its base parameters
+        held at nominal when the refinement started from, and kept, the nominal values)."""
+        ee = FitOrigin("equation_error", theta0, free, dynamics)
         if not self.settings.oe:
-            return theta0
+            return self.record(theta0, ee)
         win = self.fit_windows(dynamics, self.oe_idx)
         # start from the equation-error estimate unless it is non-physical or predicts worse than
         # the nominal model (closed-loop data: u correlates with the measurement noise, which
@@ -504,21 +531,23 @@ class _Fitter:
         nb = len(self.layout.base)
         nominal = theta0.copy()
         nominal[:nb] = np.where(free[:nb], self.layout.nominal()[:nb], theta0[:nb])
-        start, label = theta0, "equation-error"
+        start, label, start_origin = theta0, "equation-error", ee
         if not _physical(self.layout, theta0) or self.window_rmse(nominal, win) < self.window_rmse(theta0, win):
             start, label = nominal, "nominal"
+            start_origin = ee.holding(np.flatnonzero(free[:nb]), "the nominal value kept (the refinement "
+                                      "started from the nominal parameters and did not predict better)")
             self.notes.append("the equation-error estimate was non-physical or predicted worse than the "
                               f"nominal model ({tag}); output error started from the nominal parameters")
         th, ok = _fit.oe_fit(self.layout, start, free, win, self.substeps,
                              max_nfev=self.settings.oe_max_nfev, start_iterations=self.settings.start_iterations)
         if not ok:
             self.notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
-            return th
+            return self.record(th, start_origin)
         if _physical(self.layout, start) and self.validation_rmse(start, dynamics) < self.validation_rmse(th, dynamics):
             self.notes.append(f"the {label} estimate predicts better on validation windows than the "
                               f"output-error refinement; kept ({tag})")
-            return start
-        return th
+            return self.record(start, start_origin)
+        return self.record(th, FitOrigin("output_error", th, free, dynamics, self.settings.start_iterations))
 
     def errors(self, theta, segs, prob) -> ErrorSummary:
         r = prob.R @ theta
@@ -724,7 +753,9 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
 
     def refit(th0, effects):
         free = free_columns(fx.layout, effects, fx.fixed_idx)
-        th, _ = _fit.oe_fit(fx.layout, th0, free, win, fx.substeps, s.oe_max_nfev, start)
+        th, ok = _fit.oe_fit(fx.layout, th0, free, win, fx.substeps, s.oe_max_nfev, start)
+        if ok:
+            fx.record(th, FitOrigin("output_error", th, free, dyn, start))
         return th, fx.validation_predictions(th, dyn, start)
 
     # the baseline is refitted as the trial is, so that the gain is the stiction's own
@@ -773,9 +804,17 @@ def _breakaway_at_least(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBoun
         return theta
     out = theta.copy()
     out[i] = bound.held - coulomb
+    _held_from(fx, out, theta, i, "raised to the force the rests held (a lower bound, not a fit)")
     fx.notes.append(f"{c.key}: ΔF raised {theta[i]:.3g} -> {out[i]:.3g} to the force the rests held "
                     f"({bound.held:.3g} over {bound.n_windows} windows of {fx.settings.rest_window:g} s)")
     return out
+
+
+def _held_from(fx: _Fitter, theta, fitted, i: int, why: str) -> None:
+    """``theta`` is the fit ``fitted`` came from with entry ``i`` set, not fitted: no interval there."""
+    origin = fx.origin(fitted)
+    if origin is not None:
+        fx.record(theta, origin.holding([i], why))
 
 
 def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBound, refit_others, dyn):
@@ -793,7 +832,9 @@ def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBoun
     th = base.copy()
     th[i] = bound.held - base[j]
     th = refit_others(th)
+    fitted = th.copy()
     th[i] = _rest_bound(fx, th, dyn, c.joint).held - th[j]
+    _held_from(fx, th, fitted, i, "set from the force the rests held, not fitted")
     if not (th[i] > 0 and _physical(fx.layout, th)):
         fx.notes.append(f"{c.key}: {seen}; refitted, ΔF {th[i]:.3g} is not physical: not added")
         return None
@@ -980,6 +1021,30 @@ def _fit_declared(fx: _Fitter) -> np.ndarray:
     return fx.refine(th_ee, free_base, _fit.NO_INPUT_DYNAMICS, "declared model")
 
 
+def _reported_intervals(fx: _Fitter, theta, accepted, dyn, ordered):
+    """95 % intervals of the reported parameters and added effects' coefficients, from the fit
+    whose estimate is reported — not always the last one run: ``_Fitter.refine`` keeps the
+    equation-error estimate (or the nominal base values) when the output-error refinement does
+    not predict the validation windows better, and a stiction may be set from its rests. The
+    intervals of an estimate come from the residual it minimises (its Jacobian there); values
+    that no fit produced get none. Returns ({base parameter: Interval or None}, method) and sets
+    each added effect's ``interval``."""
+    origin = fx.origin(theta)
+    if origin is None:  # not a recorded estimate: the output-error criterion at the reported θ
+        sticky = any(c.kind.breakaway_above for c in accepted)
+        start = max(1, fx.settings.start_iterations) if sticky else fx.settings.start_iterations
+        free = free_columns(fx.layout, accepted, fx.fixed_idx)
+        origin = FitOrigin("output_error", theta, free, dyn, start, recorded=False)
+    out, notes, method = _intervals.fit_intervals(fx, theta, origin)
+    if fx.dynamics != dyn:
+        fx.build(dyn)
+    for e in ordered:
+        if e.significant:
+            e.interval = out.get(f"{e.name}:{e.joint}")
+    fx.notes.extend(notes)
+    return {b: out.get(b) for b in fx.layout.base}, method
+
+
 def _given_model(model, spec):
     """The model to diagnose instead of the analytic one: None, a Lagrangian system or a
     checkpoint path; checked against ``spec`` and for an input force the fit can integrate."""
@@ -1066,6 +1131,7 @@ def diagnose(
     test_after = fx.test_errors(th_after) if accepted else test_before
     ordered = _finish_evidence(fx, library, accepted, th_after, dyn, evidence)
     _mark_unresolved(ordered, fx.resolution, trajs[0].dt, notes)
+    intervals, interval_method = _reported_intervals(fx, th_after, accepted, dyn, ordered)
     if not accepted:
         notes.append("no effect is significant on held-out data: none added")
 
@@ -1076,5 +1142,6 @@ def diagnose(
         parameter_units=dict(zip(layout.base, layout.base_units)), fixed=dict(fixed), notes=notes,
         settings=settings, layout=layout, theta_before=th_before, theta_after=th_after,
         input_dynamics=dyn, test_before=test_before, test_after=test_after,
+        intervals=intervals, interval_method=interval_method,
         _segments=segs, _test_segments=test_segs,
     )

@@ -28,7 +28,8 @@ from ..simulate import rollout_zoh
 from ..systems import get_spec
 from ._library import ParameterLayout
 
-__all__ = ["Segment", "InputDynamics", "build_regressors", "ee_fit", "oe_fit", "window_errors", "delay_input", "lag_input"]
+__all__ = ["Segment", "InputDynamics", "build_regressors", "ee_fit", "oe_fit", "window_errors", "window_residuals",
+           "delay_input", "lag_input"]
 
 _CHUNK = 2048
 
@@ -354,6 +355,12 @@ def predict_windows(layout, theta, win: Windows, substeps: int = 1,
     predict = _predictor(layout, win.dt, win.length, substeps, start_iterations)
     out = [np.asarray(predict(jnp.asarray(theta), x0, us, q))[:k] for k, x0, us, q in _batches(win)]
     return np.concatenate(out)
+
+
+def window_residuals(layout, theta, win: Windows, substeps: int = 1, start_iterations: int = 0) -> np.ndarray:
+    """(W·L·n,) predicted − measured positions of every window, window by window (the output-error
+    fit's residual, non-finite where a rollout blew up)."""
+    return (predict_windows(layout, theta, win, substeps, start_iterations) - win.q).reshape(-1)
 
 
 def window_square_sums(layout, theta, win: Windows, substeps: int = 1,

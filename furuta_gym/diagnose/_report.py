@@ -28,14 +28,15 @@ def format_table(res) -> str:
     """Human-readable summary: effects by evidence, errors before/after, fitted parameters."""
     lines = [f"diagnosis of a {res.system} model"]
     lines.append("")
-    lines.append(f"{'effect':<18}{'joint':<7}{'coefficient':>13}  {'unit':<15}{'held-out gain':>14}{'z':>7}  verdict")
+    lines.append(f"{'effect':<18}{'joint':<7}{'coefficient':>13}{'± 95 %':>11}  {'unit':<15}{'held-out gain':>14}"
+                 f"{'z':>7}  verdict")
     for e in res.effects:
         verdict = "SIGNIFICANT" if e.significant else e.status.upper() if e.status == "inconsistent" else e.status
         if e.significant and not e.resolved:
             verdict += " (below the sensor's resolution)"
         gain = None if e.improvement is None else 100 * e.improvement
         lines.append(
-            f"{e.name:<18}{e.joint:<7}{_g(e.coefficient):>13}  {e.unit:<15}"
+            f"{e.name:<18}{e.joint:<7}{_g(e.coefficient):>13}{_pm(e.interval):>11}  {e.unit:<15}"
             f"{_g(gain, '{:.1f} %'):>14}{_g(e.z_score, '{:.1f}'):>7}  {verdict}"
         )
     if not res.significant:
@@ -51,15 +52,29 @@ def format_table(res) -> str:
         lines += _error_rows(f"test-log errors ({res.test_before.n_windows} windows, logs never fitted)",
                              res.test_before, res.test_after)
     lines.append("")
-    lines.append("fitted parameters (before -> after)" + (f"; fixed: {res.fixed}" if res.fixed else ""))
+    fixed = f"; fixed: {res.fixed}" if res.fixed else ""
+    lines.append(f"fitted parameters (before -> after ± 95 % interval){fixed}")
     for k in res.parameters_before:
-        lines.append(f"  {k:<10}{res.parameters_before[k]:>13.5g} -> {res.parameters_after[k]:<13.5g}{res.parameter_units[k]}")
+        lines.append(f"  {k:<10}{res.parameters_before[k]:>13.5g} -> {res.parameters_after[k]:<13.5g}"
+                     f"{_pm(res.intervals.get(k)):<11}{res.parameter_units[k]}")
     if res.input_dynamics.kind != "none":
         name = "delay" if res.input_dynamics.kind == "delay" else "lag"
-        lines.append(f"  {name:<10}{0.0:>13.5g} -> {res.input_dynamics.seconds:<13.5g}s")
+        ev = next((e for e in res.significant if e.kind.input_dynamics), None)
+        lines.append(f"  {name:<10}{0.0:>13.5g} -> {res.input_dynamics.seconds:<13.5g}"
+                     f"{_pm(None if ev is None else ev.interval):<11}s")
     for n in res.notes:
         lines.append(f"note: {n}")
     return "\n".join(lines)
+
+
+def _pm(interval) -> str:
+    """An interval as ± its half-width (the intervals are symmetric), "± inf" when unbounded,
+    blank when there is none (not an added effect, a fixed or held parameter)."""
+    if interval is None:
+        return ""
+    if interval.unbounded:
+        return "± inf"
+    return f"± {0.5 * (interval.upper - interval.lower):.2g}"
 
 
 def _error_rows(title, b, a) -> list[str]:
