@@ -27,7 +27,7 @@ from ._metrics import EpisodeMetrics, episode_metrics
 from ._pfl import InputMap, input_map, pfl_torque, pfl_voltage
 from ._rollout import ClosedLoop, Sensor, closed_loop
 from ._switching import BALANCE, SWING_UP, SwingUpLQR
-from ._tuning import GainSweep, near_rest_starts, pick_k_e
+from ._tuning import GainSweep, near_rest_starts, near_upright_starts, pick_k_e
 
 __all__ = [
     "AbstractController",
@@ -53,6 +53,7 @@ __all__ = [
     "pick_k_e",
     "GainSweep",
     "near_rest_starts",
+    "near_upright_starts",
     "DEFAULT_Q",
     "DEFAULT_R",
     "DEFAULT_PUMP_ACCELERATION",

@@ -54,6 +54,15 @@ def near_rest_starts(n: int, seed: int, include_rest: bool = True) -> np.ndarray
     return np.concatenate([np.zeros((1, 4)), x]) if include_rest else x
 
 
+def near_upright_starts(n: int, seed: int) -> np.ndarray:
+    """Seeded initial states near the upright, for a catch (LQR alone): α, β − π ~ U(±0.1 rad),
+    α̇, β̇ ~ U(±0.2 rad/s), the spread of :func:`near_rest_starts` about the other equilibrium.
+    Shape (n, 4)."""
+    x = near_rest_starts(n, seed, include_rest=False)
+    x[:, 1] += np.pi
+    return x
+
+
 @dataclasses.dataclass
 class GainSweep:
     """Result of :func:`pick_k_e`: the chosen controller and the sweep behind it."""

@@ -32,6 +32,7 @@ from furuta_gym.controllers import (
     input_map,
     lqr_design,
     near_rest_starts,
+    near_upright_starts,
     pfl_torque,
     pfl_voltage,
     pick_k_e,
@@ -178,6 +179,15 @@ def test_lqr_alone_stabilises_upright_on_mujoco(model):
         errs.append(abs(info["state"][1] - np.pi))
     env.close()
     assert max(errs[-250:]) < 0.01 and abs(info["state"][0]) < 0.05
+
+
+def test_lqr_alone_catches_from_seeded_starts_near_upright(model):
+    # what a model learned only near the top supports: the catch, not the swing-up
+    x0s = near_upright_starts(5, seed=0)
+    assert np.all(np.abs(x0s[:, 1] - np.pi) <= 0.1) and np.all(np.abs(x0s[:, 2:]) <= 0.2)
+    ctrl = LQR.from_model(model)
+    recs = evaluate_on_env(ctrl, lambda: gym.make("furuta_gym/Furuta-v0", episode_seconds=None), x0s, 3.0)
+    assert all(r.metrics.success and r.metrics.time_to_upright == 0.0 for r in recs)
 
 
 # ---------------------------------------------------------------------------- swing-up
