@@ -139,6 +139,34 @@ def test_training_a_physical_potential_does_not_warn(furuta_free, tmp_path):
     assert history[-1]["potential_shape"]["physical"] is True
 
 
+def test_data_that_never_visit_an_equilibrium_are_named_and_warned_about(furuta_free, tmp_path):
+    from furuta_gym.datasets import load_qube_closed_loop
+    from furuta_gym.training import DataCoverageWarning, check_data_coverage, warn_data_coverage
+
+    # the shipped runs balance the pendulum: the hanging rest is never near, the top always
+    with pytest.warns(DataCoverageWarning, match=r"hanging.*LQR catch"):
+        real = warn_data_coverage(load_qube_closed_loop(range(1, 6)), "furuta")
+    share = {r["name"].split()[0]: r["share"] for r in real["equilibria"]}
+    assert share["hanging"] == 0.0 and share["upright"] > 0.99
+    # free swings over the circle visit both; the count is the samples within the radius
+    free = check_data_coverage(furuta_free, "furuta")
+    beta = np.concatenate([tr.q[:, 1] for tr in furuta_free])
+    near_top = np.mean(np.abs(np.angle(np.exp(1j * (beta - np.pi)))) <= free["radius"])
+    assert free["equilibria"][1]["share"] == pytest.approx(near_top) and near_top > 0
+    assert free["equilibria"][0]["share"] > 0
+    # training on swings that stay near the top warns and records the coverage in the checkpoint
+    t = np.arange(0.0, 0.15 + 0.005, 0.01)
+    top = []
+    for k, db in enumerate((-0.05, 0.03, 0.06)):
+        xs = np.asarray(simulate(Furuta(), np.array([0.0, np.pi + db, 0.0, 0.0]), t, np.zeros((len(t), 1))))
+        assert np.all(np.abs(xs[:, 1] - np.pi) < 0.5)
+        top.append(Trajectory(t, xs[:, :2], np.zeros((len(t), 1)), xs[:, 2:], name=f"top{k}"))
+    with pytest.warns(DataCoverageWarning, match="hanging"):
+        _train_briefly(_cosine_delan(-1.0), top, tmp_path / "top")
+    doc = json.loads((tmp_path / "top" / "history.json").read_text())
+    assert doc["meta"]["data_coverage"]["equilibria"][0]["share"] == 0.0
+
+
 def test_lprop_ablation_docs_table_matches_its_results():
     root = Path(__file__).resolve().parents[1]
     if not any((root / "results" / "lprop_ablation").glob("*_s*.json")):

@@ -1,7 +1,14 @@
 """Training learned Lagrangian models: data generation, losses, the training loop, checkpoints, metrics."""
 
 from .checkpoint import CheckpointError, load_model, read_header, save_model
-from .consistency import PotentialShapeWarning, check_potential_shape, warn_potential_shape
+from .consistency import (
+    DataCoverageWarning,
+    PotentialShapeWarning,
+    check_data_coverage,
+    check_potential_shape,
+    warn_data_coverage,
+    warn_potential_shape,
+)
 from .losses import (
     Windows,
     aphynity_loss,
@@ -15,7 +22,10 @@ from .train import ScaleFit, TrainConfig, data_hash, fit_scale, train
 
 __all__ = [
     "CheckpointError",
+    "DataCoverageWarning",
     "PotentialShapeWarning",
+    "check_data_coverage",
+    "warn_data_coverage",
     "check_potential_shape",
     "warn_potential_shape",
     "load_model",

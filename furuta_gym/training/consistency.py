@@ -22,11 +22,20 @@ import jax.numpy as jnp
 from ..lagrangian import SystemSpec
 from ..models import system_definition
 
-__all__ = ["PotentialShapeWarning", "check_potential_shape", "warn_potential_shape"]
+__all__ = ["DataCoverageWarning", "PotentialShapeWarning", "check_data_coverage", "check_potential_shape",
+           "warn_data_coverage", "warn_potential_shape"]
+
+#: how near an equilibrium (rad or m, along its joint) a sample must come to count as visiting it
+COVERAGE_RADIUS = 0.5
 
 
 class PotentialShapeWarning(UserWarning):
     """A learned potential has the wrong shape (minimum / maximum) at an equilibrium."""
+
+
+class DataCoverageWarning(UserWarning):
+    """The training data never come near one of the system's equilibria: what a model learns
+    there is extrapolation, and designs that rely on it are not supported by the data."""
 
 
 @eqx.filter_jit
@@ -82,4 +91,44 @@ def warn_potential_shape(model, system: str | SystemSpec | None = None, *, stack
     message = shape_message(result)
     if message is not None:
         warnings.warn(message, PotentialShapeWarning, stacklevel=stacklevel + 1)
+    return result
+
+
+def check_data_coverage(trajs, system: str | SystemSpec, radius: float = COVERAGE_RADIUS) -> dict:
+    """Per equilibrium of the system's definition, the share of the samples of ``trajs`` whose
+    equilibrium joint lies within ``radius`` of it (angles compared modulo 2π). Returns
+    ``{"radius", "n_samples", "equilibria": [{"name", "joint", "share"}, ...]}``."""
+    import numpy as np
+
+    definition = system_definition(system)
+    spec = definition.spec
+    q = np.concatenate([np.asarray(tr.q, dtype=float).reshape(len(tr.q), -1) for tr in trajs])
+    rows = []
+    for e in definition.equilibria:
+        j = spec.joint_names.index(e.joint)
+        d = q[:, j] - e.q[j]
+        if spec.angular[j]:
+            d = np.angle(np.exp(1j * d))
+        rows.append({"name": e.name, "joint": e.joint, "share": float(np.mean(np.abs(d) <= radius))})
+    return {"radius": radius, "n_samples": int(q.shape[0]), "equilibria": rows}
+
+
+def coverage_message(result: dict) -> str | None:
+    """One sentence naming the equilibria the data never visit and those they do, or ``None``."""
+    missed = [r["name"] for r in result["equilibria"] if r["share"] == 0.0]
+    if not missed:
+        return None
+    seen = [f"{r['name']} ({r['share']:.0%} of the samples)" for r in result["equilibria"] if r["share"] > 0]
+    return (f"the training data never come within {result['radius']:g} of {' or '.join(missed)} "
+            f"({result['n_samples']} samples): what the model learns there is extrapolation, and a design that "
+            "relies on it (an energy swing-up through it) is not supported by these data"
+            + (f"; one about {', '.join(seen)} is (e.g. an LQR catch)." if seen else "."))
+
+
+def warn_data_coverage(trajs, system: str | SystemSpec, *, stacklevel: int = 2) -> dict:
+    """:func:`check_data_coverage`, and one :class:`DataCoverageWarning` if an equilibrium is never visited."""
+    result = check_data_coverage(trajs, system)
+    message = coverage_message(result)
+    if message is not None:
+        warnings.warn(message, DataCoverageWarning, stacklevel=stacklevel + 1)
     return result

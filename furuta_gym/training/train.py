@@ -44,7 +44,7 @@ from ..models import make_model
 from ..systems import get_spec
 from . import _step_cache
 from . import checkpoint as ckpt
-from .consistency import check_potential_shape, warn_potential_shape
+from .consistency import check_potential_shape, warn_data_coverage, warn_potential_shape
 from .losses import (
     AUGMENTATION_PARTS,
     Windows,
@@ -798,6 +798,7 @@ def _finish(model, history: list, config: TrainConfig, loss: str, dhash: str, tr
         meta["scale_note"] = "trained on free data only: the overall scale of L and τ_NC is unidentified"
     # after the scale fit, which multiplies V too; one warning if the shape is not physical
     meta["potential_shape"] = warn_potential_shape(model, stacklevel=3)
+    meta["data_coverage"] = warn_data_coverage(trajs, model.spec, stacklevel=3)
     if history:
         history[-1]["potential_shape"] = meta["potential_shape"]
     if out is not None:
