@@ -359,6 +359,31 @@ def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
         parser.parse_args(["reproduce", "--quadrature", "boole"])
 
 
+def test_cli_executor_options_and_what_a_ray_worker_is_told():
+    from furuta_gym.cli import build_parser
+    from furuta_gym.cli.reproduce import config_from_args
+    from furuta_gym.training._ray_sweep import worker_env
+
+    parser = build_parser()
+    _, config = config_from_args(parser.parse_args(
+        ["reproduce", "--executor", "ray", "--address", "auto", "--cpus-per-task", "2"]))
+    assert (config.executor, config.address, config.cpus_per_task) == ("ray", "auto", 2)
+    _, default = config_from_args(parser.parse_args(["reproduce"]))
+    assert (default.executor, default.address) == ("local", None)  # the local pool stays the default
+    with pytest.raises(ValueError, match="executor"):
+        ReproduceConfig(executor="dask")
+    with pytest.raises(ValueError, match="needs executor='ray'"):
+        ReproduceConfig(address="auto")
+    # a task's XLA threads follow its CPU request; the node's other XLA flags and the caches stay
+    env = worker_env(2, {"XLA_FLAGS": "--xla_force_host_platform_device_count=2 intra_op_parallelism_threads=8",
+                         "JAX_COMPILATION_CACHE_DIR": "/cache", "HOME": "/root"})
+    assert env["XLA_FLAGS"].split() == ["--xla_force_host_platform_device_count=2",
+                                        "--xla_cpu_multi_thread_eigen=true", "intra_op_parallelism_threads=2"]
+    assert env["JAX_COMPILATION_CACHE_DIR"] == "/cache" and "HOME" not in env
+    assert env["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false" and env["OMP_NUM_THREADS"] == "2"
+    assert "multi_thread_eigen=false" in worker_env(1, {})["XLA_FLAGS"]
+
+
 def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys():
     """A run trained with a model option records it, so it is never reused for the default model."""
     from furuta_gym.training.reproduce import _default_hparams, _same_settings

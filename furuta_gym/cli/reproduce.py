@@ -55,6 +55,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
              "furuta_gym.training.reproduce.REPRODUCE_QUADRATURE, and FULL_PROP_QUADRATURE for "
              "the L_prop models named there)",
     )
+    parser.add_argument(
+        "--executor", choices=["local", "ray"], default="local",
+        help="where the models train: this machine's processes (default) or Ray tasks, one per "
+             "model × seed (pip install 'furuta-gym[cluster]'); the run folders are the same",
+    )
+    parser.add_argument(
+        "--address", default=None,
+        help="with --executor ray: the Ray cluster to join (e.g. auto, or ray://HOST:10001); without "
+             "it a local Ray instance runs --jobs tasks at once. On several machines --out must be "
+             "a folder all of them see at the same path",
+    )
+    parser.add_argument(
+        "--cpus-per-task", type=int, default=1, metavar="N",
+        help="with --executor ray: CPUs each model's task asks for (and the threads it may use)",
+    )
     parser.add_argument("--no-figures", action="store_true", help="tables only")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -97,6 +112,9 @@ def config_from_args(args: argparse.Namespace):
         figures=not args.no_figures,
         progress=not args.no_progress,
         jobs=jobs,
+        executor=args.executor,
+        address=args.address,
+        cpus_per_task=args.cpus_per_task,
     )
     return out, config
 
