@@ -166,6 +166,8 @@ class ReproduceConfig:
                 raise ValueError(f"pair ({kind!r}, {loss!r}) is not one the paper reports: {PAPER_PAIRS}")
         if not self.seeds:
             raise ValueError("seeds must name at least one seed")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"seeds must differ: a seed twice would count one model twice, got {self.seeds}")
 
     @property
     def small(self) -> bool:
@@ -651,6 +653,7 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
                 per_seed = results.get((system, kind, loss), [])
                 for metric in METRIC_COLUMNS[system]:
                     paper_value = paper.get((system, label, MODEL_LABELS[kind], loss, metric), "")
+                    values = []
                     if kind == "aph" and metric in PHYSICS_METRICS:
                         ours_text, mean, std, ndiv = "N/A", None, None, 0
                     else:
@@ -668,12 +671,21 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
                             ours_mean="" if mean is None else f"{mean:.4f}",
                             ours_std="" if std is None else f"{std:.4f}",
                             n_seeds=len(per_seed),
+                            # each seed's own value, in the order of config.seeds: the spread's source
+                            ours_per_seed=" ".join(_seed_text(v) for v in values),
                             n_diverged=ndiv,
                             paper=paper_value,
                             better_or_equal=_compare(mean, ours_text, paper_value),
                         )
                     )
     return rows
+
+
+def _seed_text(value) -> str:
+    """One seed's cell in ``ours_per_seed``: the number, or X / fail / N/A."""
+    if value is None:
+        return "N/A"
+    return value if isinstance(value, str) else f"{value:.4f}"
 
 
 def _compare(mean, ours_text, paper_value) -> str:
@@ -711,9 +723,11 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
         "(as in the paper); X: the prediction diverged on at least one test trajectory; fail: "
         "training produced no finite model (reason in the run's metrics.json). "
         + (
-            f"Ours: mean ± std over {len(config.seeds)} model seeds."
+            f"Ours: mean ± sample standard deviation over {len(config.seeds)} model-initialisation "
+            f"seeds ({', '.join(map(str, config.seeds))}; each seed's value is in tables.csv, "
+            "ours_per_seed); the data are the same for every seed."
             if len(config.seeds) > 1
-            else "Ours: one model seed."
+            else f"Ours: one model seed ({config.seeds[0]})."
         )
         + " A ✓ marks our cell at or below the paper's.",
         "",
@@ -761,11 +775,13 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
         n_yes = sum(r["better_or_equal"] == "yes" for r in allnum)
         out.append(f"- All rows: {n_yes} of {len(allnum)} numeric cells at or below the paper's.")
 
-    def mean_of(system, label, model, loss, metric):
-        for r in rows:
-            if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"]) == (system, label, model, loss, metric):
-                return float(r["ours_mean"]) if r["ours_mean"] else None
-        return None
+    def row_of(system, label, model, loss, metric):
+        return next((r for r in rows if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"])
+                     == (system, label, model, loss, metric)), None)
+
+    def mean_of(*key):
+        r = row_of(*key)
+        return float(r["ours_mean"]) if r and r["ours_mean"] else None
 
     for system in config.systems:
         claim = system_data(system).main_claim
@@ -784,10 +800,30 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
                     if a is None or b is None:
                         parts.append(f"{metric}: n/a")
                     else:
-                        parts.append(f"{metric} {a:.2f} vs {b:.2f} ({'holds' if a < b else 'does not hold'})")
+                        seeds = _seeds_holding(row_of(system, label, model, "prop", metric),
+                                               row_of(system, label, model, base, metric))
+                        parts.append(f"{metric} {a:.2f} vs {b:.2f} ({'holds' if a < b else 'does not hold'}{seeds})")
                 out.append(f"  - {model} {label}: " + "; ".join(parts))
     out.append("")
     return out
+
+
+def _seeds_holding(prop_row: dict, base_row: dict) -> str:
+    """With several seeds, on how many the claim holds seed by seed (seed k of L_prop against
+    seed k of the baseline): a mean can hold on one lucky seed."""
+    pairs = list(zip(prop_row["ours_per_seed"].split(), base_row["ours_per_seed"].split()))
+    if len(pairs) < 2:
+        return ""
+    numeric = [(float(a), float(b)) for a, b in pairs if _is_number(a) and _is_number(b)]
+    return f"; on {sum(a < b for a, b in numeric)} of {len(pairs)} seeds"
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _machine() -> dict[str, Any]:
