@@ -222,9 +222,63 @@ def test_table_conventions_na_x_and_seed_spread():
     assert float(r["ours_mean"]) == pytest.approx(-2.0) and float(r["ours_std"]) == pytest.approx(1.0)
     assert r["paper"] == "-0.3147" and r["better_or_equal"] == "yes"
     assert rows[("Forced", "DLN", "alpha")]["ours"].endswith("(1/3 X)")
+    assert rows[("Forced", "DLN", "alpha")]["ours_per_seed"] == "-2.0000 X -2.0000"
+    assert rows[("Free", "APH", "inertial")]["ours_per_seed"] == ""
     assert rows[("Forced", "APH", "beta")]["ours"] == "X"
     assert rows[("Forced", "APH", "beta")]["better_or_equal"] == "no"
     assert rows[("Free", "APH", "inertial")]["ours"] == "N/A" and rows[("Free", "APH", "inertial")]["paper"] == "N/A"
+
+
+def test_cli_seeds_0_1_2_write_mean_and_spread_beside_the_paper(tiny_run, tmp_path):
+    """``reproduce --seeds 0 1 2`` with the tiny run's settings: seed 0 is the tiny run's (reused),
+    1 and 2 are trained; every cell is mean ± std over the three, with each seed's value kept."""
+    import shutil
+    import statistics
+
+    from furuta_gym.cli import main
+
+    out = tmp_path / "seeds"
+    shutil.copytree(tiny_run[0], out)
+    assert main(["reproduce", "--quick", "--out", str(out), "--system", "nmsd", "--pair", "dln:prop",
+                 "--prop-epochs", "20", "1", "0", "--ground-truth", "analytic", "--jobs", "1",
+                 "--no-figures", "--no-progress", "--seeds", "0", "1", "2"]) == 0
+    seconds = json.loads((out / "run.json").read_text())["seconds"]
+    assert [seconds[f"nmsd/dln_prop/seed{k}"]["status"] for k in (0, 1, 2)] == ["reused", "trained", "trained"]
+    with open(out / "tables.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 2 * len(METRIC_COLUMNS["nmsd"])
+    for r in rows:
+        per_seed = [float(v) for v in r["ours_per_seed"].split()]
+        assert r["n_seeds"] == "3" and len(per_seed) == 3 and len(set(per_seed)) == 3
+        assert float(r["ours_mean"]) == pytest.approx(statistics.mean(per_seed), abs=1e-4)
+        assert float(r["ours_std"]) == pytest.approx(statistics.stdev(per_seed), abs=1e-4)
+        assert r["ours"] == f"{float(r['ours_mean']):.2f} ± {float(r['ours_std']):.2f}" and r["paper"]
+    md = (out / "tables.md").read_text()
+    assert "over 3 model-initialisation seeds (0, 1, 2" in md
+    chirp_p = next(r for r in rows if (r["test_set"], r["metric"]) == ("Chirp", "p"))
+    assert f"**{chirp_p['ours']}**" in md and f"({chirp_p['paper']})" in md
+    from furuta_gym.cli import build_parser
+    from furuta_gym.cli.reproduce import config_from_args
+
+    with pytest.raises(ValueError, match="must differ"):
+        config_from_args(build_parser().parse_args(["reproduce", "--seeds", "1", "1"]))
+
+
+def test_the_main_claim_is_counted_seed_by_seed_with_several_seeds():
+    from furuta_gym.training.reproduce import _summary_lines
+
+    cfg = ReproduceConfig(systems=("furuta",), pairs=(("dln", "traj"), ("dln", "prop")), seeds=(0, 1, 2))
+    good = {m: -2.0 for m in METRIC_COLUMNS["furuta"]}
+    prop = [{label: {**good, "inertial": v} for label in ("Free", "Forced")} for v in (-3.0, -2.5, -1.0)]
+    traj = [{label: {**good, "inertial": -2.0} for label in ("Free", "Forced")}] * 3
+    rows = build_tables({("furuta", "dln", "prop"): prop, ("furuta", "dln", "traj"): traj}, cfg)
+    lines = "\n".join(_summary_lines(rows, cfg))
+    # the mean (-2.17) holds, on two of the three seeds
+    assert "inertial -2.17 vs -2.00 (holds; on 2 of 3 seeds)" in lines
+    one = ReproduceConfig(systems=("furuta",), pairs=cfg.pairs)
+    lines = "\n".join(_summary_lines(build_tables({("furuta", "dln", "prop"): prop[:1],
+                                                    ("furuta", "dln", "traj"): traj[:1]}, one), one))
+    assert "inertial -3.00 vs -2.00 (holds)" in lines
 
 
 def test_config_rejects_pairs_the_paper_does_not_report():
@@ -357,6 +411,31 @@ def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
     assert training_config("nmsd", default, 0, "prop", "dln").quadrature == REPRODUCE_QUADRATURE
     with pytest.raises(SystemExit):
         parser.parse_args(["reproduce", "--quadrature", "boole"])
+
+
+def test_cli_executor_options_and_what_a_ray_worker_is_told():
+    from furuta_gym.cli import build_parser
+    from furuta_gym.cli.reproduce import config_from_args
+    from furuta_gym.training._ray_sweep import worker_env
+
+    parser = build_parser()
+    _, config = config_from_args(parser.parse_args(
+        ["reproduce", "--executor", "ray", "--address", "auto", "--cpus-per-task", "2"]))
+    assert (config.executor, config.address, config.cpus_per_task) == ("ray", "auto", 2)
+    _, default = config_from_args(parser.parse_args(["reproduce"]))
+    assert (default.executor, default.address) == ("local", None)  # the local pool stays the default
+    with pytest.raises(ValueError, match="executor"):
+        ReproduceConfig(executor="dask")
+    with pytest.raises(ValueError, match="needs executor='ray'"):
+        ReproduceConfig(address="auto")
+    # a task's XLA threads follow its CPU request; the node's other XLA flags and the caches stay
+    env = worker_env(2, {"XLA_FLAGS": "--xla_force_host_platform_device_count=2 intra_op_parallelism_threads=8",
+                         "JAX_COMPILATION_CACHE_DIR": "/cache", "HOME": "/root"})
+    assert env["XLA_FLAGS"].split() == ["--xla_force_host_platform_device_count=2",
+                                        "--xla_cpu_multi_thread_eigen=true", "intra_op_parallelism_threads=2"]
+    assert env["JAX_COMPILATION_CACHE_DIR"] == "/cache" and "HOME" not in env
+    assert env["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false" and env["OMP_NUM_THREADS"] == "2"
+    assert "multi_thread_eigen=false" in worker_env(1, {})["XLA_FLAGS"]
 
 
 def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys():

@@ -19,10 +19,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="scaled-down data and a few epochs: the whole pipeline in minutes (not the paper's numbers)",
     )
     parser.add_argument("--out", default=None, help="output folder (default results/reproduce[_quick])")
-    parser.add_argument("--seed", type=int, default=0, help="data seed and first model seed")
+    parser.add_argument("--seed", type=int, default=0, help="data seed (and the model seed without --seeds)")
     parser.add_argument(
-        "--seeds", type=int, default=1, metavar="N",
-        help="train every model with N seeds (seed, seed+1, ...) and report mean ± std",
+        "--seeds", type=int, nargs="+", default=None, metavar="SEED",
+        help="model-initialisation seeds, e.g. --seeds 0 1 2: every model is trained once per seed "
+             "and each cell reads mean ± std over them (default: --seed alone)",
     )
     parser.add_argument(
         "--system", choices=sorted(SYSTEMS), action="append", dest="systems",
@@ -55,6 +56,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
              "furuta_gym.training.reproduce.REPRODUCE_QUADRATURE, and FULL_PROP_QUADRATURE for "
              "the L_prop models named there)",
     )
+    parser.add_argument(
+        "--executor", choices=["local", "ray"], default="local",
+        help="where the models train: this machine's processes (default) or Ray tasks, one per "
+             "model × seed (pip install 'furuta-gym[cluster]'); the run folders are the same",
+    )
+    parser.add_argument(
+        "--address", default=None,
+        help="with --executor ray: the Ray cluster to join (e.g. auto, or ray://HOST:10001); without "
+             "it a local Ray instance runs --jobs tasks at once. On several machines --out must be "
+             "a folder all of them see at the same path",
+    )
+    parser.add_argument(
+        "--cpus-per-task", type=int, default=1, metavar="N",
+        help="with --executor ray: CPUs each model's task asks for (and the threads it may use)",
+    )
     parser.add_argument("--no-figures", action="store_true", help="tables only")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -66,8 +82,9 @@ def config_from_args(args: argparse.Namespace):
     jobs = args.jobs if args.jobs is not None else max(1, min(os.cpu_count() or 1, 8))
     if jobs < 1:
         raise ValueError(f"--jobs must be at least 1, got {jobs}")
-    if args.seeds < 1:
-        raise ValueError(f"--seeds must be at least 1, got {args.seeds}")
+    seeds = tuple(args.seeds) if args.seeds else (args.seed,)
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"--seeds must differ, got {' '.join(map(str, seeds))}")
     systems = tuple(dict.fromkeys(args.systems)) if args.systems else ("nmsd", "furuta")
     epochs = {s: tuple(args.epochs) for s in systems} if args.epochs else None
     prop_epochs = {s: tuple(args.prop_epochs) for s in systems} if args.prop_epochs else None
@@ -86,7 +103,7 @@ def config_from_args(args: argparse.Namespace):
     out = Path(args.out) if args.out else Path("results") / ("reproduce_quick" if args.quick else "reproduce")
     config = ReproduceConfig(
         quick=args.quick,
-        seeds=tuple(range(args.seed, args.seed + args.seeds)),
+        seeds=seeds,
         data_seed=args.seed,
         systems=systems,
         pairs=pairs,
@@ -97,6 +114,9 @@ def config_from_args(args: argparse.Namespace):
         figures=not args.no_figures,
         progress=not args.no_progress,
         jobs=jobs,
+        executor=args.executor,
+        address=args.address,
+        cpus_per_task=args.cpus_per_task,
     )
     return out, config
 

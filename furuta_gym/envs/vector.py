@@ -41,6 +41,7 @@ from ._batched_step import Quantizer, step_function
 from ._jax_rollout import Rollout, map_chunks, rollout, scan_closed_loop
 from ._parameters import PARAMETER_CLASSES
 from ._settings import EnvArgumentError, check_int
+from ._sharding import ShardedSteps, resolve_devices
 from ._tasks import divergence_bounds
 from ._workers import ProcessChunks
 from .furuta import FurutaEnv
@@ -148,6 +149,11 @@ class LagrangianVectorEnv(VectorEnv):
       model must pickle and be importable by name in a new interpreter; call :meth:`close` (or
       use the env as a context manager) to stop the workers — they also stop when the env is
       garbage-collected or Python exits.
+    * ``devices=``: the copies split over JAX devices with :mod:`jax.sharding` (an int ``k``: the
+      first ``k`` of :func:`jax.devices`; or a list of devices), one step running on all of them
+      at once — several accelerators, or a CPU split into host devices with
+      ``XLA_FLAGS=--xla_force_host_platform_device_count=K``. Not with ``chunks`` or ``workers``;
+      :meth:`rollout` is not split over devices.
     """
 
     env_class: ClassVar[type[LagrangianEnv]]
@@ -161,8 +167,16 @@ class LagrangianVectorEnv(VectorEnv):
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
         chunks: int | None = None,
         workers: int = 0,
+        devices: Any = None,
         **env_kwargs,
     ):
+        if devices is not None and (workers or chunks is not None):
+            raise ValueError(
+                f"devices= splits the copies over JAX devices; chunks= and workers= split them in "
+                f"this process or over worker processes: pass one of them (got chunks={chunks!r}, "
+                f"workers={workers!r})"
+            )
+        devices = resolve_devices(devices)
         chunks = self._check_arguments(num_envs, dynamics, workers, chunks, env_kwargs)
         # The single env is the specification: its validated settings, spaces, task and initial-
         # state distribution are what every copy uses. It never steps: no C kernel to build.
@@ -172,7 +186,8 @@ class LagrangianVectorEnv(VectorEnv):
         backend = template.backend
         assert isinstance(backend, ModelBackend)
         self.num_envs = int(num_envs)
-        self._chunked = _ConcurrentChunks(self.num_envs, int(chunks))
+        self._chunked = (_ConcurrentChunks(self.num_envs, int(chunks)) if devices is None
+                         else ShardedSteps(self.num_envs, devices))
         self.spec_system = template.system_spec
         self._n = template.system_spec.n_dof
         self.dt = template.dt
@@ -539,6 +554,11 @@ class LagrangianVectorEnv(VectorEnv):
         return self._chunked.chunks
 
     @property
+    def devices(self) -> tuple | None:
+        """JAX devices the copies are split over (``devices=``; ``None``: not split over devices)."""
+        return getattr(self._chunked, "devices", None)
+
+    @property
     def workers(self) -> int:
         """Worker processes stepping the copies (``workers=``; 0 = this process)."""
         return 0 if self._workers is None else self._workers.workers
@@ -645,7 +665,7 @@ def make_vector_env(
     (default) picks the faster one that supports the options: sync for ``dynamics="mujoco"``, for
     fewer than :data:`BATCHED_FROM` copies and for options the batched env does not reproduce
     (sensor noise, delays, ``observation="trig"``, …); batched otherwise, and whenever
-    ``chunks=`` or ``workers=`` is given. Both give each copy the same numbers.
+    ``chunks=``, ``workers=`` or ``devices=`` is given. Both give each copy the same numbers.
     """
     classes = {cls.env_class.env_id: cls for cls in VECTOR_CLASSES}
     if env_id not in classes:
@@ -653,7 +673,9 @@ def make_vector_env(
     if batched not in (None, True, False):
         raise ValueError(f"batched must be True, False or None (choose by speed), got {batched!r}")
     autoreset_mode = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
-    split = sorted({"chunks", "workers"} & set(kwargs))
+    if "devices" in kwargs and kwargs["devices"] is None:  # the default: splits nothing
+        del kwargs["devices"]
+    split = sorted({"chunks", "workers", "devices"} & set(kwargs))
     if batched is None:
         mujoco = isinstance(dynamics, str) and dynamics == "mujoco"
         batched = not mujoco and (bool(split) or _batched_is_faster(env_id, int(num_envs), dynamics, kwargs))

@@ -15,7 +15,9 @@ every test set (:mod:`furuta_gym.training.metrics`) and writes, under ``out``:
 * ``data/<system>/`` (generated CSVs) and ``runs/<system>/<model>_<loss>/seed<k>/`` (checkpoint,
   training history, ``metrics.json``).
 
-Interrupted runs resume per model: a finished model (``model.eqx`` + ``metrics.json``) is reused,
+The models train in this process, in a local pool of processes (``jobs``) or as Ray tasks on a
+cluster (``executor="ray"``, :mod:`furuta_gym.training._ray_sweep`); the run folders, and so the
+tables, are the same. Interrupted runs resume per model: a finished model (``model.eqx`` + ``metrics.json``) is reused,
 an unfinished one continues from its training state. The experimental columns of Table 2
 (``exp_*``) need the real QUBE-Servo 2 logs and are not reproduced.
 """
@@ -95,6 +97,8 @@ METRIC_COLUMNS = {
     name: (*get_spec(name).joint_names, *(f"{j}_dot" for j in get_spec(name).joint_names), *PHYSICS_METRICS)
     for name in SYSTEM_DATA
 }
+#: Where the models are trained (:attr:`ReproduceConfig.executor`).
+EXECUTORS = ("local", "ray")
 #: Table value of a model whose training failed (no finite model; reason in metrics.json).
 FAILED = "fail"
 # The paper's result tables, shipped with the package.
@@ -120,6 +124,10 @@ class ReproduceConfig:
     ``split``: ``"test"`` (the reproduction) or ``"validation"`` (a selection run: trained on the
     same training data, scale-fitted and scored on the validation datasets only — no test set
     is written or scored, no figure made).
+    ``executor``: ``"local"`` (this process, or a local pool of ``jobs`` processes) or ``"ray"``
+    (each model × seed a Ray task asking for ``cpus_per_task`` CPUs, on the cluster at
+    ``address`` or, without one, on a local Ray instance running ``jobs`` tasks at once; needs
+    the ``[cluster]`` extra). Neither changes a result: the run folders are the same.
     """
     quick: bool = False
     seeds: tuple[int, ...] = (0,)
@@ -136,12 +144,21 @@ class ReproduceConfig:
     progress: bool = True
     jobs: int = 1
     split: str = "test"
+    executor: str = "local"
+    address: str | None = None
+    cpus_per_task: int = 1
 
     def __post_init__(self):
         if self.split not in EVALUATION_SETS:
             raise ValueError(f"split must be one of {sorted(EVALUATION_SETS)}, got {self.split!r}")
         if int(self.jobs) < 1:
             raise ValueError(f"jobs must be at least 1, got {self.jobs}")
+        if self.executor not in EXECUTORS:
+            raise ValueError(f"executor must be one of {EXECUTORS}, got {self.executor!r}")
+        if self.address is not None and self.executor != "ray":
+            raise ValueError("address names a Ray cluster: it needs executor='ray'")
+        if int(self.cpus_per_task) < 1:
+            raise ValueError(f"cpus_per_task must be at least 1, got {self.cpus_per_task}")
         for s in self.systems:
             get_spec(s)
         for kind, loss in self.pairs:
@@ -149,6 +166,8 @@ class ReproduceConfig:
                 raise ValueError(f"pair ({kind!r}, {loss!r}) is not one the paper reports: {PAPER_PAIRS}")
         if not self.seeds:
             raise ValueError("seeds must name at least one seed")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"seeds must differ: a seed twice would count one model twice, got {self.seeds}")
 
     @property
     def small(self) -> bool:
@@ -456,46 +475,86 @@ def _figures_task(system: str, out: Path, config: ReproduceConfig, data=None, tr
 
 def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
     """Yield ``("model", task, (metrics, seconds, status))`` for every task, ``config.jobs`` at a
-    time, and with ``config.figures`` ``("figures", system, (paths | error, seconds))`` once per
-    system, made as soon as that system's last model is done (in the pool: beside the models still
-    training, and in the worker that has most likely compiled the models' predictions already)."""
+    time (or as Ray schedules them), and with ``config.figures`` ``("figures", system, (paths |
+    error, seconds))`` once per system, made as soon as that system's last model is done (in the
+    pool: beside the models still training, and in the worker that has most likely compiled the
+    models' predictions already)."""
     def report(task, result):
         system, kind, loss, seed = task
         log(f"[{system}] {MODEL_LABELS[kind]} ({LOSS_LABELS[loss]}) seed {seed}: {result[2]} in {result[1]} s")
 
-    systems = list(dict.fromkeys(t[0] for t in tasks))
-    if config.jobs == 1 or len(tasks) == 1:
-        for task in tasks:
-            system = task[0]
-            result = _run_task(*task, out, config, loaded[system]["data"], loaded[system]["truth"])
-            report(task, result)
-            yield "model", task, result
-        if config.figures:
-            for system in systems:
-                yield "figures", system, _figures_task(system, out, config, loaded[system]["data"],
-                                                       loaded[system]["truth"])
+    if config.executor == "local" and (config.jobs == 1 or len(tasks) == 1):
+        yield from _run_in_process(tasks, out, config, loaded, report)
         return
-
-    # "spawn": a forked copy of a process that already runs JAX's thread pools can deadlock.
     # Progress bars of parallel workers would overwrite each other: the log lines stay.
     worker_config = dataclasses.replace(config, progress=False)
-    left = {s: sum(1 for t in tasks if t[0] == s) for s in systems}
+    if config.executor == "ray":
+        from . import _ray_sweep
+
+        with _ray_sweep.ray_executor(config.address, config.jobs, config.cpus_per_task) as executor:
+            yield from _drain(executor, tasks, _ray_sweep.absolute(out), worker_config, report)
+        return
+    # "spawn": a forked copy of a process that already runs JAX's thread pools can deadlock.
     with cf.ProcessPoolExecutor(max_workers=config.jobs, mp_context=mp.get_context("spawn")) as pool:
-        futures = {pool.submit(_run_task, *task, out, worker_config): ("model", task)
-                   for task in _longest_first(tasks, config)}
-        while futures:
-            done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
-            for fut in done:
-                what, item = futures.pop(fut)
-                result = fut.result()
-                if what == "figures":
-                    yield "figures", item, result
-                    continue
-                report(item, result)
-                yield "model", item, result
-                left[item[0]] -= 1
-                if config.figures and left[item[0]] == 0:
-                    futures[pool.submit(_figures_task, item[0], out, worker_config)] = ("figures", item[0])
+        yield from _drain(_PoolExecutor(pool), tasks, out, worker_config, report)
+
+
+def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, report):
+    """:func:`_run_all` one model after the other in this process, on the data it has loaded."""
+    for task in tasks:
+        system = task[0]
+        result = _run_task(*task, out, config, loaded[system]["data"], loaded[system]["truth"])
+        report(task, result)
+        yield "model", task, result
+    if config.figures:
+        for system in dict.fromkeys(t[0] for t in tasks):
+            yield "figures", system, _figures_task(system, out, config, loaded[system]["data"],
+                                                   loaded[system]["truth"])
+
+
+class _PoolExecutor:
+    """A local process pool behind the interface :func:`_drain` uses (Ray's is in _ray_sweep)."""
+
+    def __init__(self, pool: cf.Executor):
+        self._pool = pool
+
+    def submit(self, fn, args, name: str):
+        return self._pool.submit(fn, *args)
+
+    def first_done(self, handles) -> list:
+        return list(cf.wait(handles, return_when=cf.FIRST_COMPLETED)[0])
+
+    def result(self, handle):
+        return handle.result()
+
+
+def _drain(executor, tasks, out: Path, config: ReproduceConfig, report):
+    """:func:`_run_all` on workers: every model submitted longest first, each system's figures
+    submitted once its last model is done; events yielded as they finish."""
+    left: dict[str, int] = {}
+    for t in tasks:
+        left[t[0]] = left.get(t[0], 0) + 1
+    pending = {executor.submit(_run_task, (*task, out, config), _task_name(task)): ("model", task)
+               for task in _longest_first(tasks, config)}
+    while pending:
+        for handle in executor.first_done(pending):
+            what, item = pending.pop(handle)
+            result = executor.result(handle)
+            if what == "figures":
+                yield "figures", item, result
+                continue
+            report(item, result)
+            yield "model", item, result
+            left[item[0]] -= 1
+            if config.figures and left[item[0]] == 0:
+                handle = executor.submit(_figures_task, (item[0], out, config), f"{item[0]}/figures")
+                pending[handle] = ("figures", item[0])
+
+
+def _task_name(task) -> str:
+    """A model's name on a cluster's dashboard: its run folder under ``runs/``."""
+    system, kind, loss, seed = task
+    return f"{system}/{kind}_{loss}/seed{seed}"
 
 
 def reproduce(
@@ -594,6 +653,7 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
                 per_seed = results.get((system, kind, loss), [])
                 for metric in METRIC_COLUMNS[system]:
                     paper_value = paper.get((system, label, MODEL_LABELS[kind], loss, metric), "")
+                    values = []
                     if kind == "aph" and metric in PHYSICS_METRICS:
                         ours_text, mean, std, ndiv = "N/A", None, None, 0
                     else:
@@ -611,12 +671,21 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
                             ours_mean="" if mean is None else f"{mean:.4f}",
                             ours_std="" if std is None else f"{std:.4f}",
                             n_seeds=len(per_seed),
+                            # each seed's own value, in the order of config.seeds: the spread's source
+                            ours_per_seed=" ".join(_seed_text(v) for v in values),
                             n_diverged=ndiv,
                             paper=paper_value,
                             better_or_equal=_compare(mean, ours_text, paper_value),
                         )
                     )
     return rows
+
+
+def _seed_text(value) -> str:
+    """One seed's cell in ``ours_per_seed``: the number, or X / fail / N/A."""
+    if value is None:
+        return "N/A"
+    return value if isinstance(value, str) else f"{value:.4f}"
 
 
 def _compare(mean, ours_text, paper_value) -> str:
@@ -654,9 +723,11 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
         "(as in the paper); X: the prediction diverged on at least one test trajectory; fail: "
         "training produced no finite model (reason in the run's metrics.json). "
         + (
-            f"Ours: mean ± std over {len(config.seeds)} model seeds."
+            f"Ours: mean ± sample standard deviation over {len(config.seeds)} model-initialisation "
+            f"seeds ({', '.join(map(str, config.seeds))}; each seed's value is in tables.csv, "
+            "ours_per_seed); the data are the same for every seed."
             if len(config.seeds) > 1
-            else "Ours: one model seed."
+            else f"Ours: one model seed ({config.seeds[0]})."
         )
         + " A ✓ marks our cell at or below the paper's.",
         "",
@@ -704,11 +775,13 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
         n_yes = sum(r["better_or_equal"] == "yes" for r in allnum)
         out.append(f"- All rows: {n_yes} of {len(allnum)} numeric cells at or below the paper's.")
 
-    def mean_of(system, label, model, loss, metric):
-        for r in rows:
-            if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"]) == (system, label, model, loss, metric):
-                return float(r["ours_mean"]) if r["ours_mean"] else None
-        return None
+    def row_of(system, label, model, loss, metric):
+        return next((r for r in rows if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"])
+                     == (system, label, model, loss, metric)), None)
+
+    def mean_of(*key):
+        r = row_of(*key)
+        return float(r["ours_mean"]) if r and r["ours_mean"] else None
 
     for system in config.systems:
         claim = system_data(system).main_claim
@@ -727,10 +800,30 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
                     if a is None or b is None:
                         parts.append(f"{metric}: n/a")
                     else:
-                        parts.append(f"{metric} {a:.2f} vs {b:.2f} ({'holds' if a < b else 'does not hold'})")
+                        seeds = _seeds_holding(row_of(system, label, model, "prop", metric),
+                                               row_of(system, label, model, base, metric))
+                        parts.append(f"{metric} {a:.2f} vs {b:.2f} ({'holds' if a < b else 'does not hold'}{seeds})")
                 out.append(f"  - {model} {label}: " + "; ".join(parts))
     out.append("")
     return out
+
+
+def _seeds_holding(prop_row: dict, base_row: dict) -> str:
+    """With several seeds, on how many the claim holds seed by seed (seed k of L_prop against
+    seed k of the baseline): a mean can hold on one lucky seed."""
+    pairs = list(zip(prop_row["ours_per_seed"].split(), base_row["ours_per_seed"].split()))
+    if len(pairs) < 2:
+        return ""
+    numeric = [(float(a), float(b)) for a, b in pairs if _is_number(a) and _is_number(b)]
+    return f"; on {sum(a < b for a, b in numeric)} of {len(pairs)} seeds"
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _machine() -> dict[str, Any]:

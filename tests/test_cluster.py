@@ -1,0 +1,134 @@
+"""``reproduce --executor ray``: on a local Ray instance with two workers, a tiny reproduction
+gives the local pool's tables, a second call reuses the finished runs, and a worker killed in
+the middle of training is retried and resumes from its last epoch instead of starting over.
+Skipped when Ray (the ``[cluster]`` extra) is not installed."""
+
+import dataclasses
+import json
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+ray = pytest.importorskip("ray")
+
+from furuta_gym.training.reproduce import ReproduceConfig, reproduce  # noqa: E402
+
+# Only L_Iτ epochs (no trajectory stage to compile), enough of them that a worker can be killed
+# while it trains; two seeds, so both workers train at once.
+EPOCHS = 60
+CONFIG = ReproduceConfig(
+    quick=True,
+    systems=("nmsd",),
+    pairs=(("dln", "prop"),),
+    prop_epochs={"nmsd": (EPOCHS, 0, 0)},
+    seeds=(0, 1),
+    jobs=2,
+    progress=False,
+    figures=False,
+    ground_truth="analytic",
+)
+RUN = Path("runs") / "nmsd" / "dln_prop"
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    """A shared compilation cache (the local pool's workers compile, Ray's reuse it: same
+    executables, and the tests take seconds instead of minutes), the same single-thread XLA
+    flags for both kinds of worker, the local pool's reference run, and a 2-CPU Ray instance."""
+    root = tmp_path_factory.mktemp("cluster")
+    env = {"JAX_COMPILATION_CACHE_DIR": str(root / "jax"), "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+           "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"}
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        reproduce(root / "local", CONFIG, log=lambda msg: None)
+        ray.init(num_cpus=2, include_dashboard=False, object_store_memory=100 * 2**20)
+        yield root
+    finally:
+        if ray.is_initialized():
+            ray.shutdown()
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _metrics(out: Path, seed: int) -> dict:
+    metrics = json.loads((out / RUN / f"seed{seed}" / "metrics.json").read_text())
+    metrics.pop("_seconds")
+    return metrics
+
+
+def _statuses(paths) -> list[str]:
+    seconds = json.loads(paths["run.json"].read_text())["seconds"]
+    return [seconds[f"nmsd/dln_prop/seed{k}"]["status"] for k in CONFIG.seeds]
+
+
+def test_ray_run_gives_the_local_tables_and_reuses_finished_runs(workspace):
+    out = workspace / "ray"
+    ray_config = dataclasses.replace(CONFIG, executor="ray", figures=True)
+    paths = reproduce(out, ray_config, log=lambda msg: None)
+    assert _statuses(paths) == ["trained", "trained"]
+    assert paths["tables.csv"].read_text() == (workspace / "local" / "tables.csv").read_text()
+    for seed in CONFIG.seeds:
+        assert _metrics(out, seed) == _metrics(workspace / "local", seed)
+    # the figures task ran on a worker too, into the same folder layout
+    assert paths["predictions_nmsd"] == out.resolve() / "figures" / paths["predictions_nmsd"].name
+    again = reproduce(out, ray_config, log=lambda msg: None)
+    assert _statuses(again) == ["reused", "reused"]
+
+
+def _worker_pid(task_name: str) -> int | None:
+    """The process of the Ray worker running ``task_name`` (its process title is ray::<name>)."""
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            title = (entry / "cmdline").read_bytes().split(b"\0")[0].decode().strip()
+        except OSError:
+            continue
+        if title == f"ray::{task_name}":
+            return int(entry.name)
+    return None
+
+
+def _kill_mid_run(history: Path, task_name: str, after_epochs: int, timeout: float = 300.0) -> list[str]:
+    """SIGKILL the worker training ``task_name`` once its history holds ``after_epochs`` epochs;
+    returns the history lines written before the kill."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        lines = history.read_text().splitlines() if history.exists() else []
+        if len(lines) >= after_epochs:
+            pid = _worker_pid(task_name)
+            assert pid is not None, f"no worker runs {task_name}"
+            os.kill(pid, signal.SIGKILL)
+            return lines
+        time.sleep(0.02)
+    raise AssertionError(f"{history} never reached {after_epochs} epochs")
+
+
+def test_a_killed_worker_is_retried_and_resumes_its_training(workspace):
+    out = workspace / "killed"
+    ray_config = dataclasses.replace(CONFIG, executor="ray")
+    done = {}
+    runner = threading.Thread(target=lambda: done.update(paths=reproduce(out, ray_config, log=lambda m: None)))
+    runner.start()
+    try:
+        before = _kill_mid_run(out / RUN / "seed0" / "history.jsonl", "nmsd/dln_prop/seed0", after_epochs=5)
+    finally:
+        runner.join(timeout=600)
+    assert 5 <= len(before) < EPOCHS
+    assert _statuses(done["paths"]) == ["resumed", "trained"]
+    lines = (out / RUN / "seed0" / "history.jsonl").read_text().splitlines()
+    # the epochs before the kill were kept as written (each line carries its own timing: a
+    # restart would have rewritten them), and training went on from there, each epoch once
+    kept = len(before) - 1  # the kill may have come between an epoch's history line and its state
+    assert lines[:kept] == before[:kept]
+    assert [json.loads(line)["epoch"] for line in lines] == list(range(1, EPOCHS + 1))
+    # and the resumed model is the one an uninterrupted run trains
+    assert _metrics(out, 0) == _metrics(workspace / "local", 0)
