@@ -1,4 +1,5 @@
-"""experiments/rl_from_learned_models.py: its randomised learned-model env, and its docs table."""
+"""experiments/rl_from_learned_models.py: its randomised learned-model env, its docs table and
+bench/rl_wall_time.py's BENCHMARKS.md section."""
 
 import subprocess
 import sys
@@ -39,3 +40,11 @@ def test_a_learned_model_randomised_env_draws_its_scale_at_each_reset():
     _, state = env.reset(jax.random.PRNGKey(0), params)
     assert float(env.plant(params, state).scale) == scales[0]
     assert env.plant(params, env.state_at(np.zeros(4), params)).scale == nominal  # deployment-style start
+
+
+def test_rl_wall_time_benchmark_section_matches_its_results():
+    if "<!-- bench/rl_wall_time.py:start -->" not in (ROOT / "BENCHMARKS.md").read_text():
+        pytest.skip("BENCHMARKS.md has no wall-time-to-swing-up section yet")
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "rl_wall_time.py"), "--check"],
+                          capture_output=True, text=True, cwd=ROOT / "bench")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
