@@ -1,0 +1,50 @@
+"""experiments/rl_from_learned_models.py: its randomised learned-model env, its docs table and
+bench/rl_wall_time.py's BENCHMARKS.md section."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+EXPERIMENTS = ROOT / "experiments"
+CHECKPOINT = ROOT / "results" / "reproduce" / "runs" / "furuta" / "dln_prop" / "seed0" / "model.eqx"
+
+
+def test_rl_learned_docs_table_matches_its_results():
+    if not any((ROOT / "results" / "rl_learned").glob("*_seed0.json")):
+        pytest.skip("results/rl_learned not generated")
+    proc = subprocess.run([sys.executable, str(EXPERIMENTS / "rl_from_learned_models_table.py"), "--check"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_a_learned_model_randomised_env_draws_its_scale_at_each_reset():
+    """Each reset draws the learned model's scale within ±spread, and the step's plant uses it."""
+    pytest.importorskip("gymnax")
+    if not CHECKPOINT.is_file():
+        pytest.skip("the reproduction's DeLaN L_prop checkpoint is not here")
+    import jax
+
+    sys.path.insert(0, str(EXPERIMENTS))
+    try:
+        import rl_from_learned_models as experiment
+    finally:
+        sys.path.remove(str(EXPERIMENTS))
+    env, params = experiment.training_env("dln_prop", randomize=True)
+    nominal = float(env.plant(params).scale)
+    scales = np.array([float(env.reset(jax.random.PRNGKey(k), params)[1].physical) for k in range(8)])
+    assert np.all(np.abs(scales / nominal - 1.0) <= experiment.SPREAD) and np.ptp(scales) > 0
+    _, state = env.reset(jax.random.PRNGKey(0), params)
+    assert float(env.plant(params, state).scale) == scales[0]
+    assert env.plant(params, env.state_at(np.zeros(4), params)).scale == nominal  # deployment-style start
+
+
+def test_rl_wall_time_benchmark_section_matches_its_results():
+    if "<!-- bench/rl_wall_time.py:start -->" not in (ROOT / "BENCHMARKS.md").read_text():
+        pytest.skip("BENCHMARKS.md has no wall-time-to-swing-up section yet")
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "rl_wall_time.py"), "--check"],
+                          capture_output=True, text=True, cwd=ROOT / "bench")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
