@@ -264,7 +264,9 @@ def fit_intervals(fx, theta, origin: FitOrigin):
     names = [names_all[i] for i in idx] + ([dyn_key] if dyn_key else [])
     estimate = [theta[i] for i in idx] + ([origin.dynamics.seconds] if dyn_key else [])
     notes = []
-    if not np.all(np.isfinite(r)) or not np.all(np.isfinite(J)):
+    if not names:  # nothing was fitted (a given model, nothing added): no interval to give
+        iv = None
+    elif not np.all(np.isfinite(r)) or not np.all(np.isfinite(J)):
         iv = None
         notes.append(f"no intervals: the {origin.kind.replace('_', '-')} residual is not finite at the estimate")
     else:
