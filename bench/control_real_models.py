@@ -69,10 +69,11 @@ def main(argv=None) -> int:
     # first the exact upright (the "x0" column of the catch rows), then the seeded starts
     catch_starts = np.concatenate([[[0.0, np.pi, 0.0, 0.0]], near_upright_starts(args.episodes, args.seed)])
     for label, model in _designs(res, load_model):
-        for name, design, x0s, seconds in (("swing-up + LQR (volts)", SwingUpLQR, starts, SECONDS),
-                                           ("LQR catch near upright (volts)", LQR, catch_starts, CATCH_SECONDS)):
+        for name, design, x0s, seconds in (
+                ("swing-up + LQR (volts)", lambda m: SwingUpLQR.from_model(m, seed=args.seed), starts, SECONDS),
+                ("LQR catch near upright (volts)", LQR.from_model, catch_starts, CATCH_SECONDS)):
             try:
-                ctrl = design.from_model(model, seed=args.seed) if design is SwingUpLQR else design.from_model(model)
+                ctrl = design(model)
             except Exception as exc:  # a learned design can fail: say how, keep the table
                 notes.append(f"{name}, {label}: design failed — {type(exc).__name__}: {exc}.")
                 continue

@@ -283,7 +283,9 @@ def fill_missing(path: Path, work: Path) -> None:
         doc.update(at_snapshot(doc, cell, work / path.stem))
     if "truth_has_effects" not in doc and cell.effects and "gravity_profile" in doc:
         doc["truth_has_effects"] = True  # the truth was the plant with the effects all along
-    if doc.get("truth_has_effects") != cell.effects:  # made before the truth followed the cell
+    stale_truth = doc.get("truth_has_effects") != cell.effects  # made before the truth followed the cell
+    stale_span = cell.integral_span > 1 and doc.get("itau_span") != cell.integral_span  # before L_Iτ followed the span
+    if stale_truth or stale_span:
         from furuta_gym.training.checkpoint import load_model
 
         pieces = _pieces(simulate(cell, N_TRAIN, DURATION, doc["data_seed"])[0], SPLIT)
@@ -291,13 +293,6 @@ def fill_missing(path: Path, work: Path) -> None:
         doc["itau"] = itau_comparison(model, pieces, doc["config"]["quadrature"], cell)
         doc["gravity_profile"] = gravity_profile(pieces, doc["config"]["quadrature"], cell)
         doc["truth_has_effects"] = cell.effects
-    if cell.integral_span > 1 and doc.get("itau_span") != cell.integral_span:  # made before L_Iτ followed the span
-        from furuta_gym.training.checkpoint import load_model
-
-        pieces = _pieces(simulate(cell, N_TRAIN, DURATION, doc["data_seed"])[0], SPLIT)
-        model = load_model(work / path.stem / "model.eqx", expected_system="furuta")
-        doc["itau"] = itau_comparison(model, pieces, doc["config"]["quadrature"], cell)
-        doc["gravity_profile"] = gravity_profile(pieces, doc["config"]["quadrature"], cell)
     doc["itau_span"] = cell.integral_span
     if cell.epochs > SHORT and "short" not in doc:
         test_pieces = _pieces(simulate(cell, N_TEST, TEST_DURATION, doc["data_seed"] + 500)[0], None)

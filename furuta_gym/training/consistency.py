@@ -18,6 +18,7 @@ import warnings
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..lagrangian import SystemSpec
 from ..models import system_definition
@@ -98,8 +99,6 @@ def check_data_coverage(trajs, system: str | SystemSpec, radius: float = COVERAG
     """Per equilibrium of the system's definition, the share of the samples of ``trajs`` whose
     equilibrium joint lies within ``radius`` of it (angles compared modulo 2π). Returns
     ``{"radius", "n_samples", "equilibria": [{"name", "joint", "share"}, ...]}``."""
-    import numpy as np
-
     definition = system_definition(system)
     spec = definition.spec
     q = np.concatenate([np.asarray(tr.q, dtype=float).reshape(len(tr.q), -1) for tr in trajs])
