@@ -110,7 +110,12 @@ def span_findings(docs: dict[str, list[dict]], baseline: list[dict]) -> str:
     """The fix tried within the loss family: L_Iτ summed over longer intervals (cells g, h)."""
     base_score = np.mean([d["short"]["test"]["mean_log10"] if "short" in d else d["test"]["mean_log10"]
                           for d in baseline])
-    parts = []
+    def gravity_contrast(runs):  # L_Iτ of the truth without gravity over the truth's own
+        r = [d["gravity_profile"]["itau_at_scale_0_1_2"] for d in runs if "gravity_profile" in d]
+        r = [a / b for a, b, _ in r]
+        return f"{min(r):.2f}–{max(r):.2f}×" if r else "–"
+
+    parts = [f"taking gravity out of the truth raises its L_Iτ {gravity_contrast(baseline)} per interval"]
     for cell in ("span_5", "span_25"):
         runs = docs.get(cell, [])
         if not runs:
@@ -119,11 +124,11 @@ def span_findings(docs: dict[str, list[dict]], baseline: list[dict]) -> str:
         curv = 1e3 * np.array([d["potential"]["curvature_at_top_Nm_per_rad"] for d in runs])
         maxima = int(np.sum(curv < 0))
         score = np.mean([d["test"]["mean_log10"] for d in runs])
-        parts.append(f"over {span} Simpson intervals ({4 * span} ms at 500 Hz), upright a maximum in **{maxima} of {len(runs)}** "
+        parts.append(f"over {span} Simpson intervals ({4 * span} ms at 500 Hz), {gravity_contrast(runs)}; upright a maximum in **{maxima} of {len(runs)}** "
                      f"seeds (curvature {curv.mean():+.1f}, range {curv.min():+.1f} to {curv.max():+.1f} mN·m/rad), "
                      f"test mean log10 {score:.2f} (the real runs' conditions at the same budget: {base_score:.2f})")
     return (" L_Iτ summed over longer intervals (`TrainConfig.integral_span`), everything else as the real runs: "
-            + "; ".join(parts) + ".") if parts else ""
+            + "; ".join(parts) + ".") if len(parts) > 1 else ""
 
 
 def block(docs: dict[str, list[dict]]) -> str:

@@ -95,6 +95,28 @@ def training_table(docs: list[dict]) -> str:
     return "\n".join(rows)
 
 
+#: each L_prop variant with L_Iτ over a longer interval, beside the paper's L_Iτ and its baseline loss
+SPAN_PAIRS = (("dln_prop_span", "dln_prop", "dln_traj"), ("adln_prop_span", "adln_prop", "adln_aph"))
+
+
+def span_sentence(docs: list[dict]) -> str:
+    """The span models against the paper's L_Iτ and against their baselines, and their potential
+    against the physics' (the nominal model's), in one generated sentence."""
+    by = {d["name"]: d for d in docs}
+    physics = by["nominal"]["potential"] if "nominal" in by else None
+    parts = []
+    for span, paper, base in SPAN_PAIRS:
+        if not (physics and all(n in by for n in (span, paper, base))):
+            continue
+        p = by[span]["potential"]
+        curv = p["curvature_at_top_Nm_per_rad"] / physics["curvature_at_top_Nm_per_rad"]
+        rise = p["rise_to_top_J"] / physics["rise_to_top_J"]
+        parts.append(f"{by[span]['label']}: curvature at β = π {curv:.0%} and rise to the top {rise:.0%} of the "
+                     f"physics'; mean log10 {mean_log10(by[paper]) - mean_log10(by[span]):+.2f} better than with the "
+                     f"paper's L_Iτ and {mean_log10(by[span]) - mean_log10(by[base]):.2f} behind {by[base]['label']}")
+    return ("L_Iτ over 0.1 s — " + "; ".join(parts) + ".") if parts else ""
+
+
 def block(summary: dict, docs: list[dict]) -> str:
     ranked = sorted(docs, key=mean_log10)
     winner, second = ranked[0], ranked[1]
@@ -115,7 +137,7 @@ def block(summary: dict, docs: list[dict]) -> str:
         lines += ["", f"Diagnosis on runs {fit[0]}–{fit[-1]}: {diag['note']}."]
     lines += ["", "Energy shape at α = 0 (the physical potential rises from hanging to upright and "
               "has its maximum there; the logs only visit the neighbourhood of the top):", "",
-              shape_table(docs), "",
+              shape_table(docs), "", span_sentence(docs), "",
               f"Learned models: {summary['n_train']} training and {summary['n_validation']} validation "
               f"elementary trajectories of {summary['split_seconds']} s (every {summary['validation_every']}th "
               f"held out), the script's schedules × {summary['budget']}:", "", training_table(docs), "",
