@@ -137,7 +137,9 @@ class EnergySwingUp(AbstractController):
         """ū, the rotor acceleration the energy law asks for (before PFL and saturation)."""
         x = model_state(obs)
         beta, betad = x[1], x[3]
-        dV = self.model.potential(x[:2]) - self.V_up
+        # V(β) as the paper writes it: the potential at α = 0. A rotor spring's ½kα² (the
+        # QUBE's cable) is no pendulum energy: in V(α, β) it flips the pump's sign near the top
+        dV = self.model.potential(jnp.stack([jnp.zeros_like(beta), beta])) - self.V_up
         s = sign_with_push(self.coupling_sign * jnp.cos(beta) * betad, self.push)
         return self.k_e * dV * s - self.k_alpha * obs[0] - self.d_alpha * obs[2]
 

@@ -237,6 +237,19 @@ def test_energy_law_pumps_energy_into_the_pendulum(model):
         assert -m21 * x[3] * ubar >= 0.0
 
 
+def test_energy_law_pumps_the_pendulum_energy_whatever_a_rotor_spring_stores(model):
+    """A design model with the QUBE's cable spring (½kα² in V) pumps as the one without: the
+    spring's energy is no pendulum energy. In V(α, β) it made V − V(π) > 0 at the top with the
+    arm off centre, flipping the pump's sign, and the swing-up never arrived."""
+    spring = WithEffects(model, [Effect("spring", "alpha", 8e-4)])
+    plain, sprung = EnergySwingUp(model), EnergySwingUp(spring)
+    assert float(sprung.k_e) == pytest.approx(float(plain.k_e), rel=1e-12)
+    for obs in ([1.0, 2.9, 0.5, 1.0], [-1.5, 3.1, -2.0, 0.3], [0.7, 0.4, 0.0, -5.0]):
+        obs = jnp.asarray(obs)
+        assert float(sprung.desired_acceleration(obs)) == pytest.approx(float(plain.desired_acceleration(obs)),
+                                                                         rel=1e-12, abs=1e-12)
+
+
 def test_hysteresis_band_does_not_chatter(ctrl):
     rng = np.random.default_rng(0)
     # β dithers across the catch threshold, then across the release threshold
