@@ -47,6 +47,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="data from the MuJoCo model (auto: when available) or the analytic model",
     )
     parser.add_argument(
+        "--plant", default=None, metavar="FILE",
+        help="generate the data on this plant (a diagnosis JSON from `diagnose --json`, or an MJCF "
+             "from `--mjcf`): the paper's protocol on your calibrated rig; the state columns then "
+             "sit beside the paper's experimental ones",
+    )
+    parser.add_argument(
+        "--sensor", choices=["exact", "experiment"], default="exact",
+        help="exact states (the paper's simulated data) or as the QUBE measures them: 2048-count "
+             "encoders and the paper's derivative filter for velocities (its experiments)",
+    )
+    parser.add_argument(
         "--jobs", type=int, default=None, metavar="N",
         help="train N models at once in separate processes (default: the number of CPU cores, at most 8)",
     )
@@ -110,6 +121,8 @@ def config_from_args(args: argparse.Namespace):
         epochs=epochs,
         prop_epochs=prop_epochs,
         ground_truth=args.ground_truth,
+        plant=args.plant,
+        sensor=args.sensor,
         train_overrides={"quadrature": args.quadrature} if args.quadrature else None,
         figures=not args.no_figures,
         progress=not args.no_progress,

@@ -247,18 +247,25 @@ class AnalyticGroundTruth:
 
 class MujocoGroundTruth:
     """The MuJoCo model in ``assets/`` (through the envs' :class:`MujocoBackend`), RK4 at
-    ``substeps`` steps per sensor sample.
+    ``substeps`` steps per sensor sample; with ``plant`` (an env :class:`~furuta_gym.envs.Plant`,
+    e.g. a diagnosed rig) that plant instead, its ``input_delay`` as the input seen late.
 
     The input held over each MuJoCo step is the linear interpolation of the samples at the step's
     midpoint (midpoint rule), which tracks the linearly interpolated input to second order.
     """
 
-    name = "mujoco"
-
-    def __init__(self, system: str, substeps: int = 4):
+    def __init__(self, system: str, substeps: int = 4, plant=None):
         self.system = get_spec(system).name
         self.substeps = int(substeps)
-        self._backend = MujocoBackend(self.system, substeps=1)
+        self.plant = plant
+        self._backend = MujocoBackend(self.system, substeps=1, plant=plant)
+        self._delay = 0.0 if plant is None else sum(e.coefficient for e in plant.effects
+                                                    if e.kind.input_dynamics == "delay")
+
+    @property
+    def name(self) -> str:
+        """``"mujoco"``, or ``"mujoco plant: <the plant's source>"``."""
+        return "mujoco" if self.plant is None else f"mujoco plant: {self.plant.source or 'given'}"
 
     def __call__(self, x0s, t, us):
         dt = float(t[1] - t[0])
@@ -269,12 +276,20 @@ class MujocoGroundTruth:
         for b in range(x0s.shape[0]):
             backend.reset(np.asarray(x0s[b], dtype=float))
             out[b, 0] = x0s[b]
-            u_b = us[b]
+            u_b = np.asarray(us[b], dtype=float)
             for k in range(len(t) - 1):
                 for f in fractions:
-                    x = backend.step((1.0 - f) * u_b[k] + f * u_b[k + 1])
+                    x = backend.step(self._input(t, u_b, k, f))
                 out[b, k + 1] = x
         return out
+
+    def _input(self, t, u, k: int, f: float):
+        """The interpolated input the plant sees at ``t[k] + f·dt``: the one commanded ``delay``
+        earlier (the first sample's before the record starts)."""
+        if self._delay == 0.0:
+            return (1.0 - f) * u[k] + f * u[k + 1]
+        when = t[k] + f * (t[1] - t[0]) - self._delay
+        return np.array([np.interp(when, t, u[:, j]) for j in range(u.shape[1])])
 
 
 def default_ground_truth(system: str, kind: str = "auto") -> GroundTruth:

@@ -51,7 +51,7 @@ from ..systems import get_spec
 from . import _reproduce_figures
 from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 from .checkpoint import load_model, package_versions, read_header
-from .datagen import SYSTEM_DATA, generate, system_data
+from .datagen import SYSTEM_DATA, MujocoGroundTruth, SensorOptions, generate, system_data
 from .metrics import evaluate_model, metrics_to_json
 from .train import MODEL_FILE, STATE_FILE, TrainConfig, train
 from .recipe import (
@@ -97,6 +97,10 @@ METRIC_COLUMNS = {
     name: (*get_spec(name).joint_names, *(f"{j}_dot" for j in get_spec(name).joint_names), *PHYSICS_METRICS)
     for name in SYSTEM_DATA
 }
+#: How the data are measured (:attr:`ReproduceConfig.sensor`): the paper's simulated data, or as its
+#: QUBE recordings were.
+SENSORS = {"exact": SensorOptions(),
+           "experiment": SensorOptions(quantize=True, velocity="filter")}
 #: Where the models are trained (:attr:`ReproduceConfig.executor`).
 EXECUTORS = ("local", "ray")
 #: Table value of a model whose training failed (no finite model; reason in metrics.json).
@@ -128,6 +132,12 @@ class ReproduceConfig:
     (each model × seed a Ray task asking for ``cpus_per_task`` CPUs, on the cluster at
     ``address`` or, without one, on a local Ray instance running ``jobs`` tasks at once; needs
     the ``[cluster]`` extra). Neither changes a result: the run folders are the same.
+    ``plant``: a plant file (a diagnosis JSON or an MJCF that furuta-gym wrote) whose MuJoCo
+    plant generates the data instead of the shipped model, and whose model (its lumped parameters
+    and memoryless effects) is the truth the physics columns compare with; the state columns then
+    sit beside the paper's *experimental* values. ``sensor``: ``"exact"`` (the paper's simulated
+    data) or ``"experiment"`` (its QUBE recordings: 2048-count encoders and the derivative filter
+    ω0 = 100, ξ = 0.8 for the velocities, at 500 Hz).
     """
     quick: bool = False
     seeds: tuple[int, ...] = (0,)
@@ -140,6 +150,8 @@ class ReproduceConfig:
     train_overrides: dict | None = None
     model_overrides: dict | None = None
     ground_truth: str = "auto"
+    plant: str | None = None
+    sensor: str = "exact"
     figures: bool = True
     progress: bool = True
     jobs: int = 1
@@ -166,6 +178,10 @@ class ReproduceConfig:
                 raise ValueError(f"pair ({kind!r}, {loss!r}) is not one the paper reports: {PAPER_PAIRS}")
         if not self.seeds:
             raise ValueError("seeds must name at least one seed")
+        if self.sensor not in SENSORS:
+            raise ValueError(f"sensor must be one of {sorted(SENSORS)}, got {self.sensor!r}")
+        if self.plant is not None and self.ground_truth == "analytic":
+            raise ValueError("plant= is a MuJoCo plant: it needs ground_truth 'auto' or 'mujoco'")
         if len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"seeds must differ: a seed twice would count one model twice, got {self.seeds}")
 
@@ -266,33 +282,56 @@ def _datasets(system: str, out: Path, config: ReproduceConfig):
     manifest = folder / "manifest.json"
     if manifest.exists():
         meta = json.loads(manifest.read_text())
-        held = (meta.get("seed"), bool(meta.get("small")), meta.get("split", "test"))
-        if held != (config.data_seed, config.small, config.split):
-            raise ValueError(
-                f"{folder}: holds data generated with seed={held[0]}, small={held[1]}, "
-                f"split={held[2]!r}; this run wants seed={config.data_seed}, "
-                f"small={config.small}, split={config.split!r} — choose another --out"
-            )
+        held = (meta.get("seed"), bool(meta.get("small")), meta.get("split", "test"),
+                meta.get("plant"), meta.get("sensor_name", "exact"))
+        wanted = (config.data_seed, config.small, config.split, _plant_json(config), config.sensor)
+        if held != wanted:
+            names = ("seed", "small", "split", "plant", "sensor")
+            diff = ", ".join(f"{n}={h!r} (this run: {w!r})" for n, h, w in zip(names, held, wanted) if h != w)
+            raise ValueError(f"{folder}: holds data generated with {diff}; choose another --out")
         missing = [name for name, f in meta.get("files", {}).items() if not (folder / f["path"]).exists()]
         if missing:
-            _regenerate_data(system, folder, meta, missing)
+            _regenerate_data(system, folder, meta, missing, config)
     else:
-        generate(system, folder, seed=config.data_seed, small=config.small,
-                 ground_truth=config.ground_truth, overwrite=True, split=config.split)
+        _generate_data(system, folder, config)
     meta = json.loads(manifest.read_text())
     data = {name: load_trajectories(folder / f["path"], system) for name, f in meta["files"].items()}
     return data, meta
 
 
-def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[str]) -> None:
+def _plant_json(config: ReproduceConfig) -> dict | None:
+    """The plant of ``config`` as JSON (what a data manifest records), or None."""
+    from ..envs import Plant
+
+    return None if config.plant is None else json.loads(json.dumps(Plant.load(config.plant).to_json()))
+
+
+def _generate_data(system: str, folder: Path, config: ReproduceConfig) -> None:
+    """Write the run's datasets of ``system`` to ``folder`` (with ``config``'s plant and sensor)."""
+    from ..envs import Plant
+
+    truth = config.ground_truth
+    if config.plant is not None:
+        truth = MujocoGroundTruth(system, plant=Plant.load(config.plant))
+    generate(system, folder, seed=config.data_seed, small=config.small, ground_truth=truth,
+             sensor=SENSORS[config.sensor], overwrite=True, split=config.split)
+    if config.plant is not None or config.sensor != "exact":
+        path = folder / "manifest.json"
+        meta = json.loads(path.read_text())
+        meta.update(plant=_plant_json(config), sensor_name=config.sensor)
+        path.write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[str],
+                     config: ReproduceConfig) -> None:
     """Re-create data files a manifest lists but the folder lacks (a committed run keeps the
     manifest, not the CSVs): the data are seeded, so they must come out byte for byte as
     recorded; anything else is an error, never a silent change of the data under the models."""
 
     with tempfile.TemporaryDirectory() as tmp:
-        generate(system, tmp, seed=meta.get("seed", 0), small=bool(meta.get("small")),
-                 ground_truth=meta.get("ground_truth", "auto"), overwrite=True,
-                 split=meta.get("split", "test"))
+        fresh_config = dataclasses.replace(config, ground_truth=meta.get("ground_truth", "auto")
+                                           if config.plant is None else config.ground_truth)
+        _generate_data(system, Path(tmp), fresh_config)
         for name in missing:
             entry = meta["files"][name]
             fresh = Path(tmp) / entry["path"]
@@ -420,7 +459,22 @@ def _worker_inputs(system: str, out: Path, config: ReproduceConfig):
     parent generated under ``out``."""
     enable_x64()  # the parent already chose float64 (and said so): no second warning
     data, _ = _datasets(system, out, config)
-    return data, analytic_model(system)
+    return data, truth_model(system, config)
+
+
+def truth_model(system: str, config: ReproduceConfig):
+    """What the physics columns compare with: the pinned analytic model, or the plant's model
+    (its lumped parameters with its memoryless effects)."""
+    if config.plant is None:
+        return analytic_model(system)
+    from ..effects import WithEffects
+    from ..envs import Plant
+    from ..models import LumpedSystem
+
+    plant = Plant.load(config.plant)
+    effects = [e for e in plant.effects if not e.kind.has_memory]
+    base = LumpedSystem.of(system, plant.lumped)
+    return WithEffects(base, effects) if effects else base
 
 
 def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
@@ -582,7 +636,7 @@ def reproduce(
         data_meta[system] = {k: meta.get(k) for k in ("seed", "small", "ground_truth", "seconds")}
         timings[f"{system}/data"] = round(time.perf_counter() - t0, 1)
         log(f"[{system}] data ready ({meta.get('ground_truth')} ground truth) in {timings[f'{system}/data']} s")
-        models_for_figures[system] = {"data": data, "truth": analytic_model(system)}
+        models_for_figures[system] = {"data": data, "truth": truth_model(system, config)}
     tasks = [(system, kind, loss, seed) for system in config.systems
              for kind, loss in config.pairs for seed in config.seeds]
     figure_paths: dict[str, dict] = {}
@@ -652,7 +706,7 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
             for kind, loss in config.pairs:
                 per_seed = results.get((system, kind, loss), [])
                 for metric in METRIC_COLUMNS[system]:
-                    paper_value = paper.get((system, label, MODEL_LABELS[kind], loss, metric), "")
+                    paper_value = paper.get((system, label, MODEL_LABELS[kind], loss, _paper_metric(metric, config)), "")
                     values = []
                     if kind == "aph" and metric in PHYSICS_METRICS:
                         ours_text, mean, std, ndiv = "N/A", None, None, 0
@@ -679,6 +733,14 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
                         )
                     )
     return rows
+
+
+def _paper_metric(metric: str, config: ReproduceConfig) -> str:
+    """The paper's column for ``metric``: on a plant (a calibrated rig), a state's error sits beside
+    the paper's experimental column (``exp_<state>``); physics columns have no experimental value."""
+    if config.plant is None:
+        return metric
+    return "" if metric in PHYSICS_METRICS else f"exp_{metric}"
 
 
 def _seed_text(value) -> str:

@@ -1,0 +1,87 @@
+"""The paper's protocol on a calibrated rig: the datasets generated on a plant (a diagnosis) as the
+QUBE measures them, and ``reproduce --plant --sensor experiment`` scoring beside the paper's
+experimental columns."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from furuta_gym.effects import Effect
+from furuta_gym.envs import Plant
+from furuta_gym.training.datagen import MujocoGroundTruth
+from furuta_gym.training.reproduce import ReproduceConfig, load_paper_table, reproduce, truth_model
+
+CHIRP_T = np.arange(0, 0.5 + 1e-9, 0.01)
+
+
+def _chirp(t):
+    return (2.0 * np.sin(2 * np.pi * (1.0 + 4.0 * t) * t))[:, None]
+
+
+def test_the_nominal_plant_generates_what_the_shipped_model_does():
+    x0 = np.array([[0.3, 2.0, -1.0, 4.0]])
+    us = _chirp(CHIRP_T)[None]
+    shipped = MujocoGroundTruth("furuta")(x0, CHIRP_T, us)
+    plant = MujocoGroundTruth("furuta", plant=Plant.nominal("furuta"))(x0, CHIRP_T, us)
+    assert np.max(np.abs(plant - shipped)) < 1e-9
+    assert MujocoGroundTruth("furuta").name == "mujoco"
+
+
+def test_a_plant_input_delay_is_the_input_seen_late():
+    delay = 0.02  # two samples: the delayed run is the undelayed one driven by the shifted input
+    x0 = np.zeros((1, 4))
+    u = _chirp(CHIRP_T)
+    late = np.concatenate([np.full((2, 1), u[0, 0]), u[:-2]])
+    nominal = Plant.nominal("furuta")
+    delayed = Plant.nominal("furuta", effects=(Effect("input_delay", "u", delay),))
+    got = MujocoGroundTruth("furuta", plant=delayed)(x0, CHIRP_T, u[None])
+    want = MujocoGroundTruth("furuta", plant=nominal)(x0, CHIRP_T, late[None])
+    undelayed = MujocoGroundTruth("furuta", plant=nominal)(x0, CHIRP_T, u[None])
+    assert np.max(np.abs(got - want)) < 1e-9 < np.max(np.abs(got - undelayed))
+
+
+@pytest.fixture(scope="module")
+def rig_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rig")
+    plant = Plant.nominal("furuta", effects=(Effect("coulomb_friction", "alpha", 5e-4),
+                                             Effect("spring", "alpha", 8e-4)))
+    path = root / "diagnosis.json"
+    path.write_text(json.dumps({"plant": plant.to_json()}))
+    config = ReproduceConfig(quick=True, systems=("furuta",), pairs=(("dln", "traj"),),
+                             epochs={"furuta": (1, 0)}, progress=False, figures=False,
+                             plant=str(path), sensor="experiment")
+    paths = reproduce(root / "out", config, log=lambda msg: None)
+    return root, config, paths
+
+
+def test_a_calibrated_rig_run_is_measured_as_the_qube_and_scored_beside_the_experiment(rig_run):
+    root, config, paths = rig_run
+    manifest = json.loads((root / "out" / "data" / "furuta" / "manifest.json").read_text())
+    assert manifest["sensor_name"] == "experiment" and manifest["ground_truth"].startswith("mujoco plant")
+    assert manifest["plant"]["effects"][1]["name"] == "spring"
+    with open(root / "out" / "data" / "furuta" / "train.csv") as fh:
+        alpha = np.array([float(r["alpha"]) for r in csv.DictReader(fh)])
+    counts = alpha / (2 * np.pi / 2048)
+    assert np.max(np.abs(counts - np.round(counts))) < 1e-6  # encoder counts
+    paper = load_paper_table()
+    with open(paths["tables.csv"]) as fh:
+        rows = list(csv.DictReader(fh))
+    states = [r for r in rows if r["metric"] in ("alpha", "beta", "alpha_dot", "beta_dot")]
+    assert len(states) == 8 and all(
+        r["paper"] == paper[("furuta", r["test_set"], "DLN", "traj", "exp_" + r["metric"])] for r in states)
+    assert all(r["paper"] == "" for r in rows if r["metric"] == "energy")
+
+
+def test_a_rig_run_refuses_data_of_another_sensor_and_compares_physics_with_the_plant(rig_run):
+    root, config, _ = rig_run
+    import dataclasses
+
+    with pytest.raises(ValueError, match="sensor='experiment' .this run: 'exact'"):
+        reproduce(root / "out", dataclasses.replace(config, sensor="exact"), log=lambda msg: None)
+    truth = truth_model("furuta", config)
+    q = np.array([0.5, 0.2])
+    # the cable spring is in the truth's potential, so the physics columns see it
+    assert abs(float(truth.potential(q)) - float(truth_model("furuta", ReproduceConfig()).potential(q))
+               - 0.5 * 8e-4 * 0.5**2) < 1e-12
