@@ -15,7 +15,7 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import FURUTA
-from ._system import Equilibrium, LumpedForm, MujocoTerms, SystemDefinition, parameter_defaults, scalar
+from ._system import RigidBodyCondition, check_rigid_bodies, Equilibrium, LumpedForm, MujocoTerms, SystemDefinition, parameter_defaults, scalar
 
 __all__ = ["FURUTA_DEFINITION", "FurutaParameters", "Furuta", "furuta_energy", "furuta_lumped",
            "furuta_mass_matrix", "furuta_potential"]
@@ -194,22 +194,26 @@ def write_furuta_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
                        motor_gain=p["kt"] / p["Rm"], motor_bias=-p["kt"] * p["km"] / p["Rm"])
 
 
+def furuta_body_conditions(b: Mapping[str, float]) -> tuple[RigidBodyCondition, ...]:
+    """What a rigid pendulum on an arm needs of the lumped values (each > 0): G, J1b and Jc
+    themselves, the rotor's own inertia J1 − m·r² = J1 − Jc²/J1b and the pendulum's J2 − J1b."""
+    j1b = b["J1b"] if b["J1b"] != 0 else float("nan")
+    return (RigidBodyCondition("G", b["G"], ("G",)), RigidBodyCondition("J1b", b["J1b"], ("J1b",)),
+            RigidBodyCondition("Jc", b["Jc"], ("Jc",)),
+            RigidBodyCondition("J1 - m*r^2", b["J1"] - b["Jc"] ** 2 / j1b, ("J1", "Jc", "J1b")),
+            RigidBodyCondition("J2 - J1b", b["J2"] - b["J1b"] - _POINT_MASS_INERTIA, ("J2", "J1b")))
+
+
 def write_furuta_lumped_mujoco(model, b: Mapping[str, float]) -> MujocoTerms:
     """The lumped parameters (what the diagnosis fits) as bodies: with g pinned, the pendulum's
     mass m and centre-of-mass distance l from G = m·g·l and J1b = m·l², the arm r from
     Jc = m·r·l, the rotor's inertia J1 − m·r² and the pendulum's J2 − J1b. The rotor damping
     c_alpha holds the back-EMF (the data cannot split them), so the motor has no bias."""
+    check_rigid_bodies(b, furuta_body_conditions(b))
     g = _PINNED["g"]
-    com = b["J1b"] * g / b["G"] if b["G"] > 0 else float("nan")
+    com = b["J1b"] * g / b["G"]
     mass, arm = b["G"] / (g * com), b["Jc"] * g / b["G"]
-    rotor_inertia, pendulum_inertia = b["J1"] - mass * arm**2, b["J2"] - b["J1b"]
-    for name, value in (("G", b["G"]), ("J1b", b["J1b"]), ("Jc", b["Jc"]), ("J1 - m*r^2", rotor_inertia),
-                        ("J2 - J1b", pendulum_inertia - _POINT_MASS_INERTIA)):
-        if not value > 0:
-            raise ValueError(f"lumped parameters {dict(b)}: {name} = {value:.3g} must be > 0 for a MuJoCo "
-                             "body (no rigid pendulum on an arm has these values; their lumped model runs "
-                             "them: dynamics='analytic')")
-    _write_furuta_bodies(model, rotor_inertia, arm, mass, com, pendulum_inertia, g)
+    _write_furuta_bodies(model, b["J1"] - mass * arm**2, arm, mass, com, b["J2"] - b["J1b"], g)
     return MujocoTerms(stiffness=(0.0, 0.0), damping=(b["c_alpha"], b["c_beta"]), motor_gain=b["K"])
 
 
@@ -260,4 +264,5 @@ FURUTA_DEFINITION = SystemDefinition(
     energy=furuta_energy,
     write_mujoco=write_furuta_mujoco,
     write_lumped_mujoco=write_furuta_lumped_mujoco,
+    body_conditions=furuta_body_conditions,
 )

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import NMSD as NMSD_SPEC
-from ._system import Equilibrium, LumpedForm, MujocoTerms, SystemDefinition, scalar
+from ._system import RigidBodyCondition, check_rigid_bodies, Equilibrium, LumpedForm, MujocoTerms, SystemDefinition, scalar
 
 __all__ = ["NMSD_DEFINITION", "NMSDParameters", "NMSD", "nmsd_energy", "nmsd_potential"]
 
@@ -90,10 +90,14 @@ def write_nmsd_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
                        cubic_damping=(p["b2"],))
 
 
+def nmsd_body_conditions(b: Mapping[str, float]) -> tuple[RigidBodyCondition, ...]:
+    """A body needs a mass > 0."""
+    return (RigidBodyCondition("m", b["m"], ("m",)),)
+
+
 def write_nmsd_lumped_mujoco(model, b: Mapping[str, float]) -> MujocoTerms:
     """The lumped parameters are the physical ones, plus the input's gain."""
-    if not b["m"] > 0:
-        raise ValueError(f"lumped parameters {dict(b)}: m = {b['m']:.3g} must be > 0 for a MuJoCo body")
+    check_rigid_bodies(b, nmsd_body_conditions(b))
     return dataclasses.replace(write_nmsd_mujoco(model, b), motor_gain=b["gain"])
 
 
@@ -138,4 +142,5 @@ NMSD_DEFINITION = SystemDefinition(
     energy=nmsd_energy,
     write_mujoco=write_nmsd_mujoco,
     write_lumped_mujoco=write_nmsd_lumped_mujoco,
+    body_conditions=nmsd_body_conditions,
 )

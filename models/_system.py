@@ -17,7 +17,7 @@ import jax.numpy as jnp
 from .._x64 import ensure_x64
 from ..lagrangian import SystemSpec
 
-__all__ = ["Equilibrium", "LumpedForm", "SystemDefinition", "first_joint_input", "parameter_defaults"]
+__all__ = ["Equilibrium", "LumpedForm", "RigidBodyCondition", "SystemDefinition", "check_rigid_bodies", "first_joint_input", "parameter_defaults"]
 
 #: ``b(name)``: the value of a lumped parameter (a traced array inside a fit)
 Lookup = Callable[[str], Any]
@@ -85,6 +85,29 @@ class Equilibrium:
 
 
 @dataclasses.dataclass(frozen=True)
+class RigidBodyCondition:
+    """One thing bodies need of a system's lumped values: ``value`` (of ``expression``) > 0.
+    ``parameters``: the lumped parameters it involves (which one to hold when it fails)."""
+
+    expression: str
+    value: float
+    parameters: tuple[str, ...]
+
+    @property
+    def holds(self) -> bool:
+        return bool(self.value > 0)
+
+
+def check_rigid_bodies(lumped, conditions) -> None:
+    """Raise, naming the first failed condition, if ``lumped`` has no rigid bodies."""
+    for c in conditions:
+        if not c.holds:
+            raise ValueError(f"lumped parameters {dict(lumped)}: {c.expression} = {c.value:.3g} must be > 0 "
+                             "for a MuJoCo body (no rigid bodies have these values; their lumped model runs "
+                             "them: dynamics='analytic')")
+
+
+@dataclasses.dataclass(frozen=True)
 class MujocoTerms:
     """What a system's MuJoCo writer leaves to the backend, per dof: native joint stiffness and
     damping, the cubic stiffness and damping MuJoCo cannot express (the passive callback's), and
@@ -131,7 +154,8 @@ class SystemDefinition:
     parameters' bodies, inertias and gravity into an ``MjModel`` of the system's MJCF and returns
     the rest as :class:`MujocoTerms` (no MuJoCo import needed: it only sets the model's arrays).
     ``write_lumped_mujoco(model, lumped)``: the same from the lumped form's values (what the
-    diagnosis fits: :class:`furuta_gym.envs.Plant`), or ``None``.
+    diagnosis fits: :class:`furuta_gym.envs.Plant`), or ``None``. ``body_conditions(lumped)``: what
+    bodies need of those values (:class:`RigidBodyCondition`, each > 0), or ``None``.
     ``equilibria``: the rest positions whose potential shape (minimum / maximum) the physics
     fixes, each an :class:`Equilibrium`; training checks a learned potential against them.
     """
@@ -166,6 +190,7 @@ class SystemDefinition:
     scale_fit_on_forced_data: bool = False
     equilibria: tuple[Equilibrium, ...] = ()
     write_lumped_mujoco: Callable[[Any, Any], MujocoTerms] | None = None
+    body_conditions: Callable[[Any], tuple["RigidBodyCondition", ...]] | None = None
 
     @property
     def name(self) -> str:
