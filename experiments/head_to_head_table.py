@@ -1,0 +1,120 @@
+"""The head-to-head table of ``experiments/diagnose_head_to_head.py``, generated from its result
+files (never typed): rewrites the block ``<!-- generated:diagnose-head-to-head -->`` in
+docs/diagnose.md. ``--check`` only compares (exit 1 when the docs disagree with the results).
+
+    python experiments/head_to_head_table.py [--check]
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from _generated import block_main
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "results" / "head_to_head"
+DOC = ROOT / "docs" / "diagnose.md"
+NAME = "diagnose-head-to-head"
+ORDER = ("nominal", "gym_brt", "quanser_robots", "armandpl", "fitted", "diagnosed", "sysid_rigid", "sysid")
+COMMAND = "python experiments/diagnose_head_to_head.py && python experiments/head_to_head_table.py"
+SYSID_UNITS = {"rotor_inertia": "kg m²", "pendulum_com": "m", "pendulum_com_lateral": "m",
+               "pendulum_armature": "kg m²", "arm_length": "m", "alpha_damping": "N m s/rad",
+               "beta_damping": "N m s/rad", "alpha_frictionloss": "N m", "beta_frictionloss": "N m",
+               "alpha_stiffness": "N m/rad", "alpha_springref": "rad", "motor_gain": "N m/V", "input_delay": "s"}
+
+
+def load(folder: Path = RESULTS) -> tuple[dict, list[dict]]:
+    summary = json.loads((folder / "summary.json").read_text())
+    return summary, [json.loads((folder / f"{n}.json").read_text()) for n in ORDER if (folder / f"{n}.json").is_file()]
+
+
+def _runs(runs: list[int]) -> str:
+    return f"runs {runs[0]}–{runs[-1]}" if runs else "nothing (published values)"
+
+
+def _mrad(v: float, bold: bool = False) -> str:
+    return f"**{1e3 * v:.2f}**" if bold else f"{1e3 * v:.2f}"
+
+
+def score_table(docs: list[dict]) -> str:
+    nominal = next(d for d in docs if d["name"] == "nominal")["position_rmse"]
+    best = min(d["position_rmse"] for d in docs)
+    rows = ["| model | fitted on | α (mrad) | β (mrad) | both angles (mrad) | vs nominal | α̇, β̇ (rad/s) | fit wall time (s) |",
+            "|---|---|---|---|---|---|---|---|"]
+    for d in docs:
+        r = d["rmse"]
+        wall = "–" if d["wall_seconds"] is None else f"{d['wall_seconds']:.0f}"
+        diverged = f" ({d['n_diverged']} windows diverged)" if d["n_diverged"] else ""
+        rows.append(f"| {d['label']}{diverged} | {_runs(d['fit_runs'])} | {_mrad(r['alpha'])} | {_mrad(r['beta'])} "
+                    f"| {_mrad(d['position_rmse'], d['position_rmse'] == best)} | {nominal / d['position_rmse']:.2f}× "
+                    f"| {r['alpha_dot']:.3f}, {r['beta_dot']:.3f} | {wall} |")
+    return "\n".join(rows)
+
+
+def sysid_table(doc: dict) -> str:
+    rows = ["| MJCF term (mujoco.sysid) | fitted | ± 95 % (sysid's iid interval) |", "|---|---|---|"]
+    for name, value in doc["parameters"].items():
+        half = doc["half_widths_95"][name]
+        rows.append(f"| {name} ({SYSID_UNITS[name]}) | {value:.3g} | {half:.2g} |")
+    return "\n".join(rows)
+
+
+def _frame(f: dict) -> str:
+    rotor = "θ = α" if f["rotor"] > 0 else "θ = −α"
+    pend = ("β" if f["pendulum"] > 0 else "−β") + (" + π" if f["offset"] else "")
+    if pend.startswith("−β + π"):
+        pend = "π − β"
+    return f"{rotor}, α_theirs = {pend}, V = {'u' if f['voltage'] > 0 else '−u'}"
+
+
+def baseline_table(docs: list[dict]) -> str:
+    keys = ("Mr", "Lr", "Mp", "Lp", "Rm", "km", "Dr", "Dp")
+    rows = ["| simulator | source | " + " | ".join(keys) + " | their frame from ours |", "|---" * (len(keys) + 3) + "|"]
+    for d in docs:
+        if "frame" in d:
+            p = d["parameters"]
+            rows.append(f"| {d['label']} | {d['source']} | " + " | ".join(f"{p[k]:g}" for k in keys)
+                        + f" | {_frame(d['frame'])} |")
+    return "\n".join(rows)
+
+
+def findings(docs: list[dict]) -> str:
+    by = {d["name"]: d for d in docs}
+    parts = []
+    if "diagnosed" in by:
+        eff = ", ".join(f"{e['name']}:{e['joint']} ({e['coefficient']:.2g})" for e in by["diagnosed"]["effects"])
+        parts.append(f"The diagnosis of runs {by['diagnosed']['fit_runs'][0]}–{by['diagnosed']['fit_runs'][-1]} "
+                     f"found {eff or 'nothing'}.")
+    for name in ("sysid", "sysid_rigid"):
+        if name in by:
+            f = by[name]["fit"]
+            parts.append(f"{by[name]['label']}: {f['windows']} windows, {len(f['objective']) - 1} Gauss-Newton "
+                         f"iterations (cap {f['iterations_cap']}), RMS angle residual on its fit windows "
+                         f"{1e3 * f['rms_angle_residual']:.2f} mrad.")
+    return " ".join(parts)
+
+
+def block() -> str:
+    summary, docs = load()
+    ranked = sorted(docs, key=lambda d: d["position_rmse"])
+    first, second = ranked[0], ranked[1]
+    windows = docs[0]["n_windows"]
+    lines = [f"Fitted on runs {summary['fit_runs'][0]}–{summary['fit_runs'][-1]}, scored on runs "
+             f"{summary['test_runs'][0]}–{summary['test_runs'][-1]} (never fitted): {windows} back-to-back "
+             f"{summary['window_seconds']} s open-loop windows from the measured state, the logged input held; RMSE "
+             "over every predicted sample (**bold**: lowest).", "", score_table(docs), "",
+             f"Lowest error on the unseen runs: **{first['label']}** ({_mrad(first['position_rmse'])} mrad), then "
+             f"{second['label']} ({_mrad(second['position_rmse'])} mrad). {findings(docs)}"]
+    lines += ["", "The public simulators as implemented here (`experiments/qube_baselines.py`; SI units):", "",
+              baseline_table(docs)]
+    if any(d["name"] == "sysid" for d in docs):
+        lines += ["", sysid_table(next(d for d in docs if d["name"] == "sysid"))]
+    lines += ["", f"Made by `{COMMAND}` ({summary['date']}, {summary['machine']}, {summary['cpu']}); results in "
+              "[results/head_to_head/](../results/head_to_head/)."]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(block_main(__file__, DOC, NAME, block))
