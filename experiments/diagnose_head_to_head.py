@@ -182,6 +182,31 @@ def sysid_row(name: str, fit, test, every: int, max_iters: int) -> dict:
                    window_every=every)
 
 
+#: terms of the sysid fit beyond the declared model's, each set to zero in turn at the fitted
+#: values (no refit): which of them carries the prediction on the unseen runs
+SYSID_EXTRA_TERMS = ("alpha_stiffness", "alpha_frictionloss", "beta_frictionloss", "pendulum_com_lateral",
+                     "input_delay")
+
+
+def sysid_without_terms(values: dict, test) -> dict:
+    """Position RMSE on the test runs of the sysid fit with each extra term zeroed ("none": the
+    fit as written to its result file, rebuilt from its SI values)."""
+    x0, _, xs = prediction_windows(test, WINDOW)
+    _, u_ext, _ = hsysid.windows_for_sysid(test, WINDOW)
+    out = {"none": score(hsysid.predictor(hsysid.from_physical(values))(x0, u_ext, test[0].dt), xs)["position_rmse"]}
+    for term in SYSID_EXTRA_TERMS:
+        params = hsysid.from_physical({**values, term: 0.0})
+        out[term] = score(hsysid.predictor(params)(x0, u_ext, test[0].dt), xs)["position_rmse"]
+    return out
+
+
+def add_sysid_ablation(path: Path, test) -> None:
+    """Write the leave-one-term-out scores into a sysid row's result file."""
+    doc = json.loads(path.read_text())
+    doc["position_rmse_without"] = sysid_without_terms(doc["parameters"], test)
+    path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+
+
 def machine() -> str:
     return f"{platform.node()} {platform.processor() or platform.machine()}"
 
@@ -192,6 +217,8 @@ def main() -> None:
     ap.add_argument("--rows", default=",".join(ROWS), help=f"comma list of rows to run, of {list(ROWS)}")
     ap.add_argument("--sysid-every", type=int, default=1, help="sysid fits every k-th window of the fit runs")
     ap.add_argument("--sysid-iterations", type=int, default=30)
+    ap.add_argument("--sysid-ablation-only", action="store_true",
+                    help="only rescore the committed sysid fit with each extra term zeroed")
     args = ap.parse_args()
     rows = args.rows.split(",")
     if unknown := [r for r in rows if r not in ROWS]:
@@ -199,6 +226,8 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     fit, test = load_runs(FIT_RUNS), load_runs(TEST_RUNS)
+    if args.sysid_ablation_only:
+        return add_sysid_ablation(out / "sysid.json", test)
     docs = [d for d in fixed_rows(test) if d["name"] in rows]
     for name in SYSID_ROWS:
         if name in rows:
@@ -214,6 +243,8 @@ def main() -> None:
                "substeps": SUBSTEPS, "oe_windows": OE_WINDOWS, "velocity": "zero_phase", "rows": list(ROWS),
                "cpu": "one core (taskset -c 1), XLA single-threaded", **stamp}
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    if "sysid" in rows:
+        add_sysid_ablation(out / "sysid.json", test)
 
 
 if __name__ == "__main__":

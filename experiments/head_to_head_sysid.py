@@ -97,6 +97,14 @@ def parameter_dict(names=tuple(PARAMETERS)):
     return params
 
 
+def from_physical(values: dict):
+    """The ParameterDict of SI ``values`` (a fit's :func:`physical`)."""
+    params = parameter_dict(tuple(values))
+    for name, value in values.items():
+        params[name].value[:] = value / PARAMETERS[name][0]
+    return params
+
+
 def physical(params) -> dict:
     """The fitted values in SI units."""
     return {name: float(params[name].value[0]) * PARAMETERS[name][0] for name in params.keys()}
