@@ -54,7 +54,8 @@ import jax.numpy as jnp  # noqa: E402
 import head_to_head_sysid as hsysid  # noqa: E402
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
 from furuta_gym.diagnose._fit import InputDynamics  # noqa: E402
-from furuta_gym.effects import WithEffects  # noqa: E402
+from furuta_gym.effects import Effect, WithEffects  # noqa: E402
+from furuta_gym.envs import Plant  # noqa: E402
 from furuta_gym.lagrangian import forward_dynamics_with_dry_friction  # noqa: E402
 from furuta_gym.measured import prediction_windows, prepare_log  # noqa: E402
 from furuta_gym.models import Furuta, LumpedSystem  # noqa: E402
@@ -207,6 +208,28 @@ def add_sysid_ablation(path: Path, test) -> None:
     path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
 
 
+def add_inconsistent_effects(path: Path, test) -> None:
+    """Score the diagnosed plant with the effects its diagnosis reported ``inconsistent`` added at
+    their tested coefficients (no refit): what the evidence rule left out, as a prediction."""
+    doc = json.loads(path.read_text())
+    extra = [Effect(e["name"], e["joint"], e["coefficient"]) for e in doc["diagnosis"]["effects"]
+             if e["status"] == "inconsistent" and e["coefficient"] is not None]
+    plant = Plant.from_json(doc["diagnosis"]["plant"])
+    plant = dataclasses.replace(plant, effects=(*plant.effects, *extra))
+    doc["with_inconsistent"] = {"added": [f"{e.name}:{e.joint}" for e in extra],
+                                "position_rmse": score_plant(plant, test)["position_rmse"]}
+    path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+
+
+def rescore(out: Path, test) -> None:
+    """The what-ifs on committed fits: sysid without each extra term, the diagnosis with its
+    inconsistent effects."""
+    if (out / "sysid.json").is_file():
+        add_sysid_ablation(out / "sysid.json", test)
+    if (out / "diagnosed.json").is_file():
+        add_inconsistent_effects(out / "diagnosed.json", test)
+
+
 def machine() -> str:
     return f"{platform.node()} {platform.processor() or platform.machine()}"
 
@@ -217,8 +240,9 @@ def main() -> None:
     ap.add_argument("--rows", default=",".join(ROWS), help=f"comma list of rows to run, of {list(ROWS)}")
     ap.add_argument("--sysid-every", type=int, default=1, help="sysid fits every k-th window of the fit runs")
     ap.add_argument("--sysid-iterations", type=int, default=30)
-    ap.add_argument("--sysid-ablation-only", action="store_true",
-                    help="only rescore the committed sysid fit with each extra term zeroed")
+    ap.add_argument("--rescore-only", action="store_true",
+                    help="only the what-ifs on the committed fits (sysid without each extra term, the diagnosis "
+                         "with its inconsistent effects)")
     args = ap.parse_args()
     rows = args.rows.split(",")
     if unknown := [r for r in rows if r not in ROWS]:
@@ -226,8 +250,8 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     fit, test = load_runs(FIT_RUNS), load_runs(TEST_RUNS)
-    if args.sysid_ablation_only:
-        return add_sysid_ablation(out / "sysid.json", test)
+    if args.rescore_only:
+        return rescore(out, test)
     docs = [d for d in fixed_rows(test) if d["name"] in rows]
     for name in SYSID_ROWS:
         if name in rows:
@@ -243,8 +267,7 @@ def main() -> None:
                "substeps": SUBSTEPS, "oe_windows": OE_WINDOWS, "velocity": "zero_phase", "rows": list(ROWS),
                "cpu": "one core (taskset -c 1), XLA single-threaded", **stamp}
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    if "sysid" in rows:
-        add_sysid_ablation(out / "sysid.json", test)
+    rescore(out, test)
 
 
 if __name__ == "__main__":

@@ -95,6 +95,11 @@ def findings(docs: list[dict]) -> str:
             parts.append(f"{by[name]['label']}: {f['windows']} windows, {len(obj) - 1} Gauss-Newton iterations "
                          f"(cap {f['iterations_cap']}; within 0.1 % of its final objective after {settled}), RMS "
                          f"angle residual on its fit windows {1e3 * f['rms_angle_residual']:.2f} mrad.")
+    extra = by.get("diagnosed", {}).get("with_inconsistent")
+    if extra and extra["added"]:
+        parts.append(f"The diagnosed plant with the effects its diagnosis reported `inconsistent` added at their "
+                     f"tested coefficients ({', '.join(extra['added'])}; no refit): "
+                     f"{_mrad(extra['position_rmse'])} mrad on the unseen runs.")
     return " ".join(parts)
 
 
