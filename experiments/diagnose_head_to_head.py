@@ -12,7 +12,8 @@ score covers both. Rows:
   values, sources and the mapping onto our convention): gym_brt, quanser_robots / SimuRLacra, and
   Armandpl/furuta's own rig.
 * **mujoco.sysid**: the shipped MJCF's native terms fitted by ``mujoco.sysid.optimize`` on every
-  back-to-back 0.1 s window of the fit runs (``head_to_head_sysid.py``).
+  back-to-back 0.1 s window of the fit runs (``head_to_head_sysid.py``); and the same with only
+  the terms the declared model has (inertias, damping, motor gain), beside "fitted".
 * **furuta-gym fitted**: ``diagnose`` with no candidate effects (the declared model's lumped
   parameters, equation error refined by output error).
 * **furuta-gym diagnosed**: ``diagnose`` with the library, its found effects and input delay —
@@ -26,6 +27,10 @@ predictions (``forward_dynamics_with_dry_friction``); the sysid row is rolled ou
 (its identified MJCF, constraint solver on, one RK4 step per period). Errors: RMSE of α and β (rad)
 and of their velocities (rad/s) over every predicted sample, and the position RMSE of both angles
 together (the diagnosis' ``trajectory_rmse``). Wall times are each fit's own, on one core.
+
+Two what-ifs on the fits, no refit (``--rescore-only`` recomputes them from the committed
+files): the sysid fit with each term beyond the declared model's set to zero, and the diagnosed
+plant with the effects its diagnosis reported ``inconsistent`` added at their tested coefficients.
 
 Writes ``results/head_to_head/<row>.json`` and ``summary.json`` (machine, date, settings);
 ``experiments/head_to_head_table.py`` puts the table into docs/diagnose.md.

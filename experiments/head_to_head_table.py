@@ -80,13 +80,27 @@ def baseline_table(docs: list[dict]) -> str:
     return "\n".join(rows)
 
 
+COMMITTED_DIAGNOSIS = ROOT / "results" / "diagnose_real" / "growing_runs01-10.json"
+
+
+def reproduces_committed(diagnosis: dict) -> str:
+    """Whether the diagnosed row's fit is the committed diagnosis of the same runs and settings."""
+    if not COMMITTED_DIAGNOSIS.is_file():
+        return ""
+    old = json.loads(COMMITTED_DIAGNOSIS.read_text())
+    same = (old["settings"] == diagnosis["settings"] and old["plant"]["effects"] == diagnosis["plant"]["effects"]
+            and all(abs(old["plant"]["lumped"][k] - v) <= 1e-9 * abs(v) for k, v in diagnosis["plant"]["lumped"].items()))
+    verdict = "the same plant as" if same else "a different plant from"
+    return f" It is {verdict} the committed `results/diagnose_real/growing_runs01-10.json`."
+
+
 def findings(docs: list[dict]) -> str:
     by = {d["name"]: d for d in docs}
     parts = []
     if "diagnosed" in by:
         eff = ", ".join(f"{e['name']}:{e['joint']} ({e['coefficient']:.2g})" for e in by["diagnosed"]["effects"])
         parts.append(f"The diagnosis of runs {by['diagnosed']['fit_runs'][0]}–{by['diagnosed']['fit_runs'][-1]} "
-                     f"found {eff or 'nothing'}.")
+                     f"found {eff or 'nothing'}.{reproduces_committed(by['diagnosed']['diagnosis'])}")
     for name in ("sysid", "sysid_rigid"):
         if name in by:
             f = by[name]["fit"]
@@ -151,7 +165,9 @@ def block() -> str:
         sysid_doc = next(d for d in docs if d["name"] == "sysid")
         diagnosis = next((d["diagnosis"] for d in docs if d["name"] == "diagnosed"), None)
         lines += ["", ablation_table(sysid_doc, diagnosis), "", sysid_table(sysid_doc)]
-    lines += ["", f"Made by `{COMMAND}` ({summary['date']}, {summary['machine']}, {summary['cpu']}); results in "
+    dates = sorted({d["date"] for d in docs})
+    when = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
+    lines += ["", f"Made by `{COMMAND}` ({when}, {summary['machine']}, {summary['cpu']}); results in "
               "[results/head_to_head/](../results/head_to_head/)."]
     return "\n".join(lines)
 

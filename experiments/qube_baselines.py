@@ -115,7 +115,8 @@ BASELINES = {
         {**QUBE, "Dr": 2.7e-4, "Dp": 5e-5}, Frame(rotor=-1.0, pendulum=-1.0, offset=math.pi), brt_accelerations),
     "quanser_robots": Baseline(
         "quanser_robots", "quanser_robots QQube / SimuRLacra QQubeSim (TU Darmstadt)",
-        "quanser_robots/qube/base.py (QubeDynamics); famura/SimuRLacra Pyrado/pyrado/environments/pysim/quanser_qube.py",
+        "TU Darmstadt quanser_robots/qube/base.py (QubeDynamics; read in its copy al91liwo/pytorch-rl-lab); "
+        "famura/SimuRLacra Pyrado/pyrado/environments/pysim/quanser_qube.py",
         {**QUBE, "Dr": 5e-6, "Dp": 1e-6}, Frame(), qq_accelerations),
     "armandpl": Baseline(
         "armandpl", "Armandpl/furuta (the author's own rig)",
