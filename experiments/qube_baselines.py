@@ -29,6 +29,10 @@ frames, signs and parameter values:
   not a QUBE: Rm 6.7, km 0.067, Mr 0.057, Lr 0.083, Mp 0.027, Lp 0.092, Dr 5e-6, Dp 1e-6. That rig
   is the row here (the QUBE values would repeat quanser_robots). Its later pinocchio/URDF model
   of a geared 24 V rig is not a QUBE model either and is left out.
+
+Only their physics is compared: each is integrated by the benchmark's common RK4 (4 substeps per
+2 ms period, input held), not by its own scheme (gym_brt: ``odeint`` or semi-implicit Euler;
+Armandpl: semi-implicit Euler; SimuRLacra: an RK4 whose stages all evaluate the start state).
 """
 
 from __future__ import annotations
