@@ -1,0 +1,279 @@
+"""Head to head on the real QUBE-Servo runs: which model of the rig predicts runs it never saw?
+
+One split for every method: **fit on runs 1–10, score on runs 11–15** of the 15 shipped
+closed-loop runs (``furuta_gym.datasets.load_qube_closed_loop``, 500 Hz, upright balancing).
+Ten runs, because the rotor's cable spring shows only where the rotor wanders far from its
+neutral (runs 1, 9 and 10 among the first ten; docs/diagnose.md, per-run table) and five runs hold
+too few such stretches; runs 11–15 hold one wandering run (14) and four that stay near zero, so the
+score covers both. Rows:
+
+* **nominal**: ``furuta_gym.models.Furuta``, the datasheet parameters.
+* **public simulators** with their published parameters (``qube_baselines.py``: equations,
+  values, sources and the mapping onto our convention): gym_brt, quanser_robots / SimuRLacra, and
+  Armandpl/furuta's own rig.
+* **mujoco.sysid**: the shipped MJCF's native terms fitted by ``mujoco.sysid.optimize`` on every
+  back-to-back 0.1 s window of the fit runs (``head_to_head_sysid.py``); and the same with only
+  the terms the declared model has (inertias, damping, motor gain), beside "fitted".
+* **furuta-gym fitted**: ``diagnose`` with no candidate effects (the declared model's lumped
+  parameters, equation error refined by output error).
+* **furuta-gym diagnosed**: ``diagnose`` with the library, its found effects and input delay —
+  the README's recipe (0.5 s start dropped, 0.1 s windows, 64 output-error windows).
+
+Scored identically: back-to-back 0.1 s open-loop windows of runs 11–15 (0.5 s start dropped,
+zero-phase velocities estimated on the whole log), each started from the measured state with the
+logged input held over each 2 ms period (delayed by a row's fitted input delay, from the log's own
+earlier samples), RK4 with 4 substeps; dry friction holds a joint at rest as in the diagnosis'
+predictions (``forward_dynamics_with_dry_friction``); the sysid row is rolled out by MuJoCo itself
+(its identified MJCF, constraint solver on, one RK4 step per period). Errors: RMSE of α and β (rad)
+and of their velocities (rad/s) over every predicted sample, and the position RMSE of both angles
+together (the diagnosis' ``trajectory_rmse``). Wall times are each fit's own, on one core.
+
+Two what-ifs on the fits, no refit (``--rescore-only`` recomputes them from the committed
+files): the sysid fit with each term beyond the declared model's set to zero, and the diagnosed
+plant with the effects its diagnosis reported ``inconsistent`` added at their tested coefficients.
+
+Writes ``results/head_to_head/<row>.json`` and ``summary.json`` (machine, date, settings);
+``experiments/head_to_head_table.py`` puts the table into docs/diagnose.md.
+
+    python experiments/diagnose_head_to_head.py [--out results/head_to_head] [--rows a,b]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+import furuta_gym
+
+furuta_gym.enable_x64()
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+
+import head_to_head_sysid as hsysid  # noqa: E402
+from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
+from furuta_gym.diagnose._fit import InputDynamics  # noqa: E402
+from furuta_gym.effects import Effect, WithEffects  # noqa: E402
+from furuta_gym.envs import Plant  # noqa: E402
+from furuta_gym.lagrangian import forward_dynamics_with_dry_friction  # noqa: E402
+from furuta_gym.measured import prediction_windows, prepare_log  # noqa: E402
+from furuta_gym.models import Furuta, LumpedSystem  # noqa: E402
+from furuta_gym.simulate import rollout_zoh  # noqa: E402
+from qube_baselines import BASELINES  # noqa: E402
+
+FIT_RUNS, TEST_RUNS = list(range(1, 11)), list(range(11, 16))
+SKIP, WINDOW, SUBSTEPS, OE_WINDOWS = 0.5, 0.1, 4, 64
+STATES = ("alpha", "beta", "alpha_dot", "beta_dot")
+#: mujoco.sysid rows: every MJCF term of head_to_head_sysid.PARAMETERS, and only the terms the
+#: declared model has (inertias, damping, motor gain), beside "fitted"
+SYSID_ROWS = {"sysid": ("mujoco.sysid (MJCF terms)", tuple(hsysid.PARAMETERS)),
+              "sysid_rigid": ("mujoco.sysid (rigid body, damping, gain only)",
+                              ("rotor_inertia", "pendulum_com", "pendulum_armature", "arm_length", "alpha_damping",
+                               "beta_damping", "motor_gain"))}
+ROWS = ("nominal", *BASELINES, *SYSID_ROWS, "fitted", "diagnosed")
+
+
+def load_runs(runs: list[int]):
+    """Whole runs, velocities estimated on the whole log, start dropped (as scored)."""
+    return [prepare_log(tr, tr.name, skip=SKIP, split=None, min_seconds=WINDOW)[0]
+            for tr in load_qube_closed_loop(runs, skip_seconds=0.0)]
+
+
+def with_input(trajs, inputs: InputDynamics):
+    """The runs with the input the plant sees (a delay or lag, from each log's own samples)."""
+    if inputs.kind == "none":
+        return trajs
+    return [dataclasses.replace(tr, u=inputs.apply(np.asarray(tr.u, float), tr.dt)) for tr in trajs]
+
+
+def predict_field(field, x0, us, dt: float) -> np.ndarray:
+    """Open-loop states (W, L + 1, 4) of ``field(x, u) -> ẋ`` in our frame, input held."""
+    run = jax.jit(jax.vmap(lambda x, u: rollout_zoh(None, x, u, dt, SUBSTEPS, field)))
+    return np.asarray(run(jnp.asarray(x0), jnp.asarray(us)))
+
+
+def lagrangian_field(base, effects=(), dt: float = 0.002):
+    """ẋ of ``base`` with memoryless ``effects``; dry friction holds a joint at rest."""
+    dry = [e for e in effects if e.kind.is_dry_friction]
+    rest = [e for e in effects if not e.kind.is_dry_friction and not e.kind.on_input]
+    model = WithEffects(base, rest) if rest else base
+    n, h = base.spec.n_dof, dt / SUBSTEPS
+
+    def field(x, u):
+        q, qd = x[:n], x[n:]
+        limit = jnp.zeros(n)
+        for e in dry:
+            j = e.joint_index(base.spec)
+            limit = limit.at[j].add(jnp.maximum(e.dry_friction_limit()(qd[j]), 0.0))
+        return jnp.concatenate([qd, forward_dynamics_with_dry_friction(model, limit, q, qd, u, h)])
+    return field
+
+
+def score(pred: np.ndarray, xs: np.ndarray) -> dict:
+    """RMSE per state over all predicted samples (the start sample, measured, left out), and of
+    both angles together; windows whose prediction blew up are counted and left out."""
+    k = pred.shape[-1]
+    bad = ~np.all(np.isfinite(pred) & (np.abs(pred) < 1e6), axis=(1, 2))
+    err = (pred - xs[..., :k])[~bad][:, 1:].reshape(-1, k)
+    rmse = {s: float(np.sqrt(np.mean(err[:, i] ** 2))) for i, s in enumerate(STATES[:k])}
+    return {"rmse": rmse, "position_rmse": float(np.sqrt(np.mean(err[:, :2] ** 2))),
+            "n_windows": int(len(pred)), "n_diverged": int(bad.sum())}
+
+
+def score_field(field, trajs, inputs: InputDynamics = InputDynamics()) -> dict:
+    x0, us, xs = prediction_windows(with_input(trajs, inputs), WINDOW)
+    return score(predict_field(field, x0, us, trajs[0].dt), xs)
+
+
+def row_doc(name: str, label: str, result: dict, wall: float | None, **extra) -> dict:
+    return {"name": name, "label": label, "fit_runs": FIT_RUNS if wall is not None else [], "test_runs": TEST_RUNS,
+            "wall_seconds": None if wall is None else round(wall, 1), **result, **extra}
+
+
+def fixed_rows(test) -> list[dict]:
+    """The nominal model and the public simulators: nothing fitted."""
+    rows = [row_doc("nominal", "nominal (datasheet)", score_field(lagrangian_field(Furuta()), test), None)]
+    for b in BASELINES.values():
+        rows.append(row_doc(b.name, b.label, score_field(b.vector_field, test), None, source=b.source,
+                            parameters=b.params, frame=dataclasses.asdict(b.frame)))
+    return rows
+
+
+def input_dynamics(effects) -> InputDynamics:
+    """A found input delay or lag as the input transformation the diagnosis scores with."""
+    kinds = {"input_delay": "delay", "actuator_lag": "lag"}
+    found = [InputDynamics(kinds[e.name], e.coefficient) for e in effects if e.kind.on_input and e.name in kinds]
+    return found[0] if found else InputDynamics()
+
+
+def score_plant(plant, test) -> dict:
+    """A diagnosed plant (lumped values, effects) on the test runs."""
+    base = LumpedSystem.of("furuta", plant.lumped)
+    joint_effects = [e for e in plant.effects if not e.kind.on_input]
+    return score_field(lagrangian_field(base, joint_effects), test, input_dynamics(plant.effects))
+
+
+def diagnose_row(name: str, candidates, test) -> dict:
+    """``diagnose`` on the fit runs (the README's recipe), timed, and its plant scored."""
+    from furuta_gym.diagnose import diagnose
+
+    t0 = time.perf_counter()
+    res = diagnose(load_qube_closed_loop(FIT_RUNS, skip_seconds=SKIP), "furuta", candidates=candidates,
+                   window=WINDOW, oe_max_windows=OE_WINDOWS)
+    wall = time.perf_counter() - t0
+    plant = res.plant()
+    label = "furuta-gym fitted (no effects)" if name == "fitted" else "furuta-gym diagnosed"
+    found = [f"{e.name}:{e.joint}" for e in plant.effects]
+    return row_doc(name, label, score_plant(plant, test), wall, found=found,
+                   parameters=dict(plant.lumped), effects=[{"name": e.name, "joint": e.joint, "coefficient": e.coefficient}
+                                                           for e in plant.effects],
+                   diagnosis=res.to_json())
+
+
+def sysid_row(name: str, fit, test, every: int, max_iters: int) -> dict:
+    label, names = SYSID_ROWS[name]
+    t0 = time.perf_counter()
+    fitted, values, half, record = hsysid.fit(fit, WINDOW, every=every, max_iters=max_iters, names=names)
+    wall = time.perf_counter() - t0
+    x0, _, xs = prediction_windows(test, WINDOW)
+    _, u_ext, _ = hsysid.windows_for_sysid(test, WINDOW)
+    pred = hsysid.predictor(fitted)(x0, u_ext, test[0].dt)
+    return row_doc(name, label, score(pred, xs), wall, parameters=values, half_widths_95=half, fit=record,
+                   window_every=every)
+
+
+#: terms of the sysid fit beyond the declared model's, each set to zero in turn at the fitted
+#: values (no refit): which of them carries the prediction on the unseen runs
+SYSID_EXTRA_TERMS = ("alpha_stiffness", "alpha_frictionloss", "beta_frictionloss", "pendulum_com_lateral",
+                     "input_delay")
+
+
+def sysid_without_terms(values: dict, test) -> dict:
+    """Position RMSE on the test runs of the sysid fit with each extra term zeroed ("none": the
+    fit as written to its result file, rebuilt from its SI values)."""
+    x0, _, xs = prediction_windows(test, WINDOW)
+    _, u_ext, _ = hsysid.windows_for_sysid(test, WINDOW)
+    out = {"none": score(hsysid.predictor(hsysid.from_physical(values))(x0, u_ext, test[0].dt), xs)["position_rmse"]}
+    for term in SYSID_EXTRA_TERMS:
+        params = hsysid.from_physical({**values, term: 0.0})
+        out[term] = score(hsysid.predictor(params)(x0, u_ext, test[0].dt), xs)["position_rmse"]
+    return out
+
+
+def add_sysid_ablation(path: Path, test) -> None:
+    """Write the leave-one-term-out scores into a sysid row's result file."""
+    doc = json.loads(path.read_text())
+    doc["position_rmse_without"] = sysid_without_terms(doc["parameters"], test)
+    path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+
+
+def add_inconsistent_effects(path: Path, test) -> None:
+    """Score the diagnosed plant with the effects its diagnosis reported ``inconsistent`` added at
+    their tested coefficients (no refit): what the evidence rule left out, as a prediction."""
+    doc = json.loads(path.read_text())
+    extra = [Effect(e["name"], e["joint"], e["coefficient"]) for e in doc["diagnosis"]["effects"]
+             if e["status"] == "inconsistent" and e["coefficient"] is not None]
+    plant = Plant.from_json(doc["diagnosis"]["plant"])
+    plant = dataclasses.replace(plant, effects=(*plant.effects, *extra))
+    doc["with_inconsistent"] = {"added": [f"{e.name}:{e.joint}" for e in extra],
+                                "position_rmse": score_plant(plant, test)["position_rmse"]}
+    path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+
+
+def rescore(out: Path, test) -> None:
+    """The what-ifs on committed fits: sysid without each extra term, the diagnosis with its
+    inconsistent effects."""
+    if (out / "sysid.json").is_file():
+        add_sysid_ablation(out / "sysid.json", test)
+    if (out / "diagnosed.json").is_file():
+        add_inconsistent_effects(out / "diagnosed.json", test)
+
+
+def machine() -> str:
+    return f"{platform.node()} {platform.processor() or platform.machine()}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="results/head_to_head")
+    ap.add_argument("--rows", default=",".join(ROWS), help=f"comma list of rows to run, of {list(ROWS)}")
+    ap.add_argument("--sysid-every", type=int, default=1, help="sysid fits every k-th window of the fit runs")
+    ap.add_argument("--sysid-iterations", type=int, default=30)
+    ap.add_argument("--rescore-only", action="store_true",
+                    help="only the what-ifs on the committed fits (sysid without each extra term, the diagnosis "
+                         "with its inconsistent effects)")
+    args = ap.parse_args()
+    rows = args.rows.split(",")
+    if unknown := [r for r in rows if r not in ROWS]:
+        ap.error(f"--rows: unknown {unknown}; expected some of {list(ROWS)}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    fit, test = load_runs(FIT_RUNS), load_runs(TEST_RUNS)
+    if args.rescore_only:
+        return rescore(out, test)
+    docs = [d for d in fixed_rows(test) if d["name"] in rows]
+    for name in SYSID_ROWS:
+        if name in rows:
+            docs.append(sysid_row(name, fit, test, args.sysid_every, args.sysid_iterations))
+    for name, candidates in (("fitted", []), ("diagnosed", None)):
+        if name in rows:
+            docs.append(diagnose_row(name, candidates, test))
+    stamp = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    for d in docs:
+        (out / f"{d['name']}.json").write_text(json.dumps({**d, **stamp}, indent=1, default=float) + "\n")
+        print(f"{d['label']:55s} position RMSE {d['position_rmse']:.5f} rad  wall {d['wall_seconds']} s", flush=True)
+    summary = {"fit_runs": FIT_RUNS, "test_runs": TEST_RUNS, "skip_seconds": SKIP, "window_seconds": WINDOW,
+               "substeps": SUBSTEPS, "oe_windows": OE_WINDOWS, "velocity": "zero_phase", "rows": list(ROWS),
+               "cpu": "one core (taskset -c 1), XLA single-threaded", **stamp}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    rescore(out, test)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,176 @@
+"""The head-to-head table of ``experiments/diagnose_head_to_head.py``, generated from its result
+files (never typed): rewrites the block ``<!-- generated:diagnose-head-to-head -->`` in
+docs/diagnose.md. ``--check`` only compares (exit 1 when the docs disagree with the results).
+
+    python experiments/head_to_head_table.py [--check]
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from _generated import block_main
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "results" / "head_to_head"
+DOC = ROOT / "docs" / "diagnose.md"
+NAME = "diagnose-head-to-head"
+ORDER = ("nominal", "gym_brt", "quanser_robots", "armandpl", "fitted", "diagnosed", "sysid_rigid", "sysid")
+COMMAND = "python experiments/diagnose_head_to_head.py && python experiments/head_to_head_table.py"
+SYSID_UNITS = {"rotor_inertia": "kg m²", "pendulum_com": "m", "pendulum_com_lateral": "m",
+               "pendulum_armature": "kg m²", "arm_length": "m", "alpha_damping": "N m s/rad",
+               "beta_damping": "N m s/rad", "alpha_frictionloss": "N m", "beta_frictionloss": "N m",
+               "alpha_stiffness": "N m/rad", "alpha_springref": "rad", "motor_gain": "N m/V", "input_delay": "s"}
+
+
+def load(folder: Path = RESULTS) -> tuple[dict, list[dict]]:
+    summary = json.loads((folder / "summary.json").read_text())
+    return summary, [json.loads((folder / f"{n}.json").read_text()) for n in ORDER if (folder / f"{n}.json").is_file()]
+
+
+def _runs(runs: list[int]) -> str:
+    return f"runs {runs[0]}–{runs[-1]}" if runs else "nothing (published values)"
+
+
+def _mrad(v: float, bold: bool = False) -> str:
+    return f"**{1e3 * v:.2f}**" if bold else f"{1e3 * v:.2f}"
+
+
+def score_table(docs: list[dict]) -> str:
+    nominal = next(d for d in docs if d["name"] == "nominal")["position_rmse"]
+    best = min(d["position_rmse"] for d in docs)
+    rows = ["| model | fitted on | α (mrad) | β (mrad) | both angles (mrad) | vs nominal | α̇, β̇ (rad/s) | fit wall time (s) |",
+            "|---|---|---|---|---|---|---|---|"]
+    for d in docs:
+        r = d["rmse"]
+        wall = "–" if d["wall_seconds"] is None else f"{d['wall_seconds']:.0f}"
+        diverged = f" ({d['n_diverged']} windows diverged)" if d["n_diverged"] else ""
+        rows.append(f"| {d['label']}{diverged} | {_runs(d['fit_runs'])} | {_mrad(r['alpha'])} | {_mrad(r['beta'])} "
+                    f"| {_mrad(d['position_rmse'], d['position_rmse'] == best)} | {nominal / d['position_rmse']:.2f}× "
+                    f"| {r['alpha_dot']:.3f}, {r['beta_dot']:.3f} | {wall} |")
+    return "\n".join(rows)
+
+
+def sysid_table(doc: dict) -> str:
+    rows = ["| MJCF term (mujoco.sysid) | fitted | ± 95 % (sysid's iid interval) |", "|---|---|---|"]
+    for name, value in doc["parameters"].items():
+        half = doc["half_widths_95"][name]
+        rows.append(f"| {name} ({SYSID_UNITS[name]}) | {value:.3g} | {half:.2g} |")
+    return "\n".join(rows)
+
+
+def _frame(f: dict) -> str:
+    rotor = "θ = α" if f["rotor"] > 0 else "θ = −α"
+    pend = ("β" if f["pendulum"] > 0 else "−β") + (" + π" if f["offset"] else "")
+    if pend.startswith("−β + π"):
+        pend = "π − β"
+    return f"{rotor}, α_theirs = {pend}, V = {'u' if f['voltage'] > 0 else '−u'}"
+
+
+def baseline_table(docs: list[dict]) -> str:
+    keys = ("Mr", "Lr", "Mp", "Lp", "Rm", "km", "Dr", "Dp")
+    rows = ["| simulator | source | " + " | ".join(keys) + " | their frame from ours |", "|---" * (len(keys) + 3) + "|"]
+    for d in docs:
+        if "frame" in d:
+            p = d["parameters"]
+            rows.append(f"| {d['label']} | {d['source']} | " + " | ".join(f"{p[k]:g}" for k in keys)
+                        + f" | {_frame(d['frame'])} |")
+    return "\n".join(rows)
+
+
+COMMITTED_DIAGNOSIS = ROOT / "results" / "diagnose_real" / "growing_runs01-10.json"
+
+
+def reproduces_committed(diagnosis: dict) -> str:
+    """Whether the diagnosed row's fit is the committed diagnosis of the same runs and settings."""
+    if not COMMITTED_DIAGNOSIS.is_file():
+        return ""
+    old = json.loads(COMMITTED_DIAGNOSIS.read_text())
+    same = (old["settings"] == diagnosis["settings"] and old["plant"]["effects"] == diagnosis["plant"]["effects"]
+            and all(abs(old["plant"]["lumped"][k] - v) <= 1e-9 * abs(v) for k, v in diagnosis["plant"]["lumped"].items()))
+    verdict = "the same plant as" if same else "a different plant from"
+    return f" It is {verdict} the committed `results/diagnose_real/growing_runs01-10.json`."
+
+
+def findings(docs: list[dict]) -> str:
+    by = {d["name"]: d for d in docs}
+    parts = []
+    if "diagnosed" in by:
+        eff = ", ".join(f"{e['name']}:{e['joint']} ({e['coefficient']:.2g})" for e in by["diagnosed"]["effects"])
+        parts.append(f"The diagnosis of runs {by['diagnosed']['fit_runs'][0]}–{by['diagnosed']['fit_runs'][-1]} "
+                     f"found {eff or 'nothing'}.{reproduces_committed(by['diagnosed']['diagnosis'])}")
+    for name in ("sysid", "sysid_rigid"):
+        if name in by:
+            f = by[name]["fit"]
+            obj = f["objective"]
+            settled = next(i for i, v in enumerate(obj) if v <= 1.001 * obj[-1])
+            parts.append(f"{by[name]['label']}: {f['windows']} windows, {len(obj) - 1} Gauss-Newton iterations "
+                         f"(cap {f['iterations_cap']}; within 0.1 % of its final objective after {settled}), RMS "
+                         f"angle residual on its fit windows {1e3 * f['rms_angle_residual']:.2f} mrad.")
+    extra = by.get("diagnosed", {}).get("with_inconsistent")
+    if extra and extra["added"]:
+        parts.append(f"The diagnosed plant with the effects its diagnosis reported `inconsistent` added at their "
+                     f"tested coefficients ({', '.join(extra['added'])}; no refit): "
+                     f"{_mrad(extra['position_rmse'])} mrad on the unseen runs.")
+    return " ".join(parts)
+
+
+#: each extra MJCF term of the sysid fit and the library effect that is the same physics
+COUNTERPART = {"alpha_stiffness": ("spring", "alpha"), "alpha_frictionloss": ("coulomb_friction", "alpha"),
+               "beta_frictionloss": ("coulomb_friction", "beta"), "pendulum_com_lateral": ("com_offset", "beta"),
+               "input_delay": ("input_delay", "u")}
+
+
+def _counterpart(diagnosis: dict, term: str) -> str:
+    name, joint = COUNTERPART[term]
+    e = next((e for e in diagnosis["effects"] if (e["name"], e["joint"]) == (name, joint)), None)
+    if e is None:
+        return f"{name}:{joint}: not tested"
+    ev = e.get("evidence") or {}
+    gain = ev.get("heldout_residual_reduction")
+    detail = "" if gain is None else f", held-out residual −{gain:.0%}, t {ev['z_score']:.1f}"
+    coef = "" if e["coefficient"] is None else f" {e['coefficient']:.2g} {e['unit']}"
+    return f"{name}:{joint} {e['status']}{coef}{detail}"
+
+
+def ablation_table(doc: dict, diagnosis: dict | None) -> str:
+    """Each extra MJCF term of the sysid fit zeroed at its fitted values (no refit): the error on
+    the unseen runs without it, beside what the diagnosis said of the same physics."""
+    without = doc.get("position_rmse_without")
+    if not without:
+        return ""
+    rows = [f"| sysid term set to zero (all kept: {_mrad(without['none'])} mrad) | both angles (mrad) | the diagnosis of "
+            "the same runs on the same physics |", "|---|---|---|"]
+    for term, v in sorted(((t, v) for t, v in without.items() if t != "none"), key=lambda kv: -kv[1]):
+        rows.append(f"| {term} | {_mrad(v)} | {_counterpart(diagnosis, term) if diagnosis else '–'} |")
+    return "\n".join(rows)
+
+
+def block() -> str:
+    summary, docs = load()
+    ranked = sorted(docs, key=lambda d: d["position_rmse"])
+    first, second = ranked[0], ranked[1]
+    windows = docs[0]["n_windows"]
+    lines = [f"Fitted on runs {summary['fit_runs'][0]}–{summary['fit_runs'][-1]}, scored on runs "
+             f"{summary['test_runs'][0]}–{summary['test_runs'][-1]} (never fitted): {windows} back-to-back "
+             f"{summary['window_seconds']} s open-loop windows from the measured state, the logged input held; RMSE "
+             "over every predicted sample (**bold**: lowest).", "", score_table(docs), "",
+             f"Lowest error on the unseen runs: **{first['label']}** ({_mrad(first['position_rmse'])} mrad), then "
+             f"{second['label']} ({_mrad(second['position_rmse'])} mrad). {findings(docs)}"]
+    lines += ["", "The public simulators as implemented here (`experiments/qube_baselines.py`; SI units):", "",
+              baseline_table(docs)]
+    if any(d["name"] == "sysid" for d in docs):
+        sysid_doc = next(d for d in docs if d["name"] == "sysid")
+        diagnosis = next((d["diagnosis"] for d in docs if d["name"] == "diagnosed"), None)
+        lines += ["", ablation_table(sysid_doc, diagnosis), "", sysid_table(sysid_doc)]
+    dates = sorted({d["date"] for d in docs})
+    when = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
+    lines += ["", f"Made by `{COMMAND}` ({when}, {summary['machine']}, {summary['cpu']}); results in "
+              "[results/head_to_head/](../results/head_to_head/)."]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(block_main(__file__, DOC, NAME, block))
