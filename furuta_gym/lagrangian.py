@@ -23,11 +23,12 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-from typing import Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, TypeVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 __all__ = [
@@ -107,7 +108,13 @@ class AbstractLagrangianSystem(eqx.Module):
     methods of the same name that delegate to them.
     """
 
-    spec: eqx.AbstractVar[SystemSpec]
+    if TYPE_CHECKING:
+        # an AbstractVar is a dataclass field to a type checker, and would be the first
+        # argument of every subclass' __init__
+        @property
+        def spec(self) -> SystemSpec: ...
+    else:
+        spec: eqx.AbstractVar[SystemSpec]
 
     @abc.abstractmethod
     def mass_matrix(self, q: Float[Array, " n"]) -> Float[Array, "n n"]:
@@ -287,9 +294,13 @@ def linearize(system: AbstractLagrangianSystem, x, u):
     return A, B
 
 
+#: the interval rules are plain array arithmetic: NumPy in, NumPy out (the diagnosis' fit)
+_ArrayT = TypeVar("_ArrayT", Array, np.ndarray)
+
+
 def interval_integral(
-    f: Float[Array, " T *rest"], dt: float, rule: QuadratureRule = "trapezoid"
-) -> Float[Array, " K *rest"]:
+    f: Float[_ArrayT, " T *rest"], dt: float, rule: QuadratureRule = "trapezoid"
+) -> Float[_ArrayT, " K *rest"]:
     """∫ f dt over consecutive intervals of uniformly sampled ``f``.
 
     ``"trapezoid"``: K = T − 1 intervals [t_{j−1}, t_j] (the paper's eq. 9-10).
@@ -348,15 +359,15 @@ def interval_quadrature(
     """
     if rule != "hermite":
         return interval_integral(jax.vmap(g)(q, qd, u), dt, rule)
-    total = 0.0
+    total: Any = 0.0
     for s, w in zip(_GAUSS_NODES, _GAUSS_WEIGHTS):
         total = total + w * jax.vmap(g)(*hermite_states(q, qd, u, dt, s))
     return dt * total
 
 
 def interval_difference(
-    p: Float[Array, " T *rest"], rule: QuadratureRule = "trapezoid"
-) -> Float[Array, " K *rest"]:
+    p: Float[_ArrayT, " T *rest"], rule: QuadratureRule = "trapezoid"
+) -> Float[_ArrayT, " K *rest"]:
     """p(end) − p(start) over the same intervals as :func:`interval_integral` (``"hermite"``
     uses the trapezoid's intervals)."""
     if rule in ("trapezoid", "hermite"):

@@ -81,15 +81,19 @@ def simulate(
         us = _samples(us, ts, m)
         u_of_t = diffrax.LinearInterpolation(ts=ts, ys=us)
 
-        def u_at(t):
+        def u_linear(t):
             return u_of_t.evaluate(t)
+
+        u_at = u_linear
 
     elif input_interpolation == "zoh":
         us = _samples(us, ts, m)
 
-        def u_at(t):
+        def u_zoh(t):
             i = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, ts.shape[0] - 1)
             return us[i]
+
+        u_at = u_zoh
 
         jump_ts = ts
     else:
@@ -100,7 +104,9 @@ def simulate(
     def f(t, x, args):
         return _vector_field_once(system, x, u_at(t))
 
-    controller = diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=jump_ts)
+    # diffrax >= 0.7 moved jump_ts to ClipStepSizeController (and builds one from this call); the
+    # lowest supported diffrax, 0.6.1, has only this form
+    controller = diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=jump_ts)  # pyright: ignore[reportCallIssue]
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(f),
         diffrax.Tsit5(),
@@ -115,6 +121,7 @@ def simulate(
         throw=throw,
     )
     ys = sol.ys
+    assert ys is not None  # saved at ts
     if not throw:
         # diffrax leaves unreached save points as inf; NaNs from a blown-up model become inf too
         ys = jnp.where(jnp.isfinite(ys), ys, jnp.inf)

@@ -119,7 +119,7 @@ def _telegraph(n: int, dt: float, rng, level: float, unit: float, most: int) -> 
 
 def _smoothed(x: np.ndarray, keep: float = 5.0 / 7.0) -> np.ndarray:
     """The rig's first-order smoothing of its references and excitation (≈ 6 ms at 500 Hz)."""
-    return lfilter([1.0 - keep], [1.0, -keep], x)
+    return np.asarray(lfilter([1.0 - keep], [1.0, -keep], x))
 
 
 def _excitation(n: int, dt: float, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -299,5 +299,5 @@ def measured_like(
                 q = sense(q)
             else:
                 q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)
-        out.append(Trajectory(t=t.copy(), q=q, u=u[:, None], qd=None, name=str(k)))
+        out.append(Trajectory(t=t.copy(), q=np.asarray(q), u=u[:, None], qd=None, name=str(k)))
     return out

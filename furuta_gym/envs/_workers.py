@@ -124,7 +124,7 @@ def _attach(name: str) -> shared_memory.SharedMemory:
     try:
         from multiprocessing import resource_tracker
 
-        resource_tracker.unregister(block._name, "shared_memory")
+        resource_tracker.unregister(getattr(block, "_name"), "shared_memory")
     except Exception:  # the tracker's layout is CPython's; without it only a warning is at stake
         pass
     return block

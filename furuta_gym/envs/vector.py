@@ -22,7 +22,7 @@ from __future__ import annotations
 import inspect
 import os
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, ClassVar, Sequence
+from typing import Any, ClassVar, Sequence, cast
 
 import equinox as eqx
 import gymnasium
@@ -281,7 +281,7 @@ class LagrangianVectorEnv(VectorEnv):
                 f"{cls.__name__} steps all copies in one vmapped XLA program (chunks= and "
                 "workers= set how)"
             )
-        return chunks
+        return int(chunks)
 
     @classmethod
     def _env_id(cls) -> str:
@@ -699,7 +699,7 @@ def _batched_is_faster(env_id: str, num_envs: int, dynamics: Any, kwargs: dict) 
     if kwargs.get("render_mode") is not None or kwargs.get("kernel", "auto") != "auto":
         return False
     template = gymnasium.make(env_id, dynamics=dynamics, **kwargs).unwrapped
-    return not _unsupported_options(template)
+    return not _unsupported_options(cast(LagrangianEnv, template))
 
 
 def _unsupported_options(env: LagrangianEnv) -> list[str]:

@@ -51,7 +51,7 @@ from typing import Literal, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.spatial import cKDTree
+from scipy.spatial import KDTree
 
 from .. import __version__, ensure_x64
 from ..data import Trajectory, save_trajectories
@@ -441,7 +441,7 @@ def sample_overlap(
     for i in np.flatnonzero(wrap[keep]):
         shift = np.eye(b.shape[1])[i] * 2 * np.pi / tol[keep][i]
         b = np.concatenate([b, b + shift, b - shift])
-    distance, _ = cKDTree(b).query(a, k=1, p=np.inf, distance_upper_bound=1.0)
+    distance, _ = KDTree(b).query(a, k=1, p=np.inf, distance_upper_bound=1.0)
     return float(np.mean(np.isfinite(distance)))
 
 
@@ -488,7 +488,7 @@ def write_datasets(
 
 
 def _json_default(o):
-    if dataclasses.is_dataclass(o):
+    if dataclasses.is_dataclass(o) and not isinstance(o, type):
         return dataclasses.asdict(o)
     if isinstance(o, (np.floating, np.integer)):
         return o.item()

@@ -190,7 +190,7 @@ def force_decomposition_errors(
     the recorded states, with q̈ from ``truth``'s forward dynamics (pooled over joints)."""
     trajs = _stack_set(trajs, model.spec.n_dof)
     q = jnp.asarray(np.concatenate([tr.q for tr in trajs]))
-    qd = jnp.asarray(np.concatenate([tr.qd for tr in trajs]))
+    qd = jnp.asarray(np.concatenate([np.asarray(tr.qd) for tr in trajs]))
     u = jnp.asarray(np.concatenate([np.asarray(tr.u, dtype=float).reshape(len(tr), -1) for tr in trajs]))
     qdd = _true_accelerations(truth, q, qd, u)
     learned = _terms_along(model, q, qd, qdd)

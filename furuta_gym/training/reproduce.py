@@ -39,7 +39,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import jax
 import numpy as np
@@ -215,7 +215,7 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
     horizons = tuple(TrainConfig.for_system(name).horizons)
     if loss == "prop" and len(row.epochs) == 3:  # a leading stage of L_Iτ alone
         horizons = (None, *horizons)
-    overrides = dict(epochs=row.epochs, horizons=horizons, seed=seed, progress=config.progress,
+    overrides: dict[str, Any] = dict(epochs=row.epochs, horizons=horizons, seed=seed, progress=config.progress,
                      checkpoint_every=0, quadrature=row.quadrature)
     if config.quick:  # a few hundred steps per model: compiling them is most of the run
         overrides["fast_compile"] = True
@@ -399,7 +399,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
             error = f"{type(exc).__name__}: {exc}"
         if error is not None:
             # recorded, never hidden: every cell of this model reads "fail" in the tables
-            metrics = {label: {m: FAILED for m in METRIC_COLUMNS[system]}
+            metrics: dict[str, Any] = {label: {m: FAILED for m in METRIC_COLUMNS[system]}
                        for label in EVALUATION_SETS[config.split][system]}
             metrics["_error"] = error
             metrics_path.write_text(json.dumps(metrics, indent=1) + "\n")
@@ -473,7 +473,7 @@ def _figures_task(system: str, out: Path, config: ReproduceConfig, data=None, tr
     return result, round(time.perf_counter() - t0, 1)
 
 
-def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
+def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log) -> Iterator[tuple[str, Any, Any]]:
     """Yield ``("model", task, (metrics, seconds, status))`` for every task, ``config.jobs`` at a
     time (or as Ray schedules them), and with ``config.figures`` ``("figures", system, (paths |
     error, seconds))`` once per system, made as soon as that system's last model is done (in the
@@ -502,8 +502,8 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
 def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, report):
     """:func:`_run_all` one model after the other in this process, on the data it has loaded."""
     for task in tasks:
-        system = task[0]
-        result = _run_task(*task, out, config, loaded[system]["data"], loaded[system]["truth"])
+        system, kind, loss, seed = task
+        result = _run_task(system, kind, loss, seed, out, config, loaded[system]["data"], loaded[system]["truth"])
         report(task, result)
         yield "model", task, result
     if config.figures:
@@ -727,7 +727,7 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
             f"seeds ({', '.join(map(str, config.seeds))}; each seed's value is in tables.csv, "
             "ours_per_seed); the data are the same for every seed."
             if len(config.seeds) > 1
-            else f"Ours: one model seed ({config.seeds[0]})."
+            else f"Ours: one model seed ({', '.join(map(str, config.seeds))})."
         )
         + " A ✓ marks our cell at or below the paper's.",
         "",
@@ -775,7 +775,7 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
         n_yes = sum(r["better_or_equal"] == "yes" for r in allnum)
         out.append(f"- All rows: {n_yes} of {len(allnum)} numeric cells at or below the paper's.")
 
-    def row_of(system, label, model, loss, metric):
+    def row_of(system, label, model, loss, metric) -> Any:  # the row (a dict), or None
         return next((r for r in rows if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"])
                      == (system, label, model, loss, metric)), None)
 

@@ -47,6 +47,7 @@ from . import checkpoint as ckpt
 from .consistency import check_potential_shape, warn_data_coverage, warn_potential_shape
 from .losses import (
     AUGMENTATION_PARTS,
+    Normalization,
     Windows,
     augmentation_penalty,
     integral_loss_terms,
@@ -130,7 +131,7 @@ class TrainConfig:
     lambda_traj: float = 1.0
     lambda_step: float | None = None
     quadrature: QuadratureRule = "trapezoid"
-    normalize: str = "auto"
+    normalize: Normalization = "auto"
     integral_window: int = 101
     integral_batch_size: int | None = None
     augmentation_weight: float | None = None
@@ -211,14 +212,14 @@ class TrainConfig:
     @classmethod
     def for_system(cls, system: str, **overrides) -> "TrainConfig":
         """CPU-friendly defaults with the paper's horizons (1 s Furuta, 2 s N-MSD)."""
-        base = dict(horizons=PAPER_SCHEDULE[get_spec(system).name]["horizons"])
+        base: dict[str, Any] = dict(horizons=PAPER_SCHEDULE[get_spec(system).name]["horizons"])
         base.update(overrides)
         return cls(**base)
 
     @classmethod
     def paper(cls, system: str, **overrides) -> "TrainConfig":
         """The paper's recipe: 2-step stage then the long horizon, full batch (appendix A.2)."""
-        base = dict(**PAPER_SCHEDULE[get_spec(system).name], batch_size=None, checkpoint_every=500)
+        base: dict[str, Any] = dict(**PAPER_SCHEDULE[get_spec(system).name], batch_size=None, checkpoint_every=500)
         base.update(overrides)
         return cls(**base)
 
@@ -346,9 +347,9 @@ def _build_optimizer(model, config: TrainConfig):
     return opt, trainable, params
 
 
-def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization: str,
+def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization: Normalization,
                augmentation_weight: float = 0.0):
-    traj_kw = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
+    traj_kw: dict[str, Any] = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
     use_traj = loss in ("traj", "aph", "prop")
     use_int = loss in ("prop", "itau")
     use_share = use_int and augmentation_weight != 0.0
@@ -359,8 +360,10 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
             terms = {}
             total = 0.0
             if use_traj:
+                assert traj_b is not None
                 terms["traj"] = trajectory_loss(model, traj_b, **traj_kw)
             if use_int:
+                assert int_b is not None
                 terms["itau"], share = integral_loss_terms(
                     model, int_b, rule=config.quadrature, normalize=normalization, with_augmentation=use_share,
                     augmentation_part=config.augmentation_part, resolution_tolerance=config.resolution_tolerance,
@@ -368,9 +371,11 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
                 )
                 total = total + terms["itau"]
                 if use_share:
+                    assert share is not None  # integral_loss_terms returns it with_augmentation
                     terms["fa_share"] = share
                     total = total + augmentation_weight * share
             if loss == "aph":
+                assert traj_b is not None
                 terms["penalty"] = augmentation_penalty(model, traj_b)
                 total = total + terms["penalty"]
             if use_traj:
@@ -391,7 +396,8 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
     # the steps with an ODE solve: an L_Iτ step compiles in seconds and runs many epochs
     fast = config.fast_compile and use_traj
     compiler_options = {"xla_backend_optimization_level": 0} if fast else None
-    live_step = eqx.filter_jit(step, compiler_options=compiler_options)
+    # equinox's overloads leave out the jax.jit keywords it passes on
+    live_step = eqx.filter_jit(step, compiler_options=compiler_options)  # pyright: ignore[reportCallIssue]
     # with JAX's persistent compilation cache enabled, a later process loads the traced step from
     # disk instead of tracing it again (seconds for L_traj); see _step_cache
     cache_dir = _step_cache.step_cache_dir()
@@ -731,7 +737,7 @@ def _save_epoch(out: Path | None, record: dict, run: _RunState, static, run_info
 
 def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: int, steps: int) -> None:
     if bar is not None:
-        post = {k: f"{v:.3g}" for k, v in means.items() if k != "total"}
+        post: dict[str, Any] = {k: f"{v:.3g}" for k, v in means.items() if k != "total"}
         if loss in ("aph", "prop"):
             post["λ"] = f"{lam:.3g}"
         if skipped:
