@@ -75,6 +75,9 @@ __all__ = [
     "reproduce",
     "load_paper_table",
     "build_tables",
+    "run_settings",
+    "same_settings",
+    "machine_info",
 ]
 
 PAPER_PAIRS: tuple[tuple[str, str], ...] = (
@@ -313,7 +316,7 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
 RUN_RECORD_SCHEMA = 1
 
 
-def _run_settings(system: str, kind: str, loss: str, seed: int, config: ReproduceConfig) -> dict:
+def run_settings(system: str, kind: str, loss: str, seed: int, config: ReproduceConfig) -> dict:
     """What a run directory's ``reproduce_config.json`` records for this run — its training
     settings (the progress bar aside) and architecture — in JSON's own form (lists, not tuples),
     so it compares with a saved record as it is."""
@@ -326,7 +329,7 @@ def _run_settings(system: str, kind: str, loss: str, seed: int, config: Reproduc
     return json.loads(json.dumps(settings))
 
 
-def _same_settings(saved: dict, current: dict) -> bool:
+def same_settings(saved: dict, current: dict) -> bool:
     """Whether a run directory's recorded settings are this run's: the same record form
     (:data:`RUN_RECORD_SCHEMA`) and the same values, where a training setting the record lacks
     counts as its default (it was added later, with a default that keeps what runs did)."""
@@ -364,7 +367,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     metrics_path = run_dir / "metrics.json"
     model_path = run_dir / MODEL_FILE
     tcfg = training_config(system, config, seed, loss, kind)
-    cfg_json = _run_settings(system, kind, loss, seed, config)
+    cfg_json = run_settings(system, kind, loss, seed, config)
     cfg_path = run_dir / "reproduce_config.json"
     if cfg_path.exists():
         saved = json.loads(cfg_path.read_text())
@@ -372,7 +375,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
             # a record from before the architecture was recorded: the checkpoint's header knows it
 
             saved["model_hparams"] = json.loads(json.dumps(read_header(model_path).get("hparams", {}), default=str))
-        if not _same_settings(saved, cfg_json):
+        if not same_settings(saved, cfg_json):
             raise ValueError(
                 f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out"
             )
@@ -826,7 +829,8 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _machine() -> dict[str, Any]:
+def machine_info() -> dict[str, Any]:
+    """The platform, Python, core count and CPU model, as a run record notes them."""
     info = {
         "platform": platform.platform(),
         "python": platform.python_version(),
@@ -880,7 +884,7 @@ def _write_run_record(path: Path, config: ReproduceConfig, command, timings, dat
         "quadrature": (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE),
         "quadrature_by_model": _quadrature_by_model(config),
         "data": data_meta,
-        "machine": _machine(),
+        "machine": machine_info(),
         "packages": package_versions(),
         "seconds": timings,
     }
