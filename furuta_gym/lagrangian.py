@@ -225,8 +225,8 @@ def inverse_dynamics(system: AbstractLagrangianSystem, q, qd, qdd) -> Float[Arra
 def solve_mass_matrix(M: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:
     """M⁻¹b; in closed form for one or two degrees of freedom, else ``jnp.linalg.solve``.
 
-    Why: on CPU ``jnp.linalg.solve`` is a LAPACK custom call whose fixed cost (~5 µs) is ten times
-    the rest of an RK4 step of these tiny systems; the closed form agrees to round-off.
+    Why: on CPU ``jnp.linalg.solve`` is a LAPACK custom call whose fixed cost outweighs the rest
+    of an RK4 step of these tiny systems; the closed form agrees to round-off.
     """
     n = b.shape[-1]
     if n == 1:
@@ -353,9 +353,8 @@ def interval_quadrature(
     nodes inside each, on the states of :func:`hermite_states`. Where the sampling under-resolves
     the motion (a pendulum whirling at 30 rad/s sampled at 100 Hz turns 0.3 rad per sample) the
     sample-based rules integrate a badly resolved integrand, and that quadrature error is what
-    the true model's residual is made of: on the Furuta training data the true model's L_Iτ
-    (normalised) is 4.1e-4 with the trapezoid, 1.1e-5 with Simpson and 2e-9 with this rule; on
-    the N-MSD 1.4e-8 with Simpson, 3e-17 with this rule.
+    the true model's residual is made of; this rule lowers that floor by orders of magnitude
+    (docs/learning.md has the numbers).
     """
     if rule != "hermite":
         return interval_integral(jax.vmap(g)(q, qd, u), dt, rule)

@@ -25,11 +25,10 @@ from .lagrangian import AbstractLagrangianSystem, vector_field
 
 __all__ = ["simulate", "rk4_step", "rk4_zoh_step", "rollout_zoh", "small_kernel_compiler_options"]
 
-# XLA:CPU (jax 0.10) by default hands matrix products *together with the elementwise work around
-# them* to YNNPACK "custom fusions"; for the few-neuron layers of these models those fused calls
-# cost more than XLA's own loops (batched DeLaN RK4 step, N = 4096, one pinned core: 11.5 ms CPU
-# by default, 9.2 ms with no YNNPACK, 8.4 ms with YNNPACK for the bare products only). Same
-# quantities; summation order inside a product may differ at round-off level.
+# XLA:CPU by default hands matrix products *together with the elementwise work around them* to
+# YNNPACK "custom fusions"; for the few-neuron layers of these models those fused calls cost more
+# than XLA's own loops, and YNNPACK for the bare products alone is fastest (docs/batched.md,
+# "Speed"). Same quantities; summation order inside a product may differ at round-off level.
 _SMALL_KERNEL_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_INDIVIDUAL_DOT"}
 _small_kernel_options_checked: dict | None = None
 

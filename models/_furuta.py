@@ -92,7 +92,7 @@ def furuta_potential(G, q, cos=jnp.cos):
 
 def furuta_energy(lumped: Mapping[str, float], x) -> float:
     """T + V at the state ``x`` = (α, β, α̇, β̇) on plain floats, from :func:`furuta_lumped`
-    values: the envs' per-step ``info["energy"]``, where a JAX call would cost 100× the step."""
+    values: the envs' per-step ``info["energy"]``, where a JAX call would cost far more than the step."""
     _, beta, alpha_dot, beta_dot = x
     m11, m12 = _mass_entries(lumped["J1"], lumped["J1b"], lumped["Jc"], math.sin(beta), math.cos(beta))
     kinetic = 0.5 * (m11 * alpha_dot * alpha_dot + 2.0 * m12 * alpha_dot * beta_dot

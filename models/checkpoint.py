@@ -60,7 +60,7 @@ def package_versions() -> dict[str, str]:
 
 @functools.lru_cache(maxsize=1)
 def _package_versions() -> dict[str, str]:
-    # installed versions do not change in a running process; reading them costs ~7 ms, and a
+    # installed versions do not change in a running process; reading them is slow, and a
     # training run writes a header after every epoch
     out = {}
     for name in ("furuta-gym", "jax", "jaxlib", "equinox", "diffrax", "optax", "numpy"):

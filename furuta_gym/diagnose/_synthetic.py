@@ -277,8 +277,8 @@ def measured_like(
     T = int(round(duration / dt)) + 1
     t = np.arange(T) * dt
     # the new experiments integrate MuJoCo finely too: under RK4 the sgn law lets a rotor held by
-    # dry friction against a spring creep at a rate ∝ the step (~3 mrad/s, one count per
-    # 0.3–0.5 s at 2 ms; ~0.3 mrad/s at 0.2 ms), where a real rotor sticks
+    # dry friction against a spring creep at a rate ∝ the step (an encoder count every fraction
+    # of a second at 2 ms), where a real rotor sticks
     sim = _Plant(system, effects, plant, dt, substeps, fine=excitation != "chirp")
     sense = quantize_encoder if quantize else (lambda q: q)
     out = []

@@ -506,8 +506,8 @@ def _compiled_steps(static, rebuild, treedef_key, timestep: float, substeps: int
     The model's arrays travel as ``(vector, matrices)``: every scalar and vector leaf raveled into
     ONE float64 vector (one argument to flatten per call instead of many, and XLA fuses the
     unravelling slices into their elementwise consumers), the matrices (network weights) as a
-    list of their own: a slice feeding a matrix product is a separate XLA kernel per leaf and call
-    (~8 µs of a ~50 µs single-copy DeLaN step).
+    list of their own: a slice feeding a matrix product is a separate XLA kernel per leaf and call,
+    a large share of a single-copy step.
     """
     key = (treedef_key, timestep, substeps)
     try:

@@ -1,4 +1,4 @@
-"""The pure-JAX control step and rollout behind the batched env (issue 4, item 3).
+"""The pure-JAX control step and rollout behind the batched env.
 
 One *controlled step* is what a model-backed env does between two ``env.step`` calls, written as a
 pure function of JAX arrays so it can be ``vmap``-ed over copies and ``scan``-ned over time:
@@ -168,7 +168,7 @@ def rollout(
 
     ``chunks``: the batch runs as this many contiguous sub-batches, concurrently from threads
     (XLA:CPU runs separate executions side by side, while one execution of a small-network model
-    keeps about one core busy: DeLaN, N = 4 096, 2 cores: 647 k → 1.21 M state-steps/s with 2).
+    keeps about one core busy; docs/batched.md "Speed").
     Default: one per core from 512 copies on, else 1; always 1 when called inside a JAX
     transformation (jit, vmap), where the rollout becomes part of the caller's computation. No
     copy's numbers depend on it.

@@ -219,7 +219,7 @@ class ExportedStep:
             # The deserialised computation returns arrays committed to their device, while a
             # run's first params / opt_state and every batch arrive uncommitted. jit keys its
             # compilation on that too, so the first and second calls each compiled the whole step
-            # (6-10 s for a trajectory loss, once per training run). Committing every argument
+            # (once per training run). Committing every argument
             # where it already lives makes all calls alike: one compilation, same results.
             leaves = [leaf if leaf.committed else jax.device_put(leaf, next(iter(leaf.devices())))
                       for leaf in leaves]

@@ -161,7 +161,7 @@ def prediction_errors(
 
 
 # These run once per model and test set. Traced op by op (an eager vmap), each of their few
-# hundred primitives compiled on its own: ~12 s of a ~60 s quick-reproduction model. Jitted with
+# hundred primitives compiled on its own: a large share of a quick-reproduction model. Jitted with
 # the model as an argument, they compile once per model structure and shape, and every model of
 # that structure (through the persistent cache, in every worker process too) reuses it.
 

@@ -10,7 +10,7 @@ skipped and counted; a NaN model is never saved).
 Losses (``loss=``): ``"traj"`` L_traj; ``"aph"`` ‖F_a‖² + λ·L_traj with APHYNITY's dual ascent on λ;
 ``"prop"`` L_Iτ + λ·L_traj (the paper's proposed loss); ``"itau"`` L_Iτ alone (cheap: no ODE
 solve; the training-stage horizon is then irrelevant). L_Iτ is computed on all integral windows
-at every step (it costs a few ms), L_traj on a minibatch of windows.
+at every step (it is cheap), L_traj on a minibatch of windows.
 
 **Overall scale.** On free (u = 0) data the dynamics, and hence every loss, are invariant to
 multiplying the learned Lagrangian and τ_NC by one constant: the scale is unidentifiable. Pass
@@ -115,8 +115,7 @@ class TrainConfig:
     against the physics' impulse.
     ``fast_compile`` compiles the steps with a trajectory loss (an ODE solve: L_traj, L_aph and
     L_prop's stages after the L_Iτ-alone one) with XLA's backend optimisation level 0: such a
-    step compiles in ~2/3 of the time and runs ~2.7× slower, and results agree to rounding, not
-    bit for bit. Worth it only for a few hundred trajectory steps, whose time is mostly
+    step compiles faster and runs slower, and results agree to rounding, not bit for bit. Worth it only for a few hundred trajectory steps, whose time is mostly
     compiling (``furuta-gym reproduce --quick``); an L_Iτ-alone step compiles in seconds and runs
     thousands of epochs, so it keeps the optimised code.
     """
@@ -283,7 +282,7 @@ class ScaleFit:
 
 
 # jitted (model as an argument): traced op by op, the few hundred primitives of one model's terms
-# compiled one by one, ~5 s per fit
+# would be compiled one by one, at every fit
 _integral_terms_jit = eqx.filter_jit(integral_terms)
 
 
