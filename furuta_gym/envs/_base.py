@@ -81,8 +81,6 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
     """
 
     metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
-    action_space: Box
-    observation_space: Box
 
     system: ClassVar[str]
     #: its Gymnasium id (``register_envs`` registers every class of ``ENV_CLASSES`` under it)

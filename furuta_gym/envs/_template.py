@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any, ClassVar, Mapping
 
 import numpy as np
+from gymnasium import spaces
 
 from ..lagrangian import SystemSpec
 from ._observation import Observer
@@ -32,6 +33,8 @@ class BatchTemplate:
     observation: str
     dtype: np.dtype
     normalize_action: bool
+    action_space: spaces.Box
+    observation_space: spaces.Box
 
     def _initial_state(self, rng: np.random.Generator | None) -> np.ndarray:
         raise NotImplementedError
