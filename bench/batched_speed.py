@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _benchmarks_md import machine, write_section
+from _generated import machine, write_section
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 

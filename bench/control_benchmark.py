@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _benchmarks_md import write_section
+from _generated import write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 MARK_START = "<!-- control_benchmark:start -->"

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _benchmarks_md import machine, write_section
+from _generated import machine, write_section
 from control_benchmark import SECONDS, TABLE_HEADER, _row
 
 ROOT = Path(__file__).resolve().parents[1]

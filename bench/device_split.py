@@ -21,7 +21,7 @@ if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", "")
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2").strip()
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from _benchmarks_md import machine, write_section  # noqa: E402
+from _generated import machine, write_section  # noqa: E402
 from batched_speed import batched_env_rate  # noqa: E402
 
 START, END = "<!-- bench/device_split.py:start -->", "<!-- bench/device_split.py:end -->"

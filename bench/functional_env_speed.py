@@ -15,6 +15,7 @@ section from it (``--no-write``: neither).
 
     python bench/functional_env_speed.py           # a few minutes on 2 cores
     python bench/functional_env_speed.py --quick   # N = 1, 64, 4096 with fewer steps
+    python bench/functional_env_speed.py --check   # exit 1 if BENCHMARKS.md and the results differ
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import json
 import time
 from pathlib import Path
 
-from _benchmarks_md import machine, write_section
+from _generated import machine, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "functional_env_speed" / "results.json"
@@ -118,16 +119,26 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="N = 1, 64, 4096 and a smaller step budget")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-write", action="store_true")
+    parser.add_argument("--check", action="store_true", help="measure nothing: exit 1 if BENCHMARKS.md's "
+                        "section differs from the committed results")
     args = parser.parse_args(argv)
+    if args.check:
+        return write_section(committed_section(), START, END, check=True,
+                             how_to_fix="run python bench/functional_env_speed.py")
     sizes, budget = ((1, 64, 4096), STEP_BUDGET // 4) if args.quick else (SIZES, STEP_BUDGET)
     results = measure(sizes, args.repeats, budget)
     if not args.no_write:
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         RESULTS.write_text(json.dumps(results, indent=1))
-        write_section(section(json.loads(RESULTS.read_text()) | {"steps_per_second": {
-            k: {int(n): v for n, v in r.items()} for k, r in results["steps_per_second"].items()}}),
-            START, END)
+        write_section(committed_section(), START, END)
     return 0
+
+
+def committed_section() -> str:
+    """The section of the results file (JSON keeps the copy counts N as strings)."""
+    results = json.loads(RESULTS.read_text())
+    return section(results | {"steps_per_second": {
+        k: {int(n): v for n, v in r.items()} for k, r in results["steps_per_second"].items()}})
 
 
 if __name__ == "__main__":

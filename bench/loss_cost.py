@@ -29,7 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _benchmarks_md import write_section
+from _generated import write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 SECTION = "loss_cost"

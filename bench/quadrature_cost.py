@@ -16,7 +16,7 @@ import argparse
 import datetime
 import time
 
-from _benchmarks_md import machine, write_section
+from _generated import machine, write_section
 from loss_cost import furuta_free_data
 
 SECTION = "quadrature_cost"

@@ -33,7 +33,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _benchmarks_md import machine, write_section
+from _generated import machine, write_section
 
 SECTION = "quick_cold"
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _benchmarks_md import BENCHMARKS_MD, write_section
+from _generated import write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 PPO = ROOT / "results" / "rl_learned"
@@ -82,14 +82,10 @@ def main(argv=None) -> int:
     ap.add_argument("--check", action="store_true", help="exit 1 if BENCHMARKS.md's section is stale")
     args = ap.parse_args(argv)
     text = section()
-    if args.check:
-        stale = text not in BENCHMARKS_MD.read_text()
-        if stale:
-            print(f"{BENCHMARKS_MD}: the {START} section is stale; run python bench/rl_wall_time.py")
-        return int(stale)
-    write_section(text, START, END)
-    print(text)
-    return 0
+    status = write_section(text, START, END, check=args.check, how_to_fix="run python bench/rl_wall_time.py")
+    if not args.check:
+        print(text)
+    return status
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _benchmarks_md import machine, write_section
+from _generated import machine, write_section
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -152,9 +152,8 @@ def main(argv=None) -> int:
     ap.add_argument("--merge", nargs="+", help="result files of split runs to merge into the results")
     args = ap.parse_args(argv)
     if args.check:
-        stale = section(json.loads(RESULTS.read_text())) not in DOCS.read_text()
-        print(f"{DOCS}: {'stale, run --table-only' if stale else 'matches'} {RESULTS}")
-        return int(stale)
+        return write_section(section(json.loads(RESULTS.read_text())), START, END, path=DOCS, check=True,
+                             how_to_fix="run python bench/sac_preset.py --table-only")
     if args.merge:
         parts = [json.loads(Path(f).read_text()) for f in args.merge]
         merged = dict(parts[0], runs=[r for p in parts for r in p["runs"]])

@@ -25,7 +25,7 @@ import sys
 
 import numpy as np
 
-from _benchmarks_md import machine, write_section
+from _generated import machine, write_section
 from batched_speed import batched_env_rate, best_rate, calibrated_steps
 
 os.environ.setdefault("MUJOCO_GL", "egl")

@@ -57,7 +57,7 @@ class AbstractController(eqx.Module):
 
     # -- the stateful policy face (Python side) --------------------------------------------
     def _runtime(self) -> _Runtime:
-        # plain object attribute access: Equinox's own __getattribute__ costs ~0.1 ms per call
+        # plain object attribute access: Equinox's own __getattribute__ is slow on this per-step path
         rt = object.__getattribute__(self, "__dict__").get("_policy_runtime")
         if rt is None:
             rt = _Runtime(self)

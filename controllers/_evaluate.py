@@ -11,7 +11,7 @@ what is scored.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Any, Callable
 
 import equinox as eqx
 import jax
@@ -43,7 +43,7 @@ def _batched_step(controller, states, obs):
 
 def evaluate_on_env(
     controller: AbstractController,
-    make_env: Callable[[], object],
+    make_env: Callable[[], Any],
     x0s: np.ndarray,
     seconds: float,
     seed: int = 0,

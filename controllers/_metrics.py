@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["EpisodeMetrics", "episode_metrics"]
 
@@ -30,8 +31,8 @@ class EpisodeMetrics:
 
 
 def episode_metrics(
-    xs: np.ndarray,
-    us: np.ndarray,
+    xs: ArrayLike,
+    us: ArrayLike,
     dt: float,
     upright_tol: float = 0.1,
     hold: float = 2.0,

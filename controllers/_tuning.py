@@ -27,7 +27,7 @@ up under this voltage limit — a sign the model's energy landscape or input map
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import equinox as eqx
 import jax
@@ -67,7 +67,7 @@ def near_upright_starts(n: int, seed: int) -> np.ndarray:
 class GainSweep:
     """Result of :func:`pick_k_e`: the chosen controller and the sweep behind it."""
 
-    controller: object
+    controller: Any
     k_e: float
     stall_threshold: float
     grid: tuple[float, ...]
@@ -77,7 +77,7 @@ class GainSweep:
 
 
 def pick_k_e(
-    build: Callable[[float], object],
+    build: Callable[[float], Any],
     model: AbstractLagrangianSystem,
     *,
     grid: Sequence[float] | None = None,
@@ -109,7 +109,7 @@ def pick_k_e(
         ms = [episode_metrics(r.xs[i], r.us[i], dt) for i in range(n_starts)]
         catches.append(float(np.mean(np.any(np.asarray(r.modes) > 0, axis=1))))
         rates.append(float(np.mean([m.success for m in ms])))
-        t = [m.time_to_upright for m in ms if m.success]
+        t = [m.time_to_upright for m in ms if m.success and m.time_to_upright is not None]
         times.append(float(np.median(t)) if t else float("nan"))
     ok = np.asarray(catches) == 1.0
     k_min = None

@@ -16,7 +16,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from _generated import fill_block, update
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
+from _generated import fill_block, update  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "demo_seeds"

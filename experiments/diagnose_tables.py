@@ -21,7 +21,8 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-from _generated import fill_block
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
+from _generated import fill_block  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SIM, REAL = ROOT / "results" / "diagnose_sim", ROOT / "results" / "diagnose_real"

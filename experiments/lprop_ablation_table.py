@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from _generated import block_main
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
+from _generated import block_main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "lprop_ablation"

@@ -11,11 +11,13 @@ odd in q̇ or general) and the decision-log rows behind them.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
-from _generated import block_main
-
 from furuta_gym.training.recipe import RECIPE
+
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
+from _generated import block_main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "reproduce.md"

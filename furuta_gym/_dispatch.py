@@ -1,7 +1,6 @@
 """An opt-in for programs that step one model-backed env from Python.
 
-A DeLaN-backed ``env.step`` is one small jitted JAX call (~150 XLA:CPU kernels, ~10 µs of
-arithmetic). By default JAX hands every CPU computation to a worker thread and returns at once
+A DeLaN-backed ``env.step`` is one small jitted JAX call (docs/batched.md, "Speed"). By default JAX hands every CPU computation to a worker thread and returns at once
 (asynchronous dispatch), which pays off for large computations but costs a thread hand-off per
 call here. :func:`inline_cpu_dispatch` makes JAX run CPU computations inline on the calling
 thread (JAX's ``jax_cpu_enable_async_dispatch=False``). It is process-wide and must be chosen

@@ -18,7 +18,7 @@ import csv
 import dataclasses
 import gzip
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -157,7 +157,10 @@ def load_trajectories(
     column_map, signs, offsets = dict(column_map or {}), dict(signs or {}), dict(offsets or {})
     _check_mapping_names(path, spec, [*column_map, *signs, *offsets])
     raw = _read_columns(path)
-    source = lambda name: column_map.get(name, name)  # noqa: E731
+
+    def source(name: str) -> str:
+        return column_map.get(name, name)
+
     has_vel = _check_columns_present(path, spec, raw, source, require_velocities)
 
     def column(name: str) -> np.ndarray:
@@ -276,7 +279,7 @@ def save_trajectories(
     for k, tr in enumerate(trajectories):
         parts = [tr.t[:, None], tr.q, tr.u]
         if with_vel:
-            parts.append(tr.qd)
+            parts.append(np.asarray(tr.qd))
         blocks.append(np.concatenate(parts, axis=1))
         labels += [tr.name if tr.name is not None else str(k)] * len(tr)
     table = np.concatenate(blocks, axis=0)
@@ -289,7 +292,7 @@ def save_trajectories(
             for label, row in zip(labels, table):
                 w.writerow([label, *(repr(float(v)) for v in row)])
     elif suffix == ".npz":
-        arrays = {c: table[:, i] for i, c in enumerate(cols[1:])}
+        arrays: dict[str, Any] = {c: table[:, i] for i, c in enumerate(cols[1:])}
         label_arr = np.array(labels)
         try:
             arrays["traj"] = label_arr.astype(float)

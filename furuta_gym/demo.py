@@ -211,7 +211,7 @@ def _control(cfg: DemoConfig, model, progress: bool):
             starts, cfg.control_seconds, seed=cfg.seed,
         )
         bar.update(1)
-    times = [r.metrics.time_to_upright for r in records if r.metrics.success]
+    times = [r.metrics.time_to_upright for r in records if r.metrics.success and r.metrics.time_to_upright is not None]
     return records, {
         "episodes": len(records),
         "success_rate": float(np.mean([r.metrics.success for r in records])),

@@ -366,11 +366,11 @@ class Effect:
         angular = self.joint == "u" or spec.angular[self.joint_index(spec)]
         return self.kind.units[0 if angular else 1]
 
-    def generalized_force(self, q_j, qd_j, coulomb_smoothing: float = 0.0, xp=jnp):
+    def generalized_force(self, q_j, qd_j, coulomb_smoothing: float = 0.0, xp: Any = jnp):
         """Force on its joint from joint position/velocity (see :meth:`law`). Springs included."""
         return self.law(coulomb_smoothing, xp)(q_j, qd_j)
 
-    def law(self, coulomb_smoothing: float = 0.0, xp=jnp) -> Callable[[Any, Any], Any]:
+    def law(self, coulomb_smoothing: float = 0.0, xp: Any = jnp) -> Callable[[Any, Any], Any]:
         """The effect's force law f(q_j, q̇_j) on its joint, written once for every user.
 
         ``coulomb_smoothing`` > 0 replaces sgn(v) by tanh(v / smoothing) (for integrators), in
@@ -390,7 +390,7 @@ class Effect:
             raise ValueError(f"{self.name} has memory (its moving neutral): use CableNeutral(effect)")
         raise ValueError(f"{self.name!r} is not a force law on a joint (it acts through {self.kind.home or 'the input'})")
 
-    def dry_friction_limit(self, xp=jnp) -> Callable[[Any], Any]:
+    def dry_friction_limit(self, xp: Any = jnp) -> Callable[[Any], Any]:
         """The largest force this dry friction exerts, as a law of q̇_j (N·m or N): F_c for
         ``coulomb_friction``, ΔF·exp(−(q̇_j/v_s)²) for ``stiction``. Sliding, the friction is
         −limit·sgn(q̇_j) (:meth:`law`); at rest it holds the joint against any smaller force

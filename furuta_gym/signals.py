@@ -8,6 +8,8 @@ Inputs: :func:`chirp` (linear frequency sweep, the paper's training and test inp
 
 from __future__ import annotations
 
+from typing import cast
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -90,7 +92,7 @@ def derivative_filter_coefficients(dt: float, omega0: float = 100.0, xi: float =
     """
     num = [omega0**2, 0.0]
     den = [1.0, 2.0 * xi * omega0, omega0**2]
-    b, a, _ = signal.cont2discrete((num, den), dt, method="bilinear")
+    b, a, _ = cast(tuple, signal.cont2discrete((num, den), dt, method="bilinear"))  # (num, den, dt)
     b, a = np.ravel(b), np.ravel(a)
     return b / a[0], a / a[0]
 
@@ -144,7 +146,7 @@ def zero_phase_velocity(y, dt: float, cutoff_hz: float | None = None, order: int
     fs = 1.0 / dt
     if cutoff_hz is None:
         cutoff_hz = min(25.0, 0.2 * fs)
-    b, a = signal.butter(order, cutoff_hz, fs=fs)
+    b, a = cast(tuple, signal.butter(order, cutoff_hz, fs=fs))  # (b, a) in its default output
     padlen = min(3 * max(len(a), len(b)), y.shape[0] - 1)
     smooth = signal.filtfilt(b, a, y, axis=0, padlen=padlen)
     return np.gradient(smooth, dt, axis=0)

@@ -25,11 +25,10 @@ from .lagrangian import AbstractLagrangianSystem, vector_field
 
 __all__ = ["simulate", "rk4_step", "rk4_zoh_step", "rollout_zoh", "small_kernel_compiler_options"]
 
-# XLA:CPU (jax 0.10) by default hands matrix products *together with the elementwise work around
-# them* to YNNPACK "custom fusions"; for the few-neuron layers of these models those fused calls
-# cost more than XLA's own loops (batched DeLaN RK4 step, N = 4096, one pinned core: 11.5 ms CPU
-# by default, 9.2 ms with no YNNPACK, 8.4 ms with YNNPACK for the bare products only). Same
-# quantities; summation order inside a product may differ at round-off level.
+# XLA:CPU by default hands matrix products *together with the elementwise work around them* to
+# YNNPACK "custom fusions"; for the few-neuron layers of these models those fused calls cost more
+# than XLA's own loops, and YNNPACK for the bare products alone is fastest (docs/batched.md,
+# "Speed"). Same quantities; summation order inside a product may differ at round-off level.
 _SMALL_KERNEL_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_INDIVIDUAL_DOT"}
 _small_kernel_options_checked: dict | None = None
 
@@ -81,15 +80,19 @@ def simulate(
         us = _samples(us, ts, m)
         u_of_t = diffrax.LinearInterpolation(ts=ts, ys=us)
 
-        def u_at(t):
+        def u_linear(t):
             return u_of_t.evaluate(t)
+
+        u_at = u_linear
 
     elif input_interpolation == "zoh":
         us = _samples(us, ts, m)
 
-        def u_at(t):
+        def u_zoh(t):
             i = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, ts.shape[0] - 1)
             return us[i]
+
+        u_at = u_zoh
 
         jump_ts = ts
     else:
@@ -100,7 +103,9 @@ def simulate(
     def f(t, x, args):
         return _vector_field_once(system, x, u_at(t))
 
-    controller = diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=jump_ts)
+    # diffrax >= 0.7 moved jump_ts to ClipStepSizeController (and builds one from this call); the
+    # lowest supported diffrax, 0.6.1, has only this form
+    controller = diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=jump_ts)  # pyright: ignore[reportCallIssue]
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(f),
         diffrax.Tsit5(),
@@ -115,6 +120,7 @@ def simulate(
         throw=throw,
     )
     ys = sol.ys
+    assert ys is not None  # saved at ts
     if not throw:
         # diffrax leaves unreached save points as inf; NaNs from a blown-up model become inf too
         ys = jnp.where(jnp.isfinite(ys), ys, jnp.inf)

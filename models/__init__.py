@@ -3,6 +3,7 @@
 Analytic: :class:`Furuta`, :class:`NMSD`. Learned: DeLaN, APHYNITY, augmented DeLaN.
 """
 
+from ..lagrangian import AbstractLagrangianSystem
 from ._definitions import SYSTEM_DEFINITIONS, system_definition
 from ._furuta import Furuta, FurutaParameters, furuta_lumped, furuta_mass_matrix, furuta_potential
 from ._nmsd import NMSD, NMSDParameters, nmsd_potential
@@ -51,6 +52,6 @@ __all__ = [
 ]
 
 
-def analytic_model(system: str):
+def analytic_model(system: str) -> AbstractLagrangianSystem:
     """The analytic model of ``"furuta"`` or ``"nmsd"`` with the pinned parameters."""
     return system_definition(system).model()

@@ -85,7 +85,7 @@ class Aphynity(AbstractAugmentedSystem):
     @property
     def physical_parameters(self) -> dict[str, Any]:
         """The prior's current physical parameter values (learned ones included)."""
-        values = dict(self.nominal)
+        values: dict[str, Any] = dict(self.nominal)
         for i, name in enumerate(system_definition(self.spec).learnable_parameters):
             values[name] = values[name] * jnp.exp(self.log_ratios[i])
         return values

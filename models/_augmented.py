@@ -8,7 +8,7 @@ back-EMF is not in τ_u (only (kt/Rm)·u is): F_a learns it together with the ro
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -123,6 +123,9 @@ class AbstractAugmentedSystem(AbstractLearnedSystem):
     a subclass holds it as its field ``force_net``, a :class:`ForceNetwork`. (Not declared here
     as an abstract field: that would move it in the subclasses' field order, which saved
     checkpoints' leaves follow.)"""
+
+    if TYPE_CHECKING:
+        force_net: ForceNetwork
 
     @property
     def has_augmentation(self) -> bool:

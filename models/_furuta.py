@@ -8,7 +8,7 @@ machinery as network weights (``eqx.filter(model, eqx.is_inexact_array)``).
 from __future__ import annotations
 
 import math
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -69,10 +69,9 @@ def furuta_lumped(p: FurutaParameters | Mapping[str, float]) -> dict[str, jnp.nd
     (¼mp·Lp², the sin²β term), Jc (½mp·Lr·Lp), J2 (Jp + ¼mp·Lp²), G (½mp·g·Lp). The
     diagnosis fits these (furuta_gym.diagnose). ``p``: parameters, or a mapping of plain floats
     (then the values are floats: the env's per-step energy touches no JAX)."""
-    if isinstance(p, Mapping):
-        p = _FloatParameters(p)
-    return {"J1": p.J1, "J1b": 0.25 * p.mp * p.Lp**2, "Jc": 0.5 * p.mp * p.Lr * p.Lp, "J2": p.J2,
-            "G": 0.5 * p.mp * p.g * p.Lp}
+    q: Any = _FloatParameters(p) if isinstance(p, Mapping) else p  # FurutaParameters' fields
+    return {"J1": q.J1, "J1b": 0.25 * q.mp * q.Lp**2, "Jc": 0.5 * q.mp * q.Lr * q.Lp, "J2": q.J2,
+            "G": 0.5 * q.mp * q.g * q.Lp}
 
 
 def _mass_entries(J1, J1b, Jc, sin_beta, cos_beta):
@@ -93,7 +92,7 @@ def furuta_potential(G, q, cos=jnp.cos):
 
 def furuta_energy(lumped: Mapping[str, float], x) -> float:
     """T + V at the state ``x`` = (α, β, α̇, β̇) on plain floats, from :func:`furuta_lumped`
-    values: the envs' per-step ``info["energy"]``, where a JAX call would cost 100× the step."""
+    values: the envs' per-step ``info["energy"]``, where a JAX call would cost far more than the step."""
     _, beta, alpha_dot, beta_dot = x
     m11, m12 = _mass_entries(lumped["J1"], lumped["J1b"], lumped["Jc"], math.sin(beta), math.cos(beta))
     kinetic = 0.5 * (m11 * alpha_dot * alpha_dot + 2.0 * m12 * alpha_dot * beta_dot

@@ -30,7 +30,7 @@ class LumpedSystem(AbstractLagrangianSystem):
         missing = sorted(set(names) - set(values))
         if missing:
             raise ValueError(f"lumped parameters of {system}: missing {missing}; expected {list(names)}")
-        return cls(jnp.asarray([float(values[n]) for n in names]), get_spec(system).name)
+        return cls(values=jnp.asarray([float(values[n]) for n in names]), system=get_spec(system).name)
 
     def _value(self, name: str):
         return self.values[system_definition(self.system).lumped.names.index(name)]

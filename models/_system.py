@@ -10,7 +10,7 @@ system's name; a third system is one new module plus a line in :data:`SYSTEM_DEF
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 import jax.numpy as jnp
 
@@ -32,7 +32,7 @@ def scalar(x) -> jnp.ndarray:
 def parameter_defaults(cls) -> dict[str, float]:
     """A parameter class's pinned values as plain floats, read from its fields (no JAX array is
     made: a MuJoCo-only env never touches JAX's configuration)."""
-    return {f.name: float(f.default) for f in dataclasses.fields(cls)}
+    return {f.name: float(cast(float, f.default)) for f in dataclasses.fields(cls)}
 
 
 def first_joint_input(spec: SystemSpec, gain, u):

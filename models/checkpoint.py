@@ -60,7 +60,7 @@ def package_versions() -> dict[str, str]:
 
 @functools.lru_cache(maxsize=1)
 def _package_versions() -> dict[str, str]:
-    # installed versions do not change in a running process; reading them costs ~7 ms, and a
+    # installed versions do not change in a running process; reading them is slow, and a
     # training run writes a header after every epoch
     out = {}
     for name in ("furuta-gym", "jax", "jaxlib", "equinox", "diffrax", "optax", "numpy"):
@@ -201,6 +201,8 @@ def _skeleton(header: dict, path: Path, expected_system: str | None, expected_ki
         raise CheckpointError(f"{path}: this checkpoint is a {kind!r} model; expected {expected_kind!r}")
     if kind not in MODEL_KINDS:
         raise CheckpointError(f"{path}: unknown model kind {kind!r} in header")
+    if not isinstance(system, str):
+        raise CheckpointError(f"{path}: the header names no system")
     hparams = {k: _tuplify(v) for k, v in header.get("hparams", {}).items()}
     form = header.get("format", 1)
     if form not in (1, HEADER_FORMAT):
@@ -281,7 +283,7 @@ def save_training_state(path: str | Path, model, opt_state, header_extra: dict, 
     return path
 
 
-def load_training_state(path: str | Path, model_skeleton, opt_state_skeleton, *, with_best: bool = False):
+def load_training_state(path: str | Path, model_skeleton, opt_state_skeleton, *, with_best: bool = False) -> tuple[Any, ...]:
     """(model, opt_state, header) from :func:`save_training_state`; skeletons give the structure.
     ``with_best``: (model, opt_state, header, best model or None)."""
     path = Path(path)

@@ -96,10 +96,10 @@ def main(argv=None) -> None:
     args = parse_selection_args(parser, argv, "results/augmentation_weight")
 
     import furuta_gym
-    from furuta_gym.training.reproduce import _machine
+    from furuta_gym.training.reproduce import machine_info
 
     furuta_gym.enable_x64()
-    machine = _machine()
+    machine = machine_info()
     folder = args.out / f"{args.system}_{args.kind}"
     runs = {w: folder / f"mu_{w:g}" for w in args.weights}
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:

@@ -83,7 +83,7 @@ def _train(system: str, kind: str, where: str, name: str, value, out: Path,
 def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path, seed: int = 0) -> bool:
     """Copy ``source``'s run of this model and ``seed`` into ``out`` if it was trained with exactly
     the candidate's settings (the reproduction's own comparison decides); True if ``out`` holds it."""
-    from furuta_gym.training.reproduce import _run_settings, _same_settings
+    from furuta_gym.training.reproduce import run_settings, same_settings
 
     src = _run_dir(source, system, kind, seed)
     dst = _run_dir(out, system, kind, seed)
@@ -92,7 +92,7 @@ def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path, 
     if dst.exists():  # copied by an earlier invocation?
         return (dst / "model.eqx").exists() and (dst / "model.eqx").read_bytes() == (src / "model.eqx").read_bytes()
     saved = json.loads((src / "reproduce_config.json").read_text())
-    if not _same_settings(saved, _run_settings(system, kind, "prop", seed, config)):
+    if not same_settings(saved, run_settings(system, kind, "prop", seed, config)):
         return False
     dst.mkdir(parents=True)
     for name in ("model.eqx", "metrics.json", "reproduce_config.json", "history.json"):
@@ -289,10 +289,10 @@ def _decide(args, rows, sets: list, names: list) -> tuple[list[str], dict, dict]
 def main(argv=None) -> None:
     args = _arguments(argv)
     import furuta_gym
-    from furuta_gym.training.reproduce import _machine
+    from furuta_gym.training.reproduce import machine_info
 
     furuta_gym.enable_x64()
-    machine = _machine()
+    machine = machine_info()
     rows = _scores(args, *_train_candidates(args))
     first = next(iter(next(iter(rows.values())).values()))
     sets = list(first["sets"])

@@ -382,20 +382,20 @@ def test_run_records_compare_within_their_form_and_a_later_setting_as_its_defaul
     """A record of another form (RUN_RECORD_SCHEMA) is never reused; a record without the key is
     form 1. Within a form, a training setting the record lacks counts as its default; a model
     hyper-parameter it lacks makes it another model."""
-    from furuta_gym.training.reproduce import RUN_RECORD_SCHEMA, _run_settings, _same_settings
+    from furuta_gym.training.reproduce import RUN_RECORD_SCHEMA, run_settings, same_settings
 
-    current = _run_settings("furuta", "adln", "prop", 0, ReproduceConfig())
+    current = run_settings("furuta", "adln", "prop", 0, ReproduceConfig())
     assert current["schema"] == RUN_RECORD_SCHEMA == 1
     unversioned = {k: v for k, v in current.items() if k != "schema"}
-    assert _same_settings(unversioned, current)
-    assert not _same_settings(dict(current, schema=2), current)
+    assert same_settings(unversioned, current)
+    assert not same_settings(dict(current, schema=2), current)
     older = json.loads(json.dumps(current))
     del older["train"]["fast_compile"]  # added later, default False: what runs did before
-    assert _same_settings(older, current)
-    assert not _same_settings(older, dict(current, train=dict(current["train"], fast_compile=True)))
+    assert same_settings(older, current)
+    assert not same_settings(older, dict(current, train=dict(current["train"], fast_compile=True)))
     no_option = json.loads(json.dumps(current))
     del no_option["model_hparams"]["odd_in_velocity"]
-    assert not _same_settings(no_option, current)
+    assert not same_settings(no_option, current)
 
 
 def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
@@ -440,7 +440,7 @@ def test_cli_executor_options_and_what_a_ray_worker_is_told():
 
 def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys():
     """A run trained with a model option records it, so it is never reused for the default model."""
-    from furuta_gym.training.reproduce import _default_hparams, _same_settings
+    from furuta_gym.training.reproduce import _default_hparams, same_settings
 
     default = _default_hparams("furuta", "adln")
     odd = _default_hparams("furuta", "adln", {"odd_in_velocity": True})
@@ -448,7 +448,7 @@ def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys
     assert {k: v for k, v in odd.items() if k != "odd_in_velocity"} == \
         {k: v for k, v in default.items() if k != "odd_in_velocity"}
     record = {"system": "furuta", "model": "adln", "loss": "prop", "seed": 0, "train": {}}
-    assert not _same_settings(dict(record, model_hparams=odd), dict(record, model_hparams=default))
+    assert not same_settings(dict(record, model_hparams=odd), dict(record, model_hparams=default))
     with pytest.raises(ValueError, match="unknown DeLaN hyper-parameters|unknown"):
         _default_hparams("furuta", "dln", {"odd_in_velocity": True})
 

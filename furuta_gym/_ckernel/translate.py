@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import jax
 import numpy as np
@@ -389,7 +389,7 @@ class _Translator:
         from jax.extend.core import Literal
 
         if isinstance(atom, Literal):
-            aval = atom.aval
+            aval: Any = atom.aval  # a ShapedArray
             value = np.asarray(atom.val)
             value = value.astype(aval.dtype).reshape(aval.shape)
             if value.size != 1:

@@ -1,8 +1,8 @@
 """The persistent JAX compilation cache the training commands turn on.
 
-A training step with the trajectory loss compiles for ~20 s; a persistent cache pays that once
-per machine instead of once per run (and, with it, :mod:`furuta_gym.training._step_cache`
-stores the traced steps too, so a warm first call takes ~1 s). The library itself never writes
+A training step with the trajectory loss takes long to compile; a persistent cache pays that
+once per machine instead of once per run (and, with it, :mod:`furuta_gym.training._step_cache`
+stores the traced steps too, so a warm first call skips tracing as well). The library itself never writes
 caches; the ``train`` and ``reproduce`` commands do, in ``jax/`` under the cache root of
 :func:`furuta_gym._paths.cache_root` (``~/.cache/furuta_gym`` unless ``FURUTA_GYM_CACHE`` or
 ``XDG_CACHE_HOME`` move it) — or wherever ``JAX_COMPILATION_CACHE_DIR`` points. Set

@@ -9,6 +9,7 @@ start and cut elementary trajectories (:func:`furuta_gym.measured.prepare_log`).
 from __future__ import annotations
 
 import argparse
+from typing import Any, Callable
 from pathlib import Path
 
 __all__ = ["pairs", "qube_runs", "read_logs", "load_logs", "add_log_arguments", "prepared_logs", "QUBE_SKIP"]
@@ -18,7 +19,7 @@ __all__ = ["pairs", "qube_runs", "read_logs", "load_logs", "add_log_arguments", 
 QUBE_SKIP = 0.5
 
 
-def pairs(text: str | None, what: str, convert=str) -> dict:
+def pairs(text: str | None, what: str, convert: Callable[[str], Any] = str) -> dict:
     out = {}
     if not text:
         return out
@@ -114,7 +115,7 @@ def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | No
     parser.add_argument("--split", type=float, default=split_default, metavar="SECONDS", help=split_help)
 
 
-def prepared_logs(paths, args, *, split="measured", min_seconds: float = 0.0) -> tuple[list, list[str]]:
+def prepared_logs(paths, args, *, split: float | str | None = "measured", min_seconds: float = 0.0) -> tuple[list, list[str]]:
     """Training / test trajectories of ``paths`` (:func:`furuta_gym.measured.prepare_log` per
     log; ``args`` carries the :func:`add_log_arguments` options and ``system``) and notes on what
     was estimated. ``split``: seconds per elementary trajectory, ``None`` whole logs, or
@@ -128,7 +129,7 @@ def prepared_logs(paths, args, *, split="measured", min_seconds: float = 0.0) ->
         is_qube = source.startswith("qube")
         skip = args.skip if args.skip is not None else (QUBE_SKIP if is_qube else 0.0)
         for tr in trajs:
-            seconds = split
+            seconds: Any = split
             if split == "measured":
                 seconds = args.split if args.split is not None else (
                     SPLIT_SECONDS[args.system] if tr.qd is None else None)

@@ -12,6 +12,7 @@ Existing outputs are never overwritten unless ``--overwrite`` is given.
 from __future__ import annotations
 
 import argparse
+from typing import Any, cast
 
 from ..systems import SYSTEMS
 from pathlib import Path
@@ -63,7 +64,7 @@ def run(args) -> int:
 
     import furuta_gym  # noqa: F401  (registers the envs)
     from ..data import Trajectory, save_trajectories
-    from ..envs import ENV_IDS, Camera, Episode
+    from ..envs import ENV_IDS, Camera, Episode, LagrangianEnv
 
     outputs = [p for p in (args.out, args.video, args.data) if p is not None]
     if args.out.suffix.lower() != ".png":
@@ -77,13 +78,13 @@ def run(args) -> int:
     if not (np.isfinite(args.seconds) and args.seconds > 0):
         raise ValueError(f"--seconds must be > 0, got {args.seconds}")
 
-    kwargs = dict(dynamics=args.dynamics, episode=Episode(seconds=None))
+    kwargs: dict[str, Any] = dict(dynamics=args.dynamics, episode=Episode(seconds=None))
     if args.plant:
         kwargs["plant"] = args.plant
     if args.video is not None:
         kwargs.update(render_mode="rgb_array", camera=Camera(width=480, height=360))
     env = gym.make(ENV_IDS[args.system], **kwargs)
-    unwrapped = env.unwrapped
+    unwrapped = cast(LagrangianEnv, env.unwrapped)
     amplitude = 0.6 * unwrapped.max_action if args.amplitude is None else float(args.amplitude)
     rng = np.random.default_rng(args.seed)
     policy = _policy(args.policy, env, amplitude, args.seconds, rng)

@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     data_info = _describe_data(args, trajs, notes)
     from ._cache import enable_compilation_cache
 
-    enable_compilation_cache()  # ~20 s of compiling once per machine, not once per run
+    enable_compilation_cache()  # compiling once per machine, not once per run
     config = _config(args)
     hparams = {"hidden": args.hidden} if args.hidden else None
     try:

@@ -216,6 +216,7 @@ class DiagnosisResult:
         rests = _spring_rests(self.significant)
         out = []
         for e in self.significant:
+            assert e.coefficient is not None  # a significant effect was fitted
             if e.joint in rests and e.kind.absorbs_constant_force:
                 out.append(Effect(e.name, e.joint, float(e.coefficient), reference=rests[e.joint]))
             elif not (e.joint in rests and e.kind.is_constant_force):
@@ -315,6 +316,7 @@ def _check_data(trajs: list[Trajectory], spec, settings: DiagnosisSettings) -> N
         raise DataError(f"trajectories have different sample periods {sorted(set(dts))}; expected one")
     dt = dts[0]
     total = sum(len(tr) for tr in trajs) * dt
+    assert settings.window is not None  # resolved settings
     need = 10 * settings.window + 2 * settings.trim_seconds * len(trajs)
     if total < need:
         raise DataError(
@@ -552,6 +554,7 @@ class _Fitter:
     def errors(self, theta, segs, prob) -> ErrorSummary:
         r = prob.R @ theta
         win = _fit.make_windows(segs, self.L, self.dynamics)
+        assert win is not None  # the segments were cut to hold windows of this length
         per_q, comb = _fit.window_errors(self.layout, theta, win, self.substeps)
         names = self.spec.joint_names
         return ErrorSummary(

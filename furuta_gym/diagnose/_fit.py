@@ -432,7 +432,9 @@ def oe_fit(
     lower[:n_base] = 0.0
     lo = lower[free] / scale[free]
     z0 = np.maximum(z0, lo + 1e-9)
-    sol = least_squares(f, z0, jac=J, method="trf", bounds=(lo, np.inf), max_nfev=max_nfev, x_scale="jac")
+    # scipy's annotation of jac leaves out the callable it takes
+    sol = least_squares(f, z0, jac=J, method="trf", bounds=(lo, np.inf), max_nfev=max_nfev,  # pyright: ignore[reportArgumentType]
+                        x_scale="jac")
     if sol.cost >= 0.5 * float(r0 @ r0):  # never return something worse than the start
         return theta_start, False
     return full(sol.x), True

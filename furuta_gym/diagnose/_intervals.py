@@ -18,6 +18,7 @@ instead, windows (or blocks) as clusters (:func:`cluster_intervals`).
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 from scipy.special import stdtrit
@@ -181,7 +182,7 @@ class FitOrigin:
     kind: str  # "output_error" or "equation_error"
     theta: np.ndarray
     free: np.ndarray
-    dynamics: object  # _fit.InputDynamics
+    dynamics: Any  # _fit.InputDynamics
     start_iterations: int = 0
     held: tuple = ()  # ((index, why), ...)
     recorded: bool = True  # False: no fit's recorded estimate; the Jacobian is taken at the reported θ

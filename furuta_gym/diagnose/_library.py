@@ -91,8 +91,8 @@ class ParameterLayout:
         ``dry_friction=False`` leaves the library's dry friction out of τ_NC (a predictor then
         adds it with :meth:`dry_friction_limit`)."""
         if self.learned is None:
-            return LumpedModel(theta, self.system, dry_friction)
-        return LearnedWithLibrary(theta, self.learned, dry_friction)
+            return LumpedModel(theta=theta, system=self.system, dry_friction=dry_friction)
+        return LearnedWithLibrary(theta=theta, base=self.learned, dry_friction=dry_friction)
 
     def dry_friction_limit(self, theta, qd):
         """The library's dry friction at q̇ as the largest force per joint (N·m or N), for

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -144,7 +145,7 @@ def _save(fig, path: Path) -> None:
     fig.savefig(path, dpi=_DPI)
 
 
-def _figure(layout="tight", **kw):
+def _figure(layout: Any = "tight", **kw):
     # a bare Figure (no pyplot): no global backend switch, no open-figure registry to leak into
     from matplotlib.figure import Figure
 

@@ -119,7 +119,7 @@ def _telegraph(n: int, dt: float, rng, level: float, unit: float, most: int) -> 
 
 def _smoothed(x: np.ndarray, keep: float = 5.0 / 7.0) -> np.ndarray:
     """The rig's first-order smoothing of its references and excitation (≈ 6 ms at 500 Hz)."""
-    return lfilter([1.0 - keep], [1.0, -keep], x)
+    return np.asarray(lfilter([1.0 - keep], [1.0, -keep], x))
 
 
 def _excitation(n: int, dt: float, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -277,8 +277,8 @@ def measured_like(
     T = int(round(duration / dt)) + 1
     t = np.arange(T) * dt
     # the new experiments integrate MuJoCo finely too: under RK4 the sgn law lets a rotor held by
-    # dry friction against a spring creep at a rate ∝ the step (~3 mrad/s, one count per
-    # 0.3–0.5 s at 2 ms; ~0.3 mrad/s at 0.2 ms), where a real rotor sticks
+    # dry friction against a spring creep at a rate ∝ the step (an encoder count every fraction
+    # of a second at 2 ms), where a real rotor sticks
     sim = _Plant(system, effects, plant, dt, substeps, fine=excitation != "chirp")
     sense = quantize_encoder if quantize else (lambda q: q)
     out = []
@@ -299,5 +299,5 @@ def measured_like(
                 q = sense(q)
             else:
                 q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)
-        out.append(Trajectory(t=t.copy(), q=q, u=u[:, None], qd=None, name=str(k)))
+        out.append(Trajectory(t=t.copy(), q=np.asarray(q), u=u[:, None], qd=None, name=str(k)))
     return out

@@ -70,6 +70,7 @@ class AbstractBackend(abc.ABC):
     """
 
     system: str  # "furuta" or "nmsd"
+    _parameters: dict[str, float]
     timestep: float  # seconds per RK4 step
     substeps: int  # RK4 steps per control period
     #: whether the backend applies an ``actuator_lag`` effect itself (else the env does)
@@ -152,7 +153,9 @@ def mjcf_text(system: str, actuator_lag: bool = False) -> str:
         return path.read_text()
     # the activation changes the model's sizes (na), so it is added before compiling
     root = ET.parse(path).getroot()
-    (actuator,) = list(root.find("actuator"))
+    actuators = root.find("actuator")
+    assert actuators is not None, path
+    (actuator,) = list(actuators)
     if actuator.tag == "motor":  # <motor> is <general> with gain 1 and no bias, minus dyntype
         actuator.tag = "general"
     # 'filter', not 'filterexact': MuJoCo's RK4 integrates the activation with the state at every
@@ -235,6 +238,7 @@ def apply_parameters(
     form = MujocoForm(np.array(terms.stiffness, float), np.zeros(n), np.array(terms.damping, float), shift=np.zeros(n))
     for e in effects:  # each kind writes itself: native terms, or laws for the callback
         e.kind.to_mujoco(e, -1 if e.kind.on_input else e.joint_index(spec), form)
+    assert form.shift is not None
     extra = PassiveForces({dof: cubic for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping))
                            if any(cubic)}, form.laws, form.shift, form.neutrals)
     # masses changed: refresh MuJoCo's derived constants (e.g. the constant mass of a body that
@@ -354,7 +358,13 @@ class MujocoBackend(AbstractBackend):
         self._n = self.spec.n_dof
         self._callback = None
         self._bind_views()
-        self.set_parameters(parameters or (plant.lumped if plant is not None else default_parameters(self.system)))
+        self.set_parameters(parameters or self._nominal())
+
+    def _nominal(self) -> dict[str, float]:
+        """The parameters set_parameters starts from: the plant's lumped ones, or the pinned ones."""
+        if self.plant is not None and self.plant.lumped is not None:  # (a plant always has them)
+            return dict(self.plant.lumped)
+        return default_parameters(self.system)
 
     def _bind_views(self) -> None:
         # MjData's array attributes build a new NumPy view on every access; the step path reuses
@@ -363,7 +373,7 @@ class MujocoBackend(AbstractBackend):
 
     def set_parameters(self, values: Mapping[str, float]) -> None:
         """Physical parameters (any subset), or for a ``plant=`` backend its lumped ones."""
-        nominal = dict(self.plant.lumped) if self.plant is not None else default_parameters(self.system)
+        nominal = self._nominal()
         unknown = sorted(set(values) - set(nominal))
         if unknown:
             what = "lumped parameter(s) of its plant" if self.plant is not None else "parameter(s)"
@@ -455,7 +465,7 @@ class MujocoBackend(AbstractBackend):
         return state
 
     def __setstate__(self, state):
-        self.__dict__.update(state)
+        vars(self).update(state)
         self._bind_views()
         self._apply_parameters()
 
@@ -496,8 +506,8 @@ def _compiled_steps(static, rebuild, treedef_key, timestep: float, substeps: int
     The model's arrays travel as ``(vector, matrices)``: every scalar and vector leaf raveled into
     ONE float64 vector (one argument to flatten per call instead of many, and XLA fuses the
     unravelling slices into their elementwise consumers), the matrices (network weights) as a
-    list of their own: a slice feeding a matrix product is a separate XLA kernel per leaf and call
-    (~8 µs of a ~50 µs single-copy DeLaN step).
+    list of their own: a slice feeding a matrix product is a separate XLA kernel per leaf and call,
+    a large share of a single-copy step.
     """
     key = (treedef_key, timestep, substeps)
     try:
@@ -621,6 +631,7 @@ class _CStepper:
         if self._xla_split is not None:
             self._x_buf[:] = np.asarray(self._xla_split(self._dynamic, jnp.asarray(self._x_buf), u_first, n_first, u))
             return self._x_buf.copy()
+        assert self._split is not None
         call, (u_first_buf, n_buf, u_buf) = self._split
         u_first_buf[:] = u_first
         n_buf[...] = n_first
@@ -681,7 +692,7 @@ class ModelBackend(AbstractBackend):
         self._n = self.spec.n_dof
         self._scene = None
         # the model's own parameter values (an analytic model may carry non-pinned ones)
-        self._parameters = _params_as_floats(model.params) if self._has_parameters() else {}
+        self._parameters = _params_as_floats(getattr(model, "params")) if self._has_parameters() else {}
         if parameters:
             self.set_parameters(parameters)
         else:
@@ -739,7 +750,7 @@ class ModelBackend(AbstractBackend):
         unknown = sorted(set(values) - set(nominal))
         if unknown:
             raise ValueError(f"unknown {self.system} parameter(s) {unknown}; expected {list(nominal)}")
-        merged = {**{k: float(v) for k, v in _params_as_floats(self.base_model.params).items()}}
+        merged = {**{k: float(v) for k, v in _params_as_floats(getattr(self.base_model, "params")).items()}}
         merged.update({k: float(v) for k, v in values.items()})
         self._parameters = merged
         params = PARAMETER_CLASSES[self.system](**merged)
@@ -755,7 +766,7 @@ class ModelBackend(AbstractBackend):
         return self._stepper.step_split(u_first, n_first, u)
 
     @property
-    def state(self) -> np.ndarray:
+    def state(self) -> np.ndarray | None:  # None before the first reset
         return self._stepper.state
 
     def _scene_data(self):
@@ -777,7 +788,7 @@ class ModelBackend(AbstractBackend):
 
     def __setstate__(self, state):
         x = state.pop("_pickled_state", None)
-        self.__dict__.update(state)
+        vars(self).update(state)
         self._stepper = None
         if self._parameters and self._has_parameters():
             self.set_parameters(self._parameters)

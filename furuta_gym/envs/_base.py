@@ -80,7 +80,7 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
     :attr:`default_max_action`, and implement :meth:`_make_task` (and optionally the other hooks).
     """
 
-    metadata: ClassVar[dict] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
 
     system: ClassVar[str]
     #: its Gymnasium id (``register_envs`` registers every class of ``ENV_CLASSES`` under it)

@@ -1,4 +1,4 @@
-"""The pure-JAX control step and rollout behind the batched env (issue 4, item 3).
+"""The pure-JAX control step and rollout behind the batched env.
 
 One *controlled step* is what a model-backed env does between two ``env.step`` calls, written as a
 pure function of JAX arrays so it can be ``vmap``-ed over copies and ``scan``-ned over time:
@@ -26,6 +26,7 @@ from typing import Any, Callable, NamedTuple
 
 import equinox as eqx
 import jax
+import jax.core
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
@@ -79,7 +80,7 @@ class Rollout(NamedTuple):
     done: Bool[Array, "N T"]
 
 
-def is_diverged(x: Float[Array, " 2n"], state_bound=DEFAULT_STATE_BOUND) -> Bool[Array, ""]:
+def is_diverged(x: Float[Array, " 2n"], state_bound: float | tuple[float, ...] = DEFAULT_STATE_BOUND) -> Bool[Array, ""]:
     """True when the state is non-finite or any component exceeds ``state_bound`` in magnitude
     (one bound, or a tuple of one per component: ``inf`` leaves a component, e.g. an angle, to
     the finiteness test; see :func:`furuta_gym.envs._tasks.divergence_bounds`)."""
@@ -110,7 +111,7 @@ def controlled_step(
     dt: float,
     substeps: int = 1,
     action_limit: float | None = None,
-    state_bound: float = DEFAULT_STATE_BOUND,
+    state_bound: float | tuple[float, ...] = DEFAULT_STATE_BOUND,
     reward_fn: RewardFn | None = None,
     terminated_fn: TerminatedFn | None = None,
 ) -> StepOutput:
@@ -138,13 +139,13 @@ def controlled_step(
 def rollout(
     system: AbstractLagrangianSystem,
     policy: Callable,
-    x0s: Float[Array, "N 2n"] | Float[Array, " 2n"],
+    x0s: Float[Array | np.ndarray, "N 2n"] | Float[Array | np.ndarray, " 2n"],
     steps: int,
     *,
     dt: float,
     substeps: int = 1,
     action_limit: float | None = None,
-    state_bound: float = DEFAULT_STATE_BOUND,
+    state_bound: float | tuple[float, ...] = DEFAULT_STATE_BOUND,
     reward_fn: RewardFn | None = None,
     terminated_fn: TerminatedFn | None = None,
     observation_fn: Callable[[Array], Array] | None = None,
@@ -167,7 +168,7 @@ def rollout(
 
     ``chunks``: the batch runs as this many contiguous sub-batches, concurrently from threads
     (XLA:CPU runs separate executions side by side, while one execution of a small-network model
-    keeps about one core busy: DeLaN, N = 4 096, 2 cores: 647 k → 1.21 M state-steps/s with 2).
+    keeps about one core busy; docs/batched.md "Speed").
     Default: one per core from 512 copies on, else 1; always 1 when called inside a JAX
     transformation (jit, vmap), where the rollout becomes part of the caller's computation. No
     copy's numbers depend on it.
@@ -207,6 +208,7 @@ def rollout(
         with ThreadPoolExecutor(int(chunks), thread_name_prefix="furuta_gym-rollout") as pool:
             parts = map_chunks(lambda a, b: run(batch[a:b]), n, int(chunks), pool)
         out = Rollout(*(jnp.concatenate(fields, axis=0) for fields in zip(*parts)))
+    assert isinstance(out, Rollout)
     if single:
         out = Rollout(*(a[0] for a in out))
     return out
@@ -237,7 +239,7 @@ def _chunk_count(chunks, n: int) -> int:
         return (os.cpu_count() or 1) if n >= 512 else 1
     if isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or not 1 <= chunks <= n:
         raise ValueError(f"chunks must be an integer from 1 to the number of copies ({n}), got {chunks!r}")
-    return chunks
+    return int(chunks)
 
 
 def chunk_bounds(n: int, chunks: int) -> np.ndarray:
@@ -300,14 +302,14 @@ def scan_closed_loop(
     dt: float,
     substeps: int = 1,
     action_limit: float | None = None,
-    state_bound: float = DEFAULT_STATE_BOUND,
+    state_bound: float | tuple[float, ...] = DEFAULT_STATE_BOUND,
     reward_fn: RewardFn | None = None,
     terminated_fn: TerminatedFn | None = None,
     observation_fn: Callable[[Array], Array] | None = None,
     observer: Any = None,
     stateful: bool = True,
     record: bool = False,
-):
+) -> Any:
     """The one closed loop of the package: one copy, ``steps`` controlled steps in ``lax.scan``.
 
     Each step observes the state, asks the policy, and takes :func:`controlled_step`; after an
@@ -362,7 +364,7 @@ def scan_closed_loop(
     _, records = jax.lax.scan(body, init, None, length=steps)
     xs, us, rs, term, div, done = records[:6]
     out = Rollout(jnp.concatenate([x0[None], xs], axis=0), us, rs, term, div, done)
-    return (out, records[6], records[7]) if record else out
+    return (out, *records[6:]) if record else out
 
 
 def _rollout_vmapped(system, policy, x0s, *, policy_state, **options):
@@ -377,6 +379,7 @@ def _rollout_batch(*args, **kwargs):
     import) with the model-step options of :func:`furuta_gym.simulate.small_kernel_compiler_options`."""
     if not _ROLLOUT_JIT:
         _ROLLOUT_JIT.append(
-            eqx.filter_jit(_rollout_vmapped, compiler_options=small_kernel_compiler_options())
+            # equinox's overloads leave out the jax.jit keywords it passes on
+            eqx.filter_jit(_rollout_vmapped, compiler_options=small_kernel_compiler_options())  # pyright: ignore[reportCallIssue]
         )
     return _ROLLOUT_JIT[0](*args, **kwargs)

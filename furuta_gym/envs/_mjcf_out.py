@@ -36,6 +36,9 @@ def plant_mjcf(plant: Plant) -> str:
     ``<custom><text name="furuta_gym_plant">``. Plain MuJoCo loads it with the native terms only;
     furuta-gym's ``plant=`` restores the rest. Numbers are written to full precision (MuJoCo's
     own writer keeps six digits)."""
+    if plant.system is None or plant.lumped is None:
+        raise ValueError("plant_mjcf: the plant must be a whole one, with its system and lumped parameters "
+                         "(Plant.nominal(system), or a diagnosis' plant)")
     model = MujocoBackend(plant.system, plant=plant).model
     root = ET.fromstring(mjcf_text(plant.system, actuator_lag=model.na > 0))
     _write_model_into_xml(model, root)

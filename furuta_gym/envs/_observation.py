@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import types
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 from gymnasium import spaces
@@ -25,7 +25,7 @@ __all__ = ["Observer", "present_components"]
 _FLOATS = types.SimpleNamespace(cos=math.cos, sin=math.sin, clip=lambda v, lo, hi: min(max(v, lo), hi))
 
 
-def present_components(z, angular, observation: str, bound: float, xp=_FLOATS) -> list:
+def present_components(z, angular, observation: str, bound: float, xp: Any = _FLOATS) -> list:
     """The components of a measured state ``z`` = (q, q̇) in the bounded layouts, as a list.
 
     "trig": each angle as (cos, sin); "wrapped": angles in (−π, π]; in both, the other components
@@ -79,7 +79,7 @@ class Observer:
             q = quantize_joints(q, self.quant)
         if self.noise[:n].any():
             q = q + self.noise[:n] * self.random().standard_normal(n)
-        return q
+        return np.asarray(q)
 
     def measure(self, x: np.ndarray) -> np.ndarray:
         """Sensor model: quantised, noisy positions; exact or derivative-filtered velocities

@@ -417,7 +417,7 @@ def settings_from_keywords(owner: str, settings: dict[str, Any], types: Mapping[
 
 
 #: the folders whose frames a deprecation warning skips to point at the user's line
-_INTERNAL = tuple(os.path.dirname(m.__file__) + os.sep for m in (gymnasium, sys.modules[__name__.split(".")[0]]))
+_INTERNAL = tuple(os.path.dirname(str(m.__file__)) + os.sep for m in (gymnasium, sys.modules[__name__.split(".")[0]]))
 
 
 def _outside_stacklevel() -> int:

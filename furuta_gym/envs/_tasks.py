@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import types
+from typing import Any
 
 import numpy as np
 
@@ -100,7 +101,7 @@ def divergence_bounds(state_bound: float, angular) -> tuple[float, ...]:
     return tuple(math.inf if a else bound for a in angular) + (bound,) * len(angular)
 
 
-def is_diverged(x, state_bound=DEFAULT_STATE_BOUND):
+def is_diverged(x, state_bound: Any = DEFAULT_STATE_BOUND):
     """True when a state (float sequence or array, last axis = state) is non-finite or absurd.
 
     ``state_bound``: one magnitude for every component, or one per component (see

@@ -7,10 +7,13 @@ settings a stateless batched copy cannot reproduce.
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
+from gymnasium import spaces
 
+from ..lagrangian import SystemSpec
+from ._observation import Observer
 from ._settings import EnvArgumentError
 
 __all__ = ["BatchTemplate"]
@@ -18,6 +21,26 @@ __all__ = ["BatchTemplate"]
 
 class BatchTemplate:
     """The queries a :class:`~furuta_gym.envs.vector.LagrangianVectorEnv` makes of its template."""
+
+    # set by LagrangianEnv.__init__
+    reset_option_names: ClassVar[tuple[str, ...]]
+    _spec: SystemSpec
+    _observer: Observer
+    _randomize: dict
+    _max_steps: int | None
+    _has_delay: bool
+    _lag_tau: float
+    observation: str
+    dtype: np.dtype
+    normalize_action: bool
+    action_space: spaces.Box
+    observation_space: spaces.Box
+
+    def _initial_state(self, rng: np.random.Generator | None) -> np.ndarray:
+        raise NotImplementedError
+
+    def _options(self, options: Mapping[str, Any]) -> None:
+        raise NotImplementedError
 
     @property
     def system_spec(self):

@@ -1,11 +1,10 @@
 """Worker processes for the batched env: each steps a contiguous slice of the copies.
 
 Why processes: one XLA:CPU execution of a batched small-network step keeps one core busy and
-spends the other spinning (batched DeLaN RK4 step, N = 4096, 2 cores: 6.7 ms wall and 9.3 ms CPU
-against 6.5 ms on one pinned core); threads in one process share XLA's intra-op pool and reach
-only ~1.4 cores. A worker whose XLA pool has one thread keeps one core busy, so K workers on K
-cores add up (docs/batched.md "Speed"). The price: start-up (a worker imports JAX and compiles its step,
-~3 s) and a socket round trip per step (~50 µs), so this pays for thousands of copies, not tens.
+spends the others spinning; threads in one process share XLA's intra-op pool and reach little
+more. A worker whose XLA pool has one thread keeps one core busy, so K workers on K cores add up
+(docs/batched.md "Speed" has the measurements). The price: start-up (a worker imports JAX and
+compiles its step) and a socket round trip per step, so this pays for thousands of copies, not tens.
 
 Workers are fresh interpreters (``python -m furuta_gym.envs._workers``) that connect back over a
 local socket, not ``multiprocessing`` children: those re-import the user's main script, which then
@@ -60,15 +59,14 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
             # XLA:CPU sizes its thread pool from the cores this process may use when its backend
             # starts: one core gives one thread, none left spinning against the other workers.
             # Then the scheduler may place the worker anywhere again: kept pinned, a worker woken
-            # on the env's own core waited for the env to yield it, and the workers ran in turn
-            # (N = 4096: 7.9 ms a step instead of 3.9 ms).
+            # on the env's own core waited for the env to yield it, and the workers ran in turn.
             allowed = os.sched_getaffinity(0)
             os.sched_setaffinity(0, {core})
             jax.devices()
             os.sched_setaffinity(0, allowed)
         if hasattr(os, "SCHED_BATCH"):
             # a batch-class worker does not pre-empt the env's process when woken, so the env
-            # sends every worker its step at once (without: one step in ten took 4–6 ms, not 4)
+            # sends every worker its step at once (without it, some steps waited a worker's turn)
             try:
                 os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
             except OSError:
@@ -124,7 +122,7 @@ def _attach(name: str) -> shared_memory.SharedMemory:
     try:
         from multiprocessing import resource_tracker
 
-        resource_tracker.unregister(block._name, "shared_memory")
+        resource_tracker.unregister(getattr(block, "_name"), "shared_memory")
     except Exception:  # the tracker's layout is CPython's; without it only a warning is at stake
         pass
     return block

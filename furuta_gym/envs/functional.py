@@ -24,7 +24,7 @@ physical parameter, drawn anew at every reset (domain randomisation; analytic mo
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import equinox as eqx
 import gymnasium
@@ -72,9 +72,10 @@ class EnvState(eqx.Module):
     diverged: Bool[Array, ""]
 
 
-def _physical_of(model):
+def _physical_of(model: Any):
     """The analytic parameters inside a model (under a ``WithEffects`` wrapper, its base's)."""
-    return model.base.params if isinstance(model, WithEffects) else model.params
+    base: Any = model.base if isinstance(model, WithEffects) else model
+    return base.params
 
 
 def _has_physical(model, system: str) -> bool:
@@ -109,6 +110,7 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         if unsupported:
             raise EnvArgumentError(f"the functional env does not support {', '.join(unsupported)}")
         ensure_x64()
+        assert isinstance(template.backend, ModelBackend)  # _unsupported refuses MuJoCo
         model = template.backend.model
         dynamic, self._static = eqx.partition(model, eqx.is_array)
         self.system = template.system_spec.name
@@ -244,7 +246,7 @@ def make(env_id: str = "furuta_gym/FurutaSwingUp-v0", dynamics: Any = "analytic"
         raise EnvArgumentError("dynamics='mujoco' is not a JAX function: the functional env runs 'analytic', "
                                "a checkpoint path or a Lagrangian model")
     gym_env = gymnasium.make(env_id, dynamics=dynamics, kernel="xla", disable_env_checker=True, **kwargs)
-    template = gym_env.unwrapped
+    template = cast(LagrangianEnv, gym_env.unwrapped)
     env = FunctionalEnv(template, max_steps=gym_env.spec.max_episode_steps, name=env_id)
     return env, env.default_params
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import inspect
 import os
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, ClassVar, Sequence
+from typing import Any, ClassVar, Sequence, cast
 
 import equinox as eqx
 import gymnasium
@@ -66,11 +66,9 @@ def auto_chunks(num_envs: int, cores: int | None = None) -> int:
     """How many sub-batches :class:`LagrangianVectorEnv` steps concurrently in its own process by
     default (``workers=0``).
 
-    Measured on 2 cores (Furuta DeLaN env, docs/batched.md "Speed"): one XLA:CPU execution of a
-    few thousand copies keeps ~1.3 of 2 cores busy, and concurrent sub-batches of 512–1024
-    copies raise the rate (N = 1024: 540 k → 703 k state-steps/s with 2; N = 4096: 547 k →
-    760–790 k with 4). From ~8192 copies one execution already spreads over the cores itself and
-    splitting it costs (N = 16 384: 944 k unsplit, 767 k in 4).
+    One XLA:CPU execution of a few thousand copies does not keep every core busy, and concurrent
+    sub-batches of 512–1024 copies raise the rate; from ~8192 copies one execution already
+    spreads over the cores itself and splitting it costs (docs/batched.md "Speed").
     """
     cores = cores or os.cpu_count() or 1
     if num_envs >= 8192:
@@ -144,8 +142,8 @@ class LagrangianVectorEnv(VectorEnv):
       copies and from 8192 on).
     * ``workers=K``: K worker processes (fresh interpreters, ~3 s to start and compile), each
       stepping a contiguous slice with an XLA thread pool sized for one core; state and actions
-      travel through shared memory. For thousands of copies on K cores: at N = 4096 on 2 cores,
-      ~1.0 M state-steps/s against ~0.76 M by default in one process (docs/batched.md "Speed"). The
+      travel through shared memory. For thousands of copies on K cores, faster than the default in
+      one process (docs/batched.md "Speed"). The
       model must pickle and be importable by name in a new interpreter; call :meth:`close` (or
       use the env as a context manager) to stop the workers — they also stop when the env is
       garbage-collected or Python exits.
@@ -281,7 +279,7 @@ class LagrangianVectorEnv(VectorEnv):
                 f"{cls.__name__} steps all copies in one vmapped XLA program (chunks= and "
                 "workers= set how)"
             )
-        return chunks
+        return int(chunks)
 
     @classmethod
     def _env_id(cls) -> str:
@@ -699,7 +697,7 @@ def _batched_is_faster(env_id: str, num_envs: int, dynamics: Any, kwargs: dict) 
     if kwargs.get("render_mode") is not None or kwargs.get("kernel", "auto") != "auto":
         return False
     template = gymnasium.make(env_id, dynamics=dynamics, **kwargs).unwrapped
-    return not _unsupported_options(template)
+    return not _unsupported_options(cast(LagrangianEnv, template))
 
 
 def _unsupported_options(env: LagrangianEnv) -> list[str]:

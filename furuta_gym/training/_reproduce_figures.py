@@ -70,7 +70,8 @@ def _predictions(system, data, truth, models, tr, k):
     import matplotlib.pyplot as plt
 
     n = truth.spec.n_dof
-    fig, axes = plt.subplots(2 * n, 1, figsize=(8, 2.0 * 2 * n), sharex=True)
+    fig, axes = plt.subplots(2 * n, 1, figsize=(8, 2.0 * 2 * n), sharex=True, squeeze=False)
+    axes = axes[:, 0]
     for j in range(2 * n):
         axes[j].plot(tr.t[:k], tr.x[:k, j], "k", lw=2, label="ground truth")
         axes[j].set_ylabel(system_data(system).state_labels[j])

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import jax
+import jax.core
 import numpy as np
 
 __all__ = ["step_cache_dir", "ExportedStep"]
@@ -179,8 +180,8 @@ class ExportedStep:
             "source": _source_digest(),
             "versions": _versions(),
             "backend": jax.default_backend(),
-            "x64": bool(jax.config.jax_enable_x64),
-            "matmul_precision": str(jax.config.jax_default_matmul_precision),
+            "x64": bool(jax.config.read("jax_enable_x64")),
+            "matmul_precision": str(jax.config.read("jax_default_matmul_precision")),
             "eqx_on_error": os.environ.get("EQX_ON_ERROR", ""),
         }
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:32]
@@ -212,12 +213,13 @@ class ExportedStep:
                 return None
 
         run = jax.jit(exp.call, compiler_options=self._compiler_options)
+        assert terms is not None  # read or exported with exp
 
         def call(args, leaves):
             # The deserialised computation returns arrays committed to their device, while a
             # run's first params / opt_state and every batch arrive uncommitted. jit keys its
             # compilation on that too, so the first and second calls each compiled the whole step
-            # (6-10 s for a trajectory loss, once per training run). Committing every argument
+            # (once per training run). Committing every argument
             # where it already lives makes all calls alike: one compilation, same results.
             leaves = [leaf if leaf.committed else jax.device_put(leaf, next(iter(leaf.devices())))
                       for leaf in leaves]

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-from typing import Literal, NamedTuple, Sequence
+from typing import Any, Literal, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -162,7 +162,7 @@ def _runtime_checks_as_nan():
         yield
         return
 
-    def as_nan(x, pred, index, msgs, *, on_error="default"):
+    def as_nan(x, pred, index, msgs, *, on_error: Any = "default"):
         return checked(x, pred, index, msgs, on_error="nan" if on_error == "default" else on_error)
 
     _errors.branched_error_if_impl_jit = as_nan
@@ -357,7 +357,7 @@ def integral_loss_terms(
     return itau, share
 
 
-def resolve_normalization(windows: Windows) -> str:
+def resolve_normalization(windows: Windows) -> Normalization:
     """What ``normalize="auto"`` means for this data: "momentum" if free (u ≡ 0), else "momentum_fixed".
 
     Needs concrete data; inside ``jax.jit`` resolve it beforehand and pass the result.

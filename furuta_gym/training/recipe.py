@@ -68,7 +68,7 @@ def _row(system, *, replaces=(), **changes) -> RunRecipe:
     return dataclasses.replace(base, decisions=kept + changes.pop("decisions", ()), **changes)
 
 
-RECIPE: dict[tuple[str, str, str], RunRecipe] = {
+RECIPE: dict[tuple[str, str | None, str], RunRecipe] = {
     **{(s, k, loss): SYSTEM_ROWS[s]["baseline"] for s in SYSTEM_ROWS
        for k, loss in (("dln", "traj"), ("aph", "aph"), ("adln", "aph"))},
     ("furuta", "dln", "prop"): _row(

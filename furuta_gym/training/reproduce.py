@@ -39,7 +39,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import jax
 import numpy as np
@@ -75,6 +75,9 @@ __all__ = [
     "reproduce",
     "load_paper_table",
     "build_tables",
+    "run_settings",
+    "same_settings",
+    "machine_info",
 ]
 
 PAPER_PAIRS: tuple[tuple[str, str], ...] = (
@@ -231,7 +234,7 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
     horizons = tuple(TrainConfig.for_system(name).horizons)
     if loss == "prop" and len(row.epochs) == 3:  # a leading stage of L_Iτ alone
         horizons = (None, *horizons)
-    overrides = dict(epochs=row.epochs, horizons=horizons, seed=seed, progress=config.progress,
+    overrides: dict[str, Any] = dict(epochs=row.epochs, horizons=horizons, seed=seed, progress=config.progress,
                      checkpoint_every=0, quadrature=row.quadrature)
     if config.quick:  # a few hundred steps per model: compiling them is most of the run
         overrides["fast_compile"] = True
@@ -352,7 +355,7 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
 RUN_RECORD_SCHEMA = 1
 
 
-def _run_settings(system: str, kind: str, loss: str, seed: int, config: ReproduceConfig) -> dict:
+def run_settings(system: str, kind: str, loss: str, seed: int, config: ReproduceConfig) -> dict:
     """What a run directory's ``reproduce_config.json`` records for this run — its training
     settings (the progress bar aside) and architecture — in JSON's own form (lists, not tuples),
     so it compares with a saved record as it is."""
@@ -365,7 +368,7 @@ def _run_settings(system: str, kind: str, loss: str, seed: int, config: Reproduc
     return json.loads(json.dumps(settings))
 
 
-def _same_settings(saved: dict, current: dict) -> bool:
+def same_settings(saved: dict, current: dict) -> bool:
     """Whether a run directory's recorded settings are this run's: the same record form
     (:data:`RUN_RECORD_SCHEMA`) and the same values, where a training setting the record lacks
     counts as its default (it was added later, with a default that keeps what runs did)."""
@@ -403,7 +406,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     metrics_path = run_dir / "metrics.json"
     model_path = run_dir / MODEL_FILE
     tcfg = training_config(system, config, seed, loss, kind)
-    cfg_json = _run_settings(system, kind, loss, seed, config)
+    cfg_json = run_settings(system, kind, loss, seed, config)
     cfg_path = run_dir / "reproduce_config.json"
     if cfg_path.exists():
         saved = json.loads(cfg_path.read_text())
@@ -411,7 +414,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
             # a record from before the architecture was recorded: the checkpoint's header knows it
 
             saved["model_hparams"] = json.loads(json.dumps(read_header(model_path).get("hparams", {}), default=str))
-        if not _same_settings(saved, cfg_json):
+        if not same_settings(saved, cfg_json):
             raise ValueError(
                 f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out"
             )
@@ -438,7 +441,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
             error = f"{type(exc).__name__}: {exc}"
         if error is not None:
             # recorded, never hidden: every cell of this model reads "fail" in the tables
-            metrics = {label: {m: FAILED for m in METRIC_COLUMNS[system]}
+            metrics: dict[str, Any] = {label: {m: FAILED for m in METRIC_COLUMNS[system]}
                        for label in EVALUATION_SETS[config.split][system]}
             metrics["_error"] = error
             metrics_path.write_text(json.dumps(metrics, indent=1) + "\n")
@@ -527,7 +530,7 @@ def _figures_task(system: str, out: Path, config: ReproduceConfig, data=None, tr
     return result, round(time.perf_counter() - t0, 1)
 
 
-def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
+def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log) -> Iterator[tuple[str, Any, Any]]:
     """Yield ``("model", task, (metrics, seconds, status))`` for every task, ``config.jobs`` at a
     time (or as Ray schedules them), and with ``config.figures`` ``("figures", system, (paths |
     error, seconds))`` once per system, made as soon as that system's last model is done (in the
@@ -556,8 +559,8 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log):
 def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, report):
     """:func:`_run_all` one model after the other in this process, on the data it has loaded."""
     for task in tasks:
-        system = task[0]
-        result = _run_task(*task, out, config, loaded[system]["data"], loaded[system]["truth"])
+        system, kind, loss, seed = task
+        result = _run_task(system, kind, loss, seed, out, config, loaded[system]["data"], loaded[system]["truth"])
         report(task, result)
         yield "model", task, result
     if config.figures:
@@ -789,7 +792,7 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
             f"seeds ({', '.join(map(str, config.seeds))}; each seed's value is in tables.csv, "
             "ours_per_seed); the data are the same for every seed."
             if len(config.seeds) > 1
-            else f"Ours: one model seed ({config.seeds[0]})."
+            else f"Ours: one model seed ({', '.join(map(str, config.seeds))})."
         )
         + " A ✓ marks our cell at or below the paper's.",
         "",
@@ -837,7 +840,7 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
         n_yes = sum(r["better_or_equal"] == "yes" for r in allnum)
         out.append(f"- All rows: {n_yes} of {len(allnum)} numeric cells at or below the paper's.")
 
-    def row_of(system, label, model, loss, metric):
+    def row_of(system, label, model, loss, metric) -> Any:  # the row (a dict), or None
         return next((r for r in rows if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"])
                      == (system, label, model, loss, metric)), None)
 
@@ -888,7 +891,8 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _machine() -> dict[str, Any]:
+def machine_info() -> dict[str, Any]:
+    """The platform, Python, core count and CPU model, as a run record notes them."""
     info = {
         "platform": platform.platform(),
         "python": platform.python_version(),
@@ -942,7 +946,7 @@ def _write_run_record(path: Path, config: ReproduceConfig, command, timings, dat
         "quadrature": (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE),
         "quadrature_by_model": _quadrature_by_model(config),
         "data": data_meta,
-        "machine": _machine(),
+        "machine": machine_info(),
         "packages": package_versions(),
         "seconds": timings,
     }

@@ -10,7 +10,7 @@ skipped and counted; a NaN model is never saved).
 Losses (``loss=``): ``"traj"`` L_traj; ``"aph"`` ‖F_a‖² + λ·L_traj with APHYNITY's dual ascent on λ;
 ``"prop"`` L_Iτ + λ·L_traj (the paper's proposed loss); ``"itau"`` L_Iτ alone (cheap: no ODE
 solve; the training-stage horizon is then irrelevant). L_Iτ is computed on all integral windows
-at every step (it costs a few ms), L_traj on a minibatch of windows.
+at every step (it is cheap), L_traj on a minibatch of windows.
 
 **Overall scale.** On free (u = 0) data the dynamics, and hence every loss, are invariant to
 multiplying the learned Lagrangian and τ_NC by one constant: the scale is unidentifiable. Pass
@@ -47,6 +47,7 @@ from . import checkpoint as ckpt
 from .consistency import check_potential_shape, warn_data_coverage, warn_potential_shape
 from .losses import (
     AUGMENTATION_PARTS,
+    Normalization,
     Windows,
     augmentation_penalty,
     integral_loss_terms,
@@ -114,8 +115,7 @@ class TrainConfig:
     against the physics' impulse.
     ``fast_compile`` compiles the steps with a trajectory loss (an ODE solve: L_traj, L_aph and
     L_prop's stages after the L_Iτ-alone one) with XLA's backend optimisation level 0: such a
-    step compiles in ~2/3 of the time and runs ~2.7× slower, and results agree to rounding, not
-    bit for bit. Worth it only for a few hundred trajectory steps, whose time is mostly
+    step compiles faster and runs slower, and results agree to rounding, not bit for bit. Worth it only for a few hundred trajectory steps, whose time is mostly
     compiling (``furuta-gym reproduce --quick``); an L_Iτ-alone step compiles in seconds and runs
     thousands of epochs, so it keeps the optimised code.
     """
@@ -130,7 +130,7 @@ class TrainConfig:
     lambda_traj: float = 1.0
     lambda_step: float | None = None
     quadrature: QuadratureRule = "trapezoid"
-    normalize: str = "auto"
+    normalize: Normalization = "auto"
     integral_window: int = 101
     integral_batch_size: int | None = None
     augmentation_weight: float | None = None
@@ -211,14 +211,14 @@ class TrainConfig:
     @classmethod
     def for_system(cls, system: str, **overrides) -> "TrainConfig":
         """CPU-friendly defaults with the paper's horizons (1 s Furuta, 2 s N-MSD)."""
-        base = dict(horizons=PAPER_SCHEDULE[get_spec(system).name]["horizons"])
+        base: dict[str, Any] = dict(horizons=PAPER_SCHEDULE[get_spec(system).name]["horizons"])
         base.update(overrides)
         return cls(**base)
 
     @classmethod
     def paper(cls, system: str, **overrides) -> "TrainConfig":
         """The paper's recipe: 2-step stage then the long horizon, full batch (appendix A.2)."""
-        base = dict(**PAPER_SCHEDULE[get_spec(system).name], batch_size=None, checkpoint_every=500)
+        base: dict[str, Any] = dict(**PAPER_SCHEDULE[get_spec(system).name], batch_size=None, checkpoint_every=500)
         base.update(overrides)
         return cls(**base)
 
@@ -282,7 +282,7 @@ class ScaleFit:
 
 
 # jitted (model as an argument): traced op by op, the few hundred primitives of one model's terms
-# compiled one by one, ~5 s per fit
+# would be compiled one by one, at every fit
 _integral_terms_jit = eqx.filter_jit(integral_terms)
 
 
@@ -346,9 +346,9 @@ def _build_optimizer(model, config: TrainConfig):
     return opt, trainable, params
 
 
-def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization: str,
+def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization: Normalization,
                augmentation_weight: float = 0.0):
-    traj_kw = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
+    traj_kw: dict[str, Any] = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
     use_traj = loss in ("traj", "aph", "prop")
     use_int = loss in ("prop", "itau")
     use_share = use_int and augmentation_weight != 0.0
@@ -359,8 +359,10 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
             terms = {}
             total = 0.0
             if use_traj:
+                assert traj_b is not None
                 terms["traj"] = trajectory_loss(model, traj_b, **traj_kw)
             if use_int:
+                assert int_b is not None
                 terms["itau"], share = integral_loss_terms(
                     model, int_b, rule=config.quadrature, normalize=normalization, with_augmentation=use_share,
                     augmentation_part=config.augmentation_part, resolution_tolerance=config.resolution_tolerance,
@@ -368,9 +370,11 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
                 )
                 total = total + terms["itau"]
                 if use_share:
+                    assert share is not None  # integral_loss_terms returns it with_augmentation
                     terms["fa_share"] = share
                     total = total + augmentation_weight * share
             if loss == "aph":
+                assert traj_b is not None
                 terms["penalty"] = augmentation_penalty(model, traj_b)
                 total = total + terms["penalty"]
             if use_traj:
@@ -391,7 +395,8 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
     # the steps with an ODE solve: an L_Iτ step compiles in seconds and runs many epochs
     fast = config.fast_compile and use_traj
     compiler_options = {"xla_backend_optimization_level": 0} if fast else None
-    live_step = eqx.filter_jit(step, compiler_options=compiler_options)
+    # equinox's overloads leave out the jax.jit keywords it passes on
+    live_step = eqx.filter_jit(step, compiler_options=compiler_options)  # pyright: ignore[reportCallIssue]
     # with JAX's persistent compilation cache enabled, a later process loads the traced step from
     # disk instead of tracing it again (seconds for L_traj); see _step_cache
     cache_dir = _step_cache.step_cache_dir()
@@ -731,7 +736,7 @@ def _save_epoch(out: Path | None, record: dict, run: _RunState, static, run_info
 
 def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: int, steps: int) -> None:
     if bar is not None:
-        post = {k: f"{v:.3g}" for k, v in means.items() if k != "total"}
+        post: dict[str, Any] = {k: f"{v:.3g}" for k, v in means.items() if k != "total"}
         if loss in ("aph", "prop"):
             post["λ"] = f"{lam:.3g}"
         if skipped:
