@@ -180,8 +180,9 @@ class ExportedStep:
             "source": _source_digest(),
             "versions": _versions(),
             "backend": jax.default_backend(),
-            "x64": bool(jax.config.read("jax_enable_x64")),
-            "matmul_precision": str(jax.config.read("jax_default_matmul_precision")),
+            # flags with a context manager refuse config.read(); their value is an attribute
+            "x64": bool(getattr(jax.config, "jax_enable_x64")),
+            "matmul_precision": str(getattr(jax.config, "jax_default_matmul_precision")),
             "eqx_on_error": os.environ.get("EQX_ON_ERROR", ""),
         }
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:32]

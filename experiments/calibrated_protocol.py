@@ -1,0 +1,165 @@
+"""The paper's experimental protocol on a calibrated rig: energy shape and the swing-up designed on
+each learned model, run on the rig's plant.
+
+The rig: the MuJoCo plant of the README's ``furuta-gym diagnose`` on all fifteen shipped QUBE runs
+(its J1b held at the datasheet value: balancing logs never leave the top, where sin²β ≈ 0 hides
+J1b, and fitted free it lands above J2, which no rigid pendulum has; docs/diagnose.md). Made by
+
+    furuta-gym diagnose qube --system furuta --skip 0.5 --window 0.1 --oe-windows 64 \
+        --json results/calibrated_protocol/diagnosis.json
+
+The models: the paper's six model × loss pairs, trained by the frozen recipe on the paper's
+experimental datasets recorded on that plant (64 free releases of 1 s at 100 Hz; 6 free runs of
+6 s and 3 chirp-forced runs of 20 s for testing; 2048-count encoders, the paper's derivative
+filter for the velocities):
+
+    furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
+        --sensor experiment --out results/calibrated_protocol/reproduce --jobs 2
+
+This script then measures, per model, the learned potential's shape (hanging a minimum, upright a
+maximum; :func:`real_models.potential_shape` at both ends) and runs the swing-up + LQR designed on
+it (:class:`~furuta_gym.controllers.SwingUpLQR`, 5 V, 500 Hz, 8 s) on the plant, with the QUBE's
+sensors (2048 counts, derivative-filter velocities), from x0 = 0 and 30 seeded starts near the
+hanging rest, as the paper's control figure does. The plant's own model and the nominal analytic
+model are designed on beside them. Writes ``results/calibrated_protocol/control.json``;
+``experiments/calibrated_protocol_table.py`` writes the tables into docs/learning.md.
+
+    python experiments/calibrated_protocol.py [--episodes 30] [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import furuta_gym
+
+furuta_gym.enable_x64()
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from real_models import potential_shape  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "results" / "calibrated_protocol"
+PLANT = OUT / "diagnosis.json"
+RUNS = OUT / "reproduce" / "runs" / "furuta"
+PAIRS = (("dln", "traj"), ("dln", "prop"), ("aph", "aph"), ("aph", "prop"), ("adln", "aph"), ("adln", "prop"))
+SECONDS = 8.0
+
+
+def shape(model) -> dict:
+    """The potential's rise from hanging to upright and its curvature at both ends."""
+    import jax
+    import jax.numpy as jnp
+
+    v = lambda b: model.potential(jnp.stack([jnp.zeros(()), b]))  # noqa: E731
+    return {**potential_shape(model), "curvature_at_hanging_Nm_per_rad": float(jax.grad(jax.grad(v))(jnp.zeros(())))}
+
+
+def designs():
+    """(name, model) pairs: the plant's own model, the nominal one, each trained checkpoint."""
+    from furuta_gym.models import analytic_model
+    from furuta_gym.training.checkpoint import load_model
+    from furuta_gym.training.reproduce import ReproduceConfig, truth_model
+
+    out = [("plant model", truth_model("furuta", ReproduceConfig(plant=str(PLANT)))),
+           ("nominal analytic", analytic_model("furuta"))]
+    for kind, loss in PAIRS:
+        path = RUNS / f"{kind}_{loss}" / "seed0" / "model.eqx"
+        if path.exists():
+            out.append((f"{kind}_{loss}", load_model(path, expected_system="furuta")))
+    return out
+
+
+def swing_up(model, starts: np.ndarray, seed: int) -> dict:
+    """The swing-up + LQR designed on ``model``, run on the calibrated plant from ``starts``."""
+    import gymnasium as gym
+
+    from furuta_gym.controllers import SwingUpLQR, evaluate_on_env
+    from furuta_gym.envs import Episode, Plant, Sensors
+
+    try:
+        ctrl = SwingUpLQR.from_model(model, seed=seed)
+    except Exception as exc:  # a learned design can fail: record how, keep the table
+        return {"design_error": f"{type(exc).__name__}: {exc}"}
+    plant = Plant.load(PLANT)
+    sensors = Sensors(encoder_counts=2048, velocity="filter")
+    make_env = lambda: gym.make("furuta_gym/Furuta-v0", episode=Episode(seconds=None),  # noqa: E731
+                                plant=plant, sensors=sensors)
+    t0 = time.perf_counter()
+    recs = evaluate_on_env(ctrl, make_env, starts, SECONDS, seed=seed)
+    success = [bool(r.metrics.success) for r in recs]
+    return {"from_rest": success[0], "seeded_successes": int(sum(success[1:])), "seeded": len(success) - 1,
+            "time_to_upright_s": [r.metrics.time_to_upright for r in recs if r.metrics.success],
+            "seconds": round(time.perf_counter() - t0, 1)}
+
+
+def itau_stage(run: Path) -> dict:
+    """What an L_prop run's L_Iτ stage left (its resumable training state): the epoch reached, the
+    mass matrix at rest beside the plant's, how stiff the free dynamics are (the largest |eigenvalue|
+    of the state Jacobian at 20 random states, 1/s; the plant's for comparison) and the potential's
+    shape (the curvatures' signs do not depend on the unidentified overall scale)."""
+    import equinox as eqx  # noqa: F401  (the state's skeleton is an equinox tree)
+    import jax
+    import jax.numpy as jnp
+
+    from furuta_gym.lagrangian import forward_dynamics
+    from furuta_gym.models import make_model
+    from furuta_gym.models.checkpoint import load_training_state
+    from furuta_gym.training.reproduce import ReproduceConfig, truth_model
+    from furuta_gym.training.train import TrainConfig, _build_optimizer
+
+    cfg = json.loads((run / "reproduce_config.json").read_text())
+    tuples = lambda d: {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}  # noqa: E731
+    skeleton = make_model("furuta", cfg["model"], jax.random.PRNGKey(0), **tuples(cfg["model_hparams"]))
+    optimizer, _, params = _build_optimizer(skeleton, TrainConfig(**tuples(cfg["train"])))
+    model, _, header = load_training_state(run / "train_state.eqx", skeleton, optimizer.init(params))
+    truth = truth_model("furuta", ReproduceConfig(plant=str(PLANT)))
+    states = np.random.default_rng(0).uniform([-3, -3, -5, -5], [3, 3, 5, 5], (20, 4))
+
+    def stiffness(m) -> list[float]:
+        field = lambda x: jnp.concatenate([x[2:], forward_dynamics(m, x[:2], x[2:], jnp.zeros(1))])  # noqa: E731
+        return [float(np.max(np.abs(np.linalg.eigvals(np.asarray(jax.jacfwd(field)(jnp.asarray(x))))))) for x in states]
+
+    learned, plant = stiffness(model), stiffness(truth)
+    return {"epoch": int(header["state"]["epoch"]), "itau_epochs": cfg["train"]["epochs"][0],
+            "mass_matrix_at_rest": np.asarray(model.mass_matrix(jnp.zeros(2))).tolist(),
+            "plant_mass_matrix_at_rest": np.asarray(truth.mass_matrix(jnp.zeros(2))).tolist(),
+            "stiffness_median": float(np.median(learned)), "stiffness_max": float(np.max(learned)),
+            "plant_stiffness_median": float(np.median(plant)), "plant_stiffness_max": float(np.max(plant)),
+            "shape": shape(model)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--episodes", type=int, default=30)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    from furuta_gym.controllers import near_rest_starts
+
+    starts = np.concatenate([np.zeros((1, 4)), near_rest_starts(args.episodes, args.seed, False)])
+    stages = {name: itau_stage(RUNS / name / "seed0") for name in ("dln_prop", "adln_prop")
+              if (RUNS / name / "seed0" / "train_state.eqx").exists()}
+    print(json.dumps(stages, indent=1), flush=True)
+    rows = {}
+    for name, model in designs():
+        row = {"shape": shape(model) if hasattr(model, "potential") else None, **swing_up(model, starts, args.seed)}
+        rows[name] = row
+        print(name, json.dumps(row, default=str)[:300], flush=True)
+    doc = {"plant": str(PLANT.relative_to(ROOT)), "episodes": args.episodes, "seed": args.seed,
+           "seconds_per_episode": SECONDS, "models": rows, "itau_stage": stages,
+           "machine": {"platform": platform.platform(), "python": platform.python_version()},
+           "date": f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC"}
+    (OUT / "control.json").write_text(json.dumps(doc, indent=1, default=str) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
