@@ -129,7 +129,12 @@ def itau_stage(run: Path) -> dict:
         return [float(np.max(np.abs(np.linalg.eigvals(np.asarray(jax.jacfwd(field)(jnp.asarray(x))))))) for x in states]
 
     learned, plant = stiffness(model), stiffness(truth)
+    history = [json.loads(line) for line in (run / "history.jsonl").read_text().splitlines()]
+    later = [h for h in history if h["stage"] > 0]
     return {"epoch": int(header["state"]["epoch"]), "itau_epochs": cfg["train"]["epochs"][0],
+            "later_epochs": len(later), "later_steps": sum(h["steps"] for h in later),
+            "later_steps_skipped": sum(h["skipped"] for h in later),
+            "later_seconds": round(sum(h["seconds"] for h in later), 1),
             "mass_matrix_at_rest": np.asarray(model.mass_matrix(jnp.zeros(2))).tolist(),
             "plant_mass_matrix_at_rest": np.asarray(truth.mass_matrix(jnp.zeros(2))).tolist(),
             "stiffness_median": float(np.median(learned)), "stiffness_max": float(np.max(learned)),

@@ -13,7 +13,8 @@ import json
 import sys
 from pathlib import Path
 
-from _generated import block_main
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
+from _generated import block_main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "calibrated_protocol"
@@ -74,13 +75,35 @@ def verdict(doc: dict) -> str:
     return "; ".join(parts) + "."
 
 
+def itau_stage_lines(doc: dict) -> list[str]:
+    """What each L_prop run's L_Iτ stage left: epochs, mass matrix, stiffness, potential shape."""
+    lines = []
+    for name, st in doc.get("itau_stage", {}).items():
+        m, mp = st["mass_matrix_at_rest"], st["plant_mass_matrix_at_rest"]
+        low, top = st["shape"]["curvature_at_hanging_Nm_per_rad"], st["shape"]["curvature_at_top_Nm_per_rad"]
+        kind = "physical" if low > 0 > top else ("upright a minimum" if top > 0 else "hanging a maximum")
+        lines.append(
+            f"- {LABELS[name]}, after {min(st['epoch'] - 1, st['itau_epochs'])} of its {st['itau_epochs']} L_Iτ epochs: M(0) = "
+            f"[[{m[0][0]:.2g}, {m[0][1]:.2g}], [·, {m[1][1]:.2g}]] kg·m² against the plant's "
+            f"[[{mp[0][0]:.2g}, {mp[0][1]:.2g}], [·, {mp[1][1]:.2g}]]; the free dynamics' largest |eigenvalue| "
+            f"{st['stiffness_median']:.2g} /s (median over 20 states; max {st['stiffness_max']:.2g}) against the "
+            f"plant's {st['plant_stiffness_median']:.2g} /s; potential shape {kind} (the curvatures' signs do not "
+            "depend on the overall scale)."
+            + (f" The next stage (2-step L_traj + L_Iτ) then ran {st['later_epochs']} epoch(s) in "
+               f"{st['later_seconds']:.0f} s; {st['later_steps_skipped']} of its {st['later_steps']} steps were skipped "
+               "(a non-finite loss or gradient: the ODE solve failed)." if st["later_epochs"] else ""))
+    return lines
+
+
 def body() -> str:
     doc = json.loads((OUT / "control.json").read_text())
     return "\n".join(["Prediction, log10 RMSE on the rig's test runs: ours (the paper's experimental value; "
                       "its forced APHYNITY rows diverged, X).", "", *prediction_table(), "",
                       f"Energy shape and the swing-up designed on each model, run on the rig "
                       f"({doc['seconds_per_episode']:g} s episodes, 2048-count encoders, derivative-filter velocities; "
-                      f"{doc['date']}).", "", *control_table(doc), "", verdict(doc)])
+                      f"{doc['date']}).", "", *control_table(doc), "", verdict(doc), "",
+                      "The L_prop runs' L_Iτ stage (stopped; see the text above the block):", "",
+                      *itau_stage_lines(doc)])
 
 
 if __name__ == "__main__":

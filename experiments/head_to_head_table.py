@@ -11,7 +11,8 @@ import json
 import sys
 from pathlib import Path
 
-from _generated import block_main
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
+from _generated import block_main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "head_to_head"

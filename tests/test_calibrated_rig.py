@@ -85,3 +85,4 @@ def test_a_rig_run_refuses_data_of_another_sensor_and_compares_physics_with_the_
     # the cable spring is in the truth's potential, so the physics columns see it
     assert abs(float(truth.potential(q)) - float(truth_model("furuta", ReproduceConfig()).potential(q))
                - 0.5 * 8e-4 * 0.5**2) < 1e-12
+
