@@ -6,6 +6,7 @@ See :func:`diagnose` and ``docs/diagnose.md``.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -1102,12 +1103,12 @@ def diagnose(
     Returns a :class:`DiagnosisResult`: effects ordered by held-out evidence (those marked
     ``significant`` were added), held-out (and test) errors before/after, fitted parameters, notes.
     """
-    args = dict(test=test, column_map=column_map, signs=signs, offsets=offsets, candidates=candidates,
-                model=model, settings=settings, **overrides)
-    result = _diagnose_once(data, system, fixed=fixed, **args)
+    once = functools.partial(_diagnose_once, data, system, test=test, column_map=column_map, signs=signs,
+                             offsets=offsets, candidates=candidates, model=model, settings=settings, **overrides)
+    result = once(fixed=fixed)
     if model is not None:  # a learned model is kept as it is: no lumped bodies to check
         return result
-    return _with_rigid_bodies(result, lambda held: _diagnose_once(data, system, fixed={**result.fixed, **held}, **args))
+    return _with_rigid_bodies(result, lambda held: once(fixed={**result.fixed, **held}))
 
 
 #: A refit with one lumped parameter held at its declared value replaces a fit whose values no

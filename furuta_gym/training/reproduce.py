@@ -475,6 +475,9 @@ def truth_model(system: str, config: ReproduceConfig):
     from ..models import LumpedSystem
 
     plant = Plant.load(config.plant)
+    if plant.lumped is None:
+        raise ValueError(f"plant {config.plant}: has no lumped parameters (a diagnosis or an MJCF furuta-gym "
+                         "wrote has them); a preset plant has no model to compare the physics with")
     effects = [e for e in plant.effects if not e.kind.has_memory]
     base = LumpedSystem.of(system, plant.lumped)
     return WithEffects(base, effects) if effects else base
