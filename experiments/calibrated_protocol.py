@@ -150,8 +150,10 @@ def main(argv=None) -> int:
     from furuta_gym.controllers import near_rest_starts
 
     starts = np.concatenate([np.zeros((1, 4)), near_rest_starts(args.episodes, args.seed, False)])
+    # the L_prop runs that did not finish: what their L_Iτ stage left
     stages = {name: itau_stage(RUNS / name / "seed0") for name in ("dln_prop", "adln_prop")
-              if (RUNS / name / "seed0" / "train_state.eqx").exists()}
+              if not (RUNS / name / "seed0" / "model.eqx").exists()
+              and (RUNS / name / "seed0" / "train_state.eqx").exists()}
     print(json.dumps(stages, indent=1), flush=True)
     rows = {}
     for name, model in designs():

@@ -102,7 +102,7 @@ def body() -> str:
                       f"Energy shape and the swing-up designed on each model, run on the rig "
                       f"({doc['seconds_per_episode']:g} s episodes, 2048-count encoders, derivative-filter velocities; "
                       f"{doc['date']}).", "", *control_table(doc), "", verdict(doc), "",
-                      "The L_prop runs' L_Iτ stage (stopped; see the text above the block):", "",
+                      "What the L_Iτ stage left in the L_prop runs that did not finish (see the text above the block):", "",
                       *itau_stage_lines(doc)])
 
 

@@ -86,3 +86,14 @@ def test_a_rig_run_refuses_data_of_another_sensor_and_compares_physics_with_the_
     assert abs(float(truth.potential(q)) - float(truth_model("furuta", ReproduceConfig()).potential(q))
                - 0.5 * 8e-4 * 0.5**2) < 1e-12
 
+
+
+def test_the_calibrated_protocol_docs_match_their_results():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, str(root / "experiments" / "calibrated_protocol_table.py"), "--check"],
+                          capture_output=True, text=True, cwd=root / "experiments")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
