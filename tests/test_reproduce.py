@@ -490,7 +490,7 @@ def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path, system, fi
     assert {r["test_set"] for r in rows} == labels
     table = paths["tables.md"].read_text()
     assert all(f"| {label} | DLN (L_prop)" in table for label in labels)
-    with pytest.raises(ValueError, match="split='validation'; this run wants .* split='test'"):
+    with pytest.raises(ValueError, match="split='validation' .this run: 'test'."):
         reproduce(tmp_path, dataclasses.replace(config, split="test"), log=lambda msg: None)
     with pytest.raises(ValueError, match="split must be one of"):
         ReproduceConfig(split="train")
