@@ -74,3 +74,70 @@ def _tiny_windows():
 
     t = np.arange(5) * 0.01
     return make_windows([Trajectory(t, np.zeros((5, 2)), np.zeros((5, 1)), np.zeros((5, 2)))], 5)
+
+
+def test_the_scale_fit_over_a_longer_span_is_not_diluted_by_velocity_noise():
+    """Noise in estimated velocities is noise in the scale fit's regressor Ā (momentum at the
+    interval ends): per interval it biases the scale towards zero; over a span it weighs less."""
+    import jax
+    import jax.numpy as jnp
+
+    from furuta_gym.data import Trajectory
+    from furuta_gym.models import make_model
+    from furuta_gym.training.train import fit_scale
+    from furuta_gym.simulate import rollout_zoh
+
+    truth = make_model("nmsd", "dln", jax.random.PRNGKey(5), hidden=(8, 8)).with_scale(2.5)
+    dt, n = 0.01, 1000
+    us = np.sin(2 * np.pi * 0.4 * np.arange(n) * dt)[:, None]
+    xs = np.asarray(rollout_zoh(truth, jnp.array([0.3, -1.0]), jnp.asarray(us), dt, 20))[:n]
+    noisy_qd = xs[:, 1:] + np.random.default_rng(0).normal(0.0, 0.05 * np.std(xs[:, 1]), size=(n, 1))
+    traj = Trajectory(np.arange(n) * dt, xs[:, :1], us, noisy_qd, name="forced, noisy velocities")
+    factor = {span: fit_scale(truth.with_scale(1.0), [traj], rule="simpson", span=span)[1].factor
+              for span in (1, 20)}
+    assert factor[1] < 0.9 * 2.5  # diluted
+    assert abs(factor[20] - 2.5) < 0.25 * abs(factor[1] - 2.5)
+
+
+def test_reproduce_sums_the_integral_residual_of_its_L_prop_runs_only():
+    from furuta_gym.training.reproduce import ReproduceConfig, training_config
+
+    config = ReproduceConfig(systems=("furuta",), integral_span=10)
+    assert training_config("furuta", config, 0, "prop", "dln").integral_span == 10
+    assert training_config("furuta", config, 0, "traj", "dln").integral_span == 1
+    assert training_config("furuta", ReproduceConfig(), 0, "prop", "dln").integral_span == 1
+    with pytest.raises(ValueError, match="integral_span must be a positive integer"):
+        ReproduceConfig(integral_span=0)
+
+
+def test_reproduce_can_train_on_velocities_estimated_offline_and_records_it():
+    from furuta_gym.data import Trajectory
+    from furuta_gym.training.reproduce import ReproduceConfig, _training_data, run_settings
+
+    t = np.arange(200) * 0.01
+    q = np.stack([np.sin(2 * t), 0.5 * np.cos(3 * t)], axis=1)
+    lagged = np.stack([2 * np.cos(2 * (t - 0.016)), -1.5 * np.sin(3 * (t - 0.016))], axis=1)
+    data = {"train": [Trajectory(t, q, np.zeros((200, 1)), lagged)],
+            "scale_fit": [Trajectory(t, q, np.ones((200, 1)), lagged)]}
+    offline = ReproduceConfig(systems=("furuta",), training_velocities="zero_phase")
+    train, forced = _training_data("furuta", data, offline)
+    exact = np.stack([2 * np.cos(2 * t), -1.5 * np.sin(3 * t)], axis=1)
+    inner = slice(20, -20)  # away from the filter's ends
+    for trajs in (train, forced):
+        assert np.max(np.abs(trajs[0].qd[inner] - exact[inner])) < 0.2 * np.max(np.abs(lagged - exact))
+    assert _training_data("furuta", data, ReproduceConfig(systems=("furuta",)))[0][0].qd is lagged
+    assert run_settings("furuta", "dln", "prop", 0, offline)["training_velocities"] == "zero_phase"
+    assert "training_velocities" not in run_settings("furuta", "dln", "prop", 0, ReproduceConfig())
+    with pytest.raises(ValueError, match="training_velocities must be one of"):
+        ReproduceConfig(training_velocities="filter")
+
+
+def test_reproduce_command_line_names_the_span_and_the_training_velocities():
+    from furuta_gym.cli import build_parser
+    from furuta_gym.cli.reproduce import config_from_args
+
+    _, config = config_from_args(build_parser().parse_args(
+        ["reproduce", "--integral-span", "5", "--training-velocities", "zero_phase"]))
+    assert (config.integral_span, config.training_velocities) == (5, "zero_phase")
+    _, default = config_from_args(build_parser().parse_args(["reproduce"]))
+    assert (default.integral_span, default.training_velocities) == (1, "recorded")

@@ -58,6 +58,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
              "encoders and the paper's derivative filter for velocities (its experiments)",
     )
     parser.add_argument(
+        "--integral-span", type=int, default=1, metavar="N",
+        help="quadrature intervals summed into one L_Iτ residual in the L_prop runs (default 1, the "
+             "paper's); a few velocity-filter time constants on --sensor experiment data",
+    )
+    parser.add_argument(
+        "--training-velocities", choices=["recorded", "zero_phase"], default="recorded",
+        help="train (and fit the scale) on the sensor's velocities or on velocities re-estimated "
+             "offline from the angles without lag (the derivative filter lags by ~16 ms); the test "
+             "sets are scored as recorded",
+    )
+    parser.add_argument(
         "--jobs", type=int, default=None, metavar="N",
         help="train N models at once in separate processes (default: the number of CPU cores, at most 8)",
     )
@@ -123,6 +134,8 @@ def config_from_args(args: argparse.Namespace):
         ground_truth=args.ground_truth,
         plant=args.plant,
         sensor=args.sensor,
+        integral_span=args.integral_span,
+        training_velocities=args.training_velocities,
         train_overrides={"quadrature": args.quadrature} if args.quadrature else None,
         figures=not args.no_figures,
         progress=not args.no_progress,

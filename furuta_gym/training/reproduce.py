@@ -47,6 +47,7 @@ import numpy as np
 from .. import __version__, enable_x64, ensure_x64
 from ..data import load_trajectories
 from ..models import analytic_model, make_model, system_definition
+from ..signals import zero_phase_velocity
 from ..systems import get_spec
 from . import _reproduce_figures
 from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
@@ -104,6 +105,8 @@ METRIC_COLUMNS = {
 #: QUBE recordings were.
 SENSORS = {"exact": SensorOptions(),
            "experiment": SensorOptions(quantize=True, velocity="filter")}
+#: What the models train on (:attr:`ReproduceConfig.training_velocities`).
+TRAINING_VELOCITIES = ("recorded", "zero_phase")
 #: Where the models are trained (:attr:`ReproduceConfig.executor`).
 EXECUTORS = ("local", "ray")
 #: Table value of a model whose training failed (no finite model; reason in metrics.json).
@@ -140,7 +143,14 @@ class ReproduceConfig:
     and memoryless effects) is the truth the physics columns compare with; the state columns then
     sit beside the paper's *experimental* values. ``sensor``: ``"exact"`` (the paper's simulated
     data) or ``"experiment"`` (its QUBE recordings: 2048-count encoders and the derivative filter
-    ω0 = 100, ξ = 0.8 for the velocities, at 500 Hz).
+    ω0 = 100, ξ = 0.8 for the velocities, at 500 Hz). ``integral_span``: quadrature intervals
+    summed into one L_Iτ residual in every L_prop run (1: the paper's; see
+    :func:`~furuta_gym.training.losses.integral_loss_terms`, and docs/learning.md for its use on
+    data whose velocities a filter estimated). ``training_velocities``: the training and
+    scale-fit trajectories' velocities as the sensor gave them (``"recorded"``) or re-estimated
+    offline from the angles without lag (``"zero_phase"``,
+    :func:`~furuta_gym.signals.zero_phase_velocity`), as one would process logged data; the test
+    sets are scored as recorded either way.
     """
     quick: bool = False
     seeds: tuple[int, ...] = (0,)
@@ -162,6 +172,8 @@ class ReproduceConfig:
     executor: str = "local"
     address: str | None = None
     cpus_per_task: int = 1
+    integral_span: int = 1
+    training_velocities: str = "recorded"
 
     def __post_init__(self):
         if self.split not in EVALUATION_SETS:
@@ -181,6 +193,12 @@ class ReproduceConfig:
                 raise ValueError(f"pair ({kind!r}, {loss!r}) is not one the paper reports: {PAPER_PAIRS}")
         if not self.seeds:
             raise ValueError("seeds must name at least one seed")
+        if not (isinstance(self.integral_span, int) and self.integral_span >= 1):
+            raise ValueError(f"integral_span must be a positive integer (intervals per L_Iτ residual), "
+                             f"got {self.integral_span!r}")
+        if self.training_velocities not in TRAINING_VELOCITIES:
+            raise ValueError(f"training_velocities must be one of {TRAINING_VELOCITIES}, "
+                             f"got {self.training_velocities!r}")
         if self.sensor not in SENSORS:
             raise ValueError(f"sensor must be one of {sorted(SENSORS)}, got {self.sensor!r}")
         if self.plant is not None and self.ground_truth == "analytic":
@@ -240,6 +258,7 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
         overrides["fast_compile"] = True
     if loss == "prop":
         overrides["lambda_traj"] = row.lambda_traj
+        overrides["integral_span"] = config.integral_span
         if row.augmentation_weight is not None:
             # written out, not left to the None default: the run record then says which μ it used
             overrides["augmentation_weight"] = row.augmentation_weight
@@ -365,6 +384,8 @@ def run_settings(system: str, kind: str, loss: str, seed: int, config: Reproduce
                 "train": train, "model_hparams": _default_hparams(system, kind, config.model_overrides)}
     if config.split != "test":  # the scale is fitted on the split's own trajectory
         settings["split"] = config.split
+    if config.training_velocities != "recorded":
+        settings["training_velocities"] = config.training_velocities
     return json.loads(json.dumps(settings))
 
 
@@ -432,9 +453,9 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     else:
         resume = (run_dir / STATE_FILE).exists()
         status = "resumed" if resume else "trained"
-        forced = data.get(SCALE_FIT_SET[config.split]) if system_definition(system).scale_fit_on_forced_data else None
+        train_trajs, forced = _training_data(system, data, config)
         try:
-            train(kind, system, loss, data["train"], tcfg, out_dir=run_dir, resume=resume,
+            train(kind, system, loss, train_trajs, tcfg, out_dir=run_dir, resume=resume,
                   forced_trajs=forced, hparams=config.model_overrides)
             error = None if model_path.exists() else "training ended without a finite model"
         except (ValueError, FloatingPointError, RuntimeError) as exc:  # e.g. a failed scale fit
@@ -455,6 +476,18 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     metrics["_seconds"] = {"train": round(t_train, 1), "evaluate": round(time.perf_counter() - t0 - t_train, 1)}
     metrics_path.write_text(json.dumps(metrics, indent=1) + "\n")
     return metrics, t_train, status
+
+
+def _training_data(system: str, data: dict, config: ReproduceConfig):
+    """``(training trajectories, scale-fit trajectories or None)`` as the run trains on them."""
+    forced = data.get(SCALE_FIT_SET[config.split]) if system_definition(system).scale_fit_on_forced_data else None
+    if config.training_velocities == "recorded":
+        return data["train"], forced
+
+    def offline(trajs):
+        return [dataclasses.replace(t, qd=zero_phase_velocity(np.asarray(t.q), t.dt)) for t in trajs]
+
+    return offline(data["train"]), None if forced is None else offline(forced)
 
 
 def _worker_inputs(system: str, out: Path, config: ReproduceConfig):

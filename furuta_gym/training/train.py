@@ -53,6 +53,7 @@ from .losses import (
     integral_loss_terms,
     make_windows,
     resolve_normalization,
+    span_sum,
     trajectory_loss,
 )
 from .recipe import PAPER_SCHEDULE, RECIPE
@@ -286,12 +287,17 @@ class ScaleFit:
 _integral_terms_jit = eqx.filter_jit(integral_terms)
 
 
-def fit_scale(model, trajs: Sequence[Trajectory], rule: QuadratureRule = "trapezoid"):
+def fit_scale(model, trajs: Sequence[Trajectory], rule: QuadratureRule = "trapezoid", span: int = 1):
     """Fit the overall scale of a learned model's (L, τ_NC) on forced trajectories.
 
     The integral residual of the model with its Lagrangian and τ_NC multiplied by s is Z̄ − s·Ā
     (τ_u is known and not scaled), so s = ⟨Z̄, Ā⟩ / ⟨Ā, Ā⟩ by least squares. Returns
     ``(model_with_scale, ScaleFit)``. Needs a nonzero input in ``trajs``.
+
+    ``span``: Z̄ and Ā summed over that many consecutive intervals first, as L_Iτ's
+    (:func:`~furuta_gym.training.losses.span_sum`). Ā holds the momentum at the interval ends,
+    so an error in estimated velocities is an error in the regressor, which biases s towards
+    zero (regression dilution); over a longer interval that error weighs less against Ā.
     """
     ensure_x64()
     As, Zs = [], []
@@ -301,8 +307,8 @@ def fit_scale(model, trajs: Sequence[Trajectory], rule: QuadratureRule = "trapez
         terms = _integral_terms_jit(
             model, jnp.asarray(tr.q), jnp.asarray(tr.qd), jnp.asarray(tr.u).reshape(len(tr), -1), tr.dt, rule
         )
-        As.append(np.asarray(terms.A))
-        Zs.append(np.asarray(terms.Z))
+        As.append(np.asarray(span_sum(terms.A, span)))
+        Zs.append(np.asarray(span_sum(terms.Z, span)))
     A = np.concatenate(As).ravel()
     Z = np.concatenate(Zs).ravel()
     if not np.any(np.concatenate([np.asarray(tr.u).ravel() for tr in trajs]) != 0):
@@ -795,7 +801,7 @@ def _finish(model, history: list, config: TrainConfig, loss: str, dhash: str, tr
     meta = {"data_hash": dhash, "epoch": len(history), "loss": loss, "config": config.to_json(),
             "final": history[-1] if history else None}
     if forced_trajs:
-        model, fit = fit_scale(model, forced_trajs, rule=config.quadrature)
+        model, fit = fit_scale(model, forced_trajs, rule=config.quadrature, span=config.integral_span)
         meta["scale_fit"] = fit.to_json()
         meta["forced_data_hash"] = data_hash(forced_trajs)
     elif not any(np.any(np.asarray(tr.u) != 0) for tr in trajs):
