@@ -16,6 +16,17 @@ filter for the velocities):
     furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
         --sensor experiment --out results/calibrated_protocol/reproduce --jobs 2
 
+and the two L_prop models again with the residual summed over 10 quadrature intervals (0.2 s of
+Simpson intervals for DeLaN, 0.1 s of Hermite ones for augmented DeLaN), then also trained on velocities
+re-estimated offline from the encoder angles (``experiments/calibrated_itau.py`` says why):
+
+    furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
+        --sensor experiment --integral-span 10 --pair dln:prop --pair adln:prop \\
+        --out results/calibrated_protocol/reproduce_span --jobs 2
+    furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
+        --sensor experiment --integral-span 10 --training-velocities zero_phase \\
+        --pair dln:prop --pair adln:prop --out results/calibrated_protocol/reproduce_offline --jobs 2
+
 This script then measures, per model, the learned potential's shape (hanging a minimum, upright a
 maximum; :func:`real_models.potential_shape` at both ends) and runs the swing-up + LQR designed on
 it (:class:`~furuta_gym.controllers.SwingUpLQR`, 5 V, 500 Hz, 8 s) on the plant, with the QUBE's
@@ -50,6 +61,10 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "calibrated_protocol"
 PLANT = OUT / "diagnosis.json"
 RUNS = OUT / "reproduce" / "runs" / "furuta"
+#: the L_prop runs again, by name suffix: the residual summed over 10 intervals (``--integral-span 10``),
+#: and that with velocities re-estimated offline (``--training-velocities zero_phase``)
+VARIANT_RUNS = {"_span": OUT / "reproduce_span" / "runs" / "furuta",
+                "_offline": OUT / "reproduce_offline" / "runs" / "furuta"}
 PAIRS = (("dln", "traj"), ("dln", "prop"), ("aph", "aph"), ("aph", "prop"), ("adln", "aph"), ("adln", "prop"))
 SECONDS = 8.0
 
@@ -75,6 +90,11 @@ def designs():
         path = RUNS / f"{kind}_{loss}" / "seed0" / "model.eqx"
         if path.exists():
             out.append((f"{kind}_{loss}", load_model(path, expected_system="furuta")))
+    for suffix, runs in VARIANT_RUNS.items():
+        for kind in ("dln", "adln"):
+            path = runs / f"{kind}_prop" / "seed0" / "model.eqx"
+            if path.exists():
+                out.append((f"{kind}_prop{suffix}", load_model(path, expected_system="furuta")))
     return out
 
 

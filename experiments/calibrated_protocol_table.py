@@ -21,21 +21,33 @@ OUT = ROOT / "results" / "calibrated_protocol"
 STATES = ("alpha", "beta", "alpha_dot", "beta_dot")
 LABELS = {"dln_traj": "DeLaN L_traj", "dln_prop": "DeLaN L_prop", "aph_aph": "APHYNITY L_aph",
           "aph_prop": "APHYNITY L_prop", "adln_aph": "augmented DeLaN L_aph", "adln_prop": "augmented DeLaN L_prop",
+          "dln_prop_span": "DeLaN L_prop, span 0.2 s", "adln_prop_span": "augmented DeLaN L_prop, span 0.1 s",
+          "dln_prop_offline": "DeLaN L_prop, span 0.2 s, offline velocities",
+          "adln_prop_offline": "augmented DeLaN L_prop, span 0.1 s, offline velocities",
           "plant model": "the plant's own model (reference)", "nominal analytic": "nominal analytic (reference)"}
 MODEL_KEYS = {"DLN": "dln", "APH": "aph", "ADLN": "adln"}
 
 
+def _table_rows(folder: str, suffix: str) -> list[dict]:
+    """The state rows of one reproduction's tables.csv, each with its docs label."""
+    path = OUT / folder / "tables.csv"
+    if not path.exists():
+        return []
+    with open(path) as fh:
+        rows = [r for r in csv.DictReader(fh) if r["metric"] in STATES]
+    return [{**r, "label": LABELS[f"{MODEL_KEYS[r['model']]}_{r['loss']}{suffix}"]} for r in rows]
+
+
 def prediction_table() -> list[str]:
     """Per test set and model: each state's log10 RMSE, ours (the paper's experimental value)."""
-    with open(OUT / "reproduce" / "tables.csv") as fh:
-        rows = [r for r in csv.DictReader(fh) if r["metric"] in STATES]
+    rows = (_table_rows("reproduce", "") + _table_rows("reproduce_span", "_span")
+            + _table_rows("reproduce_offline", "_offline"))
     lines = ["| test set | model | α | β | α̇ | β̇ |", "|---|---|---:|---:|---:|---:|"]
-    keys = dict.fromkeys((r["test_set"], r["model"], r["loss"]) for r in rows)
-    for test_set, model, loss in keys:
-        cells = {r["metric"]: r for r in rows if (r["test_set"], r["model"], r["loss"]) == (test_set, model, loss)}
-        text = [f"{cells[s]['ours']} ({cells[s]['paper'] or '—'})" for s in STATES]
-        label = LABELS[f"{MODEL_KEYS[model]}_{loss}"]
-        lines.append(f"| {test_set} | {label} | " + " | ".join(text) + " |")
+    for test_set in dict.fromkeys(r["test_set"] for r in rows):
+        for label in dict.fromkeys(r["label"] for r in rows if r["test_set"] == test_set):
+            cells = {r["metric"]: r for r in rows if (r["test_set"], r["label"]) == (test_set, label)}
+            text = [f"{cells[s]['ours']} ({cells[s]['paper'] or '—'})" for s in STATES]
+            lines.append(f"| {test_set} | {label} | " + " | ".join(text) + " |")
     return lines
 
 
@@ -63,8 +75,10 @@ def verdict(doc: dict) -> str:
     """Whether both L_prop models meet the protocol's bar: upright a maximum, swing-up from rest
     and from at least 90 % of the seeded starts."""
     parts = []
-    for name in ("dln_prop", "adln_prop"):
+    for name in (f"{kind}_prop{suffix}" for suffix in ("", "_span", "_offline") for kind in ("dln", "adln")):
         row = doc["models"].get(name)
+        if row is None and name.endswith(("_span", "_offline")):
+            continue  # a variant not run
         if row is None:
             parts.append(f"{LABELS[name]}: not trained")
             continue
@@ -95,6 +109,40 @@ def itau_stage_lines(doc: dict) -> list[str]:
     return lines
 
 
+def _hanging_hz(mass: list, curvature: float) -> str:
+    """The pendulum's small-oscillation frequency about hanging, √(V''·(M⁻¹)₂₂)/2π: free of the
+    overall scale that free releases leave open. "—" where V'' ≤ 0 (no oscillation)."""
+    inverse_22 = mass[0][0] / (mass[0][0] * mass[1][1] - mass[0][1] * mass[1][0])
+    value = curvature * inverse_22
+    return f"{value ** 0.5 / (2 * 3.141592653589793):.2f}" if value > 0 else "—"
+
+
+def itau_causes_lines(plant_curvature: float) -> list[str]:
+    """``experiments/calibrated_itau.py``'s cells: the plant's own L_Iτ per velocity estimate, and
+    what DeLaN's L_Iτ stage leaves per sensor, velocity estimate and span."""
+    path = OUT / "itau_causes.json"
+    if not path.exists():
+        return []
+    doc = json.loads(path.read_text())
+    first = next(iter(doc["cells"].values()))
+    lines = ["The plant's own L_Iτ on its 64 training releases (0 would be a perfect fit; the normaliser "
+             "is the model's own momentum changes):", "", "| data | L_Iτ of the plant |", "|---|---:|"]
+    lines += [f"| {name} | {value:.2g} |" for name, value in doc["plant_itau"].items()]
+    lines += ["", "DeLaN's L_Iτ stage alone (the recipe's, seed 0), per sensor, velocities and span:", "",
+              "| sensor | velocities | span (20 ms intervals) | epochs | L_Iτ learned / plant | hanging frequency (Hz; plant {}) | "
+              "stiffness (1/s; plant {:.1f}) | potential |".format(
+                  _hanging_hz(first["plant_mass_matrix_at_rest"], plant_curvature), first["plant_stiffness_median"]),
+              "|---|---|---:|---:|---:|---:|---:|---|"]
+    velocity = {"recorded": "the sensor's", "zero_phase": "zero-phase, offline"}
+    for cell in doc["cells"].values():
+        low, top = cell["shape"]["curvature_at_hanging_Nm_per_rad"], cell["shape"]["curvature_at_top_Nm_per_rad"]
+        kind = "physical" if low > 0 > top else ("upright a minimum" if top > 0 else "hanging a maximum")
+        lines.append(f"| {cell['sensor']} | {velocity[cell['velocity']]} | {cell['span']} | {cell['epochs']} | "
+                     f"{cell['itau_learned_over_plant']:.2g} | {_hanging_hz(cell['mass_matrix_at_rest'], low)} | "
+                     f"{cell['stiffness_median']:.3g} | {kind} |")
+    return lines
+
+
 def body() -> str:
     doc = json.loads((OUT / "control.json").read_text())
     return "\n".join(["Prediction, log10 RMSE on the rig's test runs: ours (the paper's experimental value; "
@@ -103,7 +151,7 @@ def body() -> str:
                       f"({doc['seconds_per_episode']:g} s episodes, 2048-count encoders, derivative-filter velocities; "
                       f"{doc['date']}).", "", *control_table(doc), "", verdict(doc), "",
                       "What the L_Iτ stage left in the L_prop runs that did not finish (see the text above the block):", "",
-                      *itau_stage_lines(doc)])
+                      *itau_stage_lines(doc), "", *itau_causes_lines(doc["models"]["plant model"]["shape"]["curvature_at_hanging_Nm_per_rad"])])
 
 
 if __name__ == "__main__":
