@@ -162,11 +162,35 @@ def itau_stage(run: Path) -> dict:
             "shape": shape(model)}
 
 
+def terms(model) -> dict:
+    """What a controller designed on ``model`` takes besides the potential, at rest: the mass
+    matrix, the force per unit velocity of each joint at zero input (viscous damping and back-EMF:
+    the plant's lumped damping holds both) and the input force per volt (fixed at the nominal gain
+    in the learned models)."""
+    import jax.numpy as jnp
+
+    rest = jnp.zeros(2)
+
+    def at_zero_input(qd):
+        return np.asarray(model.nonconservative_force(rest, qd) + model.input_force(rest, qd, jnp.zeros(1)))
+
+    damping = [at_zero_input(jnp.eye(2)[j]).tolist() for j in range(2)]
+    return {"mass_matrix_at_rest": np.asarray(model.mass_matrix(rest)).tolist(), "force_per_unit_velocity": damping,
+            "input_force_per_volt": np.asarray(model.input_force(rest, rest, jnp.ones(1))).tolist()}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--episodes", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--terms-only", action="store_true",
+                    help="add each design's mass matrix, damping and input force to control.json; no swing-ups")
     args = ap.parse_args(argv)
+    if args.terms_only:
+        doc = json.loads((OUT / "control.json").read_text())
+        doc["terms"] = {name: terms(model) for name, model in designs()}
+        (OUT / "control.json").write_text(json.dumps(doc, indent=1, default=str) + "\n")
+        return 0
     from furuta_gym.controllers import near_rest_starts
 
     starts = np.concatenate([np.zeros((1, 4)), near_rest_starts(args.episodes, args.seed, False)])

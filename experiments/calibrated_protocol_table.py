@@ -89,6 +89,27 @@ def verdict(doc: dict) -> str:
     return "; ".join(parts) + "."
 
 
+def terms_table(doc: dict) -> list[str]:
+    """Per design model: the inertias, the rotor's damping (back-EMF included) and how strongly a
+    volt moves the rotor, input / M₁₁, relative to the plant's (``calibrated_protocol.py --terms-only``)."""
+    terms = doc.get("terms")
+    if not terms:
+        return []
+
+    def gain_over_inertia(t):
+        return t["input_force_per_volt"][0] / t["mass_matrix_at_rest"][0][0]
+
+    plant = gain_over_inertia(terms["plant model"])
+    lines = ["The rest of what a design takes, at rest (M in 1e-4 kg·m², rotor damping in 1e-4 N·m·s/rad with "
+             "the back-EMF; the learned models' input force is fixed at the nominal 5e-3 N·m/V):", "",
+             "| designed on | M₁₁ | M₂₂ | rotor damping | (input / M₁₁) ÷ the plant's |", "|---|---:|---:|---:|---:|"]
+    for name, t in terms.items():
+        m, d = t["mass_matrix_at_rest"], t["force_per_unit_velocity"]
+        lines.append(f"| {LABELS[name]} | {1e4 * m[0][0]:.3g} | {1e4 * m[1][1]:.3g} | {-1e4 * d[0][0]:.3g} | "
+                     f"{gain_over_inertia(t) / plant:.3g} |")
+    return lines
+
+
 def itau_stage_lines(doc: dict) -> list[str]:
     """What each L_prop run's L_Iτ stage left: epochs, mass matrix, stiffness, potential shape."""
     lines = []
@@ -149,7 +170,7 @@ def body() -> str:
                       "its forced APHYNITY rows diverged, X).", "", *prediction_table(), "",
                       f"Energy shape and the swing-up designed on each model, run on the rig "
                       f"({doc['seconds_per_episode']:g} s episodes, 2048-count encoders, derivative-filter velocities; "
-                      f"{doc['date']}).", "", *control_table(doc), "", verdict(doc), "",
+                      f"{doc['date']}).", "", *control_table(doc), "", verdict(doc), "", *terms_table(doc), "",
                       "What the L_Iτ stage left in the L_prop runs that did not finish (see the text above the block):", "",
                       *itau_stage_lines(doc), "", *itau_causes_lines(doc["models"]["plant model"]["shape"]["curvature_at_hanging_Nm_per_rad"])])
 
