@@ -20,7 +20,8 @@ the learned model, so more training cannot help). The recipe's own run (experime
 is read from the calibrated protocol's training state. Writes
 ``results/calibrated_protocol/itau_causes.json``.
 
-    python experiments/calibrated_itau.py [--epochs 12000] [--cell exact:1 experiment:10 ...]
+    python experiments/calibrated_itau.py [--epochs 12000] [--cell experiment:10:zero_phase ...]
+    python experiments/calibrated_itau.py --scale-fit-only
 """
 
 from __future__ import annotations
@@ -137,6 +138,39 @@ def plant_losses() -> dict:
             for span in (1, SPAN_SAMPLES) for name, trajs in variants.items()}
 
 
+def scale_fit_check() -> dict:
+    """The recipe's scale fit (one 20 s forced run, the 2 V chirp) on this rig: how far its rotor
+    travels beside the training releases, the scale the plant's own model gets there (1 is right)
+    per velocity estimate and span, and the fits the retrained L_prop checkpoints record."""
+    import jax.numpy as jnp
+
+    from furuta_gym.lagrangian import integral_terms
+    from furuta_gym.training.checkpoint import read_header
+    from furuta_gym.training.losses import span_sum
+    from furuta_gym.training.reproduce import truth_model
+
+    data = _data("experiment")
+    forced, plant = data["scale_fit"][0], truth_model("furuta", _config("experiment"))
+    fits = {}
+    for velocity in ("recorded", "zero_phase"):
+        run = _velocities([forced], velocity)[0]
+        terms = integral_terms(plant, jnp.asarray(run.q), jnp.asarray(run.qd), jnp.asarray(run.u).reshape(-1, 1),
+                               run.dt, "simpson")
+        for span in (1, SPAN_SAMPLES):
+            a, z = (np.asarray(span_sum(x, span)).ravel() for x in (terms.A, terms.Z))
+            scale = float(z @ a / (a @ a))
+            fits[f"{velocity}, span {span}"] = {"factor": scale,
+                                                "relative_residual": float(np.linalg.norm(z - scale * a) / np.linalg.norm(z))}
+    recorded = {}
+    for folder in ("reproduce", "reproduce_span", "reproduce_offline"):
+        for path in sorted((OUT / folder / "runs" / "furuta").glob("*_prop/seed0/model.eqx")):
+            recorded[f"{folder}/{path.parts[-3]}"] = read_header(path)["meta"].get("scale_fit")
+    return {"rotor_travel_rad": float(np.ptp(forced.q[:, 0])),
+            "training_max_abs_alpha_rad": float(max(np.max(np.abs(t.q[:, 0])) for t in data["train"])),
+            "scale_fit_max_abs_alpha_rad": float(np.max(np.abs(forced.q[:, 0]))),
+            "plant_fits": fits, "recorded_fits": recorded}
+
+
 def run_cell(sensor: str, span: int, velocity: str, epochs: int) -> dict:
     from furuta_gym.training import train
     from furuta_gym.training.reproduce import truth_model
@@ -156,8 +190,14 @@ def main(argv=None) -> int:
     ap.add_argument("--cell", nargs="+", default=list(CELLS),
                     help="sensor:span:velocity cells to run (merged into the result file)")
     ap.add_argument("--out", type=Path, default=RESULT, help="the result file (merged into if it exists)")
+    ap.add_argument("--scale-fit-only", action="store_true", help="only the scale fit's check (no training)")
     args = ap.parse_args(argv)
     doc = json.loads(args.out.read_text()) if args.out.exists() else {"cells": {}}
+    doc["scale_fit"] = scale_fit_check()
+    print(json.dumps(doc["scale_fit"], indent=1), flush=True)
+    if args.scale_fit_only:
+        args.out.write_text(json.dumps(doc, indent=1) + "\n")
+        return 0
     doc["plant_itau"] = plant_losses()
     print(json.dumps(doc["plant_itau"], indent=1), flush=True)
     for cell in args.cell:

@@ -164,6 +164,31 @@ def itau_causes_lines(plant_curvature: float) -> list[str]:
     return lines
 
 
+def scale_fit_lines() -> list[str]:
+    """``calibrated_itau.py --scale-fit-only``: where the scale fit's forced run takes the rotor,
+    and the scale the plant's own model and the L_prop checkpoints get there."""
+    path = OUT / "itau_causes.json"
+    doc = json.loads(path.read_text()).get("scale_fit") if path.exists() else None
+    if not doc:
+        return []
+    velocity = {"recorded": "the sensor's", "zero_phase": "zero-phase, offline"}
+    lines = [f"The scale fit's forced run (the 2 V chirp, 20 s) takes the rotor {doc['rotor_travel_rad']:.1f} rad "
+             f"end to end, to |α| = {doc['scale_fit_max_abs_alpha_rad']:.1f} rad; the training releases never pass "
+             f"|α| = {doc['training_max_abs_alpha_rad']:.1f} rad. The scale it fits (1 is right for the plant's "
+             "own model) and the share of the input's impulse left unexplained:", "",
+             "| model | velocities, span | scale | unexplained |", "|---|---|---:|---:|"]
+    for key, fit in doc["plant_fits"].items():
+        v, span = key.split(", ")
+        lines.append(f"| the plant's own model | {velocity[v]}, {span} | {fit['factor']:.3g} | "
+                     f"{fit['relative_residual']:.2f} |")
+    names = {"reproduce": "", "reproduce_span": "_span", "reproduce_offline": "_offline"}
+    for key, fit in doc["recorded_fits"].items():
+        folder, name = key.split("/")
+        lines.append(f"| {LABELS[name + names[folder]]} | as trained | {fit['factor']:.3g} | "
+                     f"{fit['relative_residual_after']:.2f} |")
+    return lines
+
+
 def body() -> str:
     doc = json.loads((OUT / "control.json").read_text())
     return "\n".join(["Prediction, log10 RMSE on the rig's test runs: ours (the paper's experimental value; "
@@ -172,7 +197,8 @@ def body() -> str:
                       f"({doc['seconds_per_episode']:g} s episodes, 2048-count encoders, derivative-filter velocities; "
                       f"{doc['date']}).", "", *control_table(doc), "", verdict(doc), "", *terms_table(doc), "",
                       "What the L_Iτ stage left in the L_prop runs that did not finish (see the text above the block):", "",
-                      *itau_stage_lines(doc), "", *itau_causes_lines(doc["models"]["plant model"]["shape"]["curvature_at_hanging_Nm_per_rad"])])
+                      *itau_stage_lines(doc), "", *itau_causes_lines(doc["models"]["plant model"]["shape"]["curvature_at_hanging_Nm_per_rad"]), "",
+                      *scale_fit_lines()])
 
 
 if __name__ == "__main__":
