@@ -145,7 +145,8 @@ def scale_fit_check() -> dict:
     import jax.numpy as jnp
 
     from furuta_gym.lagrangian import integral_terms
-    from furuta_gym.training.checkpoint import read_header
+    from furuta_gym.training import fit_scale
+    from furuta_gym.training.checkpoint import load_model, read_header
     from furuta_gym.training.losses import span_sum
     from furuta_gym.training.reproduce import truth_model
 
@@ -161,14 +162,23 @@ def scale_fit_check() -> dict:
             scale = float(z @ a / (a @ a))
             fits[f"{velocity}, span {span}"] = {"factor": scale,
                                                 "relative_residual": float(np.linalg.norm(z - scale * a) / np.linalg.norm(z))}
-    recorded = {}
+    recorded, in_range = {}, {}
+    reach = float(max(np.max(np.abs(t.q[:, 0])) for t in data["train"]))
+    offline = _velocities([forced], "zero_phase")[0]
+    outside = np.flatnonzero(np.abs(np.asarray(forced.q)[:, 0]) > reach)
+    stay = int(outside[0]) if len(outside) else len(forced.t)
+    prefix = dataclasses.replace(offline, t=offline.t[:stay], q=np.asarray(offline.q)[:stay],
+                                 u=np.asarray(offline.u)[:stay], qd=np.asarray(offline.qd)[:stay])
     for folder in ("reproduce", "reproduce_span", "reproduce_offline"):
         for path in sorted((OUT / folder / "runs" / "furuta").glob("*_prop/seed0/model.eqx")):
             recorded[f"{folder}/{path.parts[-3]}"] = read_header(path)["meta"].get("scale_fit")
-    return {"rotor_travel_rad": float(np.ptp(forced.q[:, 0])),
-            "training_max_abs_alpha_rad": float(max(np.max(np.abs(t.q[:, 0])) for t in data["train"])),
+            if folder == "reproduce_offline":  # the same fit on the run's part inside the training range
+                model = load_model(path, expected_system="furuta")
+                in_range[f"{folder}/{path.parts[-3]}"] = fit_scale(model, [prefix], "simpson", SPAN_SAMPLES)[1].to_json()
+    return {"rotor_travel_rad": float(np.ptp(forced.q[:, 0])), "training_max_abs_alpha_rad": reach,
             "scale_fit_max_abs_alpha_rad": float(np.max(np.abs(forced.q[:, 0]))),
-            "plant_fits": fits, "recorded_fits": recorded}
+            "seconds_inside_training_range": stay * forced.dt, "plant_fits": fits, "recorded_fits": recorded,
+            "in_range_fits": in_range}
 
 
 def run_cell(sensor: str, span: int, velocity: str, epochs: int) -> dict:

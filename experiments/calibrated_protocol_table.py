@@ -186,6 +186,11 @@ def scale_fit_lines() -> list[str]:
         folder, name = key.split("/")
         lines.append(f"| {LABELS[name + names[folder]]} | as trained | {fit['factor']:.3g} | "
                      f"{fit['relative_residual_after']:.2f} |")
+    for key, fit in doc.get("in_range_fits", {}).items():
+        folder, name = key.split("/")
+        lines.append(f"| {LABELS[name + names[folder]]}, refitted on the run's first "
+                     f"{doc['seconds_inside_training_range']:.2f} s (inside the training range) | zero-phase, offline, "
+                     f"span 10 | × {fit['factor']:.3g} | {fit['relative_residual_after']:.2f} |")
     return lines
 
 
