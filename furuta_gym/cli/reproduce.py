@@ -3,17 +3,26 @@
 from __future__ import annotations
 
 import argparse
-
-from ..systems import SYSTEMS
 import os
 import shlex
 import sys
 from pathlib import Path
 
+from ..systems import SYSTEMS
+
 __all__ = ["add_arguments", "config_from_args", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_selection_arguments(parser)
+    _add_data_arguments(parser)
+    _add_execution_arguments(parser)
+    parser.add_argument("--no-figures", action="store_true", help="tables only")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _add_selection_arguments(parser: argparse.ArgumentParser) -> None:
+    """What runs: scale, seeds, systems, pairs and epochs."""
     parser.add_argument(
         "--quick", action="store_true",
         help="scaled-down data and a few epochs: the whole pipeline in minutes (not the paper's numbers)",
@@ -42,6 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="epochs of the L_prop runs: L_Iτ alone, then the 2-step and long-horizon stages of "
              "L_Iτ + λ·L_traj (both systems)",
     )
+
+
+def _add_data_arguments(parser: argparse.ArgumentParser) -> None:
+    """Which plant and sensor make the data, and how the L_prop runs read it."""
     parser.add_argument(
         "--ground-truth", choices=["auto", "mujoco", "analytic"], default="auto",
         help="data from the MuJoCo model (auto: when available) or the analytic model",
@@ -69,14 +82,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
              "sets are scored as recorded",
     )
     parser.add_argument(
-        "--jobs", type=int, default=None, metavar="N",
-        help="train N models at once in separate processes (default: the number of CPU cores, at most 8)",
-    )
-    parser.add_argument(
         "--quadrature", choices=["trapezoid", "simpson", "hermite"], default=None,
         help="L_Iτ's rule and the scale fit's, for every run (default: the reproduction's recipe, "
              "furuta_gym.training.reproduce.REPRODUCE_QUADRATURE, and FULL_PROP_QUADRATURE for "
              "the L_prop models named there)",
+    )
+
+
+def _add_execution_arguments(parser: argparse.ArgumentParser) -> None:
+    """Where and how many models train at once."""
+    parser.add_argument(
+        "--jobs", type=int, default=None, metavar="N",
+        help="train N models at once in separate processes (default: the number of CPU cores, at most 8)",
     )
     parser.add_argument(
         "--executor", choices=["local", "ray"], default="local",
@@ -93,8 +110,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--cpus-per-task", type=int, default=1, metavar="N",
         help="with --executor ray: CPUs each model's task asks for (and the threads it may use)",
     )
-    parser.add_argument("--no-figures", action="store_true", help="tables only")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def config_from_args(args: argparse.Namespace):
