@@ -54,21 +54,16 @@ def furuta_free_data(n: int, seed: int = 0, samples: int = 100):
 
 
 def _setup(loss: str, n_traj: int, batch_size):
-    import equinox as eqx
     import jax
 
     from furuta_gym.models import make_model
     from furuta_gym.training.losses import make_windows
-    from furuta_gym.training.train import TrainConfig, _build_optimizer, _make_step
+    from furuta_gym.training.train import TrainConfig, training_step
 
     trajs = furuta_free_data(n_traj)
     model = make_model("furuta", "dln", jax.random.PRNGKey(0))
     config = TrainConfig.for_system("furuta", batch_size=batch_size, progress=False)
-    optimizer, trainable, params = _build_optimizer(model, config)
-    _, static = eqx.partition(model, trainable)
-    opt_state = optimizer.init(params)
-    kind = "itau" if loss == "itau" else "traj"
-    step = _make_step(static, optimizer, kind, config, "momentum")
+    step, params, opt_state = training_step(model, config, "itau" if loss == "itau" else "traj")
     if loss == "itau":
         w = make_windows(trajs, 100, stride=99, cover_end=True)
         batches = [(None, w)]

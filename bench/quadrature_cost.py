@@ -2,7 +2,7 @@
 
 One step is what an epoch of the reproduction's L_Iτ-alone stage runs: value + gradient + AdamW
 update over all integral windows of 64 free 1 s Furuta trajectories at 100 Hz (the paper's
-training set), built by :func:`furuta_gym.training.train._make_step` exactly as training builds
+training set), built by :func:`furuta_gym.training.train.training_step` exactly as training builds
 it (augmented DeLaN with its minimum-norm term μ·P_a, which the Hermite rule also integrates at
 its interior nodes). Rules are timed interleaved, best of several rounds, in one process, so the
 ratios are measured under the same load.
@@ -24,21 +24,18 @@ RULES = ("trapezoid", "simpson", "hermite")
 
 
 def make_step(kind: str, rule: str, trajs):
-    import equinox as eqx
     import jax
 
     from furuta_gym.models import make_model
     from furuta_gym.training.losses import make_windows
-    from furuta_gym.training.train import AUGMENTATION_WEIGHT, TrainConfig, _build_optimizer, _make_step
+    from furuta_gym.training.train import AUGMENTATION_WEIGHT, TrainConfig, training_step
 
     model = make_model("furuta", kind, jax.random.PRNGKey(0))
     config = TrainConfig.for_system("furuta", quadrature=rule, progress=False)
-    optimizer, trainable, params = _build_optimizer(model, config)
-    _, static = eqx.partition(model, trainable)
     mu = AUGMENTATION_WEIGHT.get(("furuta", kind), 0.0)
-    step = _make_step(static, optimizer, "itau", config, "momentum", augmentation_weight=mu)
+    step, params, opt_state = training_step(model, config, "itau", augmentation_weight=mu)
     windows = make_windows(trajs, 101, stride=100, cover_end=True)
-    return step, params, optimizer.init(params), windows
+    return step, params, opt_state, windows
 
 
 def measure(kinds=("dln", "adln"), rounds: int = 5, steps: int = 20) -> dict:

@@ -58,7 +58,7 @@ import jax.numpy as jnp  # noqa: E402
 
 import head_to_head_sysid as hsysid  # noqa: E402
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
-from furuta_gym.diagnose._fit import InputDynamics  # noqa: E402
+from furuta_gym.diagnose import InputDynamics  # noqa: E402
 from furuta_gym.effects import Effect, WithEffects  # noqa: E402
 from furuta_gym.envs import Plant  # noqa: E402
 from furuta_gym.lagrangian import forward_dynamics_with_dry_friction  # noqa: E402

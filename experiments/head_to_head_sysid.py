@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from furuta_gym.assets import asset_path
-from furuta_gym.diagnose._fit import InputDynamics
+from furuta_gym.diagnose import InputDynamics
 from furuta_gym.measured import prediction_windows
 
 

@@ -7,6 +7,7 @@ refits and reports the held-out errors before and after. See ``docs/diagnose.md`
 """
 
 from ._diagnose import DiagnosisResult, DiagnosisSettings, EffectEvidence, ErrorSummary, diagnose
+from ._fit import InputDynamics
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
 from ._report import write_figures as write_report_figures
 from ._report import write_json as write_report_json
@@ -18,6 +19,7 @@ __all__ = [
     "DiagnosisSettings",
     "EffectEvidence",
     "ErrorSummary",
+    "InputDynamics",
     "LumpedModel",
     "Candidate",
     "layout_for",

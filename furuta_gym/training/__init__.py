@@ -18,7 +18,7 @@ from .losses import (
     proposed_loss,
     trajectory_loss,
 )
-from .train import ScaleFit, TrainConfig, data_hash, fit_scale, train
+from .train import ScaleFit, TrainConfig, data_hash, fit_scale, train, training_step
 
 __all__ = [
     "CheckpointError",
@@ -38,6 +38,7 @@ __all__ = [
     "make_windows",
     "proposed_loss",
     "trajectory_loss",
+    "training_step",
     "ScaleFit",
     "TrainConfig",
     "data_hash",

@@ -58,7 +58,7 @@ from .losses import (
 )
 from .recipe import PAPER_SCHEDULE, RECIPE
 
-__all__ = ["TrainConfig", "train", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
+__all__ = ["TrainConfig", "train", "training_step", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
 
 LOSSES = ("traj", "aph", "prop", "itau")
 #: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
@@ -416,6 +416,22 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
         return _step_cache.ExportedStep(live_step, key, cache_dir, compiler_options=compiler_options,
                                         export_step=eqx.filter_jit(step) if compiler_options else None)
     return live_step
+
+
+def training_step(model, config: TrainConfig, loss: str, normalization: Normalization = "momentum",
+                  augmentation_weight: float = 0.0):
+    """One optimiser step of ``loss`` for ``model``, built as :func:`train` builds it, with its
+    starting parameters and optimiser state: ``(step, params, opt_state)``.
+
+    ``step(params, opt_state, traj_windows, integral_windows, lam, learning_rate)`` returns
+    ``(params, opt_state, losses, ok)``; ``loss`` is one of :data:`LOSSES` (``"itau"``: L_Iτ alone,
+    ``traj_windows`` None). For benchmarks and experiments that time or probe the step itself."""
+    if loss not in LOSSES:
+        raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
+    optimizer, trainable, params = _build_optimizer(model, config)
+    _, static = eqx.partition(model, trainable)
+    step = _make_step(static, optimizer, loss, config, normalization, augmentation_weight)
+    return step, params, optimizer.init(params)
 
 
 def _read_history(path: Path, epochs: int) -> list[dict]:
