@@ -110,9 +110,9 @@ def test_short_nmsd_training_with_l_prop_lowers_losses_and_held_out_error(nmsd_d
         train("dln", "nmsd", "prop", train_set, config, tmp_path, hparams=hparams)
 
 
-def test_training_step_is_the_step_training_takes_and_lowers_its_loss(nmsd_data):
-    """The public step (benchmarks time it): jitted, finite, L_Iτ lower after a few steps; an
-    unknown loss is one clear error."""
+def test_training_step_lowers_its_loss_and_refuses_an_unknown_one(nmsd_data):
+    """The public step (benchmarks time it): finite, L_Iτ lower after a few steps; an unknown loss
+    is one clear error."""
     train_set, _ = nmsd_data
     model = make_model("nmsd", "dln", jax.random.PRNGKey(0), hidden=(8, 8))
     step, params, opt_state = training_step(model, TrainConfig(progress=False), "itau")
