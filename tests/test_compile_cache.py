@@ -99,7 +99,7 @@ def itau_step(furuta_free):
     optimizer, trainable, params = _build_optimizer(model, config)
     _, static = eqx.partition(model, trainable)
     step = _make_step(static, optimizer, "itau", config, "momentum")
-    assert not isinstance(step, _step_cache.ExportedStep)  # tests never enable JAX's disk cache
+    assert not isinstance(step, _step_cache.ExportedStep)  # the tests leave the traced-step cache off
     windows = make_windows(furuta_free, 41, stride=40, cover_end=True)
     args = (params, optimizer.init(params), None, windows, jnp.asarray(1.0), jnp.asarray(1e-3))
     key = {"loss": "itau", "config": repr(config), "optimizer": _step_cache.optimizer_description(optimizer),
@@ -130,7 +130,7 @@ def test_exported_step_round_trips_through_disk_exactly(itau_step, tmp_path):
         _step_cache.ExportedStep(_never_traced, other, tmp_path)(*args)
 
 
-def test_an_exported_step_compiles_once_for_a_whole_run(itau_step, tmp_path):
+def test_an_exported_step_compiles_once_for_a_whole_run(itau_step, tmp_path, no_persistent_cache):
     """The stored step returns arrays committed to their device, while a run's first params and
     optimiser state (and every batch) arrive uncommitted: feeding its outputs back, as training
     does, must not compile the step a second time (seconds per run for a trajectory loss)."""
@@ -170,8 +170,12 @@ def test_the_step_cache_is_off_unless_asked_for(monkeypatch):
     monkeypatch.setenv("FURUTA_GYM_STEP_CACHE", "0")
     assert _step_cache.step_cache_dir() is None
     monkeypatch.delenv("FURUTA_GYM_STEP_CACHE")
-    if not jax.config.jax_compilation_cache_dir:  # the library writes nothing by itself
-        assert _step_cache.step_cache_dir() is None
+    before = jax.config.jax_compilation_cache_dir  # the test session's own cache, if any
+    try:
+        jax.config.update("jax_compilation_cache_dir", None)
+        assert _step_cache.step_cache_dir() is None  # the library writes nothing by itself
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
 
 
 def test_training_commands_turn_the_cache_on_where_asked_and_never_when_told_not_to(tmp_path):
@@ -222,14 +226,17 @@ def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported
                 jax.make_jaxpr(live)(*args)
         else:
             jax.make_jaxpr(live)(*args)
-        store = tmp_path / f"fast_{fast}"
+        outputs.append(live(*args))
+        if not fast:  # an optimised step's export: the round-trip tests above
+            continue
+        store = tmp_path / "fast"
         monkeypatch.setattr(_step_cache, "step_cache_dir", lambda: store)
         exported = _make_step(static, optimizer, "prop", config, "momentum")
         monkeypatch.undo()
         assert isinstance(exported, _step_cache.ExportedStep)
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # "training step not exported" is a failed export
-            outputs += [live(*args), exported(*args)]
+            outputs.append(exported(*args))
         assert len(list(store.glob("step-*.jaxexport"))) == 1
     reference = outputs[0]
     for out in outputs[1:]:

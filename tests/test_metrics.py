@@ -133,7 +133,7 @@ def test_wrong_system_and_missing_velocities_are_clear_errors(nmsd_data, furuta_
         evaluate_model(analytic_model("nmsd"), furuta_data["test_free"], truth=analytic_model("nmsd"))
 
 
-def test_force_and_energy_metrics_compile_once_per_model_structure(furuta_data):
+def test_force_and_energy_metrics_compile_once_per_model_structure(furuta_data, no_persistent_cache):
     """The force-decomposition and energy metrics are jitted with the model as an argument: a
     model of a new structure compiles a handful of programs (traced op by op they compiled one
     per primitive, hundreds, ~12 s per reproduction model), and a second model of that structure
