@@ -265,19 +265,28 @@ def _report(cfg: DemoConfig, out: Path, t_fine, tracks, record, progress: bool) 
     return video
 
 
+def _closer(block: dict, columns: dict[str, str]) -> str:
+    """Which model is closer to the truth in each column of a block (lower is closer), e.g.
+    "closer: L_prop on forces, L_traj on energy"."""
+    wins: dict[str, list[str]] = {"L_prop": [], "L_traj": []}
+    for key, label in columns.items():
+        wins["L_prop" if block["prop"][key] < block["traj"][key] else "L_traj"].append(label)
+    return "closer: " + ", ".join(f"{name} on {' and '.join(labels)}" for name, labels in wins.items() if labels)
+
+
 def summary_table(summary: dict) -> str:
     """The demo's one summary table (plain text)."""
     tr, co, dg, ph = summary["tracking"], summary["control"], summary["diagnose"], summary["physics"]
     eb, ea = dg["error_before"], dg["error_after"]
-    closer = "closer" if ph["prop"]["forces"] < ph["traj"]["forces"] else "NOT closer"
     rows = [
         ("Learned vs true (held-out free run, env)", "RMSE α / β [rad]", f"{summary['config']['tracking_seconds']:g} s, 500 Hz"),
         ("  DeLaN L_prop", f"{tr['prop']['rmse_alpha']:.3g} / {tr['prop']['rmse_beta']:.3g}", ""),
-        ("  DeLaN L_traj", f"{tr['traj']['rmse_alpha']:.3g} / {tr['traj']['rmse_beta']:.3g}", ""),
+        ("  DeLaN L_traj", f"{tr['traj']['rmse_alpha']:.3g} / {tr['traj']['rmse_beta']:.3g}",
+         _closer(tr, {"rmse_alpha": "α", "rmse_beta": "β"})),
         ("Physics vs true (held-out states)", "log10 RMSE energy / forces", "forces: inertial, Coriolis, gravity"),
         ("  DeLaN L_prop", f"{ph['prop']['energy']:.2f} / {ph['prop']['forces']:.2f}", ""),
         ("  DeLaN L_traj", f"{ph['traj']['energy']:.2f} / {ph['traj']['forces']:.2f}",
-         f"L_prop's forces {closer} to the truth"),
+         _closer(ph, {"energy": "energy", "forces": "forces"})),
         ("Swing-up on MuJoCo (L_prop design)",
          f"{co['success_rate'] * 100:.0f} % of {co['episodes']}",
          f"from rest: {'yes' if co['from_rest_success'] else 'no'}"

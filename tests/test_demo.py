@@ -7,6 +7,8 @@ import sys
 
 import pytest
 
+from furuta_gym.demo import _closer
+
 
 @pytest.fixture(scope="module")
 def demo_dir(tmp_path_factory):
@@ -38,8 +40,9 @@ def test_demo_summary_numbers_are_finite_and_sensible(demo_dir):
         # log10 RMSE against the truth: finite, and the mean over the three force terms
         assert all(math.isfinite(physics[k]) for k in ("energy", "forces", "inertial", "coriolis", "potential"))
         assert abs(physics["forces"] - (physics["inertial"] + physics["coriolis"] + physics["potential"]) / 3) < 1e-12
-    closer = s["physics"]["prop"]["forces"] < s["physics"]["traj"]["forces"]
-    assert ("L_prop's forces closer" if closer else "L_prop's forces NOT closer") in stdout
+    # the table says which model is closer on each column, and that is what the numbers say
+    assert _closer(s["physics"], {"energy": "energy", "forces": "forces"}) in stdout
+    assert _closer(s["tracking"], {"rmse_alpha": "α", "rmse_beta": "β"}) in stdout
     c = s["control"]
     assert 0.0 <= c["success_rate"] <= 1.0 and c["episodes"] >= 2
     assert c["peak_voltage"] <= 5.0 + 1e-9  # the env's default voltage limit holds
@@ -68,3 +71,10 @@ def test_demo_seeds_docs_block_matches_its_results():
     proc = subprocess.run([sys.executable, str(root / "experiments" / "demo_seeds.py"), "--check"],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_the_summary_names_the_closer_model_per_column():
+    block = {"prop": {"energy": -1.29, "forces": -2.30}, "traj": {"energy": -1.73, "forces": -2.21}}
+    assert _closer(block, {"energy": "energy", "forces": "forces"}) == "closer: L_prop on forces, L_traj on energy"
+    block = {"prop": {"a": 0.1, "b": 0.2}, "traj": {"a": 0.3, "b": 0.4}}
+    assert _closer(block, {"a": "α", "b": "β"}) == "closer: L_prop on α and β"
