@@ -779,17 +779,42 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
             found = _stiction_from_rests(fx, base, c, bound, lambda th0: refit(th0, accepted)[0], dyn)
             if found is None:
                 continue
-            th, how = found
+            fitted, (th, how) = (th, trial_pred), found
             trial_pred = fx.validation_predictions(th, dyn, start)
             ev = _stiction_evidence(pred, trial_pred, measured)
             if ev.z <= -s.veto_t:
                 fx.notes.append(f"{c.key}: {how}, but predicts worse with it (gain {ev.improvement:.1%}, "
                                 f"t {ev.z:.1f}): not added")
                 continue
+            th, how, trial_pred = _sized(fx, (th, how, trial_pred), fitted, c, bound, (dyn, start, measured))
+            ev = _stiction_evidence(pred, trial_pred, measured)
         accepted, theta, base, pred = accepted + [c], th, th, trial_pred
         evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z,
                                          "selected", how)
     return accepted, theta
+
+
+def _sized(fx: _Fitter, from_rests, fitted, c: Candidate, bound: _rests.RestBound, where):
+    """A stiction added on its rests' evidence (``from_rests``: θ, how, predictions) takes its size
+    from the output-error fit with ΔF free (``fitted``: θ, predictions; its breakaway kept at least
+    what the rests held) when that fit predicts the fit-set validation windows better: rests bound
+    the breakaway from below only, and with it set too low the Coulomb level absorbs the rest.
+    Returns (θ, how, predictions)."""
+    dyn, start, measured = where
+    (th_rests, how, pred_rests), (th_fit, pred_fit) = from_rests, fitted
+    i, j = fx.layout.index(c.key), fx.layout.index(f"{c.kind.breakaway_above}:{c.joint}")
+    if not (th_fit[i] > 0 and _physical(fx.layout, th_fit)):
+        return th_rests, how, pred_rests
+    raised = th_fit.copy()
+    raised[i] = max(th_fit[i], bound.held - th_fit[j])
+    if raised[i] != th_fit[i]:
+        pred_fit = fx.validation_predictions(raised, dyn, start)
+    better = _prediction_evidence(_square_sums(pred_rests, measured), _square_sums(pred_fit, measured))
+    if not better.improvement > 0:
+        return th_rests, how, pred_rests
+    th = _breakaway_at_least(fx, th_fit, c, bound)
+    return th, (f"{how}; ΔF {th[i]:.3g} from the output-error fit with it free, which predicts the validation "
+                f"windows {better.improvement:.0%} better than ΔF {th_rests[i]:.3g} set from the rests"), pred_fit
 
 
 def _stiction_evidence(pred, trial_pred, measured) -> _trace_mod.Evidence:
