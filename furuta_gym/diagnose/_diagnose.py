@@ -802,12 +802,11 @@ def _sized(fx: _Fitter, from_rests, fitted, c: Candidate, bound: _rests.RestBoun
     Returns (θ, how, predictions)."""
     dyn, start, measured = where
     (th_rests, how, pred_rests), (th_fit, pred_fit) = from_rests, fitted
-    i, j = fx.layout.index(c.key), fx.layout.index(f"{c.kind.breakaway_above}:{c.joint}")
+    i = fx.layout.index(c.key)
     if not (th_fit[i] > 0 and _physical(fx.layout, th_fit)):
         return th_rests, how, pred_rests
-    raised = th_fit.copy()
-    raised[i] = max(th_fit[i], bound.held - th_fit[j])
-    if raised[i] != th_fit[i]:
+    raised = _raised_breakaway(fx, th_fit, c, bound)
+    if raised is not th_fit:
         pred_fit = fx.validation_predictions(raised, dyn, start)
     better = _prediction_evidence(_square_sums(pred_rests, measured), _square_sums(pred_fit, measured))
     if not better.improvement > 0:
@@ -826,13 +825,23 @@ def _stiction_evidence(pred, trial_pred, measured) -> _trace_mod.Evidence:
                                 np.where(np.isfinite(change), change, 0.0))
 
 
-def _breakaway_at_least(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBound) -> np.ndarray:
-    """θ with the joint's breakaway (Coulomb + ΔF) raised to what its rests held, if it was below."""
+def _raised_breakaway(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBound) -> np.ndarray:
+    """θ with the joint's breakaway (Coulomb + ΔF) raised to what its rests held, if it was below
+    (``theta`` itself if not)."""
     i, coulomb = fx.layout.index(c.key), theta[fx.layout.index(f"{c.kind.breakaway_above}:{c.joint}")]
     if coulomb + theta[i] >= bound.held:
         return theta
     out = theta.copy()
     out[i] = bound.held - coulomb
+    return out
+
+
+def _breakaway_at_least(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBound) -> np.ndarray:
+    """:func:`_raised_breakaway`, with the raise recorded (notes; no interval for ΔF)."""
+    out = _raised_breakaway(fx, theta, c, bound)
+    if out is theta:
+        return theta
+    i = fx.layout.index(c.key)
     _held_from(fx, out, theta, i, "raised to the force the rests held (a lower bound, not a fit)")
     fx.notes.append(f"{c.key}: ΔF raised {theta[i]:.3g} -> {out[i]:.3g} to the force the rests held "
                     f"({bound.held:.3g} over {bound.n_windows} windows of {fx.settings.rest_window:g} s)")
