@@ -226,17 +226,14 @@ def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported
                 jax.make_jaxpr(live)(*args)
         else:
             jax.make_jaxpr(live)(*args)
-        outputs.append(live(*args))
-        if not fast:  # an optimised step's export: the round-trip tests above
-            continue
-        store = tmp_path / "fast"
+        store = tmp_path / f"fast_{fast}"
         monkeypatch.setattr(_step_cache, "step_cache_dir", lambda: store)
         exported = _make_step(static, optimizer, "prop", config, "momentum")
         monkeypatch.undo()
         assert isinstance(exported, _step_cache.ExportedStep)
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # "training step not exported" is a failed export
-            outputs.append(exported(*args))
+            outputs += [live(*args), exported(*args)]
         assert len(list(store.glob("step-*.jaxexport"))) == 1
     reference = outputs[0]
     for out in outputs[1:]:
