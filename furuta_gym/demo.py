@@ -42,7 +42,8 @@ class DemoConfig:
 
     seed: int = 0
     n_train: int = 16  # free 1 s training trajectories at 100 Hz
-    epochs: tuple[int, int] = (150, 40)  # (2-step stage, 1 s stage)
+    epochs: tuple[int, ...] = (150, 40)  # (2-step stage, 1 s stage)
+    horizons: tuple[int | float, ...] = (2, 1.0)  # per stage: samples (int) or seconds
     tracking_seconds: float = 2.0  # held-out comparison in the env
     control_seconds: float = 6.0
     control_starts: int = 4  # seeded starts near rest, besides x0 = 0
@@ -56,7 +57,10 @@ class DemoConfig:
         """The smallest meaningful run (CI): every stage, minimal sizes."""
         return cls(
             n_train=8,
-            epochs=(30, 5),
+            # one 2-step stage: each stage compiles its own step (most of a tiny run's time);
+            # the 1 s stage is what the default run adds
+            epochs=(40,),
+            horizons=(2,),
             tracking_seconds=1.0,
             control_seconds=4.0,
             control_starts=1,
@@ -133,7 +137,7 @@ def _generate(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> di
 
 def _train(cfg: DemoConfig, out: Path, datasets: dict, loss: str, progress: bool, overwrite: bool):
     """2. A DeLaN trained with ``loss`` on the demo's data."""
-    tc = TrainConfig.for_system("furuta", epochs=cfg.epochs, seed=cfg.seed,
+    tc = TrainConfig.for_system("furuta", epochs=cfg.epochs, horizons=cfg.horizons, seed=cfg.seed,
                                 progress=progress, checkpoint_every=10**9)
     run_dir = out / "models" / f"dln_{loss}"
     if run_dir.exists() and overwrite:
