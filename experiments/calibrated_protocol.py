@@ -111,8 +111,10 @@ def swing_up(model, starts: np.ndarray, seed: int) -> dict:
         return {"design_error": f"{type(exc).__name__}: {exc}"}
     plant = Plant.load(PLANT)
     sensors = Sensors(encoder_counts=2048, velocity="filter")
-    make_env = lambda: gym.make("furuta_gym/Furuta-v0", episode=Episode(seconds=None),  # noqa: E731
-                                plant=plant, sensors=sensors)
+
+    def make_env():
+        return gym.make("furuta_gym/Furuta-v0", episode=Episode(seconds=None), plant=plant, sensors=sensors)
+
     t0 = time.perf_counter()
     recs = evaluate_on_env(ctrl, make_env, starts, SECONDS, seed=seed)
     success = [bool(r.metrics.success) for r in recs]
