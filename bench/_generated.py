@@ -55,8 +55,15 @@ def update(path: Path, new_text: str, check: bool, how_to_fix: str) -> int:
     return 0
 
 
-def write_section(section: str, start: str, end: str, path: Path = BENCHMARKS_MD, *, check: bool = False,
-                  how_to_fix: str = "run the bench script that writes it") -> int:
+def write_section(
+    section: str,
+    start: str,
+    end: str,
+    path: Path = BENCHMARKS_MD,
+    *,
+    check: bool = False,
+    how_to_fix: str = "run the bench script that writes it",
+) -> int:
     """Put ``section`` (``start`` and ``end`` included) into ``path`` (BENCHMARKS.md by default),
     replacing the section between those markers or appending it; with ``check`` only compare
     (exit code 1, saying ``how_to_fix``, if the file differs)."""

@@ -250,9 +250,12 @@ def main(argv=None) -> int:
         f"| MuJoCo `Furuta-v0` single env (reference: the faster of start {mujoco_start:,.0f} "
         f"and end {mujoco_end:,.0f} env.step/s) | {mujoco_rate:,.0f} env.step/s | 1 | "
         f"{mujoco_cpu:,.0f} | 1 |",
-        row(f"**DeLaN single env (`dynamics=model`, default `kernel=\"auto\"` → `{delan_kernel}`)**, "
-            "target ≥ 0.5", delan_single, "env.step/s"),
-        row("DeLaN single env, `kernel=\"xla\"` (one jitted XLA call per step)", delan_xla_single, "env.step/s"),
+        row(
+            f'**DeLaN single env (`dynamics=model`, default `kernel="auto"` → `{delan_kernel}`)**, target ≥ 0.5',
+            delan_single,
+            "env.step/s",
+        ),
+        row('DeLaN single env, `kernel="xla"` (one jitted XLA call per step)', delan_xla_single, "env.step/s"),
         row(
             f"**DeLaN batched env, N = {n_ref}, `workers={min(workers, n_ref)}`** (worker "
             "processes; CPU includes theirs), target ≥ 10",
@@ -260,8 +263,7 @@ def main(argv=None) -> int:
             "state-steps/s",
         ),
         row(
-            f"DeLaN batched env, N = {n_ref}, default (in this process, "
-            f"{auto_chunks(n_ref)} concurrent chunks)",
+            f"DeLaN batched env, N = {n_ref}, default (in this process, {auto_chunks(n_ref)} concurrent chunks)",
             ref[0],
             "state-steps/s",
         ),
@@ -294,7 +296,7 @@ def main(argv=None) -> int:
         "`workers=K` steps the copies in K worker processes whose XLA thread pool has one thread "
         "(one execution in one process keeps ~1.3 of 2 cores busy); their start-up (~3 s) is not "
         "timed. The machine is shared, so absolute rates vary between runs; the "
-        "ratios are measured side by side. \"Per CPU-second\" divides the work by the CPU time "
+        'ratios are measured side by side. "Per CPU-second" divides the work by the CPU time '
         "this process used (all threads), which depends much less on the other users' load.",
         MARK_END,
     ]

@@ -88,10 +88,8 @@ def learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR) 
                 f"{np.round(np.asarray(c.lqr.K), 2).tolist()}, design {design_s:.0f} s."
             )
             t = time.perf_counter()
-            recs = evaluate_on_env(c, env_factory(), starts(n_ep if not auto else n2), SECONDS,
-                                   seed=args.seed)
-            rows.append(_row("swing-up + LQR (volts)", label, "mujoco", recs,
-                             time.perf_counter() - t))
+            recs = evaluate_on_env(c, env_factory(), starts(n_ep if not auto else n2), SECONDS, seed=args.seed)
+            rows.append(_row("swing-up + LQR (volts)", label, "mujoco", recs, time.perf_counter() - t))
             print(rows[-1], flush=True)
     lines = [LEARNED_START, "### Designed on learned models, run on MuJoCo", ""]
     if not ckpts:
@@ -112,6 +110,8 @@ def learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR) 
         lines += ["", *[f"- {x}" for x in notes]]
     lines.append(LEARNED_END)
     return "\n".join(lines)
+
+
 SECONDS = 8.0
 
 
@@ -135,14 +135,17 @@ def _row(name, design, plant, records, wall):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--extra-episodes", type=int, default=30,
-                        help="seeded starts for the sensor and PFL-reading rows (default 30)")
+    parser.add_argument(
+        "--extra-episodes", type=int, default=30, help="seeded starts for the sensor and PFL-reading rows (default 30)"
+    )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--checkpoint", action="append", default=[],
-                        help='learned design model, "NAME=PATH" (repeatable)')
+    parser.add_argument(
+        "--checkpoint", action="append", default=[], help='learned design model, "NAME=PATH" (repeatable)'
+    )
     parser.add_argument("--skip-sensitivity", action="store_true")
-    parser.add_argument("--learned-only", action="store_true",
-                        help="run and rewrite only the learned-design subsection")
+    parser.add_argument(
+        "--learned-only", action="store_true", help="run and rewrite only the learned-design subsection"
+    )
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
 
@@ -155,8 +158,13 @@ def main(argv=None) -> int:
     import equinox as eqx
 
     from furuta_gym.controllers import (
-        EnergySwingUp, SwingUpLQR, closed_loop, episode_metrics, evaluate_on_env,
-        near_rest_starts, pick_k_e,
+        EnergySwingUp,
+        SwingUpLQR,
+        closed_loop,
+        episode_metrics,
+        evaluate_on_env,
+        near_rest_starts,
+        pick_k_e,
     )
     from furuta_gym.effects import WithEffects
     from furuta_gym.envs import PLANT_PRESETS, Episode, Sensors
@@ -191,14 +199,19 @@ def main(argv=None) -> int:
     run("swing-up + LQR (volts)", "analytic", "mujoco", ctrl, n)
     run("swing-up + LQR (volts)", "analytic", "mujoco cable_spring", ctrl, n, plant="cable_spring")
     run("swing-up + LQR (volts)", "analytic", "mujoco coulomb", ctrl, n, plant="coulomb")
-    run("swing-up + LQR (volts)", "analytic", "mujoco, encoders + filtered velocity", ctrl, n2,
-        sensors=Sensors(encoder_counts=2048, velocity="filter"))
+    run(
+        "swing-up + LQR (volts)",
+        "analytic",
+        "mujoco, encoders + filtered velocity",
+        ctrl,
+        n2,
+        sensors=Sensors(encoder_counts=2048, velocity="filter"),
+    )
     for preset in ("quadratic_drag", "weak_motor", "delay"):
         run("swing-up + LQR (volts)", "analytic", f"mujoco {preset}", ctrl, n2, plant=preset)
     ctrl_pfl = SwingUpLQR.from_model(model, acts_on="pfl")
     run("swing-up + LQR on ū (PFL)", "analytic", "mujoco", ctrl_pfl, n2)
-    run("swing-up + LQR on ū (PFL)", "analytic", "mujoco cable_spring", ctrl_pfl, n2,
-        plant="cable_spring")
+    run("swing-up + LQR on ū (PFL)", "analytic", "mujoco cable_spring", ctrl_pfl, n2, plant="cable_spring")
 
     learned_section = learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR)
 
@@ -228,15 +241,11 @@ def main(argv=None) -> int:
                 r = batch(c, plant)
                 ms = [episode_metrics(r.xs[i], r.us[i], 1 / 500) for i in range(x0s.shape[0])]
                 ok = [m.time_to_upright for m in ms if m.success]
-                cells.append(
-                    f"{np.mean([m.success for m in ms]):.0%}"
-                    + (f" ({np.median(ok):.2f} s)" if ok else "")
-                )
+                cells.append(f"{np.mean([m.success for m in ms]):.0%}" + (f" ({np.median(ok):.2f} s)" if ok else ""))
             sens_lines.append(f"| {k:.0f} | " + " | ".join(cells) + " |")
             print(sens_lines[-1], flush=True)
         t = time.perf_counter()
-        sweep = pick_k_e(lambda k: SwingUpLQR(EnergySwingUp(model, k_e=k), lqr), model,
-                         seed=args.seed)
+        sweep = pick_k_e(lambda k: SwingUpLQR(EnergySwingUp(model, k_e=k), lqr), model, seed=args.seed)
         sens_lines.append("")
         sens_lines.append(
             f"Automatic pick on the analytic design model (`SwingUpLQR.from_model(model, "

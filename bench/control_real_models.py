@@ -70,8 +70,9 @@ def main(argv=None) -> int:
     catch_starts = np.concatenate([[[0.0, np.pi, 0.0, 0.0]], near_upright_starts(args.episodes, args.seed)])
     for label, model in _designs(res, load_model):
         for name, design, x0s, seconds in (
-                ("swing-up + LQR (volts)", lambda m: SwingUpLQR.from_model(m, seed=args.seed), starts, SECONDS),
-                ("LQR catch near upright (volts)", LQR.from_model, catch_starts, CATCH_SECONDS)):
+            ("swing-up + LQR (volts)", lambda m: SwingUpLQR.from_model(m, seed=args.seed), starts, SECONDS),
+            ("LQR catch near upright (volts)", LQR.from_model, catch_starts, CATCH_SECONDS),
+        ):
             try:
                 ctrl = design(model)
             except Exception as exc:  # a learned design can fail: say how, keep the table
@@ -82,14 +83,22 @@ def main(argv=None) -> int:
             rows.append(_row(name, label, f"mujoco + {plant}", recs, time.perf_counter() - t))
             print(rows[-1], flush=True)
     stamp = f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC"
-    lines = [START, "### Designed on real-data models, run on the matching plant variant", "",
-             f"`python bench/control_real_models.py --episodes {args.episodes}` — {stamp}, {machine()}. "
-             f"Plant: MuJoCo + what `diagnose` found on runs 1–5 ({plant}); nominal masses and lengths. "
-             "Swing-up: x0 = 0 and seeded starts near the hanging rest; the LQR catch alone: seeded starts "
-             f"near upright (β − π, α ~ U(±0.1 rad), velocities ~ U(±0.2 rad/s), {CATCH_SECONDS:g} s; its x0 column: "
-             "the exact upright), what "
-             "models learned from upright balancing logs saw.",
-             "", TABLE_HEADER, *rows, *[f"- {x}" for x in notes], END]
+    lines = [
+        START,
+        "### Designed on real-data models, run on the matching plant variant",
+        "",
+        f"`python bench/control_real_models.py --episodes {args.episodes}` — {stamp}, {machine()}. "
+        f"Plant: MuJoCo + what `diagnose` found on runs 1–5 ({plant}); nominal masses and lengths. "
+        "Swing-up: x0 = 0 and seeded starts near the hanging rest; the LQR catch alone: seeded starts "
+        f"near upright (β − π, α ~ U(±0.1 rad), velocities ~ U(±0.2 rad/s), {CATCH_SECONDS:g} s; its x0 column: "
+        "the exact upright), what "
+        "models learned from upright balancing logs saw.",
+        "",
+        TABLE_HEADER,
+        *rows,
+        *[f"- {x}" for x in notes],
+        END,
+    ]
     section = "\n".join(lines)
     print(section)
     if not args.no_write:

@@ -35,8 +35,11 @@ def measure(model, seconds: float, repeats: int) -> list[tuple]:
         one, _ = batched_env_rate(model, n, seconds, repeats, devices=1)
         two, _ = batched_env_rate(model, n, seconds, repeats, devices=2)
         rows.append((n, one, two))
-        print(f"N={n}: 1 device {one:,.0f} ({one.cpu:,.0f}/CPU-s), 2 devices {two:,.0f} "
-              f"({two.cpu:,.0f}/CPU-s): {two / one:.2f}x", flush=True)
+        print(
+            f"N={n}: 1 device {one:,.0f} ({one.cpu:,.0f}/CPU-s), 2 devices {two:,.0f} "
+            f"({two.cpu:,.0f}/CPU-s): {two / one:.2f}x",
+            flush=True,
+        )
     return rows
 
 

@@ -55,7 +55,9 @@ def main() -> None:
     args = ap.parse_args()
     seeds = args.seeds[:1] if args.quick else args.seeds
     print(f"<!-- {platform.node()} {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} -->")
-    print("| system | plant effect | seed | rank | found | coef. error | traj. RMSE before → after (ratio) | on the effect's joint |")
+    print(
+        "| system | plant effect | seed | rank | found | coef. error | traj. RMSE before → after (ratio) | on the effect's joint |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for system, eff in GRID:
         for seed in seeds:
@@ -73,13 +75,27 @@ def main() -> None:
             keys = [(e.name, e.joint) for e in res.effects]
             rank = keys.index(eff[:2]) + 1 if eff[:2] in keys else "-"
             ev = res.effects[rank - 1] if rank != "-" else None
-            err = (f"{100 * (ev.coefficient - eff[2]) / eff[2]:+.0f} %"
-                   if ev is not None and ev.coefficient is not None else ev.status if ev else "-")
+            err = (
+                f"{100 * (ev.coefficient - eff[2]) / eff[2]:+.0f} %"
+                if ev is not None and ev.coefficient is not None
+                else ev.status
+                if ev
+                else "-"
+            )
             j = eff[1] if eff[1] != "u" else None
-            jt = (f"{b.trajectory_rmse_per_joint[j]:.3g} → {a.trajectory_rmse_per_joint[j]:.3g} "
-                  f"({b.trajectory_rmse_per_joint[j] / a.trajectory_rmse_per_joint[j]:.1f}×)") if j else "-"
+            jt = (
+                (
+                    f"{b.trajectory_rmse_per_joint[j]:.3g} → {a.trajectory_rmse_per_joint[j]:.3g} "
+                    f"({b.trajectory_rmse_per_joint[j] / a.trajectory_rmse_per_joint[j]:.1f}×)"
+                )
+                if j
+                else "-"
+            )
             label = f"{eff[0]}:{eff[1]} = {eff[2]:g}"
-            print(f"| {system} | {label} | {seed} | {rank} | {found} | {err} | {comb} | {jt} |  <!-- {dt:.0f} s -->", flush=True)
+            print(
+                f"| {system} | {label} | {seed} | {rank} | {found} | {err} | {comb} | {jt} |  <!-- {dt:.0f} s -->",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

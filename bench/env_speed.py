@@ -126,25 +126,25 @@ def main(argv=None) -> int:
         f"| `furuta_gym/Furuta-v0` (MuJoCo) env.step | {fu:,.0f} | **{ratio_ip:.2f}** × InvertedPendulum-v5 | ≥ 1.5 |",
         f"| raw `mj_step` of `furuta.xml`, Python loop (ceiling) | {mj_python:,.0f} | {mj_python / fu:.2f} × Furuta-v0 | |",
         f"| raw `mj_step` of `furuta.xml`, MuJoCo's loop | {mj_native:,.0f} | {mj_native / fu:.2f} × Furuta-v0 | |",
-        f"| `Furuta-v0`, `dynamics=\"analytic\"` env.step (default `kernel=\"auto\"`: C) | {an:,.0f} | **{ratio_an:.2f}** × MuJoCo env | ≥ 0.5 |",
-        f"| — same, `kernel=\"xla\"` (one jitted XLA call per step) | {best['Furuta-v0 analytic xla']:,.0f} | {best['Furuta-v0 analytic xla'] / fu:.2f} × MuJoCo env | |",
+        f'| `Furuta-v0`, `dynamics="analytic"` env.step (default `kernel="auto"`: C) | {an:,.0f} | **{ratio_an:.2f}** × MuJoCo env | ≥ 0.5 |',
+        f'| — same, `kernel="xla"` (one jitted XLA call per step) | {best["Furuta-v0 analytic xla"]:,.0f} | {best["Furuta-v0 analytic xla"] / fu:.2f} × MuJoCo env | |',
         f"| `Furuta-v0`, `dynamics=<DeLaN>` (untrained, default architecture) env.step (default: C) | {best['Furuta-v0 DeLaN']:,.0f} | **{best['Furuta-v0 DeLaN'] / fu:.2f}** × MuJoCo env | ≥ 0.5 |",
-        f"| — same, `kernel=\"xla\"` | {best['Furuta-v0 DeLaN xla']:,.0f} | {best['Furuta-v0 DeLaN xla'] / fu:.2f} × MuJoCo env | |",
+        f'| — same, `kernel="xla"` | {best["Furuta-v0 DeLaN xla"]:,.0f} | {best["Furuta-v0 DeLaN xla"] / fu:.2f} × MuJoCo env | |',
         f"| in a process after `furuta_gym.inline_cpu_dispatch()`: MuJoCo env | {inline['Furuta-v0 mujoco']:,.0f} | 1 | |",
-        f"| — `dynamics=\"analytic\"`, `kernel=\"xla\"` env.step | {inline['Furuta-v0 analytic xla']:,.0f} | {inline['Furuta-v0 analytic xla'] / inline['Furuta-v0 mujoco']:.2f} × its MuJoCo env | |",
-        f"| — `dynamics=<DeLaN>`, `kernel=\"xla\"` env.step | {inline['Furuta-v0 DeLaN xla']:,.0f} | {inline['Furuta-v0 DeLaN xla'] / inline['Furuta-v0 mujoco']:.2f} × its MuJoCo env | |",
-        f"| `Furuta-v0`, `plant=\"coulomb\"` (passive callback) | {best['Furuta-v0 mujoco plant=coulomb']:,.0f} | {best['Furuta-v0 mujoco plant=coulomb'] / fu:.2f} × MuJoCo env | |",
+        f'| — `dynamics="analytic"`, `kernel="xla"` env.step | {inline["Furuta-v0 analytic xla"]:,.0f} | {inline["Furuta-v0 analytic xla"] / inline["Furuta-v0 mujoco"]:.2f} × its MuJoCo env | |',
+        f'| — `dynamics=<DeLaN>`, `kernel="xla"` env.step | {inline["Furuta-v0 DeLaN xla"]:,.0f} | {inline["Furuta-v0 DeLaN xla"] / inline["Furuta-v0 mujoco"]:.2f} × its MuJoCo env | |',
+        f'| `Furuta-v0`, `plant="coulomb"` (passive callback) | {best["Furuta-v0 mujoco plant=coulomb"]:,.0f} | {best["Furuta-v0 mujoco plant=coulomb"] / fu:.2f} × MuJoCo env | |',
         f"| `NMSD-v0` (MuJoCo + cubic-term callback) env.step | {best['NMSD-v0 mujoco']:,.0f} | | |",
-        f"| `NMSD-v0`, `dynamics=\"analytic\"` env.step | {best['NMSD-v0 analytic']:,.0f} | {best['NMSD-v0 analytic'] / best['NMSD-v0 mujoco']:.2f} × NMSD MuJoCo | |",
+        f'| `NMSD-v0`, `dynamics="analytic"` env.step | {best["NMSD-v0 analytic"]:,.0f} | {best["NMSD-v0 analytic"] / best["NMSD-v0 mujoco"]:.2f} × NMSD MuJoCo | |',
         "",
         "One Furuta env.step is one RK4 step of 2 ms (500 Hz control). InvertedPendulum-v5 takes two "
         "RK4 steps of 20 ms with collision detection per env.step; Furuta-v0 skips MuJoCo's "
         "constraint pipeline (no contacts) and keeps its Python step lean (scalar fast paths, "
         "cached MjData views; allocations only for the returned observation and info). A model "
         "backend's step is one JAX function (RK4 of the forward dynamics JAX derives by autodiff). "
-        "With `kernel=\"xla\"` it is one jitted XLA call per env.step: a DeLaN step compiles to "
+        'With `kernel="xla"` it is one jitted XLA call per env.step: a DeLaN step compiles to '
         "~150 XLA:CPU kernels and the call costs ~19 µs or more of fixed dispatch and per-kernel "
-        "overhead for ~12 k multiply-adds. The default `kernel=\"auto\"` lowers the same jaxpr to "
+        'overhead for ~12 k multiply-adds. The default `kernel="auto"` lowers the same jaxpr to '
         "one C function (`furuta_gym/_ckernel/`, compiled once per model structure with the "
         "system's C compiler and cached on disk) called through ctypes on fixed buffers: ~5 µs for "
         "the DeLaN step. `furuta_gym.inline_cpu_dispatch()` (opt-in, process-wide, before any JAX "
@@ -193,8 +193,7 @@ def best_rates(cases: dict, steps: int, repeats: int, between_repeats=None) -> d
     random actions, after a warm-up run (JIT compiles, caches)."""
     rng = np.random.default_rng(0)
     actions = {
-        name: rng.uniform(env.action_space.low, env.action_space.high, (steps, 1))
-        for name, env in cases.items()
+        name: rng.uniform(env.action_space.low, env.action_space.high, (steps, 1)) for name, env in cases.items()
     }
     for name, env in cases.items():
         env_steps_per_second(env, actions[name][: min(300, steps)])
@@ -227,11 +226,18 @@ def _measure_inline_dispatch(args) -> dict[str, float]:
     import json
     import subprocess
 
-    cmd = [sys.executable, __file__, "--inline-dispatch-child", "--steps", str(args.steps),
-           "--repeats", str(args.repeats)]
+    cmd = [
+        sys.executable,
+        __file__,
+        "--inline-dispatch-child",
+        "--steps",
+        str(args.steps),
+        "--repeats",
+        str(args.repeats),
+    ]
     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
     line = next(l for l in out.stdout.splitlines() if l.startswith("INLINE "))
-    result = json.loads(line[len("INLINE "):])
+    result = json.loads(line[len("INLINE ") :])
     print("inline dispatch (child process): " + ", ".join(f"{k} {v:,.0f}/s" for k, v in result.items()))
     return result
 

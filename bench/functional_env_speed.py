@@ -80,38 +80,52 @@ def measure(sizes, repeats: int, budget: int) -> dict:
     from furuta_gym.envs import functional
 
     furuta_gym.enable_x64()
-    envs = {"analytic": functional.make(dynamics="analytic"), "delan": functional.make(dynamics=str(DELAN)),
-            "gymnax Pendulum-v1": gymnax.make("Pendulum-v1")}
+    envs = {
+        "analytic": functional.make(dynamics="analytic"),
+        "delan": functional.make(dynamics=str(DELAN)),
+        "gymnax Pendulum-v1": gymnax.make("Pendulum-v1"),
+    }
     rates = {name: {} for name in envs}
     for n in sizes:
         for name, (env, params) in envs.items():
             rates[name][n] = steps_per_second(env, params, n, repeats, budget)
             print(f"N = {n:5d}  {name:20s} {rates[name][n]:14,.0f} steps/s", flush=True)
-    return {"machine": machine(), "date": datetime.date.today().isoformat(), "sizes": list(sizes),
-            "repeats": repeats, "budget": budget, "steps_per_second": rates}
+    return {
+        "machine": machine(),
+        "date": datetime.date.today().isoformat(),
+        "sizes": list(sizes),
+        "repeats": repeats,
+        "budget": budget,
+        "steps_per_second": rates,
+    }
 
 
 def section(results: dict) -> str:
     rates, sizes = results["steps_per_second"], results["sizes"]
     pendulum = rates["gymnax Pendulum-v1"]
-    rows = [f"| {n:,} | {rates['analytic'][n]:,.0f} | {rates['delan'][n]:,.0f} | {pendulum[n]:,.0f} | "
-            f"{rates['analytic'][n] / pendulum[n]:.2f} |" for n in sizes]
-    return "\n".join([
-        START,
-        "## Functional env vs gymnax Pendulum-v1 (`bench/functional_env_speed.py`)",
-        "",
-        "Env steps per second (copies × steps / s) of gymnax's `env.step` (autoreset included), vmapped "
-        "over N copies and scanned inside one `jit`, uniform random actions, best of "
-        f"{results['repeats']}. `FurutaSwingUp-v0` as a functional env (one step: a 20 ms control period, "
-        "10 RK4 steps of the model; analytic model and the reproduction's DeLaN L_prop) beside gymnax's "
-        f"Pendulum-v1 (one Euler step) in the same run. Generated from "
-        f"`results/functional_env_speed/results.json` ({results['machine']}, {results['date']}).",
-        "",
-        "| N | analytic | DeLaN | gymnax Pendulum-v1 | analytic ÷ Pendulum-v1 |",
-        "|---|---|---|---|---|",
-        *rows,
-        END,
-    ])
+    rows = [
+        f"| {n:,} | {rates['analytic'][n]:,.0f} | {rates['delan'][n]:,.0f} | {pendulum[n]:,.0f} | "
+        f"{rates['analytic'][n] / pendulum[n]:.2f} |"
+        for n in sizes
+    ]
+    return "\n".join(
+        [
+            START,
+            "## Functional env vs gymnax Pendulum-v1 (`bench/functional_env_speed.py`)",
+            "",
+            "Env steps per second (copies × steps / s) of gymnax's `env.step` (autoreset included), vmapped "
+            "over N copies and scanned inside one `jit`, uniform random actions, best of "
+            f"{results['repeats']}. `FurutaSwingUp-v0` as a functional env (one step: a 20 ms control period, "
+            "10 RK4 steps of the model; analytic model and the reproduction's DeLaN L_prop) beside gymnax's "
+            f"Pendulum-v1 (one Euler step) in the same run. Generated from "
+            f"`results/functional_env_speed/results.json` ({results['machine']}, {results['date']}).",
+            "",
+            "| N | analytic | DeLaN | gymnax Pendulum-v1 | analytic ÷ Pendulum-v1 |",
+            "|---|---|---|---|---|",
+            *rows,
+            END,
+        ]
+    )
 
 
 def main(argv=None) -> int:
@@ -119,12 +133,16 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="N = 1, 64, 4096 and a smaller step budget")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-write", action="store_true")
-    parser.add_argument("--check", action="store_true", help="measure nothing: exit 1 if BENCHMARKS.md's "
-                        "section differs from the committed results")
+    parser.add_argument(
+        "--check",
+        action="store_true",
+        help="measure nothing: exit 1 if BENCHMARKS.md's section differs from the committed results",
+    )
     args = parser.parse_args(argv)
     if args.check:
-        return write_section(committed_section(), START, END, check=True,
-                             how_to_fix="run python bench/functional_env_speed.py")
+        return write_section(
+            committed_section(), START, END, check=True, how_to_fix="run python bench/functional_env_speed.py"
+        )
     sizes, budget = ((1, 64, 4096), STEP_BUDGET // 4) if args.quick else (SIZES, STEP_BUDGET)
     results = measure(sizes, args.repeats, budget)
     if not args.no_write:
@@ -137,8 +155,10 @@ def main(argv=None) -> int:
 def committed_section() -> str:
     """The section of the results file (JSON keeps the copy counts N as strings)."""
     results = json.loads(RESULTS.read_text())
-    return section(results | {"steps_per_second": {
-        k: {int(n): v for n, v in r.items()} for k, r in results["steps_per_second"].items()}})
+    return section(
+        results
+        | {"steps_per_second": {k: {int(n): v for n, v in r.items()} for k, r in results["steps_per_second"].items()}}
+    )
 
 
 if __name__ == "__main__":

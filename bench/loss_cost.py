@@ -96,8 +96,15 @@ def epoch_time(loss: str, n_traj: int, batch_size=256, repeats: int = 3) -> dict
         t0 = time.perf_counter()
         params, opt_state = one_epoch(params, opt_state)
         times.append(time.perf_counter() - t0)
-    return {"loss": loss, "n_traj": n_traj, "full_batch": batch_size is None, "steps": len(batches), "first_epoch_s": first,
-            "epoch_s": min(times), "epoch_s_median": sorted(times)[len(times) // 2]}
+    return {
+        "loss": loss,
+        "n_traj": n_traj,
+        "full_batch": batch_size is None,
+        "steps": len(batches),
+        "first_epoch_s": first,
+        "epoch_s": min(times),
+        "epoch_s_median": sorted(times)[len(times) // 2],
+    }
 
 
 def compile_probe(loss: str, cache_dir: str) -> float:
@@ -137,8 +144,7 @@ def breakdown_probe(loss: str) -> dict:
     jax.block_until_ready(out[2]["total"])
     t4 = time.perf_counter()
     callbacks = re.findall(r"custom_call @\w*callback", lowered.as_text())
-    return {"trace": t1 - t0, "lower": t2 - t1, "compile": t3 - t2, "run": t4 - t3,
-            "host_callbacks": len(callbacks)}
+    return {"trace": t1 - t0, "lower": t2 - t1, "compile": t3 - t2, "run": t4 - t3, "host_callbacks": len(callbacks)}
 
 
 def _probe_subprocess(loss: str, cache_dir: str | None, step_cache: bool = True, breakdown: bool = False):
@@ -237,7 +243,7 @@ def main() -> None:
         f"L_traj (minibatch) ×{t256['epoch_s'] / t64['epoch_s']:.1f}.",
         "",
         "First call (trace + compile + one step) in a fresh process, JAX persistent compilation cache",
-        "(`jax.config.update(\"jax_compilation_cache_dir\", ...)`) empty (cold) then filled (warm). With",
+        '(`jax.config.update("jax_compilation_cache_dir", ...)`) empty (cold) then filled (warm). With',
         "that cache on, `_make_step` also stores the traced step (`jax.export`) beside it, so a warm",
         "process skips Python tracing too; `FURUTA_GYM_STEP_CACHE=0` turns that part off:",
         "",
@@ -261,8 +267,10 @@ def main() -> None:
     ]
     for loss, label in (("itau", "L_Iτ (64 traj.)"), ("traj", "L_traj 2-step (256 windows)")):
         b = breakdown[loss]
-        lines.append(f"| {label} | {b['trace']:.1f} s | {b['lower']:.1f} s | {b['compile']:.1f} s | "
-                     f"{b['run']:.2f} s | {b['host_callbacks']} |")
+        lines.append(
+            f"| {label} | {b['trace']:.1f} s | {b['lower']:.1f} s | {b['compile']:.1f} s | "
+            f"{b['run']:.2f} s | {b['host_callbacks']} |"
+        )
     lines += [
         "",
         "Before (commit 823962f; this breakdown run on that tree and on this one back to back at load",

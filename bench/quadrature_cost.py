@@ -82,8 +82,10 @@ def main(argv=None) -> None:
         "|---|---:|---:|---:|---:|",
     ]
     for kind, best in results.items():
-        lines.append(f"| {kind} | {best['trapezoid'] * 1e3:.1f} | {best['simpson'] * 1e3:.1f} | "
-                     f"{best['hermite'] * 1e3:.1f} | {best['hermite'] / best['simpson']:.2f} |")
+        lines.append(
+            f"| {kind} | {best['trapezoid'] * 1e3:.1f} | {best['simpson'] * 1e3:.1f} | "
+            f"{best['hermite'] * 1e3:.1f} | {best['hermite'] / best['simpson']:.2f} |"
+        )
     lines += [
         "",
         "Hermite evaluates ∂L/∂q + τ_NC (and, with F_a, M̂⁻¹F_a) at two Gauss nodes per sampling "

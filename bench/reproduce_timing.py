@@ -34,15 +34,16 @@ def section(records: list[tuple[Path, dict]]) -> str:
     for path, rec in records:
         secs = rec.get("seconds", {})
         per_model = [
-            v["seconds"] for k, v in secs.items()
+            v["seconds"]
+            for k, v in secs.items()
             if isinstance(v, dict) and v.get("status") in ("trained", "resumed", "loaded")
         ]
         data_s = sum(v for k, v in secs.items() if k.endswith("/data"))
         # a reused model's record keeps what it cost when it was trained (train + evaluate)
         all_models = sum(
-            v["seconds"] if v.get("status") != "reused"
-            else sum((v.get("original") or {}).values())
-            for v in secs.values() if isinstance(v, dict)
+            v["seconds"] if v.get("status") != "reused" else sum((v.get("original") or {}).values())
+            for v in secs.values()
+            if isinstance(v, dict)
         )
         if per_model:
             per_model.sort()

@@ -37,9 +37,11 @@ def ppo_rows() -> list[str]:
             continue
         doc = json.loads(path.read_text())
         ev = doc["mujoco"]["nominal"]
-        rows.append(f"| PPO in one `jit`, functional env on {doc['label']} | {doc['steps']:,} | "
-                    f"{doc['train_seconds']:.0f} | {ev['x0']['return']:.0f} | {ev['seeded_mean_return']:.0f} | "
-                    f"{100 * ev['seeded_success']:.0f} % |")
+        rows.append(
+            f"| PPO in one `jit`, functional env on {doc['label']} | {doc['steps']:,} | "
+            f"{doc['train_seconds']:.0f} | {ev['x0']['return']:.0f} | {ev['seeded_mean_return']:.0f} | "
+            f"{100 * ev['seeded_success']:.0f} % |"
+        )
     return rows
 
 
@@ -50,31 +52,37 @@ def sac_rows() -> list[str]:
     runs = [r for r in doc["runs"] if r["env"] == "preset"]
     final = [r["curve"][-1]["return"] for r in runs]
     seconds = [r["seconds"] for r in runs]
-    return [f"| SB3 SAC on the MuJoCo preset (`bench/sac_preset.py`, {len(runs)} seeds, wall includes its "
-            f"evaluations) | {runs[0]['curve'][-1]['steps']:,} | {min(seconds):.0f}–{max(seconds):.0f} | — | "
-            f"{np.mean(final):.0f} (fresh resets, mean of seeds) | not scored |"]
+    return [
+        f"| SB3 SAC on the MuJoCo preset (`bench/sac_preset.py`, {len(runs)} seeds, wall includes its "
+        f"evaluations) | {runs[0]['curve'][-1]['steps']:,} | {min(seconds):.0f}–{max(seconds):.0f} | — | "
+        f"{np.mean(final):.0f} (fresh resets, mean of seeds) | not scored |"
+    ]
 
 
 def section() -> str:
-    head = ("| how | env steps | training wall (s) | MuJoCo return, x0 = 0 | MuJoCo mean return, 30 starts | "
-            "success, 30 starts |")
-    return "\n".join([
-        START,
-        "## Wall time to a trained swing-up (`bench/rl_wall_time.py`)",
-        "",
-        "Training wall time (compilation included) and what the deterministic policy then does on the MuJoCo "
-        "`FurutaSwingUp-v0` (return of 500; success: within 0.1 rad of upright for 2 s, as the control "
-        "benchmarks score it, from `near_rest_starts(30, seed=0)`). PPO rows: one seed each, pinned to one "
-        "core with a one-thread XLA pool on the 2-core machine shared with other jobs "
-        "(`experiments/rl_from_learned_models.py`, results/rl_learned/; docs/rl.md has every row). SAC is "
-        "not run at PPO's budget: at its rate the same env steps would take days here.",
-        "",
-        head,
-        "|---|---|---|---|---|---|",
-        *ppo_rows(),
-        *sac_rows(),
-        END,
-    ])
+    head = (
+        "| how | env steps | training wall (s) | MuJoCo return, x0 = 0 | MuJoCo mean return, 30 starts | "
+        "success, 30 starts |"
+    )
+    return "\n".join(
+        [
+            START,
+            "## Wall time to a trained swing-up (`bench/rl_wall_time.py`)",
+            "",
+            "Training wall time (compilation included) and what the deterministic policy then does on the MuJoCo "
+            "`FurutaSwingUp-v0` (return of 500; success: within 0.1 rad of upright for 2 s, as the control "
+            "benchmarks score it, from `near_rest_starts(30, seed=0)`). PPO rows: one seed each, pinned to one "
+            "core with a one-thread XLA pool on the 2-core machine shared with other jobs "
+            "(`experiments/rl_from_learned_models.py`, results/rl_learned/; docs/rl.md has every row). SAC is "
+            "not run at PPO's budget: at its rate the same env steps would take days here.",
+            "",
+            head,
+            "|---|---|---|---|---|---|",
+            *ppo_rows(),
+            *sac_rows(),
+            END,
+        ]
+    )
 
 
 def main(argv=None) -> int:

@@ -95,9 +95,11 @@ def table(results: dict) -> str:
     runs = results["runs"]
     steps = sorted({p["steps"] for r in runs for p in r["curve"]})
     seeds = sorted({r["seed"] for r in runs})
-    head = "| env steps | " + " | ".join(
-        f"{name} (seed {s})" for name in ENVS for s in seeds
-    ) + " | mean default | mean preset |"
+    head = (
+        "| env steps | "
+        + " | ".join(f"{name} (seed {s})" for name in ENVS for s in seeds)
+        + " | mean default | mean preset |"
+    )
     lines = [head, "|" + "---|" * (len(ENVS) * len(seeds) + 3)]
     for n in steps:
         by = {(r["env"], r["seed"]): p["return"] for r in runs for p in r["curve"] if p["steps"] == n}
@@ -110,31 +112,32 @@ def table(results: dict) -> str:
 def _verdict(results: dict) -> str:
     """Whether the preset scored higher than the default env, seed by seed, at every evaluation."""
     by = {(r["env"], r["seed"], p["steps"]): p["return"] for r in results["runs"] for p in r["curve"]}
-    pairs = [(by[("preset", s, n)], v) for (e, s, n), v in by.items()
-             if e == "default" and ("preset", s, n) in by]
+    pairs = [(by[("preset", s, n)], v) for (e, s, n), v in by.items() if e == "default" and ("preset", s, n) in by]
     wins = sum(p > d for p, d in pairs)
     return f"The preset scores higher than the default env in {wins} of {len(pairs)} (seed, steps) pairs. "
 
 
 def section(results: dict) -> str:
-    return "\n".join([
-        START,
-        "### SAC on the preset vs the default env (`bench/sac_preset.py`)",
-        "",
-        f"Stable-Baselines3 {results['sb3']} `SAC(\"MlpPolicy\")` with its default hyperparameters, "
-        "the same number of env steps on each env, MuJoCo ground truth. Score: the deterministic "
-        "policy's return of a 10 s episode on one scale (500 × the time-averaged task reward, "
-        "0 = hanging still, 500 = balanced throughout), mean of "
-        f"{results['eval_episodes']} evaluation episodes from fresh resets. "
-        f"Generated from `results/sac_preset/results.json` ({results['machine']}, {results['date']}).",
-        "",
-        table(results),
-        "",
-        _verdict(results) + "At 500 Hz γ = 0.99 discounts over ~0.2 s, shorter than the ~1 s a swing-up takes, and "
-        "the default env's 5 000-step episodes give 4 episodes in 20 000 steps; at 50 Hz the same γ "
-        "looks ~2 s ahead and the same steps are 40 episodes.",
-        END,
-    ])
+    return "\n".join(
+        [
+            START,
+            "### SAC on the preset vs the default env (`bench/sac_preset.py`)",
+            "",
+            f'Stable-Baselines3 {results["sb3"]} `SAC("MlpPolicy")` with its default hyperparameters, '
+            "the same number of env steps on each env, MuJoCo ground truth. Score: the deterministic "
+            "policy's return of a 10 s episode on one scale (500 × the time-averaged task reward, "
+            "0 = hanging still, 500 = balanced throughout), mean of "
+            f"{results['eval_episodes']} evaluation episodes from fresh resets. "
+            f"Generated from `results/sac_preset/results.json` ({results['machine']}, {results['date']}).",
+            "",
+            table(results),
+            "",
+            _verdict(results) + "At 500 Hz γ = 0.99 discounts over ~0.2 s, shorter than the ~1 s a swing-up takes, and "
+            "the default env's 5 000-step episodes give 4 episodes in 20 000 steps; at 50 Hz the same γ "
+            "looks ~2 s ahead and the same steps are 40 episodes.",
+            END,
+        ]
+    )
 
 
 def main(argv=None) -> int:
@@ -147,13 +150,20 @@ def main(argv=None) -> int:
     ap.add_argument("--table-only", action="store_true", help="rewrite docs/envs.md from the results")
     ap.add_argument("--check", action="store_true", help="exit 1 if docs/envs.md is stale")
     ap.add_argument("--no-write", action="store_true")
-    ap.add_argument("--out", help="write the runs here and stop (for runs split over processes; "
-                    "merge them with --merge)")
+    ap.add_argument(
+        "--out", help="write the runs here and stop (for runs split over processes; merge them with --merge)"
+    )
     ap.add_argument("--merge", nargs="+", help="result files of split runs to merge into the results")
     args = ap.parse_args(argv)
     if args.check:
-        return write_section(section(json.loads(RESULTS.read_text())), START, END, path=DOCS, check=True,
-                             how_to_fix="run python bench/sac_preset.py --table-only")
+        return write_section(
+            section(json.loads(RESULTS.read_text())),
+            START,
+            END,
+            path=DOCS,
+            check=True,
+            how_to_fix="run python bench/sac_preset.py --table-only",
+        )
     if args.merge:
         parts = [json.loads(Path(f).read_text()) for f in args.merge]
         merged = dict(parts[0], runs=[r for p in parts for r in p["runs"]])
@@ -162,9 +172,13 @@ def main(argv=None) -> int:
     elif not args.table_only:
         import stable_baselines3
 
-        results = {"sb3": stable_baselines3.__version__, "machine": machine(),
-                   "date": datetime.date.today().isoformat(), "eval_episodes": args.eval_episodes,
-                   "runs": []}
+        results = {
+            "sb3": stable_baselines3.__version__,
+            "machine": machine(),
+            "date": datetime.date.today().isoformat(),
+            "eval_episodes": args.eval_episodes,
+            "runs": [],
+        }
         out = Path(args.out) if args.out else RESULTS
         for seed in args.seeds:
             for name in args.envs:

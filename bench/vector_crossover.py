@@ -80,8 +80,7 @@ def main(argv=None) -> int:
             sync = sync_env_rate(dynamics, n, args.seconds, args.repeats)
             batched, _ = batched_env_rate(dynamics, n, args.seconds, args.repeats)
             rows.append((label, n, sync, batched))
-            print(f"{label} N={n}: sync {sync:,.0f}, batched {batched:,.0f} "
-                  f"({batched / sync:.2f}x)", flush=True)
+            print(f"{label} N={n}: sync {sync:,.0f}, batched {batched:,.0f} ({batched / sync:.2f}x)", flush=True)
     lines = [
         START,
         "## Vector env crossover (issue 27): `bench/vector_crossover.py`",

@@ -92,7 +92,5 @@ def evaluate_on_env(
         if e < steps:  # diverged: mark the trajectory as such for the metrics
             x_i = np.concatenate([x_i, np.full((1, 4), np.inf)])
         m = episode_metrics(x_i, us[i, :e], dt)
-        records.append(
-            EpisodeRecord(x0s[i], np.arange(e + 1) * dt, xs[i, : e + 1], us[i, :e], modes[i, :e], m)
-        )
+        records.append(EpisodeRecord(x0s[i], np.arange(e + 1) * dt, xs[i, : e + 1], us[i, :e], modes[i, :e], m))
     return records

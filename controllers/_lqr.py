@@ -126,8 +126,7 @@ def lqr_design(
             stable = bool(np.all(eig.real < 0.0))
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ValueError(
-            f"LQR design failed for this model (linearisation at the upright not stabilisable?): "
-            f"{exc}"
+            f"LQR design failed for this model (linearisation at the upright not stabilisable?): {exc}"
         ) from exc
     return LQRDesign(K, P, A, B, Ad, Bd, eig, stable, acts_on, discrete, dt)
 
@@ -180,9 +179,7 @@ class LQR(AbstractController):
     def error(self, obs: Float[Array, " 4"]) -> Float[Array, " 4"]:
         """x − x_d with β − π wrapped and α clipped to ±alpha_error_limit."""
         lim = self.alpha_error_limit
-        return jnp.stack(
-            [jnp.clip(obs[0], -lim, lim), wrap_angle(obs[1] - jnp.pi), obs[2], obs[3]]
-        )
+        return jnp.stack([jnp.clip(obs[0], -lim, lim), wrap_angle(obs[1] - jnp.pi), obs[2], obs[3]])
 
     def step(self, state, obs):
         obs = jnp.asarray(obs, dtype=float)

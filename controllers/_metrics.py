@@ -42,9 +42,7 @@ def episode_metrics(
     xs = np.asarray(xs, dtype=float)
     us = np.asarray(us, dtype=float).reshape(-1)
     finite = np.all(np.isfinite(xs), axis=1)
-    diverged = bool(
-        (~finite).any() or (np.abs(xs[finite][:, 2:]) > divergence_speed).any()
-    )
+    diverged = bool((~finite).any() or (np.abs(xs[finite][:, 2:]) > divergence_speed).any())
     if (~finite).any():
         xs = xs[: int(np.argmin(finite))]
     err = np.abs(np.mod(xs[:, 1] - np.pi + np.pi, 2 * np.pi) - np.pi)

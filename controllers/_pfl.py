@@ -52,11 +52,7 @@ def input_map(model: AbstractLagrangianSystem, q, qd) -> InputMap:
 
 def _drift_force(model, q, qd):
     """h = ∂L/∂q + τ_NC − (∂²L/∂q∂q̇) q̇: everything but inertia and input in the EL equation."""
-    return (
-        potential_derived_force(model, q, qd)
-        + model.nonconservative_force(q, qd)
-        - coriolis_force(model, q, qd)
-    )
+    return potential_derived_force(model, q, qd) + model.nonconservative_force(q, qd) - coriolis_force(model, q, qd)
 
 
 def pfl_torque(model: AbstractLagrangianSystem, q, qd, ubar) -> Float[Array, ""]:

@@ -84,14 +84,17 @@ class SwingUpLQR(AbstractController):
         (:func:`furuta_gym.controllers.pick_k_e`).
         """
         lqr = LQR.from_model(
-            model, Q=Q, R=R, dt=dt, acts_on=acts_on, voltage_limit=voltage_limit,
+            model,
+            Q=Q,
+            R=R,
+            dt=dt,
+            acts_on=acts_on,
+            voltage_limit=voltage_limit,
             alpha_error_limit=alpha_error_limit,
         )
 
         def build(k):
-            swing = EnergySwingUp(
-                model, k_e=k, k_alpha=k_alpha, d_alpha=d_alpha, voltage_limit=voltage_limit
-            )
+            swing = EnergySwingUp(model, k_e=k, k_alpha=k_alpha, d_alpha=d_alpha, voltage_limit=voltage_limit)
             return cls(swing, lqr, catch_angle=catch_angle, release_angle=release_angle)
 
         if auto_gain:
@@ -118,4 +121,3 @@ class SwingUpLQR(AbstractController):
         u_swing, _ = self.swing_up.step((), obs)
         u_lqr, _ = self.lqr.step((), obs)
         return jnp.where(mode == BALANCE, u_lqr, u_swing), mode
-

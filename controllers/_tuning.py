@@ -102,9 +102,7 @@ def pick_k_e(
     for k in grid:
         ctrl = build(k)
         if run is None:  # one compilation: the gain is a traced leaf of the controller pytree
-            run = eqx.filter_jit(
-                lambda c, xs: jax.vmap(lambda x0: closed_loop(c, model, x0, steps, dt=dt))(xs)
-            )
+            run = eqx.filter_jit(lambda c, xs: jax.vmap(lambda x0: closed_loop(c, model, x0, steps, dt=dt))(xs))
         r = run(ctrl, x0s)
         ms = [episode_metrics(r.xs[i], r.us[i], dt) for i in range(n_starts)]
         catches.append(float(np.mean(np.any(np.asarray(r.modes) > 0, axis=1))))
@@ -125,6 +123,4 @@ def pick_k_e(
             "potential and input map, or give k_e explicitly"
         )
     k_pick = min(margin * k_min, grid[-1])
-    return GainSweep(
-        build(k_pick), k_pick, k_min, grid, tuple(catches), tuple(rates), tuple(times)
-    )
+    return GainSweep(build(k_pick), k_pick, k_min, grid, tuple(catches), tuple(rates), tuple(times))

@@ -41,8 +41,7 @@ UPRIGHT_TOLERANCE = 0.2  # rad from upright
 
 def train(dynamics: str, config: PPOConfig, seed: int, randomize: float | None):
     """(policy, per-update returns, wall seconds including compilation)."""
-    env, params = functional.make(SWINGUP, dynamics=dynamics,
-                                  plant=Plant(randomize=randomize) if randomize else None)
+    env, params = functional.make(SWINGUP, dynamics=dynamics, plant=Plant(randomize=randomize) if randomize else None)
     run = eqx.filter_jit(lambda key: train_ppo(env, params, config, key))
     start = time.perf_counter()
     policy, metrics = jax.block_until_ready(run(jax.random.PRNGKey(seed)))
@@ -75,8 +74,12 @@ def evaluate_on_mujoco(policy, plant: str | None, starts: int = 30) -> dict:
     act = GymnasiumPolicy(policy, env.action_space)
     rest_return, rest_ok = run_episode(act, env, None, np.zeros(4))
     seeded = [run_episode(act, env, 10_000 + k) for k in range(starts)]
-    return {"x0_return": rest_return, "x0_balanced": rest_ok,
-            "seeded_returns": [r for r, _ in seeded], "seeded_success": float(np.mean([ok for _, ok in seeded]))}
+    return {
+        "x0_return": rest_return,
+        "x0_balanced": rest_ok,
+        "seeded_returns": [r for r, _ in seeded],
+        "seeded_success": float(np.mean([ok for _, ok in seeded])),
+    }
 
 
 def main(argv=None) -> dict:
@@ -91,15 +94,27 @@ def main(argv=None) -> dict:
     furuta_gym.enable_x64()
     config = PPOConfig(**{**CONFIG.__dict__, "total_timesteps": args.steps})
     policy, returns, wall, model_return = train(args.dynamics, config, args.seed, args.randomize)
-    print(f"trained {args.steps:,} steps in {wall:.0f} s; training return {returns[-3:].mean():.1f}, "
-          f"deterministic return on the training model {model_return:.1f}")
-    result = {"dynamics": args.dynamics, "seed": args.seed, "steps": args.steps, "randomize": args.randomize,
-              "train_seconds": wall, "train_returns": returns.tolist(), "model_return": model_return,
-              "mujoco": evaluate_on_mujoco(policy, args.plant), "plant": args.plant}
+    print(
+        f"trained {args.steps:,} steps in {wall:.0f} s; training return {returns[-3:].mean():.1f}, "
+        f"deterministic return on the training model {model_return:.1f}"
+    )
+    result = {
+        "dynamics": args.dynamics,
+        "seed": args.seed,
+        "steps": args.steps,
+        "randomize": args.randomize,
+        "train_seconds": wall,
+        "train_returns": returns.tolist(),
+        "model_return": model_return,
+        "mujoco": evaluate_on_mujoco(policy, args.plant),
+        "plant": args.plant,
+    }
     mj = result["mujoco"]
-    print(f"MuJoCo{' (' + args.plant + ')' if args.plant else ''}: x0 = 0 return {mj['x0_return']:.1f} "
-          f"balanced {mj['x0_balanced']}; 30 seeded starts: mean return {np.mean(mj['seeded_returns']):.1f}, "
-          f"balanced {100 * mj['seeded_success']:.0f} %")
+    print(
+        f"MuJoCo{' (' + args.plant + ')' if args.plant else ''}: x0 = 0 return {mj['x0_return']:.1f} "
+        f"balanced {mj['x0_balanced']}; 30 seeded starts: mean return {np.mean(mj['seeded_returns']):.1f}, "
+        f"balanced {100 * mj['seeded_success']:.0f} %"
+    )
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(result, indent=1))

@@ -33,8 +33,10 @@ from furuta_gym.envs import MujocoBackend  # noqa: E402
 OUT = Path(__file__).resolve().parents[1] / "results" / "cable_centre_drift"
 DT, SUBSTEPS = 0.002, 10
 FRICTION = [Effect("coulomb_friction", "alpha", 5e-4), Effect("stiction", "alpha", 5e-4)]
-RIGS = {"fixed cable": [Effect("spring", "alpha", 2e-3)] + FRICTION,
-        "dragged neutral": [Effect("hysteretic_spring", "alpha", 2e-3, play=0.3)] + FRICTION}
+RIGS = {
+    "fixed cable": [Effect("spring", "alpha", 2e-3)] + FRICTION,
+    "dragged neutral": [Effect("hysteretic_spring", "alpha", 2e-3, play=0.3)] + FRICTION,
+}
 SWING, CREEP = 4.0, 40.0  # s
 
 
@@ -54,9 +56,18 @@ def centres(effects) -> list[float]:
 
 
 def main() -> None:
-    doc = {"dt": DT, "swing_seconds": SWING, "oscillation_seconds": CREEP,
-           "rigs": {name: {"effects": [dict(name=e.name, coefficient=e.coefficient, play=e.play) for e in effects],
-                           "centre_every_5s": centres(effects)} for name, effects in RIGS.items()}}
+    doc = {
+        "dt": DT,
+        "swing_seconds": SWING,
+        "oscillation_seconds": CREEP,
+        "rigs": {
+            name: {
+                "effects": [dict(name=e.name, coefficient=e.coefficient, play=e.play) for e in effects],
+                "centre_every_5s": centres(effects),
+            }
+            for name, effects in RIGS.items()
+        },
+    }
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "drift.json").write_text(json.dumps(doc, indent=1) + "\n")
     for name, r in doc["rigs"].items():

@@ -45,8 +45,13 @@ from calibrated_protocol import OUT, PLANT, shape  # noqa: E402
 RESULT = OUT / "itau_causes.json"
 #: Simpson intervals (two samples each) summed into one residual: 0.2 s at the experiments' 100 Hz
 SPAN_SAMPLES = 10
-CELLS = ("exact:1:recorded", "experiment:1:recorded", f"experiment:{SPAN_SAMPLES}:recorded",
-         "experiment:1:zero_phase", f"experiment:{SPAN_SAMPLES}:zero_phase")
+CELLS = (
+    "exact:1:recorded",
+    "experiment:1:recorded",
+    f"experiment:{SPAN_SAMPLES}:recorded",
+    "experiment:1:zero_phase",
+    f"experiment:{SPAN_SAMPLES}:zero_phase",
+)
 
 
 def _config(sensor: str):
@@ -63,8 +68,13 @@ def _data(sensor: str):
     from furuta_gym.training.reproduce import SENSORS
 
     config = _config(sensor)
-    return generate_datasets("furuta", seed=config.data_seed, small=config.small, sensor=SENSORS[sensor],
-                             ground_truth=MujocoGroundTruth("furuta", plant=Plant.load(PLANT)))
+    return generate_datasets(
+        "furuta",
+        seed=config.data_seed,
+        small=config.small,
+        sensor=SENSORS[sensor],
+        ground_truth=MujocoGroundTruth("furuta", plant=Plant.load(PLANT)),
+    )
 
 
 def _train_config(sensor: str, span: int, epochs: int):
@@ -72,8 +82,9 @@ def _train_config(sensor: str, span: int, epochs: int):
 
     recipe = training_config("furuta", _config(sensor), 0, "prop", "dln")
     rate = recipe.learning_rate[0] if isinstance(recipe.learning_rate, tuple) else recipe.learning_rate
-    return dataclasses.replace(recipe, epochs=(epochs,), horizons=(None,), learning_rate=rate,
-                               integral_span=span, progress=False)
+    return dataclasses.replace(
+        recipe, epochs=(epochs,), horizons=(None,), learning_rate=rate, integral_span=span, progress=False
+    )
 
 
 def _stiffness(model, states) -> list[float]:
@@ -90,7 +101,7 @@ def _itau(model, trajs, tcfg) -> float:
     from furuta_gym.training.losses import integral_loss, make_windows
 
     w = min(tcfg.integral_window, min(len(t) for t in trajs))
-    w -= (tcfg.quadrature == "simpson" and w % 2 == 0)
+    w -= tcfg.quadrature == "simpson" and w % 2 == 0
     windows = make_windows(trajs, w, stride=w - 1, cover_end=True)
     return float(integral_loss(model, windows, rule=tcfg.quadrature, normalize=tcfg.normalize, span=tcfg.integral_span))
 
@@ -102,12 +113,16 @@ def measure(model, plant, trajs, tcfg) -> dict:
     states = np.random.default_rng(0).uniform([-3, -3, -5, -5], [3, 3, 5, 5], (20, 4))
     mass = np.asarray(model.mass_matrix(jnp.zeros(2)))
     learned, truth = _itau(model, trajs, tcfg), _itau(plant, trajs, tcfg)
-    return {"mass_matrix_at_rest": mass.tolist(),
-            "plant_mass_matrix_at_rest": np.asarray(plant.mass_matrix(jnp.zeros(2))).tolist(),
-            "stiffness_median": float(np.median(_stiffness(model, states))),
-            "plant_stiffness_median": float(np.median(_stiffness(plant, states))),
-            "shape": shape(model), "itau_learned": learned, "itau_plant": truth,
-            "itau_learned_over_plant": learned / truth}
+    return {
+        "mass_matrix_at_rest": mass.tolist(),
+        "plant_mass_matrix_at_rest": np.asarray(plant.mass_matrix(jnp.zeros(2))).tolist(),
+        "stiffness_median": float(np.median(_stiffness(model, states))),
+        "plant_stiffness_median": float(np.median(_stiffness(plant, states))),
+        "shape": shape(model),
+        "itau_learned": learned,
+        "itau_plant": truth,
+        "itau_learned_over_plant": learned / truth,
+    }
 
 
 def _velocities(trajs, velocity: str):
@@ -130,12 +145,17 @@ def plant_losses() -> dict:
 
     plant = truth_model("furuta", _config("exact"))
     exact, measured = _data("exact")["train"], _data("experiment")["train"]
-    variants = {"exact states": exact,
-                "encoder angles, exact velocities": [dataclasses.replace(m, qd=e.qd) for m, e in zip(measured, exact)],
-                "encoder angles, derivative filter": measured,
-                "encoder angles, zero-phase": _velocities(measured, "zero_phase")}
-    return {f"{name}, span {span}": _itau(plant, trajs, _train_config("exact", span, 1))
-            for span in (1, SPAN_SAMPLES) for name, trajs in variants.items()}
+    variants = {
+        "exact states": exact,
+        "encoder angles, exact velocities": [dataclasses.replace(m, qd=e.qd) for m, e in zip(measured, exact)],
+        "encoder angles, derivative filter": measured,
+        "encoder angles, zero-phase": _velocities(measured, "zero_phase"),
+    }
+    return {
+        f"{name}, span {span}": _itau(plant, trajs, _train_config("exact", span, 1))
+        for span in (1, SPAN_SAMPLES)
+        for name, trajs in variants.items()
+    }
 
 
 def scale_fit_check() -> dict:
@@ -155,30 +175,45 @@ def scale_fit_check() -> dict:
     fits = {}
     for velocity in ("recorded", "zero_phase"):
         run = _velocities([forced], velocity)[0]
-        terms = integral_terms(plant, jnp.asarray(run.q), jnp.asarray(run.qd), jnp.asarray(run.u).reshape(-1, 1),
-                               run.dt, "simpson")
+        terms = integral_terms(
+            plant, jnp.asarray(run.q), jnp.asarray(run.qd), jnp.asarray(run.u).reshape(-1, 1), run.dt, "simpson"
+        )
         for span in (1, SPAN_SAMPLES):
             a, z = (np.asarray(span_sum(x, span)).ravel() for x in (terms.A, terms.Z))
             scale = float(z @ a / (a @ a))
-            fits[f"{velocity}, span {span}"] = {"factor": scale,
-                                                "relative_residual": float(np.linalg.norm(z - scale * a) / np.linalg.norm(z))}
+            fits[f"{velocity}, span {span}"] = {
+                "factor": scale,
+                "relative_residual": float(np.linalg.norm(z - scale * a) / np.linalg.norm(z)),
+            }
     recorded, in_range = {}, {}
     reach = float(max(np.max(np.abs(t.q[:, 0])) for t in data["train"]))
     offline = _velocities([forced], "zero_phase")[0]
     outside = np.flatnonzero(np.abs(np.asarray(forced.q)[:, 0]) > reach)
     stay = int(outside[0]) if len(outside) else len(forced.t)
-    prefix = dataclasses.replace(offline, t=offline.t[:stay], q=np.asarray(offline.q)[:stay],
-                                 u=np.asarray(offline.u)[:stay], qd=np.asarray(offline.qd)[:stay])
+    prefix = dataclasses.replace(
+        offline,
+        t=offline.t[:stay],
+        q=np.asarray(offline.q)[:stay],
+        u=np.asarray(offline.u)[:stay],
+        qd=np.asarray(offline.qd)[:stay],
+    )
     for folder in ("reproduce", "reproduce_span", "reproduce_offline"):
         for path in sorted((OUT / folder / "runs" / "furuta").glob("*_prop/seed0/model.eqx")):
             recorded[f"{folder}/{path.parts[-3]}"] = read_header(path)["meta"].get("scale_fit")
             if folder == "reproduce_offline":  # the same fit on the run's part inside the training range
                 model = load_model(path, expected_system="furuta")
-                in_range[f"{folder}/{path.parts[-3]}"] = fit_scale(model, [prefix], "simpson", SPAN_SAMPLES)[1].to_json()
-    return {"rotor_travel_rad": float(np.ptp(forced.q[:, 0])), "training_max_abs_alpha_rad": reach,
-            "scale_fit_max_abs_alpha_rad": float(np.max(np.abs(forced.q[:, 0]))),
-            "seconds_inside_training_range": stay * forced.dt, "plant_fits": fits, "recorded_fits": recorded,
-            "in_range_fits": in_range}
+                in_range[f"{folder}/{path.parts[-3]}"] = fit_scale(model, [prefix], "simpson", SPAN_SAMPLES)[
+                    1
+                ].to_json()
+    return {
+        "rotor_travel_rad": float(np.ptp(forced.q[:, 0])),
+        "training_max_abs_alpha_rad": reach,
+        "scale_fit_max_abs_alpha_rad": float(np.max(np.abs(forced.q[:, 0]))),
+        "seconds_inside_training_range": stay * forced.dt,
+        "plant_fits": fits,
+        "recorded_fits": recorded,
+        "in_range_fits": in_range,
+    }
 
 
 def run_cell(sensor: str, span: int, velocity: str, epochs: int) -> dict:
@@ -190,15 +225,22 @@ def run_cell(sensor: str, span: int, velocity: str, epochs: int) -> dict:
     plant = truth_model("furuta", _config(sensor))
     t0 = time.perf_counter()
     model, _ = train("dln", "furuta", "prop", data["train"], tcfg, hparams=_config(sensor).model_overrides)
-    return {"sensor": sensor, "span": span, "velocity": velocity, "epochs": epochs, "seconds": round(time.perf_counter() - t0, 1),
-            **measure(model, plant, data["train"], tcfg)}
+    return {
+        "sensor": sensor,
+        "span": span,
+        "velocity": velocity,
+        "epochs": epochs,
+        "seconds": round(time.perf_counter() - t0, 1),
+        **measure(model, plant, data["train"], tcfg),
+    }
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--epochs", type=int, default=12000)
-    ap.add_argument("--cell", nargs="+", default=list(CELLS),
-                    help="sensor:span:velocity cells to run (merged into the result file)")
+    ap.add_argument(
+        "--cell", nargs="+", default=list(CELLS), help="sensor:span:velocity cells to run (merged into the result file)"
+    )
     ap.add_argument("--out", type=Path, default=RESULT, help="the result file (merged into if it exists)")
     ap.add_argument("--scale-fit-only", action="store_true", help="only the scale fit's check (no training)")
     args = ap.parse_args(argv)

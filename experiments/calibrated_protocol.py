@@ -63,8 +63,10 @@ PLANT = OUT / "diagnosis.json"
 RUNS = OUT / "reproduce" / "runs" / "furuta"
 #: the L_prop runs again, by name suffix: the residual summed over 10 intervals (``--integral-span 10``),
 #: and that with velocities re-estimated offline (``--training-velocities zero_phase``)
-VARIANT_RUNS = {"_span": OUT / "reproduce_span" / "runs" / "furuta",
-                "_offline": OUT / "reproduce_offline" / "runs" / "furuta"}
+VARIANT_RUNS = {
+    "_span": OUT / "reproduce_span" / "runs" / "furuta",
+    "_offline": OUT / "reproduce_offline" / "runs" / "furuta",
+}
 PAIRS = (("dln", "traj"), ("dln", "prop"), ("aph", "aph"), ("aph", "prop"), ("adln", "aph"), ("adln", "prop"))
 SECONDS = 8.0
 
@@ -84,8 +86,10 @@ def designs():
     from furuta_gym.training.checkpoint import load_model
     from furuta_gym.training.reproduce import ReproduceConfig, truth_model
 
-    out = [("plant model", truth_model("furuta", ReproduceConfig(plant=str(PLANT)))),
-           ("nominal analytic", analytic_model("furuta"))]
+    out = [
+        ("plant model", truth_model("furuta", ReproduceConfig(plant=str(PLANT)))),
+        ("nominal analytic", analytic_model("furuta")),
+    ]
     for kind, loss in PAIRS:
         path = RUNS / f"{kind}_{loss}" / "seed0" / "model.eqx"
         if path.exists():
@@ -118,9 +122,13 @@ def swing_up(model, starts: np.ndarray, seed: int) -> dict:
     t0 = time.perf_counter()
     recs = evaluate_on_env(ctrl, make_env, starts, SECONDS, seed=seed)
     success = [bool(r.metrics.success) for r in recs]
-    return {"from_rest": success[0], "seeded_successes": int(sum(success[1:])), "seeded": len(success) - 1,
-            "time_to_upright_s": [r.metrics.time_to_upright for r in recs if r.metrics.success],
-            "seconds": round(time.perf_counter() - t0, 1)}
+    return {
+        "from_rest": success[0],
+        "seeded_successes": int(sum(success[1:])),
+        "seeded": len(success) - 1,
+        "time_to_upright_s": [r.metrics.time_to_upright for r in recs if r.metrics.success],
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
 
 
 def itau_stage(run: Path) -> dict:
@@ -153,15 +161,21 @@ def itau_stage(run: Path) -> dict:
     learned, plant = stiffness(model), stiffness(truth)
     history = [json.loads(line) for line in (run / "history.jsonl").read_text().splitlines()]
     later = [h for h in history if h["stage"] > 0]
-    return {"epoch": int(header["state"]["epoch"]), "itau_epochs": cfg["train"]["epochs"][0],
-            "later_epochs": len(later), "later_steps": sum(h["steps"] for h in later),
-            "later_steps_skipped": sum(h["skipped"] for h in later),
-            "later_seconds": round(sum(h["seconds"] for h in later), 1),
-            "mass_matrix_at_rest": np.asarray(model.mass_matrix(jnp.zeros(2))).tolist(),
-            "plant_mass_matrix_at_rest": np.asarray(truth.mass_matrix(jnp.zeros(2))).tolist(),
-            "stiffness_median": float(np.median(learned)), "stiffness_max": float(np.max(learned)),
-            "plant_stiffness_median": float(np.median(plant)), "plant_stiffness_max": float(np.max(plant)),
-            "shape": shape(model)}
+    return {
+        "epoch": int(header["state"]["epoch"]),
+        "itau_epochs": cfg["train"]["epochs"][0],
+        "later_epochs": len(later),
+        "later_steps": sum(h["steps"] for h in later),
+        "later_steps_skipped": sum(h["skipped"] for h in later),
+        "later_seconds": round(sum(h["seconds"] for h in later), 1),
+        "mass_matrix_at_rest": np.asarray(model.mass_matrix(jnp.zeros(2))).tolist(),
+        "plant_mass_matrix_at_rest": np.asarray(truth.mass_matrix(jnp.zeros(2))).tolist(),
+        "stiffness_median": float(np.median(learned)),
+        "stiffness_max": float(np.max(learned)),
+        "plant_stiffness_median": float(np.median(plant)),
+        "plant_stiffness_max": float(np.max(plant)),
+        "shape": shape(model),
+    }
 
 
 def terms(model) -> dict:
@@ -177,16 +191,22 @@ def terms(model) -> dict:
         return np.asarray(model.nonconservative_force(rest, qd) + model.input_force(rest, qd, jnp.zeros(1)))
 
     damping = [at_zero_input(jnp.eye(2)[j]).tolist() for j in range(2)]
-    return {"mass_matrix_at_rest": np.asarray(model.mass_matrix(rest)).tolist(), "force_per_unit_velocity": damping,
-            "input_force_per_volt": np.asarray(model.input_force(rest, rest, jnp.ones(1))).tolist()}
+    return {
+        "mass_matrix_at_rest": np.asarray(model.mass_matrix(rest)).tolist(),
+        "force_per_unit_velocity": damping,
+        "input_force_per_volt": np.asarray(model.input_force(rest, rest, jnp.ones(1))).tolist(),
+    }
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--episodes", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--terms-only", action="store_true",
-                    help="add each design's mass matrix, damping and input force to control.json; no swing-ups")
+    ap.add_argument(
+        "--terms-only",
+        action="store_true",
+        help="add each design's mass matrix, damping and input force to control.json; no swing-ups",
+    )
     args = ap.parse_args(argv)
     if args.terms_only:
         doc = json.loads((OUT / "control.json").read_text())
@@ -197,19 +217,27 @@ def main(argv=None) -> int:
 
     starts = np.concatenate([np.zeros((1, 4)), near_rest_starts(args.episodes, args.seed, False)])
     # the L_prop runs that did not finish: what their L_Iτ stage left
-    stages = {name: itau_stage(RUNS / name / "seed0") for name in ("dln_prop", "adln_prop")
-              if not (RUNS / name / "seed0" / "model.eqx").exists()
-              and (RUNS / name / "seed0" / "train_state.eqx").exists()}
+    stages = {
+        name: itau_stage(RUNS / name / "seed0")
+        for name in ("dln_prop", "adln_prop")
+        if not (RUNS / name / "seed0" / "model.eqx").exists() and (RUNS / name / "seed0" / "train_state.eqx").exists()
+    }
     print(json.dumps(stages, indent=1), flush=True)
     rows = {}
     for name, model in designs():
         row = {"shape": shape(model) if hasattr(model, "potential") else None, **swing_up(model, starts, args.seed)}
         rows[name] = row
         print(name, json.dumps(row, default=str)[:300], flush=True)
-    doc = {"plant": str(PLANT.relative_to(ROOT)), "episodes": args.episodes, "seed": args.seed,
-           "seconds_per_episode": SECONDS, "models": rows, "itau_stage": stages,
-           "machine": {"platform": platform.platform(), "python": platform.python_version()},
-           "date": f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC"}
+    doc = {
+        "plant": str(PLANT.relative_to(ROOT)),
+        "episodes": args.episodes,
+        "seed": args.seed,
+        "seconds_per_episode": SECONDS,
+        "models": rows,
+        "itau_stage": stages,
+        "machine": {"platform": platform.platform(), "python": platform.python_version()},
+        "date": f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC",
+    }
     (OUT / "control.json").write_text(json.dumps(doc, indent=1, default=str) + "\n")
     return 0
 

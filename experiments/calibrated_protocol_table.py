@@ -19,12 +19,20 @@ from _generated import block_main  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "calibrated_protocol"
 STATES = ("alpha", "beta", "alpha_dot", "beta_dot")
-LABELS = {"dln_traj": "DeLaN L_traj", "dln_prop": "DeLaN L_prop", "aph_aph": "APHYNITY L_aph",
-          "aph_prop": "APHYNITY L_prop", "adln_aph": "augmented DeLaN L_aph", "adln_prop": "augmented DeLaN L_prop",
-          "dln_prop_span": "DeLaN L_prop, span 0.2 s", "adln_prop_span": "augmented DeLaN L_prop, span 0.1 s",
-          "dln_prop_offline": "DeLaN L_prop, span 0.2 s, offline velocities",
-          "adln_prop_offline": "augmented DeLaN L_prop, span 0.1 s, offline velocities",
-          "plant model": "the plant's own model (reference)", "nominal analytic": "nominal analytic (reference)"}
+LABELS = {
+    "dln_traj": "DeLaN L_traj",
+    "dln_prop": "DeLaN L_prop",
+    "aph_aph": "APHYNITY L_aph",
+    "aph_prop": "APHYNITY L_prop",
+    "adln_aph": "augmented DeLaN L_aph",
+    "adln_prop": "augmented DeLaN L_prop",
+    "dln_prop_span": "DeLaN L_prop, span 0.2 s",
+    "adln_prop_span": "augmented DeLaN L_prop, span 0.1 s",
+    "dln_prop_offline": "DeLaN L_prop, span 0.2 s, offline velocities",
+    "adln_prop_offline": "augmented DeLaN L_prop, span 0.1 s, offline velocities",
+    "plant model": "the plant's own model (reference)",
+    "nominal analytic": "nominal analytic (reference)",
+}
 MODEL_KEYS = {"DLN": "dln", "APH": "aph", "ADLN": "adln"}
 
 
@@ -40,8 +48,11 @@ def _table_rows(folder: str, suffix: str) -> list[dict]:
 
 def prediction_table() -> list[str]:
     """Per test set and model: each state's log10 RMSE, ours (the paper's experimental value)."""
-    rows = (_table_rows("reproduce", "") + _table_rows("reproduce_span", "_span")
-            + _table_rows("reproduce_offline", "_offline"))
+    rows = (
+        _table_rows("reproduce", "")
+        + _table_rows("reproduce_span", "_span")
+        + _table_rows("reproduce_offline", "_offline")
+    )
     lines = ["| test set | model | α | β | α̇ | β̇ |", "|---|---|---:|---:|---:|---:|"]
     for test_set in dict.fromkeys(r["test_set"] for r in rows):
         for label in dict.fromkeys(r["label"] for r in rows if r["test_set"] == test_set):
@@ -53,8 +64,11 @@ def prediction_table() -> list[str]:
 
 def control_table(doc: dict) -> list[str]:
     """Per design model: the potential's curvature at both ends and the swing-up on the rig."""
-    lines = ["| designed on | V'' hanging (mN·m/rad) | V'' upright (mN·m/rad) | shape | swing-up from x0 = 0 | "
-             f"seeded starts (of {doc['episodes']}) |", "|---|---:|---:|---|---|---:|"]
+    lines = [
+        "| designed on | V'' hanging (mN·m/rad) | V'' upright (mN·m/rad) | shape | swing-up from x0 = 0 | "
+        f"seeded starts (of {doc['episodes']}) |",
+        "|---|---:|---:|---|---|---:|",
+    ]
     for name, row in doc["models"].items():
         shape = row.get("shape")
         if shape is None:
@@ -84,8 +98,11 @@ def verdict(doc: dict) -> str:
             continue
         shape_ok = row.get("shape") is not None and row["shape"]["curvature_at_top_Nm_per_rad"] < 0
         ok = "design_error" not in row and row["from_rest"] and row["seeded_successes"] >= 0.9 * row["seeded"]
-        parts.append(f"{LABELS[name]}: upright {'a maximum' if shape_ok else 'NOT a maximum'}, swing-up "
-                     + ("meets" if ok else "does NOT meet") + " the bar (x0 = 0 and ≥ 90 % of the starts)")
+        parts.append(
+            f"{LABELS[name]}: upright {'a maximum' if shape_ok else 'NOT a maximum'}, swing-up "
+            + ("meets" if ok else "does NOT meet")
+            + " the bar (x0 = 0 and ≥ 90 % of the starts)"
+        )
     return "; ".join(parts) + "."
 
 
@@ -100,13 +117,19 @@ def terms_table(doc: dict) -> list[str]:
         return t["input_force_per_volt"][0] / t["mass_matrix_at_rest"][0][0]
 
     plant = gain_over_inertia(terms["plant model"])
-    lines = ["The rest of what a design takes, at rest (M in 1e-4 kg·m², rotor damping in 1e-4 N·m·s/rad with "
-             "the back-EMF; the learned models' input force is fixed at the nominal 5e-3 N·m/V):", "",
-             "| designed on | M₁₁ | M₂₂ | rotor damping | (input / M₁₁) ÷ the plant's |", "|---|---:|---:|---:|---:|"]
+    lines = [
+        "The rest of what a design takes, at rest (M in 1e-4 kg·m², rotor damping in 1e-4 N·m·s/rad with "
+        "the back-EMF; the learned models' input force is fixed at the nominal 5e-3 N·m/V):",
+        "",
+        "| designed on | M₁₁ | M₂₂ | rotor damping | (input / M₁₁) ÷ the plant's |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for name, t in terms.items():
         m, d = t["mass_matrix_at_rest"], t["force_per_unit_velocity"]
-        lines.append(f"| {LABELS[name]} | {1e4 * m[0][0]:.3g} | {1e4 * m[1][1]:.3g} | {-1e4 * d[0][0]:.3g} | "
-                     f"{gain_over_inertia(t) / plant:.3g} |")
+        lines.append(
+            f"| {LABELS[name]} | {1e4 * m[0][0]:.3g} | {1e4 * m[1][1]:.3g} | {-1e4 * d[0][0]:.3g} | "
+            f"{gain_over_inertia(t) / plant:.3g} |"
+        )
     return lines
 
 
@@ -124,9 +147,14 @@ def itau_stage_lines(doc: dict) -> list[str]:
             f"{st['stiffness_median']:.2g} /s (median over 20 states; max {st['stiffness_max']:.2g}) against the "
             f"plant's {st['plant_stiffness_median']:.2g} /s; potential shape {kind} (the curvatures' signs do not "
             "depend on the overall scale)."
-            + (f" The next stage (2-step L_traj + L_Iτ) then ran {st['later_epochs']} epoch(s) in "
-               f"{st['later_seconds']:.0f} s; {st['later_steps_skipped']} of its {st['later_steps']} steps were skipped "
-               "(a non-finite loss or gradient: the ODE solve failed)." if st["later_epochs"] else ""))
+            + (
+                f" The next stage (2-step L_traj + L_Iτ) then ran {st['later_epochs']} epoch(s) in "
+                f"{st['later_seconds']:.0f} s; {st['later_steps_skipped']} of its {st['later_steps']} steps were skipped "
+                "(a non-finite loss or gradient: the ODE solve failed)."
+                if st["later_epochs"]
+                else ""
+            )
+        )
     return lines
 
 
@@ -135,7 +163,7 @@ def _hanging_hz(mass: list, curvature: float) -> str:
     overall scale that free releases leave open. "—" where V'' ≤ 0 (no oscillation)."""
     inverse_22 = mass[0][0] / (mass[0][0] * mass[1][1] - mass[0][1] * mass[1][0])
     value = curvature * inverse_22
-    return f"{value ** 0.5 / (2 * 3.141592653589793):.2f}" if value > 0 else "—"
+    return f"{value**0.5 / (2 * 3.141592653589793):.2f}" if value > 0 else "—"
 
 
 def itau_causes_lines(plant_curvature: float) -> list[str]:
@@ -146,21 +174,33 @@ def itau_causes_lines(plant_curvature: float) -> list[str]:
         return []
     doc = json.loads(path.read_text())
     first = next(iter(doc["cells"].values()))
-    lines = ["The plant's own L_Iτ on its 64 training releases (0 would be a perfect fit; the normaliser "
-             "is the model's own momentum changes):", "", "| data | L_Iτ of the plant |", "|---|---:|"]
+    lines = [
+        "The plant's own L_Iτ on its 64 training releases (0 would be a perfect fit; the normaliser "
+        "is the model's own momentum changes):",
+        "",
+        "| data | L_Iτ of the plant |",
+        "|---|---:|",
+    ]
     lines += [f"| {name} | {value:.2g} |" for name, value in doc["plant_itau"].items()]
-    lines += ["", "DeLaN's L_Iτ stage alone (the recipe's, seed 0), per sensor, velocities and span:", "",
-              "| sensor | velocities | span (20 ms intervals) | epochs | L_Iτ learned / plant | hanging frequency (Hz; plant {}) | "
-              "stiffness (1/s; plant {:.1f}) | potential |".format(
-                  _hanging_hz(first["plant_mass_matrix_at_rest"], plant_curvature), first["plant_stiffness_median"]),
-              "|---|---|---:|---:|---:|---:|---:|---|"]
+    lines += [
+        "",
+        "DeLaN's L_Iτ stage alone (the recipe's, seed 0), per sensor, velocities and span:",
+        "",
+        "| sensor | velocities | span (20 ms intervals) | epochs | L_Iτ learned / plant | hanging frequency (Hz; plant {}) | "
+        "stiffness (1/s; plant {:.1f}) | potential |".format(
+            _hanging_hz(first["plant_mass_matrix_at_rest"], plant_curvature), first["plant_stiffness_median"]
+        ),
+        "|---|---|---:|---:|---:|---:|---:|---|",
+    ]
     velocity = {"recorded": "the sensor's", "zero_phase": "zero-phase, offline"}
     for cell in doc["cells"].values():
         low, top = cell["shape"]["curvature_at_hanging_Nm_per_rad"], cell["shape"]["curvature_at_top_Nm_per_rad"]
         kind = "physical" if low > 0 > top else ("upright a minimum" if top > 0 else "hanging a maximum")
-        lines.append(f"| {cell['sensor']} | {velocity[cell['velocity']]} | {cell['span']} | {cell['epochs']} | "
-                     f"{cell['itau_learned_over_plant']:.2g} | {_hanging_hz(cell['mass_matrix_at_rest'], low)} | "
-                     f"{cell['stiffness_median']:.3g} | {kind} |")
+        lines.append(
+            f"| {cell['sensor']} | {velocity[cell['velocity']]} | {cell['span']} | {cell['epochs']} | "
+            f"{cell['itau_learned_over_plant']:.2g} | {_hanging_hz(cell['mass_matrix_at_rest'], low)} | "
+            f"{cell['stiffness_median']:.3g} | {kind} |"
+        )
     return lines
 
 
@@ -172,38 +212,65 @@ def scale_fit_lines() -> list[str]:
     if not doc:
         return []
     velocity = {"recorded": "the sensor's", "zero_phase": "zero-phase, offline"}
-    lines = [f"The scale fit's forced run (the 2 V chirp, 20 s) takes the rotor {doc['rotor_travel_rad']:.1f} rad "
-             f"end to end, to |α| = {doc['scale_fit_max_abs_alpha_rad']:.1f} rad; the training releases never pass "
-             f"|α| = {doc['training_max_abs_alpha_rad']:.1f} rad. The scale it fits (1 is right for the plant's "
-             "own model) and the share of the input's impulse left unexplained:", "",
-             "| model | velocities, span | scale | unexplained |", "|---|---|---:|---:|"]
+    lines = [
+        f"The scale fit's forced run (the 2 V chirp, 20 s) takes the rotor {doc['rotor_travel_rad']:.1f} rad "
+        f"end to end, to |α| = {doc['scale_fit_max_abs_alpha_rad']:.1f} rad; the training releases never pass "
+        f"|α| = {doc['training_max_abs_alpha_rad']:.1f} rad. The scale it fits (1 is right for the plant's "
+        "own model) and the share of the input's impulse left unexplained:",
+        "",
+        "| model | velocities, span | scale | unexplained |",
+        "|---|---|---:|---:|",
+    ]
     for key, fit in doc["plant_fits"].items():
         v, span = key.split(", ")
-        lines.append(f"| the plant's own model | {velocity[v]}, {span} | {fit['factor']:.3g} | "
-                     f"{fit['relative_residual']:.2f} |")
+        lines.append(
+            f"| the plant's own model | {velocity[v]}, {span} | {fit['factor']:.3g} | {fit['relative_residual']:.2f} |"
+        )
     names = {"reproduce": "", "reproduce_span": "_span", "reproduce_offline": "_offline"}
     for key, fit in doc["recorded_fits"].items():
         folder, name = key.split("/")
-        lines.append(f"| {LABELS[name + names[folder]]} | as trained | {fit['factor']:.3g} | "
-                     f"{fit['relative_residual_after']:.2f} |")
+        lines.append(
+            f"| {LABELS[name + names[folder]]} | as trained | {fit['factor']:.3g} | "
+            f"{fit['relative_residual_after']:.2f} |"
+        )
     for key, fit in doc.get("in_range_fits", {}).items():
         folder, name = key.split("/")
-        lines.append(f"| {LABELS[name + names[folder]]}, refitted on the run's first "
-                     f"{doc['seconds_inside_training_range']:.2f} s (inside the training range) | zero-phase, offline, "
-                     f"span 10 | × {fit['factor']:.3g} | {fit['relative_residual_after']:.2f} |")
+        lines.append(
+            f"| {LABELS[name + names[folder]]}, refitted on the run's first "
+            f"{doc['seconds_inside_training_range']:.2f} s (inside the training range) | zero-phase, offline, "
+            f"span 10 | × {fit['factor']:.3g} | {fit['relative_residual_after']:.2f} |"
+        )
     return lines
 
 
 def body() -> str:
     doc = json.loads((OUT / "control.json").read_text())
-    return "\n".join(["Prediction, log10 RMSE on the rig's test runs: ours (the paper's experimental value; "
-                      "its forced APHYNITY rows diverged, X).", "", *prediction_table(), "",
-                      f"Energy shape and the swing-up designed on each model, run on the rig "
-                      f"({doc['seconds_per_episode']:g} s episodes, 2048-count encoders, derivative-filter velocities; "
-                      f"{doc['date']}).", "", *control_table(doc), "", verdict(doc), "", *terms_table(doc), "",
-                      "What the L_Iτ stage left in the L_prop runs that did not finish (see the text above the block):", "",
-                      *itau_stage_lines(doc), "", *itau_causes_lines(doc["models"]["plant model"]["shape"]["curvature_at_hanging_Nm_per_rad"]), "",
-                      *scale_fit_lines()])
+    return "\n".join(
+        [
+            "Prediction, log10 RMSE on the rig's test runs: ours (the paper's experimental value; "
+            "its forced APHYNITY rows diverged, X).",
+            "",
+            *prediction_table(),
+            "",
+            f"Energy shape and the swing-up designed on each model, run on the rig "
+            f"({doc['seconds_per_episode']:g} s episodes, 2048-count encoders, derivative-filter velocities; "
+            f"{doc['date']}).",
+            "",
+            *control_table(doc),
+            "",
+            verdict(doc),
+            "",
+            *terms_table(doc),
+            "",
+            "What the L_Iτ stage left in the L_prop runs that did not finish (see the text above the block):",
+            "",
+            *itau_stage_lines(doc),
+            "",
+            *itau_causes_lines(doc["models"]["plant model"]["shape"]["curvature_at_hanging_Nm_per_rad"]),
+            "",
+            *scale_fit_lines(),
+        ]
+    )
 
 
 if __name__ == "__main__":

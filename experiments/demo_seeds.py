@@ -29,15 +29,30 @@ def run_seed(seed: int) -> None:
     """The README's demo command at one seed (no video); its summary kept in the results."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "demo"
-        subprocess.run([sys.executable, "-m", "furuta_gym", "demo", "--no-progress", "--no-video",
-                        "--seed", str(seed), "--out", str(out)], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "furuta_gym",
+                "demo",
+                "--no-progress",
+                "--no-video",
+                "--seed",
+                str(seed),
+                "--out",
+                str(out),
+            ],
+            check=True,
+        )
         RESULTS.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(out / "summary.json", RESULTS / f"seed{seed}.json")
 
 
 def block(docs: list[dict]) -> str:
-    rows = ["| seed | loss | held-out RMSE α / β (rad) | energy log10 | forces log10 | inertial | Coriolis | gravity |",
-            "|---|---|---|---|---|---|---|---|"]
+    rows = [
+        "| seed | loss | held-out RMSE α / β (rad) | energy log10 | forces log10 | inertial | Coriolis | gravity |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     lower, margins = 0, []
     for d in docs:
         margins.append(d["physics"]["traj"]["forces"] - d["physics"]["prop"]["forces"])
@@ -45,19 +60,27 @@ def block(docs: list[dict]) -> str:
         lower += ph["prop"]["forces"] < ph["traj"]["forces"]
         for loss in ("prop", "traj"):
             p = ph[loss]
-            rows.append(f"| {d['config']['seed']} | L_{loss} | {tr[loss]['rmse_alpha']:.3f} / {tr[loss]['rmse_beta']:.3f} "
-                        f"| {p['energy']:.2f} | {p['forces']:.2f} | {p['inertial']:.2f} | {p['coriolis']:.2f} "
-                        f"| {p['potential']:.2f} |")
+            rows.append(
+                f"| {d['config']['seed']} | L_{loss} | {tr[loss]['rmse_alpha']:.3f} / {tr[loss]['rmse_beta']:.3f} "
+                f"| {p['energy']:.2f} | {p['forces']:.2f} | {p['inertial']:.2f} | {p['coriolis']:.2f} "
+                f"| {p['potential']:.2f} |"
+            )
     epochs = docs[0]["config"]["epochs"]
-    return "\n".join([
-        f"`furuta-gym demo` at its default budget ({docs[0]['config']['n_train']} free trajectories of 1 s, "
-        f"epochs {epochs[0]} + {epochs[1]}), one row per seed and loss; log10 RMSE against the truth on the held-out "
-        "states (forces: the mean of the inertial, Coriolis and gravity terms).", "", *rows, "",
-        f"L_prop's force decomposition is the closer one on **{lower} of {len(docs)}** seeds (L_traj's minus "
-        f"L_prop's log10: {', '.join(f'{m:+.2f}' for m in margins)}; small margins at this budget); its energy on "
-        f"{sum(d['physics']['prop']['energy'] < d['physics']['traj']['energy'] for d in docs)} of {len(docs)}.", "",
-        "Made by `python experiments/demo_seeds.py` (results/demo_seeds/).",
-    ])
+    return "\n".join(
+        [
+            f"`furuta-gym demo` at its default budget ({docs[0]['config']['n_train']} free trajectories of 1 s, "
+            f"epochs {epochs[0]} + {epochs[1]}), one row per seed and loss; log10 RMSE against the truth on the held-out "
+            "states (forces: the mean of the inertial, Coriolis and gravity terms).",
+            "",
+            *rows,
+            "",
+            f"L_prop's force decomposition is the closer one on **{lower} of {len(docs)}** seeds (L_traj's minus "
+            f"L_prop's log10: {', '.join(f'{m:+.2f}' for m in margins)}; small margins at this budget); its energy on "
+            f"{sum(d['physics']['prop']['energy'] < d['physics']['traj']['energy'] for d in docs)} of {len(docs)}.",
+            "",
+            "Made by `python experiments/demo_seeds.py` (results/demo_seeds/).",
+        ]
+    )
 
 
 def main() -> int:

@@ -72,17 +72,30 @@ SKIP, WINDOW, SUBSTEPS, OE_WINDOWS = 0.5, 0.1, 4, 64
 STATES = ("alpha", "beta", "alpha_dot", "beta_dot")
 #: mujoco.sysid rows: every MJCF term of head_to_head_sysid.PARAMETERS, and only the terms the
 #: declared model has (inertias, damping, motor gain), beside "fitted"
-SYSID_ROWS = {"sysid": ("mujoco.sysid (MJCF terms)", tuple(hsysid.PARAMETERS)),
-              "sysid_rigid": ("mujoco.sysid (rigid body, damping, gain only)",
-                              ("rotor_inertia", "pendulum_com", "pendulum_armature", "arm_length", "alpha_damping",
-                               "beta_damping", "motor_gain"))}
+SYSID_ROWS = {
+    "sysid": ("mujoco.sysid (MJCF terms)", tuple(hsysid.PARAMETERS)),
+    "sysid_rigid": (
+        "mujoco.sysid (rigid body, damping, gain only)",
+        (
+            "rotor_inertia",
+            "pendulum_com",
+            "pendulum_armature",
+            "arm_length",
+            "alpha_damping",
+            "beta_damping",
+            "motor_gain",
+        ),
+    ),
+}
 ROWS = ("nominal", *BASELINES, *SYSID_ROWS, "fitted", "diagnosed")
 
 
 def load_runs(runs: list[int]):
     """Whole runs, velocities estimated on the whole log, start dropped (as scored)."""
-    return [prepare_log(tr, tr.name, skip=SKIP, split=None, min_seconds=WINDOW)[0]
-            for tr in load_qube_closed_loop(runs, skip_seconds=0.0)]
+    return [
+        prepare_log(tr, tr.name, skip=SKIP, split=None, min_seconds=WINDOW)[0]
+        for tr in load_qube_closed_loop(runs, skip_seconds=0.0)
+    ]
 
 
 def with_input(trajs, inputs: InputDynamics):
@@ -112,6 +125,7 @@ def lagrangian_field(base, effects=(), dt: float = 0.002):
             j = e.joint_index(base.spec)
             limit = limit.at[j].add(jnp.maximum(e.dry_friction_limit()(qd[j]), 0.0))
         return jnp.concatenate([qd, forward_dynamics_with_dry_friction(model, limit, q, qd, u, h)])
+
     return field
 
 
@@ -122,8 +136,12 @@ def score(pred: np.ndarray, xs: np.ndarray) -> dict:
     bad = ~np.all(np.isfinite(pred) & (np.abs(pred) < 1e6), axis=(1, 2))
     err = (pred - xs[..., :k])[~bad][:, 1:].reshape(-1, k)
     rmse = {s: float(np.sqrt(np.mean(err[:, i] ** 2))) for i, s in enumerate(STATES[:k])}
-    return {"rmse": rmse, "position_rmse": float(np.sqrt(np.mean(err[:, :2] ** 2))),
-            "n_windows": int(len(pred)), "n_diverged": int(bad.sum())}
+    return {
+        "rmse": rmse,
+        "position_rmse": float(np.sqrt(np.mean(err[:, :2] ** 2))),
+        "n_windows": int(len(pred)),
+        "n_diverged": int(bad.sum()),
+    }
 
 
 def score_field(field, trajs, inputs: InputDynamics = InputDynamics()) -> dict:
@@ -132,16 +150,32 @@ def score_field(field, trajs, inputs: InputDynamics = InputDynamics()) -> dict:
 
 
 def row_doc(name: str, label: str, result: dict, wall: float | None, **extra) -> dict:
-    return {"name": name, "label": label, "fit_runs": FIT_RUNS if wall is not None else [], "test_runs": TEST_RUNS,
-            "wall_seconds": None if wall is None else round(wall, 1), **result, **extra}
+    return {
+        "name": name,
+        "label": label,
+        "fit_runs": FIT_RUNS if wall is not None else [],
+        "test_runs": TEST_RUNS,
+        "wall_seconds": None if wall is None else round(wall, 1),
+        **result,
+        **extra,
+    }
 
 
 def fixed_rows(test) -> list[dict]:
     """The nominal model and the public simulators: nothing fitted."""
     rows = [row_doc("nominal", "nominal (datasheet)", score_field(lagrangian_field(Furuta()), test), None)]
     for b in BASELINES.values():
-        rows.append(row_doc(b.name, b.label, score_field(b.vector_field, test), None, source=b.source,
-                            parameters=b.params, frame=dataclasses.asdict(b.frame)))
+        rows.append(
+            row_doc(
+                b.name,
+                b.label,
+                score_field(b.vector_field, test),
+                None,
+                source=b.source,
+                parameters=b.params,
+                frame=dataclasses.asdict(b.frame),
+            )
+        )
     return rows
 
 
@@ -164,16 +198,27 @@ def diagnose_row(name: str, candidates, test) -> dict:
     from furuta_gym.diagnose import diagnose
 
     t0 = time.perf_counter()
-    res = diagnose(load_qube_closed_loop(FIT_RUNS, skip_seconds=SKIP), "furuta", candidates=candidates,
-                   window=WINDOW, oe_max_windows=OE_WINDOWS)
+    res = diagnose(
+        load_qube_closed_loop(FIT_RUNS, skip_seconds=SKIP),
+        "furuta",
+        candidates=candidates,
+        window=WINDOW,
+        oe_max_windows=OE_WINDOWS,
+    )
     wall = time.perf_counter() - t0
     plant = res.plant()
     label = "furuta-gym fitted (no effects)" if name == "fitted" else "furuta-gym diagnosed"
     found = [f"{e.name}:{e.joint}" for e in plant.effects]
-    return row_doc(name, label, score_plant(plant, test), wall, found=found,
-                   parameters=dict(plant.lumped), effects=[{"name": e.name, "joint": e.joint, "coefficient": e.coefficient}
-                                                           for e in plant.effects],
-                   diagnosis=res.to_json())
+    return row_doc(
+        name,
+        label,
+        score_plant(plant, test),
+        wall,
+        found=found,
+        parameters=dict(plant.lumped),
+        effects=[{"name": e.name, "joint": e.joint, "coefficient": e.coefficient} for e in plant.effects],
+        diagnosis=res.to_json(),
+    )
 
 
 def sysid_row(name: str, fit, test, every: int, max_iters: int) -> dict:
@@ -184,14 +229,20 @@ def sysid_row(name: str, fit, test, every: int, max_iters: int) -> dict:
     x0, _, xs = prediction_windows(test, WINDOW)
     _, u_ext, _ = hsysid.windows_for_sysid(test, WINDOW)
     pred = hsysid.predictor(fitted)(x0, u_ext, test[0].dt)
-    return row_doc(name, label, score(pred, xs), wall, parameters=values, half_widths_95=half, fit=record,
-                   window_every=every)
+    return row_doc(
+        name, label, score(pred, xs), wall, parameters=values, half_widths_95=half, fit=record, window_every=every
+    )
 
 
 #: terms of the sysid fit beyond the declared model's, each set to zero in turn at the fitted
 #: values (no refit): which of them carries the prediction on the unseen runs
-SYSID_EXTRA_TERMS = ("alpha_stiffness", "alpha_frictionloss", "beta_frictionloss", "pendulum_com_lateral",
-                     "input_delay")
+SYSID_EXTRA_TERMS = (
+    "alpha_stiffness",
+    "alpha_frictionloss",
+    "beta_frictionloss",
+    "pendulum_com_lateral",
+    "input_delay",
+)
 
 
 def sysid_without_terms(values: dict, test) -> dict:
@@ -217,12 +268,17 @@ def add_inconsistent_effects(path: Path, test) -> None:
     """Score the diagnosed plant with the effects its diagnosis reported ``inconsistent`` added at
     their tested coefficients (no refit): what the evidence rule left out, as a prediction."""
     doc = json.loads(path.read_text())
-    extra = [Effect(e["name"], e["joint"], e["coefficient"]) for e in doc["diagnosis"]["effects"]
-             if e["status"] == "inconsistent" and e["coefficient"] is not None]
+    extra = [
+        Effect(e["name"], e["joint"], e["coefficient"])
+        for e in doc["diagnosis"]["effects"]
+        if e["status"] == "inconsistent" and e["coefficient"] is not None
+    ]
     plant = Plant.from_json(doc["diagnosis"]["plant"])
     plant = dataclasses.replace(plant, effects=(*plant.effects, *extra))
-    doc["with_inconsistent"] = {"added": [f"{e.name}:{e.joint}" for e in extra],
-                                "position_rmse": score_plant(plant, test)["position_rmse"]}
+    doc["with_inconsistent"] = {
+        "added": [f"{e.name}:{e.joint}" for e in extra],
+        "position_rmse": score_plant(plant, test)["position_rmse"],
+    }
     path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
 
 
@@ -245,9 +301,12 @@ def main() -> None:
     ap.add_argument("--rows", default=",".join(ROWS), help=f"comma list of rows to run, of {list(ROWS)}")
     ap.add_argument("--sysid-every", type=int, default=1, help="sysid fits every k-th window of the fit runs")
     ap.add_argument("--sysid-iterations", type=int, default=30)
-    ap.add_argument("--rescore-only", action="store_true",
-                    help="only the what-ifs on the committed fits (sysid without each extra term, the diagnosis "
-                         "with its inconsistent effects)")
+    ap.add_argument(
+        "--rescore-only",
+        action="store_true",
+        help="only the what-ifs on the committed fits (sysid without each extra term, the diagnosis "
+        "with its inconsistent effects)",
+    )
     args = ap.parse_args()
     rows = args.rows.split(",")
     if unknown := [r for r in rows if r not in ROWS]:
@@ -268,9 +327,18 @@ def main() -> None:
     for d in docs:
         (out / f"{d['name']}.json").write_text(json.dumps({**d, **stamp}, indent=1, default=float) + "\n")
         print(f"{d['label']:55s} position RMSE {d['position_rmse']:.5f} rad  wall {d['wall_seconds']} s", flush=True)
-    summary = {"fit_runs": FIT_RUNS, "test_runs": TEST_RUNS, "skip_seconds": SKIP, "window_seconds": WINDOW,
-               "substeps": SUBSTEPS, "oe_windows": OE_WINDOWS, "velocity": "zero_phase", "rows": list(ROWS),
-               "cpu": "one core (taskset -c 1), XLA single-threaded", **stamp}
+    summary = {
+        "fit_runs": FIT_RUNS,
+        "test_runs": TEST_RUNS,
+        "skip_seconds": SKIP,
+        "window_seconds": WINDOW,
+        "substeps": SUBSTEPS,
+        "oe_windows": OE_WINDOWS,
+        "velocity": "zero_phase",
+        "rows": list(ROWS),
+        "cpu": "one core (taskset -c 1), XLA single-threaded",
+        **stamp,
+    }
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     rescore(out, test)
 

@@ -40,11 +40,18 @@ OUT = Path(__file__).resolve().parents[1] / "results" / "diagnose_intervals"
 LOGS = 25  # seeds 0..LOGS-1 per scenario
 
 SCENARIOS = {
-    "furuta_cable_spring": dict(system="furuta", effects=[Effect("spring", "alpha", 2e-3)],
-                                log=dict(n_trajectories=6, duration=5.0), absorbed={}),
-    "nmsd_force_and_spring": dict(system="nmsd",
-                                  effects=[Effect("constant_torque", "p", 0.5), Effect("spring", "p", 2.0)],
-                                  log=dict(n_trajectories=6, duration=8.0), absorbed={"spring:p": "k1"}),
+    "furuta_cable_spring": dict(
+        system="furuta",
+        effects=[Effect("spring", "alpha", 2e-3)],
+        log=dict(n_trajectories=6, duration=5.0),
+        absorbed={},
+    ),
+    "nmsd_force_and_spring": dict(
+        system="nmsd",
+        effects=[Effect("constant_torque", "p", 0.5), Effect("spring", "p", 2.0)],
+        log=dict(n_trajectories=6, duration=8.0),
+        absorbed={"spring:p": "k1"},
+    ),
 }
 
 
@@ -63,13 +70,26 @@ def truths(scenario: dict) -> tuple[dict[str, float], dict[str, float]]:
 
 
 def _row(seed, key, truth, estimate, interval) -> dict:
-    row = {"seed": seed, "key": key, "truth": truth, "estimate": estimate, "interval": None,
-           "covered": False, "iid_covered": None, "source": None}
+    row = {
+        "seed": seed,
+        "key": key,
+        "truth": truth,
+        "estimate": estimate,
+        "interval": None,
+        "covered": False,
+        "iid_covered": None,
+        "source": None,
+    }
     if interval is not None:
         half = 0.5 * (interval.upper - interval.lower)
-        row.update(interval=interval.to_json(), covered=interval.contains(truth), source=interval.source,
-                   half_width=None if interval.unbounded else half, iid_half_width=interval.iid_half_width,
-                   iid_covered=bool(abs(estimate - truth) <= interval.iid_half_width))
+        row.update(
+            interval=interval.to_json(),
+            covered=interval.contains(truth),
+            source=interval.source,
+            half_width=None if interval.unbounded else half,
+            iid_half_width=interval.iid_half_width,
+            iid_covered=bool(abs(estimate - truth) <= interval.iid_half_width),
+        )
     return row
 
 
@@ -79,8 +99,12 @@ def run_log(name: str, seed: int) -> list[dict]:
     res = diagnose(measured_like(sc["system"], sc["effects"], seed=seed, **sc["log"]), sc["system"])
     base, effects = truths(sc)
     found = {f"{e.name}:{e.joint}": e for e in res.significant}
-    rows = [_row(seed, k, v, None if k not in found else found[k].coefficient,
-                 None if k not in found else found[k].interval) for k, v in effects.items()]
+    rows = [
+        _row(
+            seed, k, v, None if k not in found else found[k].coefficient, None if k not in found else found[k].interval
+        )
+        for k, v in effects.items()
+    ]
     rows += [_row(seed, k, base[k], res.parameters_after[k], iv) for k, iv in res.intervals.items() if iv is not None]
     return rows
 
@@ -93,7 +117,9 @@ def summary(rows: list[dict]) -> dict:
         with_iv = [r for r in rs if r["interval"] is not None and r["half_width"] is not None]
         ratio = [r["half_width"] / r["iid_half_width"] for r in with_iv if r["iid_half_width"] > 0]
         out[key] = {
-            "logs": len(rs), "with_interval": len(with_iv), "covered": sum(r["covered"] for r in rs),
+            "logs": len(rs),
+            "with_interval": len(with_iv),
+            "covered": sum(r["covered"] for r in rs),
             "coverage": sum(r["covered"] for r in rs) / len(rs),
             "iid_coverage": sum(bool(r["iid_covered"]) for r in rs) / len(rs),
             "median_half_width": float(np.median([r["half_width"] for r in with_iv])) if with_iv else None,
@@ -118,7 +144,11 @@ def main() -> None:
         doc["scenarios"][name] = {
             "system": sc["system"],
             "effects": [{"name": e.name, "joint": e.joint, "coefficient": e.coefficient} for e in sc["effects"]],
-            "log": sc["log"], "seconds": round(time.perf_counter() - t0, 1), "summary": summary(rows), "rows": rows}
+            "log": sc["log"],
+            "seconds": round(time.perf_counter() - t0, 1),
+            "summary": summary(rows),
+            "rows": rows,
+        }
         print(name, json.dumps(doc["scenarios"][name]["summary"], indent=1))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(doc, indent=1) + "\n")

@@ -38,8 +38,7 @@ ALL = list(range(1, 16))
 SPLITS = {"runs01-05": list(range(1, 6)), "runs06-10": list(range(6, 11)), "runs11-15": list(range(11, 16))}
 # growing sets from the first run on: a finding must not fade as runs are added; all but the last
 # are judged on the same unseen runs, so that their errors compare
-GROWING = {"runs01-03": [1, 2, 3], "runs01-05": list(range(1, 6)), "runs01-10": list(range(1, 11)),
-           "runs01-15": ALL}
+GROWING = {"runs01-03": [1, 2, 3], "runs01-05": list(range(1, 6)), "runs01-10": list(range(1, 11)), "runs01-15": ALL}
 COMMON_TEST = list(range(11, 16))
 # runs 1-5 without the one run whose rotor wanders far on the positive side, judged on the runs
 # the split of runs 1-5 is judged on
@@ -58,11 +57,20 @@ def per_run(out: Path) -> None:
         alpha, dt = tr.q[:, 0], float(tr.t[1] - tr.t[0])
         res = diagnose([tr], "furuta", candidates=RUN_CANDIDATES, **SETTINGS).to_json()
         spring = next(e for e in res["effects"] if (e["name"], e["joint"]) == ("spring", "alpha"))
-        rows.append({"run": run, "alpha_min": round(float(alpha.min()), 3), "alpha_max": round(float(alpha.max()), 3),
-                     "alpha_rms": round(float(np.sqrt(np.mean(alpha**2))), 3),
-                     "seconds_beyond_far": round(float(np.sum(np.abs(alpha) > FAR) * dt), 2),
-                     "spring_alone": {"coefficient": spring["coefficient"], "t": spring["evidence"]["z_score"],
-                                      "status": spring["status"]}})
+        rows.append(
+            {
+                "run": run,
+                "alpha_min": round(float(alpha.min()), 3),
+                "alpha_max": round(float(alpha.max()), 3),
+                "alpha_rms": round(float(np.sqrt(np.mean(alpha**2))), 3),
+                "seconds_beyond_far": round(float(np.sum(np.abs(alpha) > FAR) * dt), 2),
+                "spring_alone": {
+                    "coefficient": spring["coefficient"],
+                    "t": spring["evidence"]["z_score"],
+                    "status": spring["status"],
+                },
+            }
+        )
     target = out / "runs" / "per_run.json"
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text(json.dumps({"far_rad": FAR, "candidates": RUN_CANDIDATES, "runs": rows}, indent=1) + "\n")
@@ -73,8 +81,13 @@ def run_one(name: str, fit_runs: list[int], test_runs: list[int] | None, out: Pa
     if target.exists():
         return json.loads(target.read_text())
     t0 = time.time()
-    res = diagnose(load_qube_closed_loop(fit_runs), "furuta", candidates=candidates,
-                   test=load_qube_closed_loop(test_runs) if test_runs else None, **SETTINGS)
+    res = diagnose(
+        load_qube_closed_loop(fit_runs),
+        "furuta",
+        candidates=candidates,
+        test=load_qube_closed_loop(test_runs) if test_runs else None,
+        **SETTINGS,
+    )
     doc = res.to_json()
     doc["fit_runs"], doc["test_runs"], doc["candidates"] = fit_runs, test_runs or [], candidates
     doc["seconds"] = round(time.time() - t0, 1)
@@ -101,8 +114,9 @@ def main() -> None:
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    splits = {name: run_one(f"split_{name}", runs, [r for r in ALL if r not in runs], out)
-              for name, runs in SPLITS.items()}
+    splits = {
+        name: run_one(f"split_{name}", runs, [r for r in ALL if r not in runs], out) for name, runs in SPLITS.items()
+    }
     for name, runs in GROWING.items():
         run_one(f"growing_{name}", runs, None if runs == ALL else COMMON_TEST, out)
     for name, runs in ABLATIONS.items():

@@ -46,24 +46,44 @@ CASES = {
     "none": [],
     "spring_dry_friction": [Effect("spring", "alpha", 1.5e-3), Effect("coulomb_friction", "alpha", 8e-4)],
     "spring_weak_friction": [Effect("spring", "alpha", 1.5e-3), Effect("coulomb_friction", "alpha", 4e-4)],
-    "cable_stiction": [Effect("spring", "alpha", 1.5e-3, reference=0.1), Effect("coulomb_friction", "alpha", 6e-4),
-                       Effect("stiction", "alpha", 4e-4)],
-    "coulomb_com_lag": [Effect("coulomb_friction", "alpha", 3e-4), Effect("com_offset", "beta", 2e-3),
-                        Effect("actuator_lag", "u", 2e-3)],
-    "coulomb_com_lag5": [Effect("coulomb_friction", "alpha", 3e-4), Effect("com_offset", "beta", 2e-3),
-                         Effect("actuator_lag", "u", 5e-3)],
+    "cable_stiction": [
+        Effect("spring", "alpha", 1.5e-3, reference=0.1),
+        Effect("coulomb_friction", "alpha", 6e-4),
+        Effect("stiction", "alpha", 4e-4),
+    ],
+    "coulomb_com_lag": [
+        Effect("coulomb_friction", "alpha", 3e-4),
+        Effect("com_offset", "beta", 2e-3),
+        Effect("actuator_lag", "u", 2e-3),
+    ],
+    "coulomb_com_lag5": [
+        Effect("coulomb_friction", "alpha", 3e-4),
+        Effect("com_offset", "beta", 2e-3),
+        Effect("actuator_lag", "u", 5e-3),
+    ],
     # a cable whose neutral is dragged along (outside the diagnosis library): what the library's
     # effects make of it
-    "sticky_hysteresis": [Effect("hysteretic_spring", "alpha", 2e-3, play=0.3), Effect("coulomb_friction", "alpha", 5e-4),
-                          Effect("stiction", "alpha", 5e-4)],
+    "sticky_hysteresis": [
+        Effect("hysteretic_spring", "alpha", 2e-3, play=0.3),
+        Effect("coulomb_friction", "alpha", 5e-4),
+        Effect("stiction", "alpha", 5e-4),
+    ],
 }
 DRAWN = {"sticky_cable": sticky_rig}  # cases whose plant is drawn per log
 # a sticky log: at least this share of consecutive samples repeats the rotor's count (else redrawn)
 MIN_REPEATS = {"sticky_cable": 0.6, "sticky_hysteresis": 0.6}
-PLAN = [("sine_sweep", "none"), ("closed_loop_prbs", "none"), ("sticky_sweep", "none"),
-        ("sine_sweep", "spring_dry_friction"), ("sine_sweep", "spring_weak_friction"),
-        ("sine_sweep", "cable_stiction"), ("sticky_sweep", "sticky_cable"), ("sticky_sweep", "sticky_hysteresis"),
-        ("closed_loop_prbs", "coulomb_com_lag"), ("closed_loop_prbs", "coulomb_com_lag5")]
+PLAN = [
+    ("sine_sweep", "none"),
+    ("closed_loop_prbs", "none"),
+    ("sticky_sweep", "none"),
+    ("sine_sweep", "spring_dry_friction"),
+    ("sine_sweep", "spring_weak_friction"),
+    ("sine_sweep", "cable_stiction"),
+    ("sticky_sweep", "sticky_cable"),
+    ("sticky_sweep", "sticky_hysteresis"),
+    ("closed_loop_prbs", "coulomb_com_lag"),
+    ("closed_loop_prbs", "coulomb_com_lag5"),
+]
 
 
 def repeat_share(data) -> float:
@@ -91,10 +111,25 @@ def run_one(excitation: str, case: str, seed: int, out: Path, quantize: bool = T
     effects, data, draws = simulate(excitation, case, seed, quantize)
     res = diagnose(data, "furuta", **{**SETTINGS[excitation], **overrides})
     doc = res.to_json()
-    doc.update(excitation=excitation, case=case, seed=seed, quantized=quantize, seconds=round(time.time() - t0, 1),
-               rotor_repeat_share=round(repeat_share(data), 3), draws=draws,
-               planted=[dict(name=e.name, joint=e.joint, coefficient=e.coefficient, reference=e.reference,
-                             **({"play": e.play} if e.play else {})) for e in effects])
+    doc.update(
+        excitation=excitation,
+        case=case,
+        seed=seed,
+        quantized=quantize,
+        seconds=round(time.time() - t0, 1),
+        rotor_repeat_share=round(repeat_share(data), 3),
+        draws=draws,
+        planted=[
+            dict(
+                name=e.name,
+                joint=e.joint,
+                coefficient=e.coefficient,
+                reference=e.reference,
+                **({"play": e.play} if e.play else {}),
+            )
+            for e in effects
+        ],
+    )
     target.write_text(json.dumps(doc, indent=1) + "\n")
     found = [(e["name"], e["joint"], e["coefficient"]) for e in doc["effects"] if e["significant"]]
     print(f"{excitation:17s} {case:22s} seed {seed:3d}: {found}", flush=True)
@@ -110,8 +145,11 @@ def main() -> None:
     ap.add_argument("--excitations", nargs="*", help="experiments to run (default: all)")
     ap.add_argument("--start-iterations", type=int, help="DiagnosisSettings.start_iterations (default: its default)")
     ap.add_argument("--no-quantize", action="store_true", help="log exact angles (no encoder resolution)")
-    ap.add_argument("--evidence-weighting", choices=("regressor", "uniform"),
-                    help="DiagnosisSettings.evidence_weighting (default: its default)")
+    ap.add_argument(
+        "--evidence-weighting",
+        choices=("regressor", "uniform"),
+        help="DiagnosisSettings.evidence_weighting (default: its default)",
+    )
     args = ap.parse_args()
     overrides = {} if args.start_iterations is None else {"start_iterations": args.start_iterations}
     if args.evidence_weighting:

@@ -100,13 +100,21 @@ def sim_table(docs: dict[str, dict]) -> str:
     groups = defaultdict(list)
     for d in docs.values():
         groups[(d["excitation"], d["case"])].append(d)
-    rows = ["| experiment | planted | logs | false alarms / all found, nothing else | coefficient error per log | held-out error ratio (min–median) |",
-            "|---|---|---|---|---|---|"]
+    rows = [
+        "| experiment | planted | logs | false alarms / all found, nothing else | coefficient error per log | held-out error ratio (min–median) |",
+        "|---|---|---|---|---|---|",
+    ]
     for (exc, case), ds in sorted(groups.items()):
         if case in DRAWN or _outside_library(ds[0]["planted"]):  # their own tables
             continue
-        planted = ", ".join(f"{p['name']}:{p['joint']} {p['coefficient']:g}" + (f" (rest {p['reference']:g})" if p.get("reference") else "")
-                            for p in ds[0]["planted"]) or "none"
+        planted = (
+            ", ".join(
+                f"{p['name']}:{p['joint']} {p['coefficient']:g}"
+                + (f" (rest {p['reference']:g})" if p.get("reference") else "")
+                for p in ds[0]["planted"]
+            )
+            or "none"
+        )
         ratios = sorted(_ratio(d) for d in ds)
         med = ratios[len(ratios) // 2]
         if not ds[0]["planted"]:
@@ -143,8 +151,10 @@ def sticky_table(docs: dict[str, dict]) -> str:
     """Per sticky-sweep log: planted and found spring (rest), Coulomb level, breakaway; errors;
     then how many logs meet each criterion."""
     ds = sorted((d for d in docs.values() if d["case"] in DRAWN), key=lambda d: d["seed"])
-    rows = ["| seed | rotor count repeated | planted: spring (rest), Coulomb, breakaway | found: spring (rest), Coulomb, breakaway | errors | else added | held-out ratio |",
-            "|---|---|---|---|---|---|---|"]
+    rows = [
+        "| seed | rotor count repeated | planted: spring (rest), Coulomb, breakaway | found: spring (rest), Coulomb, breakaway | errors | else added | held-out ratio |",
+        "|---|---|---|---|---|---|---|",
+    ]
     hits = {k: 0 for k, _ in STICKY_CRITERIA}
     ratio_ok = 0
     for d in ds:
@@ -158,16 +168,28 @@ def sticky_table(docs: dict[str, dict]) -> str:
             hits[key] += abs(err) <= tol
             errs.append(f"{key} {err:+.0%}")
         ratio_ok += _ratio(d) >= 1.4
-        extra = [f"{e['name']}:{e['joint']}" for e in _found(d)
-                 if (e["name"], e["joint"]) not in {("spring", "alpha"), ("constant_torque", "alpha"),
-                                                    ("coulomb_friction", "alpha"), ("stiction", "alpha")}]
-        rows.append(f"| {d['seed']} | {d['rotor_repeat_share']:.0%} | {_sticky_text(p)} | {_sticky_text(f)} | {'; '.join(errs)} | "
-                    f"{', '.join(extra) or '-'} | {_ratio(d):.1f}× |")
+        extra = [
+            f"{e['name']}:{e['joint']}"
+            for e in _found(d)
+            if (e["name"], e["joint"])
+            not in {
+                ("spring", "alpha"),
+                ("constant_torque", "alpha"),
+                ("coulomb_friction", "alpha"),
+                ("stiction", "alpha"),
+            }
+        ]
+        rows.append(
+            f"| {d['seed']} | {d['rotor_repeat_share']:.0%} | {_sticky_text(p)} | {_sticky_text(f)} | {'; '.join(errs)} | "
+            f"{', '.join(extra) or '-'} | {_ratio(d):.1f}× |"
+        )
     n = len(ds)
     rows.append("")
-    rows.append(f"Spring within ±35 %: {hits['spring']} of {n}; rotor Coulomb friction within ±35 %: "
-                f"{hits['coulomb_friction']} of {n}; breakaway within ±50 %: {hits['breakaway']} of {n}; "
-                f"held-out error ≥ 1.4× lower: {ratio_ok} of {n}.")
+    rows.append(
+        f"Spring within ±35 %: {hits['spring']} of {n}; rotor Coulomb friction within ±35 %: "
+        f"{hits['coulomb_friction']} of {n}; breakaway within ±50 %: {hits['breakaway']} of {n}; "
+        f"held-out error ≥ 1.4× lower: {ratio_ok} of {n}."
+    )
     return "\n".join(rows)
 
 
@@ -182,14 +204,24 @@ def outside_table(docs: dict[str, dict]) -> str:
     """Per log of a plant with an effect outside the library: what was added, what was reported
     inconsistent (with its gain), and the held-out ratio."""
     ds = sorted((d for d in docs.values() if _outside_library(d["planted"])), key=lambda d: (d["case"], d["seed"]))
-    rows = ["| case | seed | planted | added | reported inconsistent (held-out gain) | held-out ratio |",
-            "|---|---|---|---|---|---|"]
+    rows = [
+        "| case | seed | planted | added | reported inconsistent (held-out gain) | held-out ratio |",
+        "|---|---|---|---|---|---|",
+    ]
     for d in ds:
-        planted = ", ".join(f"{p['name']}:{p['joint']} {p['coefficient']:g}" + (f" (play {p['play']:g})" if p.get("play") else "")
-                            for p in d["planted"])
+        planted = ", ".join(
+            f"{p['name']}:{p['joint']} {p['coefficient']:g}" + (f" (play {p['play']:g})" if p.get("play") else "")
+            for p in d["planted"]
+        )
         added = ", ".join(f"{n}:{j} ({v.rsplit(', t', 1)[0]})" for n, j, v in _merged(d)) or "none"
-        odd = ", ".join(f"{e['name']}:{e['joint']} ({e['evidence']['heldout_residual_reduction']:.0%})"
-                        for e in d["effects"] if e["status"] == "inconsistent") or "-"
+        odd = (
+            ", ".join(
+                f"{e['name']}:{e['joint']} ({e['evidence']['heldout_residual_reduction']:.0%})"
+                for e in d["effects"]
+                if e["status"] == "inconsistent"
+            )
+            or "-"
+        )
         rows.append(f"| {d['case']} | {d['seed']} | {planted} | {added} | {odd} | {_ratio(d):.2f}× |")
     return "\n".join(rows)
 
@@ -205,12 +237,16 @@ def drift_table(doc: dict) -> str:
 
 def rest_bound_table(doc: dict) -> str:
     """The rests' breakaway bound (true model) over the Coulomb level and over the breakaway."""
-    rows = ["| log | seed | Coulomb (N m) | breakaway (N m) | rest windows | held (N m) | held / Coulomb | held / breakaway |",
-            "|---|---|---|---|---|---|---|---|"]
+    rows = [
+        "| log | seed | Coulomb (N m) | breakaway (N m) | rest windows | held (N m) | held / Coulomb | held / breakaway |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in doc["rows"]:
         kind = f"{r['excitation']}, " + ("stiction" if r["stiction"] else "no stiction")
-        rows.append(f"| {kind} | {r['seed']} | {r['coulomb']:.2g} | {r['breakaway']:.2g} | {r['windows']} | "
-                    f"{r['held']:.2g} | {r['held_over_coulomb']:.2f} | {r['held_over_breakaway']:.2f} |")
+        rows.append(
+            f"| {kind} | {r['seed']} | {r['coulomb']:.2g} | {r['breakaway']:.2g} | {r['windows']} | "
+            f"{r['held']:.2g} | {r['held_over_coulomb']:.2f} | {r['held_over_breakaway']:.2f} |"
+        )
     return "\n".join(rows)
 
 
@@ -228,15 +264,25 @@ def _effects_text(doc) -> str:
 
 
 def real_table(docs: dict[str, dict]) -> str:
-    rows = ["| fit on | judged on (never fitted) | found (coefficient, t) | held-out windows: before → after | unseen runs: before → after |",
-            "|---|---|---|---|---|"]
+    rows = [
+        "| fit on | judged on (never fitted) | found (coefficient, t) | held-out windows: before → after | unseen runs: before → after |",
+        "|---|---|---|---|---|",
+    ]
     for name, d in docs.items():
         fit = f"runs {min(d['fit_runs'])}–{max(d['fit_runs'])}"
         test = f"runs {', '.join(map(str, d['test_runs']))}" if d["test_runs"] else "-"
         held = f"{d['error_before']['trajectory_rmse']:.4f} → {d['error_after']['trajectory_rmse']:.4f} rad ({_ratio(d):.2f}×)"
-        unseen = (f"{d['test_error_before']['trajectory_rmse']:.4f} → {d['test_error_after']['trajectory_rmse']:.4f} rad "
-                  f"({_ratio(d, 'test_error'):.2f}×)") if d.get("test_error_before") else "-"
-        rows.append(f"| {fit} ({name.split('_')[0]}) | {test if len(test) < 30 else 'the other ' + str(len(d['test_runs']))} | {_effects_text(d)} | {held} | {unseen} |")
+        unseen = (
+            (
+                f"{d['test_error_before']['trajectory_rmse']:.4f} → {d['test_error_after']['trajectory_rmse']:.4f} rad "
+                f"({_ratio(d, 'test_error'):.2f}×)"
+            )
+            if d.get("test_error_before")
+            else "-"
+        )
+        rows.append(
+            f"| {fit} ({name.split('_')[0]}) | {test if len(test) < 30 else 'the other ' + str(len(d['test_runs']))} | {_effects_text(d)} | {held} | {unseen} |"
+        )
     return "\n".join(rows)
 
 
@@ -267,34 +313,52 @@ def agreement_table(docs: dict[str, dict]) -> str:
     """Each effect found on any independent split: its coefficient per split, and the spread."""
     splits = {k: d for k, d in docs.items() if k.startswith("split_")}
     keys = sorted({(n, j) for d in splits.values() for n, j, _ in _merged(d)})
-    rows = ["| effect | " + " | ".join(f"runs {min(d['fit_runs'])}–{max(d['fit_runs'])}" for d in splits.values())
-            + " | largest / smallest (resolved) |", "|---" * (len(splits) + 2) + "|"]
+    rows = [
+        "| effect | "
+        + " | ".join(f"runs {min(d['fit_runs'])}–{max(d['fit_runs'])}" for d in splits.values())
+        + " | largest / smallest (resolved) |",
+        "|---" * (len(splits) + 2) + "|",
+    ]
     for name, joint in keys:
-        found = [next((e for e in _found(d) if (e["name"], e["joint"]) == (name, joint)), None)
-                 for d in splits.values()]
+        found = [
+            next((e for e in _found(d) if (e["name"], e["joint"]) == (name, joint)), None) for d in splits.values()
+        ]
         got = [e["coefficient"] for e in found if e is not None and e.get("resolved", True)]
         if len({v > 0 for v in got}) > 1:
             spread = "signs differ"
         else:
             spread = f"{max(map(abs, got)) / min(map(abs, got)):.2f}" if len(got) > 1 else "-"
-        cells = ["not found" if e is None else f"{e['coefficient']:.2g}" + ("" if e.get("resolved", True) else " (not resolved)")
-                 for e in found]
+        cells = [
+            "not found"
+            if e is None
+            else f"{e['coefficient']:.2g}" + ("" if e.get("resolved", True) else " (not resolved)")
+            for e in found
+        ]
         rows.append(f"| {name}:{joint} | " + " | ".join(cells) + f" | {spread} |")
     return "\n".join(rows)
 
 
 def per_run_table(record: dict, docs: dict[str, dict]) -> str:
     """Per run: which independent split holds it, how far its rotor wandered, its spring alone."""
-    split_of = {r: f"{min(d['fit_runs'])}–{max(d['fit_runs'])}" for k, d in docs.items() if k.startswith("split_")
-                for r in d["fit_runs"]}
+    split_of = {
+        r: f"{min(d['fit_runs'])}–{max(d['fit_runs'])}"
+        for k, d in docs.items()
+        if k.startswith("split_")
+        for r in d["fit_runs"]
+    }
     far = record["far_rad"]
-    rows = [f"| run | split | rotor angle range (rad) | RMS angle (rad) | time beyond ±{far:g} rad (s) | "
-            "spring:alpha on this run alone (N m/rad, t) |", "|---|---|---|---:|---:|---|"]
+    rows = [
+        f"| run | split | rotor angle range (rad) | RMS angle (rad) | time beyond ±{far:g} rad (s) | "
+        "spring:alpha on this run alone (N m/rad, t) |",
+        "|---|---|---|---:|---:|---|",
+    ]
     for r in record["runs"]:
         sp = r["spring_alone"]
         added = " found" if sp["status"] == "selected" else ""
-        rows.append(f"| {r['run']} | {split_of.get(r['run'], '-')} | {r['alpha_min']:+.2f} … {r['alpha_max']:+.2f} | "
-                    f"{r['alpha_rms']:.2f} | {r['seconds_beyond_far']:.1f} | {sp['coefficient']:.2g}, t {sp['t']:.1f}{added} |")
+        rows.append(
+            f"| {r['run']} | {split_of.get(r['run'], '-')} | {r['alpha_min']:+.2f} … {r['alpha_max']:+.2f} | "
+            f"{r['alpha_rms']:.2f} | {r['seconds_beyond_far']:.1f} | {sp['coefficient']:.2g}, t {sp['t']:.1f}{added} |"
+        )
     return "\n".join(rows)
 
 
@@ -302,15 +366,19 @@ def reference_table(split: dict, refs: dict[str, dict], target: float = 1.25) ->
     """Runs 1–5's prediction of runs 6–15 beside models of runs 6–15 fitted on themselves."""
     before = split["test_error_before"]["trajectory_rmse"]
     err = lambda d: d["test_error_after"]["trajectory_rmse"]  # noqa: E731
-    rows = ["| model | fitted on | candidates | found | error on runs 6–15 (rad) |", "|---|---|---|---|---|",
-            f"| declared | runs 1–5 | - | - | {before:.4f} |",
-            f"| {target}× lower than the declared model | | | | {before / target:.4f} |",
-            f"| runs 1–5's diagnosis (a prediction) | runs 1–5 | the library | {_found_text(split)} | "
-            f"{err(split):.4f} ({before / err(split):.2f}×) |"]
+    rows = [
+        "| model | fitted on | candidates | found | error on runs 6–15 (rad) |",
+        "|---|---|---|---|---|",
+        f"| declared | runs 1–5 | - | - | {before:.4f} |",
+        f"| {target}× lower than the declared model | | | | {before / target:.4f} |",
+        f"| runs 1–5's diagnosis (a prediction) | runs 1–5 | the library | {_found_text(split)} | "
+        f"{err(split):.4f} ({before / err(split):.2f}×) |",
+    ]
     for d in refs.values():
         cands = ", ".join(d["candidates"]) if d.get("candidates") else "the library"
-        rows.append(f"| in-sample reference | runs 6–15 | {cands} | {_found_text(d)} | {err(d):.4f} "
-                    f"({before / err(d):.2f}×) |")
+        rows.append(
+            f"| in-sample reference | runs 6–15 | {cands} | {_found_text(d)} | {err(d):.4f} ({before / err(d):.2f}×) |"
+        )
     return "\n".join(rows)
 
 
@@ -318,14 +386,15 @@ def readme_line(docs: dict[str, dict]) -> str:
     """The README's real-data sentence: the fit on all fifteen runs (the README's command), then
     the independent thirds as its stability check."""
     d = docs["growing_runs01-15"]
-    text = (f"Fitted on all 15 runs it finds {_found_text(d)}; on held-out segments of those runs, never "
-            f"fitted, the open-loop error (0.1 s windows) falls {d['error_before']['trajectory_rmse']:.4f} → "
-            f"{d['error_after']['trajectory_rmse']:.4f} rad (**{_ratio(d):.2f}×**).")
+    text = (
+        f"Fitted on all 15 runs it finds {_found_text(d)}; on held-out segments of those runs, never "
+        f"fitted, the open-loop error (0.1 s windows) falls {d['error_before']['trajectory_rmse']:.4f} → "
+        f"{d['error_after']['trajectory_rmse']:.4f} rad (**{_ratio(d):.2f}×**)."
+    )
     text += " Fitted on each third alone, as a stability check (judged on the ten runs it never saw):"
     for k in ("split_runs01-05", "split_runs06-10", "split_runs11-15"):
         o = docs[k]
-        text += (f" runs {min(o['fit_runs'])}–{max(o['fit_runs'])}: {_found_text(o)}, "
-                 f"{_ratio(o, 'test_error'):.2f}×;")
+        text += f" runs {min(o['fit_runs'])}–{max(o['fit_runs'])}: {_found_text(o)}, {_ratio(o, 'test_error'):.2f}×;"
     return text.rstrip(";") + "."
 
 

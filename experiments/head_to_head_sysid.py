@@ -35,6 +35,7 @@ def _set_ipos(axis: int, sign: float):
         ipos = np.array(body.ipos)
         ipos[axis] = sign * value
         body.ipos = ipos
+
     return modify
 
 
@@ -47,10 +48,12 @@ def _set_gain(spec, value):
 def _joint(name: str, attribute: str):
     """Writes a joint attribute; damping and stiffness are polynomials in MuJoCo 4 (the linear
     coefficient first, the higher ones kept at zero)."""
+
     def modify(spec, value):
         joint = spec.joint(name)
         old = getattr(joint, attribute)
         setattr(joint, attribute, np.concatenate([[value], np.zeros(np.size(old) - 1)]) if np.ndim(old) else value)
+
     return modify
 
 
@@ -81,8 +84,9 @@ def furuta_spec():
     spec = mujoco.MjSpec.from_file(str(asset_path("furuta.xml")))
     spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
     for joint in ("alpha", "beta"):
-        spec.add_sensor(name=f"{joint}_pos", type=mujoco.mjtSensor.mjSENS_JOINTPOS, objtype=mujoco.mjtObj.mjOBJ_JOINT,
-                        objname=joint)
+        spec.add_sensor(
+            name=f"{joint}_pos", type=mujoco.mjtSensor.mjSENS_JOINTPOS, objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=joint
+        )
     return spec
 
 
@@ -143,14 +147,27 @@ def _rollout_with_delay(dt: float):
     from mujoco import sysid
 
     def rollout(*, models, datas, control_signal, initial_states, param_dicts, **mappings):
-        delay = float(param_dicts[0]["input_delay"].value[0]) * PARAMETERS["input_delay"][0] if (
-            "input_delay" in param_dicts[0].keys()) else 0.0
+        delay = (
+            float(param_dicts[0]["input_delay"].value[0]) * PARAMETERS["input_delay"][0]
+            if ("input_delay" in param_dicts[0].keys())
+            else 0.0
+        )
         # sysid rolls out all but the last control (one per measured sample after the start):
         # the delayed inputs of the window's periods, then a placeholder
-        shifted = [sysid.TimeSeries(c.times, _held_after(InputDynamics("delay", delay).apply(c.data, dt)[1:]))
-                   for c in control_signal]
-        return sysid.sysid_rollout(models, datas, shifted, initial_states, mappings["rollout_signal_mapping"],
-                                   mappings["rollout_state_mapping"], mappings["ctrl_mapping"])
+        shifted = [
+            sysid.TimeSeries(c.times, _held_after(InputDynamics("delay", delay).apply(c.data, dt)[1:]))
+            for c in control_signal
+        ]
+        return sysid.sysid_rollout(
+            models,
+            datas,
+            shifted,
+            initial_states,
+            mappings["rollout_signal_mapping"],
+            mappings["rollout_state_mapping"],
+            mappings["ctrl_mapping"],
+        )
+
     return rollout
 
 
@@ -167,15 +184,23 @@ def residual_function(spec, seq, dt: float):
     rollout = _rollout_with_delay(dt)
 
     def one(x, params):
-        r, _, _ = sysid.model_residual(x, params, lambda p: sysid.apply_param_modifiers(p, spec),
-                                       seq.measured_rollout, modify_residual=_angle_residual,
-                                       custom_rollout=rollout, n_threads=1, resample_true=False)
+        r, _, _ = sysid.model_residual(
+            x,
+            params,
+            lambda p: sysid.apply_param_modifiers(p, spec),
+            seq.measured_rollout,
+            modify_residual=_angle_residual,
+            custom_rollout=rollout,
+            n_threads=1,
+            resample_true=False,
+        )
         return r
 
     def residual(x, params):
         if x.ndim == 1:
             return [one(x, params)], None, None
         return [np.stack([one(x[:, i], params) for i in range(x.shape[1])], axis=1)], None, None
+
     return residual
 
 
@@ -194,8 +219,12 @@ def fit(trajs, window: float, every: int = 1, max_iters: int = 30, names=tuple(P
     _, half = sysid.calculate_intervals(r_star, np.asarray(result.jac))
     units = np.array([PARAMETERS[n][0] for n in fitted.keys()])
     objective = [float(v) for v in result.extras.get("objective", [])]
-    record = {"windows": len(seq.measured_rollout), "iterations_cap": max_iters, "objective": objective,
-              "rms_angle_residual": float(np.sqrt(np.mean(np.concatenate(r_star) ** 2)))}
+    record = {
+        "windows": len(seq.measured_rollout),
+        "iterations_cap": max_iters,
+        "objective": objective,
+        "rms_angle_residual": float(np.sqrt(np.mean(np.concatenate(r_star) ** 2))),
+    }
     return fitted, physical(fitted), dict(zip(fitted.keys(), (np.asarray(half) * units).tolist())), record
 
 
@@ -207,7 +236,9 @@ def predictor(params):
     from mujoco import sysid
 
     model = sysid.apply_param_modifiers(params, furuta_spec())
-    delay = float(params["input_delay"].value[0]) * PARAMETERS["input_delay"][0] if "input_delay" in params.keys() else 0.0
+    delay = (
+        float(params["input_delay"].value[0]) * PARAMETERS["input_delay"][0] if "input_delay" in params.keys() else 0.0
+    )
 
     def predict(x0, u_ext, dt):
         data = mujoco.MjData(model)
@@ -215,4 +246,5 @@ def predictor(params):
         ctrl = np.stack([InputDynamics("delay", delay).apply(u, dt)[1:] for u in u_ext])
         state, _ = mj_rollout.rollout(model, data, starts, ctrl)
         return np.concatenate([x0[:, None, :], np.asarray(state)[:, :, 1:5]], axis=1)
+
     return predict

@@ -20,10 +20,21 @@ DOC = ROOT / "docs" / "diagnose.md"
 NAME = "diagnose-head-to-head"
 ORDER = ("nominal", "gym_brt", "quanser_robots", "armandpl", "fitted", "diagnosed", "sysid_rigid", "sysid")
 COMMAND = "python experiments/diagnose_head_to_head.py && python experiments/head_to_head_table.py"
-SYSID_UNITS = {"rotor_inertia": "kg m²", "pendulum_com": "m", "pendulum_com_lateral": "m",
-               "pendulum_armature": "kg m²", "arm_length": "m", "alpha_damping": "N m s/rad",
-               "beta_damping": "N m s/rad", "alpha_frictionloss": "N m", "beta_frictionloss": "N m",
-               "alpha_stiffness": "N m/rad", "alpha_springref": "rad", "motor_gain": "N m/V", "input_delay": "s"}
+SYSID_UNITS = {
+    "rotor_inertia": "kg m²",
+    "pendulum_com": "m",
+    "pendulum_com_lateral": "m",
+    "pendulum_armature": "kg m²",
+    "arm_length": "m",
+    "alpha_damping": "N m s/rad",
+    "beta_damping": "N m s/rad",
+    "alpha_frictionloss": "N m",
+    "beta_frictionloss": "N m",
+    "alpha_stiffness": "N m/rad",
+    "alpha_springref": "rad",
+    "motor_gain": "N m/V",
+    "input_delay": "s",
+}
 
 
 def load(folder: Path = RESULTS) -> tuple[dict, list[dict]]:
@@ -42,15 +53,19 @@ def _mrad(v: float, bold: bool = False) -> str:
 def score_table(docs: list[dict]) -> str:
     nominal = next(d for d in docs if d["name"] == "nominal")["position_rmse"]
     best = min(d["position_rmse"] for d in docs)
-    rows = ["| model | fitted on | α (mrad) | β (mrad) | both angles (mrad) | vs nominal | α̇, β̇ (rad/s) | fit wall time (s) |",
-            "|---|---|---|---|---|---|---|---|"]
+    rows = [
+        "| model | fitted on | α (mrad) | β (mrad) | both angles (mrad) | vs nominal | α̇, β̇ (rad/s) | fit wall time (s) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for d in docs:
         r = d["rmse"]
         wall = "–" if d["wall_seconds"] is None else f"{d['wall_seconds']:.0f}"
         diverged = f" ({d['n_diverged']} windows diverged)" if d["n_diverged"] else ""
-        rows.append(f"| {d['label']}{diverged} | {_runs(d['fit_runs'])} | {_mrad(r['alpha'])} | {_mrad(r['beta'])} "
-                    f"| {_mrad(d['position_rmse'], d['position_rmse'] == best)} | {nominal / d['position_rmse']:.2f}× "
-                    f"| {r['alpha_dot']:.3f}, {r['beta_dot']:.3f} | {wall} |")
+        rows.append(
+            f"| {d['label']}{diverged} | {_runs(d['fit_runs'])} | {_mrad(r['alpha'])} | {_mrad(r['beta'])} "
+            f"| {_mrad(d['position_rmse'], d['position_rmse'] == best)} | {nominal / d['position_rmse']:.2f}× "
+            f"| {r['alpha_dot']:.3f}, {r['beta_dot']:.3f} | {wall} |"
+        )
     return "\n".join(rows)
 
 
@@ -76,8 +91,11 @@ def baseline_table(docs: list[dict]) -> str:
     for d in docs:
         if "frame" in d:
             p = d["parameters"]
-            rows.append(f"| {d['label']} | {d['source']} | " + " | ".join(f"{p[k]:g}" for k in keys)
-                        + f" | {_frame(d['frame'])} |")
+            rows.append(
+                f"| {d['label']} | {d['source']} | "
+                + " | ".join(f"{p[k]:g}" for k in keys)
+                + f" | {_frame(d['frame'])} |"
+            )
     return "\n".join(rows)
 
 
@@ -89,8 +107,11 @@ def reproduces_committed(diagnosis: dict) -> str:
     if not COMMITTED_DIAGNOSIS.is_file():
         return ""
     old = json.loads(COMMITTED_DIAGNOSIS.read_text())
-    same = (old["settings"] == diagnosis["settings"] and old["plant"]["effects"] == diagnosis["plant"]["effects"]
-            and all(abs(old["plant"]["lumped"][k] - v) <= 1e-9 * abs(v) for k, v in diagnosis["plant"]["lumped"].items()))
+    same = (
+        old["settings"] == diagnosis["settings"]
+        and old["plant"]["effects"] == diagnosis["plant"]["effects"]
+        and all(abs(old["plant"]["lumped"][k] - v) <= 1e-9 * abs(v) for k, v in diagnosis["plant"]["lumped"].items())
+    )
     verdict = "the same plant as" if same else "a different plant from"
     return f" It is {verdict} the committed `results/diagnose_real/growing_runs01-10.json`."
 
@@ -100,28 +121,38 @@ def findings(docs: list[dict]) -> str:
     parts = []
     if "diagnosed" in by:
         eff = ", ".join(f"{e['name']}:{e['joint']} ({e['coefficient']:.2g})" for e in by["diagnosed"]["effects"])
-        parts.append(f"The diagnosis of runs {by['diagnosed']['fit_runs'][0]}–{by['diagnosed']['fit_runs'][-1]} "
-                     f"found {eff or 'nothing'}.{reproduces_committed(by['diagnosed']['diagnosis'])}")
+        parts.append(
+            f"The diagnosis of runs {by['diagnosed']['fit_runs'][0]}–{by['diagnosed']['fit_runs'][-1]} "
+            f"found {eff or 'nothing'}.{reproduces_committed(by['diagnosed']['diagnosis'])}"
+        )
     for name in ("sysid", "sysid_rigid"):
         if name in by:
             f = by[name]["fit"]
             obj = f["objective"]
             settled = next(i for i, v in enumerate(obj) if v <= 1.001 * obj[-1])
-            parts.append(f"{by[name]['label']}: {f['windows']} windows, {len(obj) - 1} Gauss-Newton iterations "
-                         f"(cap {f['iterations_cap']}; within 0.1 % of its final objective after {settled}), RMS "
-                         f"angle residual on its fit windows {1e3 * f['rms_angle_residual']:.2f} mrad.")
+            parts.append(
+                f"{by[name]['label']}: {f['windows']} windows, {len(obj) - 1} Gauss-Newton iterations "
+                f"(cap {f['iterations_cap']}; within 0.1 % of its final objective after {settled}), RMS "
+                f"angle residual on its fit windows {1e3 * f['rms_angle_residual']:.2f} mrad."
+            )
     extra = by.get("diagnosed", {}).get("with_inconsistent")
     if extra and extra["added"]:
-        parts.append(f"The diagnosed plant with the effects its diagnosis reported `inconsistent` added at their "
-                     f"tested coefficients ({', '.join(extra['added'])}; no refit): "
-                     f"{_mrad(extra['position_rmse'])} mrad on the unseen runs.")
+        parts.append(
+            f"The diagnosed plant with the effects its diagnosis reported `inconsistent` added at their "
+            f"tested coefficients ({', '.join(extra['added'])}; no refit): "
+            f"{_mrad(extra['position_rmse'])} mrad on the unseen runs."
+        )
     return " ".join(parts)
 
 
 #: each extra MJCF term of the sysid fit and the library effect that is the same physics
-COUNTERPART = {"alpha_stiffness": ("spring", "alpha"), "alpha_frictionloss": ("coulomb_friction", "alpha"),
-               "beta_frictionloss": ("coulomb_friction", "beta"), "pendulum_com_lateral": ("com_offset", "beta"),
-               "input_delay": ("input_delay", "u")}
+COUNTERPART = {
+    "alpha_stiffness": ("spring", "alpha"),
+    "alpha_frictionloss": ("coulomb_friction", "alpha"),
+    "beta_frictionloss": ("coulomb_friction", "beta"),
+    "pendulum_com_lateral": ("com_offset", "beta"),
+    "input_delay": ("input_delay", "u"),
+}
 
 
 def _counterpart(diagnosis: dict, term: str) -> str:
@@ -142,8 +173,11 @@ def ablation_table(doc: dict, diagnosis: dict | None) -> str:
     without = doc.get("position_rmse_without")
     if not without:
         return ""
-    rows = [f"| sysid term set to zero (all kept: {_mrad(without['none'])} mrad) | both angles (mrad) | the diagnosis of "
-            "the same runs on the same physics |", "|---|---|---|"]
+    rows = [
+        f"| sysid term set to zero (all kept: {_mrad(without['none'])} mrad) | both angles (mrad) | the diagnosis of "
+        "the same runs on the same physics |",
+        "|---|---|---|",
+    ]
     for term, v in sorted(((t, v) for t, v in without.items() if t != "none"), key=lambda kv: -kv[1]):
         rows.append(f"| {term} | {_mrad(v)} | {_counterpart(diagnosis, term) if diagnosis else '–'} |")
     return "\n".join(rows)
@@ -154,22 +188,34 @@ def block() -> str:
     ranked = sorted(docs, key=lambda d: d["position_rmse"])
     first, second = ranked[0], ranked[1]
     windows = docs[0]["n_windows"]
-    lines = [f"Fitted on runs {summary['fit_runs'][0]}–{summary['fit_runs'][-1]}, scored on runs "
-             f"{summary['test_runs'][0]}–{summary['test_runs'][-1]} (never fitted): {windows} back-to-back "
-             f"{summary['window_seconds']} s open-loop windows from the measured state, the logged input held; RMSE "
-             "over every predicted sample (**bold**: lowest).", "", score_table(docs), "",
-             f"Lowest error on the unseen runs: **{first['label']}** ({_mrad(first['position_rmse'])} mrad), then "
-             f"{second['label']} ({_mrad(second['position_rmse'])} mrad). {findings(docs)}"]
-    lines += ["", "The public simulators as implemented here (`experiments/qube_baselines.py`; SI units):", "",
-              baseline_table(docs)]
+    lines = [
+        f"Fitted on runs {summary['fit_runs'][0]}–{summary['fit_runs'][-1]}, scored on runs "
+        f"{summary['test_runs'][0]}–{summary['test_runs'][-1]} (never fitted): {windows} back-to-back "
+        f"{summary['window_seconds']} s open-loop windows from the measured state, the logged input held; RMSE "
+        "over every predicted sample (**bold**: lowest).",
+        "",
+        score_table(docs),
+        "",
+        f"Lowest error on the unseen runs: **{first['label']}** ({_mrad(first['position_rmse'])} mrad), then "
+        f"{second['label']} ({_mrad(second['position_rmse'])} mrad). {findings(docs)}",
+    ]
+    lines += [
+        "",
+        "The public simulators as implemented here (`experiments/qube_baselines.py`; SI units):",
+        "",
+        baseline_table(docs),
+    ]
     if any(d["name"] == "sysid" for d in docs):
         sysid_doc = next(d for d in docs if d["name"] == "sysid")
         diagnosis = next((d["diagnosis"] for d in docs if d["name"] == "diagnosed"), None)
         lines += ["", ablation_table(sysid_doc, diagnosis), "", sysid_table(sysid_doc)]
     dates = sorted({d["date"] for d in docs})
     when = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
-    lines += ["", f"Made by `{COMMAND}` ({when}, {summary['machine']}, {summary['cpu']}); results in "
-              "[results/head_to_head/](../results/head_to_head/)."]
+    lines += [
+        "",
+        f"Made by `{COMMAND}` ({when}, {summary['machine']}, {summary['cpu']}); results in "
+        "[results/head_to_head/](../results/head_to_head/).",
+    ]
     return "\n".join(lines)
 
 

@@ -61,8 +61,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_models import SKIP, SPLIT, WINDOW, potential_shape  # noqa: E402
 
 #: the effects ``diagnose`` finds on all 15 real runs (docs/diagnose.md)
-REAL_EFFECTS = (Effect("coulomb_friction", "alpha", 5.4e-4), Effect("spring", "alpha", 8e-4),
-                Effect("com_offset", "beta", -1.7e-3), Effect("input_delay", "u", 0.0016))
+REAL_EFFECTS = (
+    Effect("coulomb_friction", "alpha", 5.4e-4),
+    Effect("spring", "alpha", 8e-4),
+    Effect("com_offset", "beta", -1.7e-3),
+    Effect("input_delay", "u", 0.0016),
+)
 N_TRAIN, N_TEST, DURATION, TEST_DURATION = 5, 2, 20.0, 10.0
 #: L_Iτ epochs of the short budget (about the real DeLaN run's kept snapshot, epoch 999) and
 #: the long one's factor
@@ -84,8 +88,9 @@ class Cell:
 
 
 CELLS = {
-    "baseline": Cell("as the real runs (closed loop, 2048 counts, estimated velocities, effects)",
-                     epochs=SHORT * LONG_FACTOR),
+    "baseline": Cell(
+        "as the real runs (closed loop, 2048 counts, estimated velocities, effects)", epochs=SHORT * LONG_FACTOR
+    ),
     "feedforward_x4": Cell("(a) feed-forward × 4 (less of u is state feedback)", feedforward=4.0),
     "exact_velocity": Cell("(b) exact velocities", exact_velocity=True),
     "exact_angles": Cell("(c) exact angles (no encoder)", quantize=False),
@@ -112,9 +117,11 @@ def physical_start(seed: int):
     w0 = first.weight.at[0].set(0.0).at[0, cos_beta].set(1.0)
     w1 = middle.weight.at[:, 0].set(0.0).at[0].set(0.0).at[0, 0].set(1.0)
     w2 = last.weight.at[0, 0].set(-2.05)
-    new = (eqx.tree_at(lambda l: (l.weight, l.bias), first, (w0, first.bias.at[0].set(0.0))),
-           eqx.tree_at(lambda l: (l.weight, l.bias), middle, (w1, middle.bias.at[0].set(0.0))),
-           eqx.tree_at(lambda l: l.weight, last, w2))
+    new = (
+        eqx.tree_at(lambda l: (l.weight, l.bias), first, (w0, first.bias.at[0].set(0.0))),
+        eqx.tree_at(lambda l: (l.weight, l.bias), middle, (w1, middle.bias.at[0].set(0.0))),
+        eqx.tree_at(lambda l: l.weight, last, w2),
+    )
     return eqx.tree_at(lambda m: m.lagrangian_nets.potential_net.layers, model, new)
 
 
@@ -165,8 +172,15 @@ def simulate(cell: Cell, n: int, duration: float, seed: int) -> tuple[list[Traje
     feeds: list = []
     states: list | None = [] if cell.exact_velocity else None
     with _patched_simulator(cell.feedforward, feeds, states):
-        runs = measured_like("furuta", REAL_EFFECTS if cell.effects else (), excitation="closed_loop_prbs",
-                             n_trajectories=n, duration=duration, seed=seed, quantize=cell.quantize)
+        runs = measured_like(
+            "furuta",
+            REAL_EFFECTS if cell.effects else (),
+            excitation="closed_loop_prbs",
+            n_trajectories=n,
+            duration=duration,
+            seed=seed,
+            quantize=cell.quantize,
+        )
     start = int(round(SKIP / runs[0].dt))
     u = np.concatenate([np.asarray(tr.u)[start:, 0] for tr in runs])
     feed = np.concatenate([f[start:] for f in feeds])
@@ -187,8 +201,14 @@ def config_for(cell: Cell, seed: int):
     base = training_config("furuta", ReproduceConfig(progress=False), seed, "prop", "dln")
     lr = base.learning_rate[0] if isinstance(base.learning_rate, tuple) else base.learning_rate
     # snapshots at multiples of SHORT / 4, so a long run has one at the short budget
-    return dataclasses.replace(base, epochs=(cell.epochs,), horizons=(None,), learning_rate=lr,
-                               checkpoint_every=max(1, SHORT // 4), integral_span=cell.integral_span)
+    return dataclasses.replace(
+        base,
+        epochs=(cell.epochs,),
+        horizons=(None,),
+        learning_rate=lr,
+        checkpoint_every=max(1, SHORT // 4),
+        integral_span=cell.integral_span,
+    )
 
 
 def _mean_log10(errors: dict) -> float | None:
@@ -217,8 +237,10 @@ def itau_comparison(model, train_pieces, rule: str, cell: Cell) -> dict:
     windows = make_windows(train_pieces, 101, stride=100, cover_end=True)
     models = {"learned": model, "nominal analytic": Furuta(), "truth without the delay": _truth(cell)}
     # the loss the cell trained on: its span of quadrature intervals per residual
-    return {k: float(integral_loss(m, windows, rule=rule, normalize="none", span=cell.integral_span))
-            for k, m in models.items()}
+    return {
+        k: float(integral_loss(m, windows, rule=rule, normalize="none", span=cell.integral_span))
+        for k, m in models.items()
+    }
 
 
 def gravity_profile(train_pieces, rule: str, cell: Cell) -> dict:
@@ -231,8 +253,7 @@ def gravity_profile(train_pieces, rule: str, cell: Cell) -> dict:
     windows = make_windows(train_pieces, 101, stride=100, cover_end=True)
 
     def loss(scale):
-        return float(integral_loss(_truth(cell, scale), windows, rule=rule, normalize="none",
-                                   span=cell.integral_span))
+        return float(integral_loss(_truth(cell, scale), windows, rule=rule, normalize="none", span=cell.integral_span))
 
     l0, l1, l2 = loss(0.0), loss(1.0), loss(2.0)
     curvature = (l2 - 2 * l1 + l0) / 2  # L(s) = a·s² + b·s + c
@@ -246,8 +267,9 @@ def short_budget(run_dir: Path, test_pieces) -> dict:
     from furuta_gym.training.checkpoint import load_model
 
     # the last snapshot at or before SHORT (runs made with another cadence have none at SHORT)
-    epochs = max(e for e in (int(p.stem.removeprefix("model_epoch")) for p in run_dir.glob("model_epoch*.eqx"))
-                 if e <= SHORT)
+    epochs = max(
+        e for e in (int(p.stem.removeprefix("model_epoch")) for p in run_dir.glob("model_epoch*.eqx")) if e <= SHORT
+    )
     model = load_model(run_dir / f"model_epoch{epochs:06d}.eqx", expected_system="furuta")
     test = window_errors(model, test_pieces, WINDOW)
     test["mean_log10"] = _mean_log10(test)
@@ -265,10 +287,15 @@ def at_snapshot(doc: dict, cell: Cell, run_dir: Path) -> dict:
     test["mean_log10"] = _mean_log10(test)
     along = {k: v for k, v in doc["potential_along_training"].items() if int(k) <= cell.epochs}
     config = {**doc["config"], "epochs": [cell.epochs]}
-    return {"potential": potential_shape(model), "test": test, "potential_along_training": along, "config": config,
-            "itau": itau_comparison(model, train_pieces, doc["config"]["quadrature"], cell),
-            "gravity_profile": gravity_profile(train_pieces, doc["config"]["quadrature"], cell),
-            "scored_at_snapshot": f"model_epoch{cell.epochs:06d} of a {doc['config']['epochs'][0]}-epoch run"}
+    return {
+        "potential": potential_shape(model),
+        "test": test,
+        "potential_along_training": along,
+        "config": config,
+        "itau": itau_comparison(model, train_pieces, doc["config"]["quadrature"], cell),
+        "gravity_profile": gravity_profile(train_pieces, doc["config"]["quadrature"], cell),
+        "scored_at_snapshot": f"model_epoch{cell.epochs:06d} of a {doc['config']['epochs'][0]}-epoch run",
+    }
 
 
 def fill_missing(path: Path, work: Path) -> None:
@@ -320,16 +347,29 @@ def run_one(name: str, seed: int, out: Path, work: Path) -> dict:
     snaps = {int(p.stem.removeprefix("model_epoch")): p for p in sorted(run_dir.glob("model_epoch*.eqx"))}
     along = {e: potential_shape(load_model(p, expected_system="furuta")) for e, p in sorted(snaps.items())}
     along[0], along[len(history)] = potential_shape(start), potential_shape(model)
-    doc = {"cell": name, "label": cell.label, "settings": dataclasses.asdict(cell), "seed": seed,
-           "data_seed": data_seed, "model_seed": seed, "n_train": len(train_pieces), "n_test_runs": N_TEST,
-           "feedforward_rms_over_u_rms": round(share, 4),
-           "potential_along_training": {str(e): v for e, v in sorted(along.items())},
-           "potential": along[len(history)], "truth": potential_shape(Furuta()),
-           "test": window_errors(model, test_pieces, WINDOW), "nominal_test": window_errors(Furuta(), test_pieces, WINDOW),
-           "final_itau": history[-1].get("itau"), "training_seconds": round(sum(r["seconds"] for r in history), 1),
-           "training_seconds_this_call": round(train_s, 1),
-           "seconds": round(time.time() - t0, 1), "config": config.to_json(),
-           "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": platform.node()}
+    doc = {
+        "cell": name,
+        "label": cell.label,
+        "settings": dataclasses.asdict(cell),
+        "seed": seed,
+        "data_seed": data_seed,
+        "model_seed": seed,
+        "n_train": len(train_pieces),
+        "n_test_runs": N_TEST,
+        "feedforward_rms_over_u_rms": round(share, 4),
+        "potential_along_training": {str(e): v for e, v in sorted(along.items())},
+        "potential": along[len(history)],
+        "truth": potential_shape(Furuta()),
+        "test": window_errors(model, test_pieces, WINDOW),
+        "nominal_test": window_errors(Furuta(), test_pieces, WINDOW),
+        "final_itau": history[-1].get("itau"),
+        "training_seconds": round(sum(r["seconds"] for r in history), 1),
+        "training_seconds_this_call": round(train_s, 1),
+        "seconds": round(time.time() - t0, 1),
+        "config": config.to_json(),
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "machine": platform.node(),
+    }
     for key in ("test", "nominal_test"):
         doc[key]["mean_log10"] = _mean_log10(doc[key])
     if cell.epochs > SHORT:
@@ -339,9 +379,12 @@ def run_one(name: str, seed: int, out: Path, work: Path) -> dict:
     doc["truth_has_effects"] = cell.effects
     (out / f"{name}_s{seed}.json").write_text(json.dumps(doc, indent=1, default=str) + "\n")
     p = doc["potential"]
-    print(f"{name} s{seed}: curvature {1e3 * p['curvature_at_top_Nm_per_rad']:+.2f} mN·m/rad, rise "
-          f"{1e3 * p['rise_to_top_J']:+.1f} mJ, test mean log10 {doc['test']['mean_log10']}, "
-          f"{doc['seconds']:.0f} s", flush=True)
+    print(
+        f"{name} s{seed}: curvature {1e3 * p['curvature_at_top_Nm_per_rad']:+.2f} mN·m/rad, rise "
+        f"{1e3 * p['rise_to_top_J']:+.1f} mJ, test mean log10 {doc['test']['mean_log10']}, "
+        f"{doc['seconds']:.0f} s",
+        flush=True,
+    )
     return doc
 
 

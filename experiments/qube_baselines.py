@@ -56,8 +56,9 @@ class Frame:
     voltage: float = 1.0
 
     def state(self, x):
-        return jnp.stack([self.rotor * x[0], self.pendulum * x[1] + self.offset,
-                          self.rotor * x[2], self.pendulum * x[3]])
+        return jnp.stack(
+            [self.rotor * x[0], self.pendulum * x[1] + self.offset, self.rotor * x[2], self.pendulum * x[3]]
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,8 +102,13 @@ def qq_accelerations(p, th, al, thd, ald, V):
     """M·q̈ = τ − C(q, q̇) as quanser_robots / SimuRLacra / Armandpl write it (α = 0 hanging)."""
     Jr, Jp = _inertias(p)
     Mp, Lp, Lr = p["Mp"], p["Lp"], p["Lr"]
-    c1, c2, c3, c4, c5 = (Jr + Mp * Lr**2, 0.25 * Mp * Lp**2, 0.5 * Mp * Lp * Lr, Jp + 0.25 * Mp * Lp**2,
-                          0.5 * Mp * Lp * p["g"])
+    c1, c2, c3, c4, c5 = (
+        Jr + Mp * Lr**2,
+        0.25 * Mp * Lp**2,
+        0.5 * Mp * Lp * Lr,
+        Jp + 0.25 * Mp * Lp**2,
+        0.5 * Mp * Lp * p["g"],
+    )
     s, c, s2 = jnp.sin(al), jnp.cos(al), jnp.sin(2 * al)
     a, b, d = c1 + c2 * s**2, c3 * c, c4
     det = a * d - b * b
@@ -114,17 +120,28 @@ def qq_accelerations(p, th, al, thd, ald, V):
 
 BASELINES = {
     "gym_brt": Baseline(
-        "gym_brt", "gym_brt (BlueRiverTech quanser-openai-driver)",
+        "gym_brt",
+        "gym_brt (BlueRiverTech quanser-openai-driver)",
         "BlueRiverTech/quanser-openai-driver gym_brt/quanser/qube_simulator.py",
-        {**QUBE, "Dr": 2.7e-4, "Dp": 5e-5}, Frame(rotor=-1.0, pendulum=-1.0, offset=math.pi), brt_accelerations),
+        {**QUBE, "Dr": 2.7e-4, "Dp": 5e-5},
+        Frame(rotor=-1.0, pendulum=-1.0, offset=math.pi),
+        brt_accelerations,
+    ),
     "quanser_robots": Baseline(
-        "quanser_robots", "quanser_robots QQube / SimuRLacra QQubeSim (TU Darmstadt)",
+        "quanser_robots",
+        "quanser_robots QQube / SimuRLacra QQubeSim (TU Darmstadt)",
         "TU Darmstadt quanser_robots/qube/base.py (QubeDynamics; read in its copy al91liwo/pytorch-rl-lab); "
         "famura/SimuRLacra Pyrado/pyrado/environments/pysim/quanser_qube.py",
-        {**QUBE, "Dr": 5e-6, "Dp": 1e-6}, Frame(), qq_accelerations),
+        {**QUBE, "Dr": 5e-6, "Dp": 1e-6},
+        Frame(),
+        qq_accelerations,
+    ),
     "armandpl": Baseline(
-        "armandpl", "Armandpl/furuta (the author's own rig)",
+        "armandpl",
+        "Armandpl/furuta (the author's own rig)",
         "Armandpl/furuta furuta/robot.py (QubeDynamics) with furuta_params.py",
         dict(Mr=0.057, Lr=0.083, Mp=0.027, Lp=0.092, Rm=6.7, km=0.067, g=9.81, Dr=5e-6, Dp=1e-6),
-        Frame(), qq_accelerations),
+        Frame(),
+        qq_accelerations,
+    ),
 }

@@ -43,14 +43,20 @@ def _cells(rows, model, loss) -> tuple[int, int]:
 
 
 def _forces(rows, model, loss) -> float | None:
-    values = [float(r["ours_mean"]) for r in rows
-              if r["model"] == model and r["loss"] == loss and r["metric"] in FORCES and r["ours_mean"]]
+    values = [
+        float(r["ours_mean"])
+        for r in rows
+        if r["model"] == model and r["loss"] == loss and r["metric"] in FORCES and r["ours_mean"]
+    ]
     return float(np.mean(values)) if values else None
 
 
 def table() -> str:
-    lines = ["| system | model | cells at or below the paper: L_prop | baseline | "
-             "force decomposition, log10 RMSE: L_prop | baseline |", "|---|---|---|---|---|---|"]
+    lines = [
+        "| system | model | cells at or below the paper: L_prop | baseline | "
+        "force decomposition, log10 RMSE: L_prop | baseline |",
+        "|---|---|---|---|---|---|",
+    ]
     seeds = set()
     for system in SYSTEM:
         rows = _rows(system)
@@ -59,11 +65,15 @@ def table() -> str:
             prop, ref = _cells(rows, model, "prop"), _cells(rows, model, base)
             fp, fb = _forces(rows, model, "prop"), _forces(rows, model, base)
             force = "N/A (prior) | N/A" if fp is None else f"**{fp:.2f}** | {fb:.2f} ({LOSS[base]})"
-            lines.append(f"| {SYSTEM[system]} | {model} | {prop[0]} of {prop[1]} | "
-                         f"{ref[0]} of {ref[1]} ({LOSS[base]}) | {force} |")
-    note = (f"{' / '.join(sorted(seeds))} model seed(s) per row, the frozen recipe, one run from scratch; "
-            "generated from [results/reproduce](results/reproduce/tables.md) by "
-            "`experiments/readme_results.py`.")
+            lines.append(
+                f"| {SYSTEM[system]} | {model} | {prop[0]} of {prop[1]} | "
+                f"{ref[0]} of {ref[1]} ({LOSS[base]}) | {force} |"
+            )
+    note = (
+        f"{' / '.join(sorted(seeds))} model seed(s) per row, the frozen recipe, one run from scratch; "
+        "generated from [results/reproduce](results/reproduce/tables.md) by "
+        "`experiments/readme_results.py`."
+    )
     return "\n".join(lines) + "\n\n" + note
 
 

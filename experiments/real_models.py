@@ -54,33 +54,53 @@ SKIP, SPLIT, WINDOW, VALIDATION_EVERY = 0.5, 1.0, 0.1, 5
 #: (augmented DeLaN's Hermite rule); a 2-step epoch (147 minibatches) ~16 s, ~40 s (DeLaN
 #: L_prop) and ~80 s (augmented DeLaN L_prop: the full L_Iτ goes into every step); a 0.1 s epoch
 #: (133 minibatches) ~50 s, ~60 s and ~110 s. L_prop's trajectory stages keep one epoch each.
-SCHEDULES = {("dln", "prop"): (4000, 1, 1), ("dln", "traj"): (10, 8),
-             ("adln", "prop"): (1000, 1, 1), ("adln", "aph"): (10, 8)}
+SCHEDULES = {
+    ("dln", "prop"): (4000, 1, 1),
+    ("dln", "traj"): (10, 8),
+    ("adln", "prop"): (1000, 1, 1),
+    ("adln", "aph"): (10, 8),
+}
 #: L_Iτ over 0.1 s (25 Simpson intervals at 500 Hz) instead of the paper's one interval, chosen on
 #: the simulated ablation (experiments/lprop_closed_loop_ablation.py, cells g/h): per interval the
 #: encoder's counts, through the estimated velocities, all but hide gravity from the loss
 SPAN = 25
 #: learned models: name -> (kind, loss, TrainConfig changes to the recipe)
-LEARNED = {"dln_prop": ("dln", "prop", {}), "dln_traj": ("dln", "traj", {}),
-           "adln_prop": ("adln", "prop", {}), "adln_aph": ("adln", "aph", {}),
-           "dln_prop_span": ("dln", "prop", {"integral_span": SPAN}),
-           "adln_prop_span": ("adln", "prop", {"integral_span": SPAN})}
-LABELS = {"nominal": "nominal analytic", "fitted": "fitted analytic (diagnose, no effect)",
-          "diagnosed": "diagnosed (fitted + found effects)", "dln_prop": "DeLaN L_prop",
-          "dln_traj": "DeLaN L_traj", "adln_prop": "augmented DeLaN L_prop", "adln_aph": "augmented DeLaN L_aph",
-          "dln_prop_span": "DeLaN L_prop, L_Iτ over 0.1 s",
-          "adln_prop_span": "augmented DeLaN L_prop, L_Iτ over 0.1 s"}
+LEARNED = {
+    "dln_prop": ("dln", "prop", {}),
+    "dln_traj": ("dln", "traj", {}),
+    "adln_prop": ("adln", "prop", {}),
+    "adln_aph": ("adln", "aph", {}),
+    "dln_prop_span": ("dln", "prop", {"integral_span": SPAN}),
+    "adln_prop_span": ("adln", "prop", {"integral_span": SPAN}),
+}
+LABELS = {
+    "nominal": "nominal analytic",
+    "fitted": "fitted analytic (diagnose, no effect)",
+    "diagnosed": "diagnosed (fitted + found effects)",
+    "dln_prop": "DeLaN L_prop",
+    "dln_traj": "DeLaN L_traj",
+    "adln_prop": "augmented DeLaN L_prop",
+    "adln_aph": "augmented DeLaN L_aph",
+    "dln_prop_span": "DeLaN L_prop, L_Iτ over 0.1 s",
+    "adln_prop_span": "augmented DeLaN L_prop, L_Iτ over 0.1 s",
+}
 ENERGY_RUN = 6
 
 
 def load_data():
     """Training / validation elementary trajectories of the fit runs, whole test runs."""
-    pieces = [p for tr in load_qube_closed_loop(FIT_RUNS, skip_seconds=0.0)
-              for p in prepare_log(tr, tr.name, skip=SKIP, split=SPLIT)]
+    pieces = [
+        p
+        for tr in load_qube_closed_loop(FIT_RUNS, skip_seconds=0.0)
+        for p in prepare_log(tr, tr.name, skip=SKIP, split=SPLIT)
+    ]
     train = [p for i, p in enumerate(pieces) if i % VALIDATION_EVERY != VALIDATION_EVERY - 1]
     val = [p for i, p in enumerate(pieces) if i % VALIDATION_EVERY == VALIDATION_EVERY - 1]
-    test = [p for tr in load_qube_closed_loop(TEST_RUNS, skip_seconds=0.0)
-            for p in prepare_log(tr, tr.name, skip=SKIP, split=None, min_seconds=WINDOW)]
+    test = [
+        p
+        for tr in load_qube_closed_loop(TEST_RUNS, skip_seconds=0.0)
+        for p in prepare_log(tr, tr.name, skip=SKIP, split=None, min_seconds=WINDOW)
+    ]
     return train, val, test
 
 
@@ -124,9 +144,14 @@ def train_learned(name: str, train, val, out: Path, budget: float):
     best = min(scores, key=scores.get)
     # the scored model is committed as selected.eqx (the snapshots are not)
     shutil.copyfile(out / best, out / SELECTED)
-    info = {"config": config.to_json(), "training_seconds": round(seconds, 1),
-            "wall_seconds_this_call": round(time.time() - t0, 1), "validation": scores, "selected": best,
-            "final": {k: history[-1].get(k) for k in ("itau", "traj", "penalty", "lambda")}}
+    info = {
+        "config": config.to_json(),
+        "training_seconds": round(seconds, 1),
+        "wall_seconds_this_call": round(time.time() - t0, 1),
+        "validation": scores,
+        "selected": best,
+        "final": {k: history[-1].get(k) for k in ("itau", "traj", "penalty", "lambda")},
+    }
     return load_model(out / best, expected_system="furuta"), info
 
 
@@ -169,8 +194,11 @@ def energy_figure(models: dict, test, path: Path) -> None:
         style = "--" if name in ("nominal", "fitted", "diagnosed") else "-"
         ax_e.plot(t, e * 1e3, style, lw=1.0, label=LABELS[name])
         ax_v.plot(beta, v * 1e3, style, lw=1.0, label=LABELS[name])
-    ax_e.set(xlabel=f"time in run {ENERGY_RUN} (s, after the skipped start)", ylabel="E (mJ), V(0) = 0",
-             title="energy along a test run (measured states) as each model sees it")
+    ax_e.set(
+        xlabel=f"time in run {ENERGY_RUN} (s, after the skipped start)",
+        ylabel="E (mJ), V(0) = 0",
+        title="energy along a test run (measured states) as each model sees it",
+    )
     ax_v.set(xlabel="β (rad), α = 0", ylabel="V (mJ)", title="potential each model believes in")
     handles, labels = ax_e.get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8)
@@ -188,13 +216,22 @@ def potential_shape(model) -> dict:
 
     v = lambda b: model.potential(jnp.stack([jnp.zeros(()), b]))  # noqa: E731
     top = jnp.asarray(np.pi)
-    return {"rise_to_top_J": float(v(top) - v(jnp.zeros(()))), "curvature_at_top_Nm_per_rad": float(jax.grad(jax.grad(v))(top))}
+    return {
+        "rise_to_top_J": float(v(top) - v(jnp.zeros(()))),
+        "curvature_at_top_Nm_per_rad": float(jax.grad(jax.grad(v))(top)),
+    }
 
 
 def score(name: str, model, val, test, out: Path, extra: dict) -> dict:
     """Test (and validation) window errors of one model, written to ``out/<name>.json``."""
-    doc = {"name": name, "label": LABELS[name], "test": window_errors(model, test, WINDOW),
-           "validation": window_errors(model, val, WINDOW), "potential": potential_shape(model), **extra}
+    doc = {
+        "name": name,
+        "label": LABELS[name],
+        "test": window_errors(model, test, WINDOW),
+        "validation": window_errors(model, val, WINDOW),
+        "potential": potential_shape(model),
+        **extra,
+    }
     (out / f"{name}.json").write_text(json.dumps(doc, indent=1, default=str) + "\n")
     cells = "  ".join(f"{k}={v if isinstance(v, str) else round(v, 3)}" for k, v in doc["test"]["log10_rmse"].items())
     print(f"{LABELS[name]:40s} {cells}", flush=True)
@@ -205,8 +242,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="results/real_models")
     ap.add_argument("--budget", type=float, default=1.0, help="scale of every schedule's epochs")
-    ap.add_argument("--learned", default=",".join(LEARNED),
-                    help="comma list of learned models to train and score (the others' result files are kept)")
+    ap.add_argument(
+        "--learned",
+        default=",".join(LEARNED),
+        help="comma list of learned models to train and score (the others' result files are kept)",
+    )
     args = ap.parse_args()
     names = args.learned.split(",")
     if unknown := [n for n in names if n not in LEARNED]:
@@ -233,12 +273,23 @@ def main() -> None:
 
             models[name] = load_model(out / "runs" / name / SELECTED, expected_system="furuta")
     energy_figure(models, test, out / "energy.png")
-    summary = {"fit_runs": FIT_RUNS, "test_runs": TEST_RUNS, "skip_seconds": SKIP, "split_seconds": SPLIT,
-               "window_seconds": WINDOW, "validation_every": VALIDATION_EVERY, "velocity": "zero_phase",
-               "input": "held over each sample period (RK4, 4 substeps)", "budget": args.budget,
-               "n_train": len(train), "n_validation": len(val), "models": list(models),
-               "seconds": round(time.time() - t0, 1), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-               "machine": f"{platform.node()} {platform.processor() or platform.machine()}"}
+    summary = {
+        "fit_runs": FIT_RUNS,
+        "test_runs": TEST_RUNS,
+        "skip_seconds": SKIP,
+        "split_seconds": SPLIT,
+        "window_seconds": WINDOW,
+        "validation_every": VALIDATION_EVERY,
+        "velocity": "zero_phase",
+        "input": "held over each sample period (RK4, 4 substeps)",
+        "budget": args.budget,
+        "n_train": len(train),
+        "n_validation": len(val),
+        "models": list(models),
+        "seconds": round(time.time() - t0, 1),
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "machine": f"{platform.node()} {platform.processor() or platform.machine()}",
+    }
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     print(f"wrote {out}/*.json and {out}/energy.png")
 

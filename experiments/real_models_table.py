@@ -23,8 +23,17 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "real_models"
 DOC = ROOT / "docs" / "learning.md"
 NAME = "real-models"
-ORDER = ("nominal", "fitted", "diagnosed", "dln_prop", "dln_prop_span", "dln_traj", "adln_prop", "adln_prop_span",
-         "adln_aph")
+ORDER = (
+    "nominal",
+    "fitted",
+    "diagnosed",
+    "dln_prop",
+    "dln_prop_span",
+    "dln_traj",
+    "adln_prop",
+    "adln_prop_span",
+    "adln_aph",
+)
 STATES = (("alpha", "α"), ("beta", "β"), ("alpha_dot", "α̇"), ("beta_dot", "β̇"))
 COMMAND = "python experiments/real_models.py && python experiments/real_models_table.py"
 
@@ -49,8 +58,13 @@ def _cell(v, best) -> str:
 
 def score_table(docs: list[dict]) -> str:
     units = ("rad", "rad", "rad/s", "rad/s")
-    head = ("| model | " + " | ".join(f"{s} log10" for _, s in STATES) + " | mean log10 | "
-            + " | ".join(f"{s} RMSE ({u})" for (_, s), u in zip(STATES, units)) + " |")
+    head = (
+        "| model | "
+        + " | ".join(f"{s} log10" for _, s in STATES)
+        + " | mean log10 | "
+        + " | ".join(f"{s} RMSE ({u})" for (_, s), u in zip(STATES, units))
+        + " |"
+    )
     rows = [head, "|---" * (2 + 2 * len(STATES)) + "|"]
     finite = [d for d in docs if mean_log10(d) < float("inf")]
     best = {k: min(d["test"]["log10_rmse"][k] for d in finite) for k, _ in STATES} if finite else {}
@@ -58,9 +72,13 @@ def score_table(docs: list[dict]) -> str:
     for d in docs:
         lg, rm = d["test"]["log10_rmse"], d["test"]["rmse"]
         m = mean_log10(d)
-        rows.append(f"| {d['label']} | " + " | ".join(_cell(lg[k], best.get(k)) for k, _ in STATES)
-                    + f" | {_cell(m, best_mean) if m < float('inf') else 'X'} | "
-                    + " | ".join("–" if rm[k] is None else f"{rm[k]:.4f}" for k, _ in STATES) + " |")
+        rows.append(
+            f"| {d['label']} | "
+            + " | ".join(_cell(lg[k], best.get(k)) for k, _ in STATES)
+            + f" | {_cell(m, best_mean) if m < float('inf') else 'X'} | "
+            + " | ".join("–" if rm[k] is None else f"{rm[k]:.4f}" for k, _ in STATES)
+            + " |"
+        )
     return "\n".join(rows)
 
 
@@ -74,25 +92,30 @@ def shape_table(docs: list[dict]) -> str:
 
 
 def training_table(docs: list[dict]) -> str:
-    rows = ["| model | epochs per stage | horizons | L_Iτ quadrature | learning rate | training s "
-            "| snapshot kept | its / the last one's validation mean log10 |",
-            "|---|---|---|---|---|---|---|---|"]
+    rows = [
+        "| model | epochs per stage | horizons | L_Iτ quadrature | learning rate | training s "
+        "| snapshot kept | its / the last one's validation mean log10 |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for d in docs:
         tr = d.get("training")
         if not tr:
             continue
         c = tr["config"]
-        hz = ", ".join("L_Iτ alone" if h is None else (f"{h} samples" if isinstance(h, int) else f"{h} s")
-                       for h in c["horizons"])
+        hz = ", ".join(
+            "L_Iτ alone" if h is None else (f"{h} samples" if isinstance(h, int) else f"{h} s") for h in c["horizons"]
+        )
         lr = c["learning_rate"]
         lr = ", ".join(f"{v:g}" for v in lr) if isinstance(lr, list) else f"{lr:g}"
         quad = "–"  # L_Iτ's rule (and its intervals per residual): L_prop only
         if "_prop" in d["name"]:
             span = c.get("integral_span", 1)
             quad = c["quadrature"] + (f", {span} intervals per residual" if span > 1 else "")
-        rows.append(f"| {d['label']} | {', '.join(map(str, c['epochs']))} | {hz} | {quad} | {lr} "
-                    f"| {tr['training_seconds']:.0f} | {tr['selected']} "
-                    f"| {tr['validation'][tr['selected']]:.3f} / {tr['validation']['model.eqx']:.3f} |")
+        rows.append(
+            f"| {d['label']} | {', '.join(map(str, c['epochs']))} | {hz} | {quad} | {lr} "
+            f"| {tr['training_seconds']:.0f} | {tr['selected']} "
+            f"| {tr['validation'][tr['selected']]:.3f} / {tr['validation']['model.eqx']:.3f} |"
+        )
     return "\n".join(rows)
 
 
@@ -112,9 +135,11 @@ def span_sentence(docs: list[dict]) -> str:
         p = by[span]["potential"]
         curv = p["curvature_at_top_Nm_per_rad"] / physics["curvature_at_top_Nm_per_rad"]
         rise = p["rise_to_top_J"] / physics["rise_to_top_J"]
-        parts.append(f"{by[span]['label']}: curvature at β = π {curv:.0%} and rise to the top {rise:.0%} of the "
-                     f"physics'; mean log10 {mean_log10(by[paper]) - mean_log10(by[span]):+.2f} better than with the "
-                     f"paper's L_Iτ and {mean_log10(by[span]) - mean_log10(by[base]):.2f} behind {by[base]['label']}")
+        parts.append(
+            f"{by[span]['label']}: curvature at β = π {curv:.0%} and rise to the top {rise:.0%} of the "
+            f"physics'; mean log10 {mean_log10(by[paper]) - mean_log10(by[span]):+.2f} better than with the "
+            f"paper's L_Iτ and {mean_log10(by[span]) - mean_log10(by[base]):.2f} behind {by[base]['label']}"
+        )
     return ("L_Iτ over 0.1 s — " + "; ".join(parts) + ".") if parts else ""
 
 
@@ -129,21 +154,33 @@ def block(summary: dict, docs: list[dict]) -> str:
         f"Fitted / trained on runs {fit[0]}–{fit[-1]}, scored on runs {tst[0]}–{tst[-1]}: {test['n_windows']} "
         f"open-loop windows of {summary['window_seconds']} s started from the measured state, input held; "
         "log10 RMSE (lower is better; **bold**: best in its column) and RMSE in rad, rad/s.",
-        "", score_table(docs), "",
+        "",
+        score_table(docs),
+        "",
         f"**Winner: {winner['label']}** (lowest mean log10 RMSE over the four states, {mean_log10(winner):.3f}; "
         f"next {second['label']}, {mean_log10(second):.3f}: {mean_log10(second) - mean_log10(winner):.3f} "
         "apart, one seed of each learned model).",
     ]
     if diag:
         lines += ["", f"Diagnosis on runs {fit[0]}–{fit[-1]}: {diag['note']}."]
-    lines += ["", "Energy shape at α = 0 (the physical potential rises from hanging to upright and "
-              "has its maximum there; the logs only visit the neighbourhood of the top):", "",
-              shape_table(docs), "", span_sentence(docs), "",
-              f"Learned models: {summary['n_train']} training and {summary['n_validation']} validation "
-              f"elementary trajectories of {summary['split_seconds']} s (every {summary['validation_every']}th "
-              f"held out), the script's schedules × {summary['budget']}:", "", training_table(docs), "",
-              f"Made by `{COMMAND}` ({train_min:.0f} min of training in all, {summary['date']}); figure: "
-              "[results/real_models/energy.png](../results/real_models/energy.png)."]
+    lines += [
+        "",
+        "Energy shape at α = 0 (the physical potential rises from hanging to upright and "
+        "has its maximum there; the logs only visit the neighbourhood of the top):",
+        "",
+        shape_table(docs),
+        "",
+        span_sentence(docs),
+        "",
+        f"Learned models: {summary['n_train']} training and {summary['n_validation']} validation "
+        f"elementary trajectories of {summary['split_seconds']} s (every {summary['validation_every']}th "
+        f"held out), the script's schedules × {summary['budget']}:",
+        "",
+        training_table(docs),
+        "",
+        f"Made by `{COMMAND}` ({train_min:.0f} min of training in all, {summary['date']}); figure: "
+        "[results/real_models/energy.png](../results/real_models/energy.png).",
+    ]
     return "\n".join(lines)
 
 

@@ -45,9 +45,14 @@ def _force_design(system: str, kind: str) -> str:
 
 
 def table() -> str:
-    lines = ["| system | model | loss | epochs per stage | L_Iτ quadrature | step: L_Iτ / after | λ | μ | F_a | "
-             "decision-log rows |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for (system, kind, loss), row in sorted(RECIPE.items(), key=lambda kv: (kv[0][0] != "furuta", kv[0][1], kv[0][2] == "prop")):
+    lines = [
+        "| system | model | loss | epochs per stage | L_Iτ quadrature | step: L_Iτ / after | λ | μ | F_a | "
+        "decision-log rows |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (system, kind, loss), row in sorted(
+        RECIPE.items(), key=lambda kv: (kv[0][0] != "furuta", kv[0][1], kv[0][2] == "prop")
+    ):
         prop = loss == "prop"
         epochs = " + ".join(f"{e:,}".replace(",", " ") for e in row.epochs)
         lines.append(
@@ -55,7 +60,8 @@ def table() -> str:
             f"{row.quadrature if prop else '—'} | "
             f"{_value(row.itau_learning_rate) + ' / ' + _value(row.finetune_learning_rate) if prop else _value(row.finetune_learning_rate)} | "
             f"{_value(row.lambda_traj)} | {_value(row.augmentation_weight)} | {_force_design(system, kind)} | "
-            f"{'; '.join(row.decisions)} |")
+            f"{'; '.join(row.decisions)} |"
+        )
     return "\n".join(lines)
 
 

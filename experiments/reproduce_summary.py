@@ -43,8 +43,11 @@ def _seconds(record) -> float | None:
 
 
 def _model_rows(rows, run) -> list[str]:
-    lines = ["| system | model | loss | cells at or below the paper | force decomposition, log10 RMSE "
-             "| train + evaluate s |", "|---|---|---|---|---|---|"]
+    lines = [
+        "| system | model | loss | cells at or below the paper | force decomposition, log10 RMSE "
+        "| train + evaluate s |",
+        "|---|---|---|---|---|---|",
+    ]
     keys = dict.fromkeys((r["system"], r["model"], r["loss"]) for r in rows)
     for system, model, loss in keys:
         mine = [r for r in rows if (r["system"], r["model"], r["loss"]) == (system, model, loss)]
@@ -52,9 +55,11 @@ def _model_rows(rows, run) -> list[str]:
         forces = [float(r["ours_mean"]) for r in mine if r["metric"] in FORCES and r["ours_mean"]]
         force = f"{np.mean(forces):.2f}" if forces else "N/A (prior)"
         seconds = _seconds(run["seconds"].get(f"{system}/{model.lower()}_{loss}/seed0"))
-        lines.append(f"| {SYSTEM[system]} | {model} | {LOSS[loss]} | "
-                     f"{sum(r['better_or_equal'] == 'yes' for r in judged)} of {len(judged)} | {force} | "
-                     f"{'' if seconds is None else f'{seconds:.0f}'} |")
+        lines.append(
+            f"| {SYSTEM[system]} | {model} | {LOSS[loss]} | "
+            f"{sum(r['better_or_equal'] == 'yes' for r in judged)} of {len(judged)} | {force} | "
+            f"{'' if seconds is None else f'{seconds:.0f}'} |"
+        )
     return lines
 
 
@@ -62,8 +67,11 @@ def _behind(rows) -> list[str]:
     worse = [r for r in rows if r["better_or_equal"] == "no"]
     if not worse:
         return ["Every cell with a paper value is at or below the paper's."]
-    cells = [f"{SYSTEM[r['system']]} {r['model']} {LOSS[r['loss']]}, {r['test_set']} {r['metric']} "
-             f"({float(r['ours_mean']):.2f} vs {float(r['paper']):.2f})" for r in worse]
+    cells = [
+        f"{SYSTEM[r['system']]} {r['model']} {LOSS[r['loss']]}, {r['test_set']} {r['metric']} "
+        f"({float(r['ours_mean']):.2f} vs {float(r['paper']):.2f})"
+        for r in worse
+    ]
     return [f"Cells where the paper is lower ({len(worse)}): " + "; ".join(cells) + "."]
 
 
@@ -74,10 +82,13 @@ def _provenance(run) -> str:
     if reused == 0:
         return f"it trained all {len(models)} models"
     if reused == len(models):
-        return ("it reused all the models, trained from scratch into the same folder by the invocations "
-                "in `invocations/`")
-    return (f"it trained {len(models) - reused} models and reused {reused} trained by an earlier "
-            "invocation into the same folder: `invocations/`")
+        return (
+            "it reused all the models, trained from scratch into the same folder by the invocations in `invocations/`"
+        )
+    return (
+        f"it trained {len(models) - reused} models and reused {reused} trained by an earlier "
+        "invocation into the same folder: `invocations/`"
+    )
 
 
 def summary() -> str:
@@ -88,11 +99,13 @@ def summary() -> str:
     machine = run["machine"]
     total = sum(s for s in map(_seconds, run["seconds"].values()) if s is not None)
     command = re.sub(r"--out \S+", "--out <folder>", run["command"])
-    head = (f"`{command}` (the last invocation, {run['date_utc'][:16].replace('T', ' ')} UTC, "
-            f"{machine.get('cpu', 'cpu')}, {machine['cpu_count']} cores; {_provenance(run)}); "
-            f"{' / '.join(seeds)} model seed(s); "
-            f"{total:.0f} s of training and evaluation summed over the models. Full tables: "
-            "[results/reproduce/tables.md](../results/reproduce/tables.md).")
+    head = (
+        f"`{command}` (the last invocation, {run['date_utc'][:16].replace('T', ' ')} UTC, "
+        f"{machine.get('cpu', 'cpu')}, {machine['cpu_count']} cores; {_provenance(run)}); "
+        f"{' / '.join(seeds)} model seed(s); "
+        f"{total:.0f} s of training and evaluation summed over the models. Full tables: "
+        "[results/reproduce/tables.md](../results/reproduce/tables.md)."
+    )
     return "\n".join([head, "", *_model_rows(rows, run), "", *_behind(rows)])
 
 

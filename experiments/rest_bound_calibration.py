@@ -52,9 +52,17 @@ def _bound(effects, excitation: str, seed: int) -> dict:
     b = rest_bound(layout, theta, segs, NO_INPUT_DYNAMICS, "alpha", COUNT, window)
     by = {e.name: e.coefficient for e in effects}
     breakaway = by["coulomb_friction"] + by.get("stiction", 0.0)
-    return {"excitation": excitation, "seed": seed, "coulomb": by["coulomb_friction"], "breakaway": breakaway,
-            "held": b.held, "windows": b.n_windows, "slack": b.slack,
-            "held_over_coulomb": b.held / by["coulomb_friction"], "held_over_breakaway": b.held / breakaway}
+    return {
+        "excitation": excitation,
+        "seed": seed,
+        "coulomb": by["coulomb_friction"],
+        "breakaway": breakaway,
+        "held": b.held,
+        "windows": b.n_windows,
+        "slack": b.slack,
+        "held_over_coulomb": b.held / by["coulomb_friction"],
+        "held_over_breakaway": b.held / breakaway,
+    }
 
 
 def main() -> None:
@@ -67,8 +75,10 @@ def main() -> None:
     doc = {"window_seconds": DiagnosisSettings().rest_window, "count_rad": COUNT, "rows": rows}
     (OUT / "calibration.json").write_text(json.dumps(doc, indent=1) + "\n")
     for r in rows:
-        print(f"{r['excitation']:13s} seed {r['seed']}: held {r['held']:.3g} = {r['held_over_coulomb']:.2f}x Coulomb, "
-              f"{r['held_over_breakaway']:.2f}x breakaway ({r['windows']} windows)")
+        print(
+            f"{r['excitation']:13s} seed {r['seed']}: held {r['held']:.3g} = {r['held_over_coulomb']:.2f}x Coulomb, "
+            f"{r['held_over_breakaway']:.2f}x breakaway ({r['windows']} windows)"
+        )
 
 
 if __name__ == "__main__":

@@ -51,8 +51,13 @@ OUT = ROOT / "results" / "rl_learned"
 CHECKPOINTS = ROOT / "results" / "reproduce" / "runs" / "furuta"
 SWINGUP = "furuta_gym/FurutaSwingUp-v0"
 #: label of each row, in the table's order (the analytic model first, for reference)
-MODELS = {"analytic": "analytic (reference)", "dln_prop": "DeLaN L_prop", "adln_prop": "augmented DeLaN L_prop",
-          "dln_traj": "DeLaN L_traj (baseline)", "adln_aph": "augmented DeLaN L_aph (baseline)"}
+MODELS = {
+    "analytic": "analytic (reference)",
+    "dln_prop": "DeLaN L_prop",
+    "adln_prop": "augmented DeLaN L_prop",
+    "dln_traj": "DeLaN L_traj (baseline)",
+    "adln_aph": "augmented DeLaN L_aph (baseline)",
+}
 PLANTS = (None, "cable_spring", "coulomb")
 #: examples/ppo_swingup.py's settings: 6 M env steps, 256 copies × 128 steps per update
 CONFIG = PPOConfig(total_timesteps=6_000_000, num_envs=256, num_steps=128)
@@ -126,8 +131,12 @@ def run_episode(act, env: gymnasium.Env, x0: np.ndarray, seed: int) -> dict:
         xs = np.concatenate([xs, np.full((1, 4), np.inf)])  # scored as diverged, as evaluate_on_env does
     metrics = episode_metrics(xs, np.asarray(us), float(env.unwrapped.dt))
     tail = np.abs(np.mod(xs[-BALANCE_STEPS:, 1], 2 * math.pi) - math.pi)
-    return {"return": total, "success": metrics.success, "time_to_upright": metrics.time_to_upright,
-            "balanced_end": bool(full and not terminated and np.all(tail < BALANCE_TOLERANCE))}
+    return {
+        "return": total,
+        "success": metrics.success,
+        "time_to_upright": metrics.time_to_upright,
+        "balanced_end": bool(full and not terminated and np.all(tail < BALANCE_TOLERANCE)),
+    }
 
 
 def evaluate(policy, plant: str | None) -> dict:
@@ -140,10 +149,13 @@ def evaluate(policy, plant: str | None) -> dict:
     finally:
         env.close()
     seeded = episodes[1:]
-    return {"x0": episodes[0], "seeded": seeded,
-            "seeded_success": float(np.mean([e["success"] for e in seeded])),
-            "seeded_balanced_end": float(np.mean([e["balanced_end"] for e in seeded])),
-            "seeded_mean_return": float(np.mean([e["return"] for e in seeded]))}
+    return {
+        "x0": episodes[0],
+        "seeded": seeded,
+        "seeded_success": float(np.mean([e["success"] for e in seeded])),
+        "seeded_balanced_end": float(np.mean([e["balanced_end"] for e in seeded])),
+        "seeded_mean_return": float(np.mean([e["return"] for e in seeded])),
+    }
 
 
 def result_path(model: str, randomize: bool, seed: int) -> Path:
@@ -169,13 +181,25 @@ def main(argv=None) -> int:
     randomization = None
     if args.randomize:
         randomization = {"spread": SPREAD, "over": "physical parameters" if args.model == "analytic" else "scale"}
-    doc = {"model": args.model, "label": MODELS[args.model], "dynamics": checkpoint(args.model).replace(
-        str(ROOT) + os.sep, ""), "randomize": randomization, "seed": args.seed, "steps": args.steps,
-        "train_seconds": wall, "train_returns": returns.tolist(), "model_return": own, "starts_seed": STARTS_SEED,
-        "mujoco": {plant or "nominal": evaluate(policy, plant) for plant in PLANTS}}
+    doc = {
+        "model": args.model,
+        "label": MODELS[args.model],
+        "dynamics": checkpoint(args.model).replace(str(ROOT) + os.sep, ""),
+        "randomize": randomization,
+        "seed": args.seed,
+        "steps": args.steps,
+        "train_seconds": wall,
+        "train_returns": returns.tolist(),
+        "model_return": own,
+        "starts_seed": STARTS_SEED,
+        "mujoco": {plant or "nominal": evaluate(policy, plant) for plant in PLANTS},
+    }
     for plant, ev in doc["mujoco"].items():
-        print(f"  MuJoCo {plant}: x0 success {ev['x0']['success']} (return {ev['x0']['return']:.0f}); "
-              f"{STARTS} starts: {100 * ev['seeded_success']:.0f} % success", flush=True)
+        print(
+            f"  MuJoCo {plant}: x0 success {ev['x0']['success']} (return {ev['x0']['return']:.0f}); "
+            f"{STARTS} starts: {100 * ev['seeded_success']:.0f} % success",
+            flush=True,
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(doc, indent=1))
     eqx.tree_serialise_leaves(path.with_suffix(".eqx"), policy)

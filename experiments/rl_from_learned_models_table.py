@@ -23,11 +23,18 @@ RESULTS = ROOT / "results" / "rl_learned"
 DOC = ROOT / "docs" / "rl.md"
 NAME = "rl-learned"
 #: the rows' order and labels (those of rl_from_learned_models.py, not imported: that needs jax)
-MODELS = {"analytic": "analytic (reference)", "dln_prop": "DeLaN L_prop", "adln_prop": "augmented DeLaN L_prop",
-          "dln_traj": "DeLaN L_traj (baseline)", "adln_aph": "augmented DeLaN L_aph (baseline)"}
+MODELS = {
+    "analytic": "analytic (reference)",
+    "dln_prop": "DeLaN L_prop",
+    "adln_prop": "augmented DeLaN L_prop",
+    "dln_traj": "DeLaN L_traj (baseline)",
+    "adln_aph": "augmented DeLaN L_aph (baseline)",
+}
 PLANTS = ("nominal", "cable_spring", "coulomb")
-COMMAND = ("python experiments/rl_from_learned_models.py --model MODEL [--randomize] && "
-           "python experiments/rl_from_learned_models_table.py")
+COMMAND = (
+    "python experiments/rl_from_learned_models.py --model MODEL [--randomize] && "
+    "python experiments/rl_from_learned_models_table.py"
+)
 
 
 def load(folder: Path = RESULTS) -> dict[tuple[str, bool], dict]:
@@ -71,19 +78,21 @@ def table(docs: dict[tuple[str, bool], dict]) -> str:
 def body() -> str:
     docs = load()
     steps = sorted({d["steps"] for d in docs.values()})
-    return "\n".join([
-        f"PPO ({', '.join(f'{s:,}' for s in steps) or '—'} env steps, `examples/ppo_swingup.py`'s settings), "
-        "**one training seed (0) per row**, trained only on the model in the first column, then run on "
-        "the MuJoCo `FurutaSwingUp-v0`. x0 = 0: ✓ when it succeeds, and its return (of 500); 30 starts: "
-        "share of `near_rest_starts(30, seed=0)` that succeed (mean return). Success: within 0.1 rad of "
-        "upright for 2 s without interruption, as the control benchmarks score it. Own-model return: the "
-        "deterministic policy on its (nominal) training model, 32 episodes. Train s: wall time of the "
-        "training, compilation included, on one core of a 2-core machine shared with other jobs.",
-        "",
-        table(docs),
-        "",
-        f"Generated from `results/rl_learned/*.json` by `{COMMAND}`.",
-    ])
+    return "\n".join(
+        [
+            f"PPO ({', '.join(f'{s:,}' for s in steps) or '—'} env steps, `examples/ppo_swingup.py`'s settings), "
+            "**one training seed (0) per row**, trained only on the model in the first column, then run on "
+            "the MuJoCo `FurutaSwingUp-v0`. x0 = 0: ✓ when it succeeds, and its return (of 500); 30 starts: "
+            "share of `near_rest_starts(30, seed=0)` that succeed (mean return). Success: within 0.1 rad of "
+            "upright for 2 s without interruption, as the control benchmarks score it. Own-model return: the "
+            "deterministic policy on its (nominal) training model, 32 episodes. Train s: wall time of the "
+            "training, compilation included, on one core of a 2-core machine shared with other jobs.",
+            "",
+            table(docs),
+            "",
+            f"Generated from `results/rl_learned/*.json` by `{COMMAND}`.",
+        ]
+    )
 
 
 if __name__ == "__main__":

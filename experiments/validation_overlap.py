@@ -48,7 +48,11 @@ def tolerances(system: str, tests: list) -> tuple[list[float], list[bool]]:
 
 def measure(system: str) -> list[dict]:
     from furuta_gym.training.datagen import (
-        DATASET_NAMES, FurutaRecipe, generate_datasets, generate_validation, sample_overlap,
+        DATASET_NAMES,
+        FurutaRecipe,
+        generate_datasets,
+        generate_validation,
+        sample_overlap,
     )
 
     test = generate_datasets(system, seed=0, ground_truth="mujoco")
@@ -60,30 +64,44 @@ def measure(system: str) -> list[dict]:
     rows = []
 
     def add(kind, name, data, against, reference):
-        rows.append({"system": system, "kind": kind, "data": name, "against": against,
-                     "same_time": sample_overlap(data, reference, tol, angular, same_time=True),
-                     "any_time": sample_overlap(data, reference, tol, angular, same_time=False)})
+        rows.append(
+            {
+                "system": system,
+                "kind": kind,
+                "data": name,
+                "against": against,
+                "same_time": sample_overlap(data, reference, tol, angular, same_time=True),
+                "any_time": sample_overlap(data, reference, tol, angular, same_time=False),
+            }
+        )
 
     for n in test_names:  # the old protocol: the same recipe, another seed, against its own test set
         add("old validation (test recipe, seed 100)", n, old[n], n, test[n])
     for n, trajs in new.items():
         add("validation (own excitation)", n, trajs, "all test sets", all_tests)
     if "scale_fit" in test:
-        add("scale fit of the reproduction (random steps)", "scale_fit", test["scale_fit"],
-            "all test sets", all_tests)
-        chirp = generate_datasets(system, seed=0, ground_truth="mujoco",
-                                  recipe=FurutaRecipe(scale_fit_input="chirp"))
-        add("earlier scale fit, `scale_fit_input=\"chirp\"` (the test chirp)", "scale_fit", chirp["scale_fit"],
-            "all test sets", all_tests)
+        add("scale fit of the reproduction (random steps)", "scale_fit", test["scale_fit"], "all test sets", all_tests)
+        chirp = generate_datasets(system, seed=0, ground_truth="mujoco", recipe=FurutaRecipe(scale_fit_input="chirp"))
+        add(
+            'earlier scale fit, `scale_fit_input="chirp"` (the test chirp)',
+            "scale_fit",
+            chirp["scale_fit"],
+            "all test sets",
+            all_tests,
+        )
     return rows
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| system | data | compared with | repeating a test sample: same time | any time |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "| system | data | compared with | repeating a test sample: same time | any time |",
+        "|---|---|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['system']} | {r['kind']}: `{r['data']}` | {r['against']} | "
-                     f"{100 * r['same_time']:.1f} % | {100 * r['any_time']:.1f} % |")
+        lines.append(
+            f"| {r['system']} | {r['kind']}: `{r['data']}` | {r['against']} | "
+            f"{100 * r['same_time']:.1f} % | {100 * r['any_time']:.1f} % |"
+        )
     return "\n".join(lines)
 
 
@@ -98,8 +116,12 @@ def main(argv=None) -> int:
     ap.add_argument("--check", action="store_true", help="exit 1 if docs/reproduce.md is stale")
     args = ap.parse_args(argv)
     if args.check:
-        return update(DOCS, documented(json.loads(RESULT.read_text())["rows"]), True,
-                      "run python experiments/validation_overlap.py --table")
+        return update(
+            DOCS,
+            documented(json.loads(RESULT.read_text())["rows"]),
+            True,
+            "run python experiments/validation_overlap.py --table",
+        )
     if not args.table:
         import furuta_gym
 

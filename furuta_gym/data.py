@@ -84,9 +84,7 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
                     raise DataError(f"{path}: the file is empty; expected a header row") from None
                 rows = [r for r in reader if r and any(c.strip() for c in r)]
         except (gzip.BadGzipFile, EOFError) as err:
-            raise DataError(
-                f"{path}: not a readable gzip file ({err}); expected a gzip-compressed CSV"
-            ) from None
+            raise DataError(f"{path}: not a readable gzip file ({err}); expected a gzip-compressed CSV") from None
         if not rows:
             raise DataError(f"{path}: no data rows after the header")
         out: dict[str, np.ndarray] = {}
@@ -99,9 +97,7 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
                     out[name] = np.array(raw, dtype=object)
                 else:
                     bad = next(v for v in raw if not _is_float(v))
-                    raise DataError(
-                        f"{path}: column {name!r} holds {bad!r}, expected numbers"
-                    ) from None
+                    raise DataError(f"{path}: column {name!r} holds {bad!r}, expected numbers") from None
         return out
     if suffix == ".npz":
         with np.load(path, allow_pickle=False) as z:
@@ -113,14 +109,14 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
         try:
             m = loadmat(path, squeeze_me=True)
         except NotImplementedError:  # scipy reads MAT v4-v7.2, not the HDF5-based v7.3
-            raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file, which cannot be read here; save it "
-                            "with save(..., '-v7') or export CSV") from None
+            raise DataError(
+                f"{path}: a MATLAB v7.3 (HDF5) file, which cannot be read here; save it "
+                "with save(..., '-v7') or export CSV"
+            ) from None
         except (ValueError, MatReadError) as err:
             raise DataError(f"{path}: not a readable MAT file ({err})") from None
         return {k: np.ravel(np.asarray(v)) for k, v in m.items() if not k.startswith("__")}
-    raise DataError(
-        f"{path}: unsupported file type {suffix!r}; expected .csv, .csv.gz, .npz or .mat"
-    )
+    raise DataError(f"{path}: unsupported file type {suffix!r}; expected .csv, .csv.gz, .npz or .mat")
 
 
 def _is_float(v: str) -> bool:
@@ -185,8 +181,7 @@ def _check_mapping_names(path: Path, spec: SystemSpec, keys) -> None:
     for key in keys:
         if key not in canonical:
             raise DataError(
-                f"{path}: column map / sign / offset names unknown column {key!r}; "
-                f"{spec.name} columns are {canonical}"
+                f"{path}: column map / sign / offset names unknown column {key!r}; {spec.name} columns are {canonical}"
             )
 
 
@@ -224,8 +219,9 @@ def _finite_column(path: Path, raw, name: str) -> np.ndarray:
     return values
 
 
-def _check_time(path: Path, t_name: str, name: str, tt: np.ndarray, idx: np.ndarray,
-                min_samples: int, dt_tolerance: float) -> None:
+def _check_time(
+    path: Path, t_name: str, name: str, tt: np.ndarray, idx: np.ndarray, min_samples: int, dt_tolerance: float
+) -> None:
     """One trajectory's time column: enough samples, strictly increasing, uniformly sampled."""
     if idx.size < min_samples:
         raise DataError(f"{path}: trajectory {name!r} has {idx.size} sample(s); expected at least {min_samples}")

@@ -76,8 +76,9 @@ def _bar(total: int, desc: str, enabled: bool):
     return tqdm(total=total, desc=desc, disable=not enabled, leave=True)
 
 
-def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress: bool = True,
-             overwrite: bool = False) -> dict:
+def run_demo(
+    out_dir: str | Path, config: DemoConfig | None = None, *, progress: bool = True, overwrite: bool = False
+) -> dict:
     """Run the six stages, writing everything under ``out_dir``; returns the summary dict.
 
     Refuses an ``out_dir`` that already holds a demo (``summary.json``) unless ``overwrite``.
@@ -90,9 +91,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     cfg = config or DemoConfig()
     out = Path(out_dir)
     if (out / "summary.json").exists() and not overwrite:
-        raise FileExistsError(
-            f"{out}: holds a previous demo (summary.json); choose another --out or pass --overwrite"
-        )
+        raise FileExistsError(f"{out}: holds a previous demo (summary.json); choose another --out or pass --overwrite")
     out.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
     summary: dict = {"config": dataclasses.asdict(cfg), "out_dir": str(out)}
@@ -104,8 +103,9 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         return result
 
     datasets = timed("generate", _generate, cfg, out, progress, overwrite)
-    models = {loss: timed(f"train_{loss}", _train, cfg, out, datasets, loss, progress, overwrite)
-              for loss in ("prop", "traj")}
+    models = {
+        loss: timed(f"train_{loss}", _train, cfg, out, datasets, loss, progress, overwrite) for loss in ("prop", "traj")
+    }
     t_fine, tracks, summary["tracking"] = timed("swap", _swap_into_env, cfg, models, progress)
     summary["physics"] = timed("physics", _physics_vs_truth, models, datasets)
     records, summary["control"] = timed("control", _control, cfg, models["prop"], progress)
@@ -124,27 +124,29 @@ def _generate(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> di
     """1. A small Furuta training set (and a held-out trajectory) from the MuJoCo ground truth."""
     with _bar(1, "1/6 generate data (MuJoCo)", progress) as bar:
         recipe = dataclasses.replace(
-            FurutaRecipe.small(), n_train=cfg.n_train, n_test_free=1,
-            test_free_duration=max(cfg.tracking_seconds, 1.0), n_test_forced=1,
+            FurutaRecipe.small(),
+            n_train=cfg.n_train,
+            n_test_free=1,
+            test_free_duration=max(cfg.tracking_seconds, 1.0),
+            n_test_forced=1,
             test_forced_duration=max(cfg.tracking_seconds, 2.0),
         )
         datasets = generate_datasets("furuta", seed=cfg.seed, recipe=recipe, ground_truth="mujoco")
-        write_datasets(out / "data", datasets, "furuta", metadata={"seed": cfg.seed},
-                       overwrite=overwrite)
+        write_datasets(out / "data", datasets, "furuta", metadata={"seed": cfg.seed}, overwrite=overwrite)
         bar.update(1)
     return datasets
 
 
 def _train(cfg: DemoConfig, out: Path, datasets: dict, loss: str, progress: bool, overwrite: bool):
     """2. A DeLaN trained with ``loss`` on the demo's data."""
-    tc = TrainConfig.for_system("furuta", epochs=cfg.epochs, horizons=cfg.horizons, seed=cfg.seed,
-                                progress=progress, checkpoint_every=10**9)
+    tc = TrainConfig.for_system(
+        "furuta", epochs=cfg.epochs, horizons=cfg.horizons, seed=cfg.seed, progress=progress, checkpoint_every=10**9
+    )
     run_dir = out / "models" / f"dln_{loss}"
     if run_dir.exists() and overwrite:
         shutil.rmtree(run_dir)
     print(f"2/6 train DeLaN with L_{loss}")
-    model, _ = train("dln", "furuta", loss, datasets["train"], tc, out_dir=run_dir,
-                     forced_trajs=datasets["scale_fit"])
+    model, _ = train("dln", "furuta", loss, datasets["train"], tc, out_dir=run_dir, forced_trajs=datasets["scale_fit"])
     return model
 
 
@@ -182,8 +184,10 @@ def _swap_into_env(cfg: DemoConfig, models: dict, progress: bool):
     for loss in ("prop", "traj"):
         err = tracks[loss] - tracks["mujoco"]
         beta_err = np.angle(np.exp(1j * err[:, 1]))  # a full turn of the pendulum is no error
-        tracking[loss] = {"rmse_alpha": float(np.sqrt(np.mean(err[:, 0] ** 2))),
-                          "rmse_beta": float(np.sqrt(np.mean(beta_err**2)))}
+        tracking[loss] = {
+            "rmse_alpha": float(np.sqrt(np.mean(err[:, 0] ** 2))),
+            "rmse_beta": float(np.sqrt(np.mean(beta_err**2))),
+        }
     return np.arange(steps) / 500.0, tracks, tracking
 
 
@@ -198,9 +202,11 @@ def _physics_vs_truth(models: dict, datasets: dict) -> dict:
     physics = {}
     for loss, model in models.items():
         forces = force_decomposition_errors(model, held_out, Furuta())
-        physics[loss] = {"energy": float(energy_error(model, datasets["test_free"], Furuta())),
-                         "forces": float(np.mean([forces[k] for k in FORCE_TERMS])),
-                         **{k: float(forces[k]) for k in FORCE_TERMS}}
+        physics[loss] = {
+            "energy": float(energy_error(model, datasets["test_free"], Furuta())),
+            "forces": float(np.mean([forces[k] for k in FORCE_TERMS])),
+            **{k: float(forces[k]) for k in FORCE_TERMS},
+        }
     return physics
 
 
@@ -211,8 +217,11 @@ def _control(cfg: DemoConfig, model, progress: bool):
         bar.update(1)
         starts = near_rest_starts(cfg.control_starts + 1, seed=cfg.seed, include_rest=True)
         records = evaluate_on_env(
-            ctrl, lambda: gym.make("furuta_gym/Furuta-v0", dynamics="mujoco"),
-            starts, cfg.control_seconds, seed=cfg.seed,
+            ctrl,
+            lambda: gym.make("furuta_gym/Furuta-v0", dynamics="mujoco"),
+            starts,
+            cfg.control_seconds,
+            seed=cfg.seed,
         )
         bar.update(1)
     times = [r.metrics.time_to_upright for r in records if r.metrics.success and r.metrics.time_to_upright is not None]
@@ -229,12 +238,19 @@ def _control(cfg: DemoConfig, model, progress: bool):
 def _diagnose_log(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> dict:
     """5. A measured-like log of a plant with an undeclared rotor cable spring, diagnosed."""
     with _bar(1, "5/6 diagnose a log with an undeclared cable spring", progress) as bar:
-        log = measured_like("furuta", [Effect("spring", "alpha", cfg.spring)],
-                            n_trajectories=cfg.diagnose_trajectories,
-                            duration=cfg.diagnose_seconds, seed=cfg.seed + 1)
-        log_path = save_trajectories(out / "diagnose" / "measured_log.csv",
-                                     [dataclasses.replace(tr, qd=None) for tr in log], "furuta",
-                                     overwrite=overwrite)
+        log = measured_like(
+            "furuta",
+            [Effect("spring", "alpha", cfg.spring)],
+            n_trajectories=cfg.diagnose_trajectories,
+            duration=cfg.diagnose_seconds,
+            seed=cfg.seed + 1,
+        )
+        log_path = save_trajectories(
+            out / "diagnose" / "measured_log.csv",
+            [dataclasses.replace(tr, qd=None) for tr in log],
+            "furuta",
+            overwrite=overwrite,
+        )
         result = diagnose(log_path, "furuta")
         bar.update(1)
     diagnosis = result.to_json()
@@ -283,21 +299,32 @@ def summary_table(summary: dict) -> str:
     tr, co, dg, ph = summary["tracking"], summary["control"], summary["diagnose"], summary["physics"]
     eb, ea = dg["error_before"], dg["error_after"]
     rows = [
-        ("Learned vs true (held-out free run, env)", "RMSE α / β [rad]", f"{summary['config']['tracking_seconds']:g} s, 500 Hz"),
+        (
+            "Learned vs true (held-out free run, env)",
+            "RMSE α / β [rad]",
+            f"{summary['config']['tracking_seconds']:g} s, 500 Hz",
+        ),
         ("  DeLaN L_prop", f"{tr['prop']['rmse_alpha']:.3g} / {tr['prop']['rmse_beta']:.3g}", ""),
-        ("  DeLaN L_traj", f"{tr['traj']['rmse_alpha']:.3g} / {tr['traj']['rmse_beta']:.3g}",
-         _closer(tr, {"rmse_alpha": "α", "rmse_beta": "β"})),
+        (
+            "  DeLaN L_traj",
+            f"{tr['traj']['rmse_alpha']:.3g} / {tr['traj']['rmse_beta']:.3g}",
+            _closer(tr, {"rmse_alpha": "α", "rmse_beta": "β"}),
+        ),
         ("Physics vs true (held-out states)", "log10 RMSE energy / forces", "forces: inertial, Coriolis, gravity"),
         ("  DeLaN L_prop", f"{ph['prop']['energy']:.2f} / {ph['prop']['forces']:.2f}", ""),
-        ("  DeLaN L_traj", f"{ph['traj']['energy']:.2f} / {ph['traj']['forces']:.2f}",
-         _closer(ph, {"energy": "energy", "forces": "forces"})),
-        ("Swing-up on MuJoCo (L_prop design)",
-         f"{co['success_rate'] * 100:.0f} % of {co['episodes']}",
-         f"from rest: {'yes' if co['from_rest_success'] else 'no'}"
-         + (f", t_up {co['median_time_to_upright']:.2f} s" if co["median_time_to_upright"] else "")),
+        (
+            "  DeLaN L_traj",
+            f"{ph['traj']['energy']:.2f} / {ph['traj']['forces']:.2f}",
+            _closer(ph, {"energy": "energy", "forces": "forces"}),
+        ),
+        (
+            "Swing-up on MuJoCo (L_prop design)",
+            f"{co['success_rate'] * 100:.0f} % of {co['episodes']}",
+            f"from rest: {'yes' if co['from_rest_success'] else 'no'}"
+            + (f", t_up {co['median_time_to_upright']:.2f} s" if co["median_time_to_upright"] else ""),
+        ),
         ("Diagnosis (true: spring on α)", ", ".join(dg["found"]) or "none", ""),
-        ("  held-out trajectory RMSE", f"before {eb['trajectory_rmse']:.3g}",
-         f"after {ea['trajectory_rmse']:.3g}"),
+        ("  held-out trajectory RMSE", f"before {eb['trajectory_rmse']:.3g}", f"after {ea['trajectory_rmse']:.3g}"),
     ]
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)

@@ -318,6 +318,7 @@ EFFECT_UNITS = {n: k.units for n, k in EFFECT_KINDS.items()}
 #: the input effect of each input-dynamics form ("delay", "lag")
 INPUT_DYNAMICS_EFFECTS = {k.input_dynamics: n for n, k in EFFECT_KINDS.items() if k.input_dynamics}
 
+
 @dataclasses.dataclass(frozen=True)
 class Effect:
     """One physical effect on one joint (``"alpha"``, ``"beta"``, ``"p"``) or on the input (``"u"``).
@@ -344,8 +345,7 @@ class Effect:
             raise ValueError(f"effect {self.name!r}: play must be >= 0 (rad or m), got {self.play!r}")
         if not (math.isfinite(self.stribeck_velocity) and self.stribeck_velocity > 0):
             raise ValueError(
-                f"effect {self.name!r}: stribeck_velocity must be > 0 (rad/s or m/s), "
-                f"got {self.stribeck_velocity!r}"
+                f"effect {self.name!r}: stribeck_velocity must be > 0 (rad/s or m/s), got {self.stribeck_velocity!r}"
             )
 
     @property
@@ -388,7 +388,9 @@ class Effect:
             )
         if self.kind.has_memory and not self.kind.on_input:
             raise ValueError(f"{self.name} has memory (its moving neutral): use CableNeutral(effect)")
-        raise ValueError(f"{self.name!r} is not a force law on a joint (it acts through {self.kind.home or 'the input'})")
+        raise ValueError(
+            f"{self.name!r} is not a force law on a joint (it acts through {self.kind.home or 'the input'})"
+        )
 
     def dry_friction_limit(self, xp: Any = jnp) -> Callable[[Any], Any]:
         """The largest force this dry friction exerts, as a law of q̇_j (N·m or N): F_c for
@@ -517,9 +519,7 @@ class WithEffects(AbstractLagrangianSystem):
         effects = tuple(effects)
         for e in effects:
             if e.kind.has_memory:
-                raise ValueError(
-                    f"{e.name} has no memoryless Lagrangian form (it has a state); use {e.kind.home}"
-                )
+                raise ValueError(f"{e.name} has no memoryless Lagrangian form (it has a state); use {e.kind.home}")
             if e.joint != "u":
                 e.joint_index(base.spec)
         self.base = base

@@ -125,15 +125,11 @@ class AbstractLagrangianSystem(eqx.Module):
         """Potential energy V(q), a scalar."""
 
     @abc.abstractmethod
-    def nonconservative_force(
-        self, q: Float[Array, " n"], qd: Float[Array, " n"]
-    ) -> Float[Array, " n"]:
+    def nonconservative_force(self, q: Float[Array, " n"], qd: Float[Array, " n"]) -> Float[Array, " n"]:
         """Generalized non-conservative force τ_NC(q, q̇)."""
 
     @abc.abstractmethod
-    def input_force(
-        self, q: Float[Array, " n"], qd: Float[Array, " n"], u: Float[Array, " m"]
-    ) -> Float[Array, " n"]:
+    def input_force(self, q: Float[Array, " n"], qd: Float[Array, " n"], u: Float[Array, " m"]) -> Float[Array, " n"]:
         """Generalized input force τ_u(q, q̇, u)."""
 
     # -- derived quantities, delegating to the module functions (the one place they live) --
@@ -200,9 +196,7 @@ def potential_derived_force(system: AbstractLagrangianSystem, q, qd) -> Float[Ar
     return jax.grad(lagrangian, argnums=1)(system, q, qd)
 
 
-def inverse_dynamics_terms(
-    system: AbstractLagrangianSystem, q, qd, qdd
-) -> InverseDynamicsTerms:
+def inverse_dynamics_terms(system: AbstractLagrangianSystem, q, qd, qdd) -> InverseDynamicsTerms:
     """Inertial, Coriolis and potential-derived parts at (q, q̇, q̈)."""
     return InverseDynamicsTerms(
         inertial=system.mass_matrix(q) @ qdd,
@@ -214,12 +208,7 @@ def inverse_dynamics_terms(
 def inverse_dynamics(system: AbstractLagrangianSystem, q, qd, qdd) -> Float[Array, " n"]:
     """The input force τ_u needed for acceleration q̈: inertial + Coriolis − ∂L/∂q − τ_NC."""
     terms = inverse_dynamics_terms(system, q, qd, qdd)
-    return (
-        terms.inertial
-        + terms.coriolis
-        - terms.potential
-        - system.nonconservative_force(q, qd)
-    )
+    return terms.inertial + terms.coriolis - terms.potential - system.nonconservative_force(q, qd)
 
 
 def solve_mass_matrix(M: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:
@@ -343,7 +332,11 @@ def hermite_states(
 
 
 def interval_quadrature(
-    g, q: Float[Array, "T n"], qd: Float[Array, "T n"], u: Float[Array, "T m"], dt: float,
+    g,
+    q: Float[Array, "T n"],
+    qd: Float[Array, "T n"],
+    u: Float[Array, "T m"],
+    dt: float,
     rule: QuadratureRule = "trapezoid",
 ) -> Float[Array, " K *rest"]:
     """∫ g(q, q̇, u) dt over the intervals of ``rule``, for a per-sample function ``g``.
@@ -414,8 +407,10 @@ def integral_terms(
     p = jax.vmap(lambda q_, qd_: momentum(system, q_, qd_))(q, qd)
 
     def forces(q_, qd_, u_):
-        return (potential_derived_force(system, q_, qd_) + system.nonconservative_force(q_, qd_),
-                system.input_force(q_, qd_, u_))
+        return (
+            potential_derived_force(system, q_, qd_) + system.nonconservative_force(q_, qd_),
+            system.input_force(q_, qd_, u_),
+        )
 
     if rule == "hermite":  # one pass over the interior nodes for both integrands
         f, tau_u = interval_quadrature(lambda *a: jnp.stack(forces(*a)), q, qd, u, dt, rule).swapaxes(0, 1)

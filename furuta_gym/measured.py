@@ -82,8 +82,7 @@ def skip_start(tr: Trajectory, seconds: float) -> Trajectory:
     if not seconds > 0:
         return tr
     keep = tr.t >= tr.t[0] + seconds - 1e-9
-    return Trajectory(t=tr.t[keep], q=tr.q[keep], u=tr.u[keep],
-                      qd=None if tr.qd is None else tr.qd[keep], name=tr.name)
+    return Trajectory(t=tr.t[keep], q=tr.q[keep], u=tr.u[keep], qd=None if tr.qd is None else tr.qd[keep], name=tr.name)
 
 
 def split_elementary(tr: Trajectory, seconds: float | None) -> list[Trajectory]:
@@ -98,8 +97,9 @@ def split_elementary(tr: Trajectory, seconds: float | None) -> list[Trajectory]:
     out = []
     for k in range(len(tr) // n):
         s = slice(k * n, (k + 1) * n)
-        out.append(Trajectory(t=tr.t[s], q=tr.q[s], u=tr.u[s],
-                              qd=None if tr.qd is None else tr.qd[s], name=f"{tr.name}:{k}"))
+        out.append(
+            Trajectory(t=tr.t[s], q=tr.q[s], u=tr.u[s], qd=None if tr.qd is None else tr.qd[s], name=f"{tr.name}:{k}")
+        )
     return out
 
 
@@ -180,6 +180,7 @@ def window_predictions(model, x0, us, dt: float, substeps: int = 4, batch: int =
     key = (static, jax.tree_util.tree_structure(params), us.shape[1:], float(dt), substeps, batch)
     fn = _ROLLOUTS.get(key)
     if fn is None:
+
         def one(p, x, u):
             return rollout_zoh(eqx.combine(p, static), x, u, dt, substeps)
 
@@ -192,8 +193,15 @@ def window_predictions(model, x0, us, dt: float, substeps: int = 4, batch: int =
     return np.concatenate(out)
 
 
-def window_errors(model, trajs: Sequence[Trajectory], seconds: float, *, stride: float | None = None,
-                  substeps: int = 4, divergence_bound: float = 1e6) -> dict:
+def window_errors(
+    model,
+    trajs: Sequence[Trajectory],
+    seconds: float,
+    *,
+    stride: float | None = None,
+    substeps: int = 4,
+    divergence_bound: float = 1e6,
+) -> dict:
     """Per-state errors of ``model``'s open-loop predictions over short windows of ``trajs``
     (:func:`prediction_windows`, :func:`window_predictions`), pooled over windows and samples.
 
@@ -212,5 +220,10 @@ def window_errors(model, trajs: Sequence[Trajectory], seconds: float, *, stride:
     names = model.spec.state_names
     rmse = {k: (float(np.sqrt(np.mean(err[:, i] ** 2))) if err.size else None) for i, k in enumerate(names)}
     log10 = {k: DIVERGED if bad.any() else (math.log10(v) if v else -math.inf) for k, v in rmse.items()}
-    return {"log10_rmse": log10, "rmse": rmse, "n_windows": int(len(x0)), "n_diverged": int(bad.sum()),
-            "window_seconds": float(seconds)}
+    return {
+        "log10_rmse": log10,
+        "rmse": rmse,
+        "n_windows": int(len(x0)),
+        "n_diverged": int(bad.sum()),
+        "window_seconds": float(seconds),
+    }

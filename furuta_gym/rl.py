@@ -27,8 +27,15 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float, PRNGKeyArray
 
-__all__ = ["PPOConfig", "Policy", "ObservationNormalizer", "ActorCritic", "train_ppo", "episode_returns",
-           "GymnasiumPolicy"]
+__all__ = [
+    "PPOConfig",
+    "Policy",
+    "ObservationNormalizer",
+    "ActorCritic",
+    "train_ppo",
+    "episode_returns",
+    "GymnasiumPolicy",
+]
 
 _NET_DTYPE = jnp.float32  # networks in float32: the env's physics stays float64
 
@@ -158,12 +165,20 @@ def _collect(env, params, config: PPOConfig, static, runner: _Runner):
         done = terminated | truncated
         final = jax.vmap(norm)(info["final_observation"])
         transition = _Transition(
-            obs, action, jax.vmap(net.log_prob)(obs, action), jax.vmap(net.critic)(obs),
-            reward.astype(_NET_DTYPE), terminated, done, jax.vmap(net.critic)(final))
+            obs,
+            action,
+            jax.vmap(net.log_prob)(obs, action),
+            jax.vmap(net.critic)(obs),
+            reward.astype(_NET_DTYPE),
+            terminated,
+            done,
+            jax.vmap(net.critic)(final),
+        )
         episode_return = runner.episode_return + reward
         finished = (jnp.where(done, episode_return, 0.0), done)
-        runner = runner._replace(env_state=env_state, obs=next_obs, key=key,
-                                 episode_return=jnp.where(done, 0.0, episode_return))
+        runner = runner._replace(
+            env_state=env_state, obs=next_obs, key=key, episode_return=jnp.where(done, 0.0, episode_return)
+        )
         return runner, (transition, finished, runner.obs)
 
     runner, (batch, finished, raw_obs) = jax.lax.scan(one, runner, None, config.num_steps)
@@ -215,8 +230,9 @@ def _update(runner: _Runner, static, batch, adv, target, optimizer, config: PPOC
         return jax.lax.scan(minibatch, (net, opt_state), order)[0], None
 
     key, k_epochs = jax.random.split(runner.key)
-    (net, opt_state), _ = jax.lax.scan(epoch, (runner.net, runner.opt_state),
-                                       jax.random.split(k_epochs, config.update_epochs))
+    (net, opt_state), _ = jax.lax.scan(
+        epoch, (runner.net, runner.opt_state), jax.random.split(k_epochs, config.update_epochs)
+    )
     return runner._replace(net=net, opt_state=opt_state, key=key)
 
 
@@ -238,8 +254,15 @@ def train_ppo(env, params, config: PPOConfig, key: PRNGKeyArray):
     optimizer = _optimizer(config)
     obs, env_state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, config.num_envs), params)
     arrays, static = eqx.partition(net, eqx.is_array)
-    runner = _Runner(arrays, optimizer.init(arrays), ObservationNormalizer.empty(obs_size),
-                     env_state, obs, jnp.zeros(config.num_envs), k_run)
+    runner = _Runner(
+        arrays,
+        optimizer.init(arrays),
+        ObservationNormalizer.empty(obs_size),
+        env_state,
+        obs,
+        jnp.zeros(config.num_envs),
+        k_run,
+    )
 
     def update(runner, _):
         runner, batch, mean_return, episodes = _collect(env, params, config, static, runner)
@@ -248,7 +271,12 @@ def train_ppo(env, params, config: PPOConfig, key: PRNGKeyArray):
 
     runner, (returns, episodes) = jax.lax.scan(update, runner, None, config.num_updates)
     low, high = jnp.asarray(space.low, _NET_DTYPE), jnp.asarray(space.high, _NET_DTYPE)
-    policy = Policy(eqx.combine(runner.net, static), runner.normalizer, jnp.broadcast_to(low, space.shape), jnp.broadcast_to(high, space.shape))
+    policy = Policy(
+        eqx.combine(runner.net, static),
+        runner.normalizer,
+        jnp.broadcast_to(low, space.shape),
+        jnp.broadcast_to(high, space.shape),
+    )
     return policy, {"return": returns, "episodes": episodes}
 
 

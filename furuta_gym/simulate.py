@@ -96,9 +96,7 @@ def simulate(
 
         jump_ts = ts
     else:
-        raise ValueError(
-            f"input_interpolation must be 'linear' or 'zoh', got {input_interpolation!r}"
-        )
+        raise ValueError(f"input_interpolation must be 'linear' or 'zoh', got {input_interpolation!r}")
 
     def f(t, x, args):
         return _vector_field_once(system, x, u_at(t))
@@ -151,8 +149,7 @@ def rk4_step(system: AbstractLagrangianSystem, x, u, h, field: Callable | None =
     return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
-def rk4_zoh_step(system: AbstractLagrangianSystem, x, u, dt: float, substeps: int = 1,
-                 field: Callable | None = None):
+def rk4_zoh_step(system: AbstractLagrangianSystem, x, u, dt: float, substeps: int = 1, field: Callable | None = None):
     """Advance one control period ``dt`` with ``u`` held, in ``substeps`` RK4 steps."""
     h = dt / substeps
     return jax.lax.fori_loop(0, substeps, lambda _, x_: rk4_step(system, x_, u, h, field), x)

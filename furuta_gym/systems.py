@@ -37,6 +37,4 @@ def get_spec(name: str) -> SystemSpec:
     try:
         return SYSTEMS[name]
     except KeyError:
-        raise ValueError(
-            f"unknown system {name!r}: expected one of {sorted(SYSTEMS)}"
-        ) from None
+        raise ValueError(f"unknown system {name!r}: expected one of {sorted(SYSTEMS)}") from None

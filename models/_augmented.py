@@ -65,8 +65,20 @@ class ForceNetwork(eqx.Module):
     damping_scale: float = eqx.field(static=True)
     odd_in_velocity: bool = eqx.field(static=True)
 
-    def __init__(self, spec, *, key, hidden, force_scale, position_scale, velocity_scale, activation="tanh",
-                 linear_velocity=True, damping_scale=None, odd_in_velocity=False):
+    def __init__(
+        self,
+        spec,
+        *,
+        key,
+        hidden,
+        force_scale,
+        position_scale,
+        velocity_scale,
+        activation="tanh",
+        linear_velocity=True,
+        damping_scale=None,
+        odd_in_velocity=False,
+    ):
         n = spec.n_dof
         self.net = MLP(feature_size(spec) + n, n, tuple(hidden), key=key, activation=activation, final_scale=0.1)
         # a string must name the per-joint term; anything else is read as a flag (hyper-parameters
@@ -91,10 +103,18 @@ class ForceNetwork(eqx.Module):
     def from_hparams(cls, spec, hp: dict[str, Any], *, hidden, key) -> "ForceNetwork":
         """The F_a of a model whose hyper-parameters ``hp`` hold :func:`force_hparams`' keys and
         the feature scales; ``hidden`` its layer widths."""
-        return cls(spec, key=key, hidden=tuple(hidden), force_scale=hp["force_scale"],
-                   position_scale=hp["position_scale"], velocity_scale=hp["velocity_scale"],
-                   activation=hp["force_activation"], linear_velocity=hp["linear_velocity"],
-                   damping_scale=hp["damping_scale"], odd_in_velocity=hp["odd_in_velocity"])
+        return cls(
+            spec,
+            key=key,
+            hidden=tuple(hidden),
+            force_scale=hp["force_scale"],
+            position_scale=hp["position_scale"],
+            velocity_scale=hp["velocity_scale"],
+            activation=hp["force_activation"],
+            linear_velocity=hp["linear_velocity"],
+            damping_scale=hp["damping_scale"],
+            odd_in_velocity=hp["odd_in_velocity"],
+        )
 
     def __call__(self, q, qd):
         out = self.beyond_linear(q, qd)
@@ -161,14 +181,21 @@ class AugmentedDeLaN(AbstractAugmentedSystem):
         hp.update(force_hparams(spec, "adln"))
         unknown = set(hparams) - set(hp) - {"eps", "activation"}
         if unknown:
-            raise ValueError(f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}")
+            raise ValueError(
+                f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}"
+            )
         hp.update(hparams)
         kl, kf = jax.random.split(key)
         act = hp.get("activation", "tanh")
         self.lagrangian_nets = LagrangianNetworks(
-            spec, key=kl, hidden=tuple(hp["hidden"]), mass_scale=hp["mass_scale"],
-            potential_scale=hp["potential_scale"], position_scale=hp["position_scale"],
-            eps=hp.get("eps", 1e-3), activation=act,
+            spec,
+            key=kl,
+            hidden=tuple(hp["hidden"]),
+            mass_scale=hp["mass_scale"],
+            potential_scale=hp["potential_scale"],
+            position_scale=hp["position_scale"],
+            eps=hp.get("eps", 1e-3),
+            activation=act,
         )
         self.force_net = ForceNetwork.from_hparams(spec, hp, hidden=hp["force_hidden"], key=kf)
         self.scale = jnp.asarray(1.0)

@@ -83,10 +83,7 @@ class LagrangianNetworks(eqx.Module):
         below = {(int(r), int(c)): out[n + k] for k, (r, c) in enumerate(zip(*np.tril_indices(n, -1)))}
         zero = jnp.zeros_like(diag[0])
         return jnp.stack(
-            [
-                jnp.stack([diag[i] if i == j else below.get((i, j), zero) for j in range(n)])
-                for i in range(n)
-            ]
+            [jnp.stack([diag[i] if i == j else below.get((i, j), zero) for j in range(n)]) for i in range(n)]
         )
 
     def mass_matrix(self, q):
@@ -129,7 +126,9 @@ class DeLaN(AbstractLearnedSystem):
         hp = system_defaults(spec.name)
         unknown = set(hparams) - set(hp) - {"eps", "activation"}
         if unknown:
-            raise ValueError(f"unknown DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}")
+            raise ValueError(
+                f"unknown DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}"
+            )
         hp.update(hparams)
         self.lagrangian_nets = LagrangianNetworks(
             spec,

@@ -15,10 +15,26 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import FURUTA
-from ._system import RigidBodyCondition, check_rigid_bodies, Equilibrium, LumpedForm, MujocoTerms, SystemDefinition, parameter_defaults, scalar
+from ._system import (
+    RigidBodyCondition,
+    check_rigid_bodies,
+    Equilibrium,
+    LumpedForm,
+    MujocoTerms,
+    SystemDefinition,
+    parameter_defaults,
+    scalar,
+)
 
-__all__ = ["FURUTA_DEFINITION", "FurutaParameters", "Furuta", "furuta_energy", "furuta_lumped",
-           "furuta_mass_matrix", "furuta_potential"]
+__all__ = [
+    "FURUTA_DEFINITION",
+    "FurutaParameters",
+    "Furuta",
+    "furuta_energy",
+    "furuta_lumped",
+    "furuta_mass_matrix",
+    "furuta_potential",
+]
 
 
 class FurutaParameters(eqx.Module):
@@ -70,8 +86,13 @@ def furuta_lumped(p: FurutaParameters | Mapping[str, float]) -> dict[str, jnp.nd
     diagnosis fits these (furuta_gym.diagnose). ``p``: parameters, or a mapping of plain floats
     (then the values are floats: the env's per-step energy touches no JAX)."""
     q: Any = _FloatParameters(p) if isinstance(p, Mapping) else p  # FurutaParameters' fields
-    return {"J1": q.J1, "J1b": 0.25 * q.mp * q.Lp**2, "Jc": 0.5 * q.mp * q.Lr * q.Lp, "J2": q.J2,
-            "G": 0.5 * q.mp * q.g * q.Lp}
+    return {
+        "J1": q.J1,
+        "J1b": 0.25 * q.mp * q.Lp**2,
+        "Jc": 0.5 * q.mp * q.Lr * q.Lp,
+        "J2": q.J2,
+        "G": 0.5 * q.mp * q.g * q.Lp,
+    }
 
 
 def _mass_entries(J1, J1b, Jc, sin_beta, cos_beta):
@@ -95,8 +116,9 @@ def furuta_energy(lumped: Mapping[str, float], x) -> float:
     values: the envs' per-step ``info["energy"]``, where a JAX call would cost far more than the step."""
     _, beta, alpha_dot, beta_dot = x
     m11, m12 = _mass_entries(lumped["J1"], lumped["J1b"], lumped["Jc"], math.sin(beta), math.cos(beta))
-    kinetic = 0.5 * (m11 * alpha_dot * alpha_dot + 2.0 * m12 * alpha_dot * beta_dot
-                     + lumped["J2"] * beta_dot * beta_dot)
+    kinetic = 0.5 * (
+        m11 * alpha_dot * alpha_dot + 2.0 * m12 * alpha_dot * beta_dot + lumped["J2"] * beta_dot * beta_dot
+    )
     return kinetic + furuta_potential(lumped["G"], x, cos=math.cos)
 
 
@@ -127,12 +149,10 @@ class Furuta(AbstractLagrangianSystem):
         return jnp.stack([p.kt / p.Rm * (u[0] - p.km * qd[0]), jnp.zeros_like(u[0])])
 
 
-
 def _nominal_lumped() -> dict[str, float]:
     p = FurutaParameters()
     lumped = {k: float(v) for k, v in furuta_lumped(p).items()}
-    return {**lumped, "c_alpha": float(p.c_r + p.kt * p.km / p.Rm), "c_beta": float(p.c_p),
-            "K": float(p.kt / p.Rm)}
+    return {**lumped, "c_alpha": float(p.c_r + p.kt * p.km / p.Rm), "c_beta": float(p.c_p), "K": float(p.kt / p.Rm)}
 
 
 def _physical(p) -> bool:
@@ -141,9 +161,9 @@ def _physical(p) -> bool:
 
 
 def _anchor_note(nominal, forced) -> str:
-    return ("scale anchored on the pendulum gravity term G = 0.5*mp*g*Lp = "
-            f"{nominal['G']:.6g} N m (nominal)"
-            + ("; everything else, including the motor gain K, is fitted" if forced else ""))
+    return f"scale anchored on the pendulum gravity term G = 0.5*mp*g*Lp = {nominal['G']:.6g} N m (nominal)" + (
+        "; everything else, including the motor gain K, is fitted" if forced else ""
+    )
 
 
 # Rotor viscous friction and back-EMF are the same regressor (−α̇) on any data: one parameter.
@@ -187,20 +207,28 @@ def write_furuta_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
     """The QUBE-Servo 2's bodies (the pendulum a point mass at Lp/2 plus hinge armature = the
     rest of Jp) and gravity; viscous friction native, the motor with its back-EMF as bias."""
     model.body_mass[model.body("rotor").id] = p["mr"]
-    _write_furuta_bodies(model, p["mr"] * p["Lr"] ** 2 / 12.0, p["Lr"], p["mp"], 0.5 * p["Lp"],
-                         p["mp"] * p["Lp"] ** 2 / 12.0, p["g"])
-    return MujocoTerms(stiffness=(0.0, 0.0), damping=(p["c_r"], p["c_p"]),
-                       motor_gain=p["kt"] / p["Rm"], motor_bias=-p["kt"] * p["km"] / p["Rm"])
+    _write_furuta_bodies(
+        model, p["mr"] * p["Lr"] ** 2 / 12.0, p["Lr"], p["mp"], 0.5 * p["Lp"], p["mp"] * p["Lp"] ** 2 / 12.0, p["g"]
+    )
+    return MujocoTerms(
+        stiffness=(0.0, 0.0),
+        damping=(p["c_r"], p["c_p"]),
+        motor_gain=p["kt"] / p["Rm"],
+        motor_bias=-p["kt"] * p["km"] / p["Rm"],
+    )
 
 
 def furuta_body_conditions(b: Mapping[str, float]) -> tuple[RigidBodyCondition, ...]:
     """What a rigid pendulum on an arm needs of the lumped values (each > 0): G, J1b and Jc
     themselves, the rotor's own inertia J1 − m·r² = J1 − Jc²/J1b and the pendulum's J2 − J1b."""
     j1b = b["J1b"] if b["J1b"] != 0 else float("nan")
-    return (RigidBodyCondition("G", b["G"], ("G",)), RigidBodyCondition("J1b", b["J1b"], ("J1b",)),
-            RigidBodyCondition("Jc", b["Jc"], ("Jc",)),
-            RigidBodyCondition("J1 - m*r^2", b["J1"] - b["Jc"] ** 2 / j1b, ("J1", "Jc", "J1b")),
-            RigidBodyCondition("J2 - J1b", b["J2"] - b["J1b"] - _POINT_MASS_INERTIA, ("J2", "J1b")))
+    return (
+        RigidBodyCondition("G", b["G"], ("G",)),
+        RigidBodyCondition("J1b", b["J1b"], ("J1b",)),
+        RigidBodyCondition("Jc", b["Jc"], ("Jc",)),
+        RigidBodyCondition("J1 - m*r^2", b["J1"] - b["Jc"] ** 2 / j1b, ("J1", "Jc", "J1b")),
+        RigidBodyCondition("J2 - J1b", b["J2"] - b["J1b"] - _POINT_MASS_INERTIA, ("J2", "J1b")),
+    )
 
 
 def write_furuta_lumped_mujoco(model, b: Mapping[str, float]) -> MujocoTerms:
@@ -253,12 +281,16 @@ FURUTA_DEFINITION = SystemDefinition(
     excitations=("chirp", "sine_sweep", "sticky_sweep", "closed_loop_prbs"),
     encoders=True,
     table_title="Table 2 — Furuta pendulum (simulation)",
-    energy_panels=((1, -3.141592653589793, 3.141592653589793, 1.0, "β [rad] (α̇ = β̇ = 0)"),
-                   (3, -20.0, 20.0, 1.0, "β̇ [rad/s] (β = α̇ = 0)")),
+    energy_panels=(
+        (1, -3.141592653589793, 3.141592653589793, 1.0, "β [rad] (α̇ = β̇ = 0)"),
+        (3, -20.0, 20.0, 1.0, "β̇ [rad/s] (β = α̇ = 0)"),
+    ),
     scale_fit_on_forced_data=True,
     # gravity: the hanging pendulum is stable, the upright one unstable (whatever the rotor does)
-    equilibria=(Equilibrium("hanging (β = 0)", (0.0, 0.0), "beta", "minimum"),
-                Equilibrium("upright (β = π)", (0.0, math.pi), "beta", "maximum")),
+    equilibria=(
+        Equilibrium("hanging (β = 0)", (0.0, 0.0), "beta", "minimum"),
+        Equilibrium("upright (β = π)", (0.0, math.pi), "beta", "maximum"),
+    ),
     lumped_values=furuta_lumped,
     energy=furuta_energy,
     write_mujoco=write_furuta_mujoco,

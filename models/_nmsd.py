@@ -12,7 +12,15 @@ import jax.numpy as jnp
 
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import NMSD as NMSD_SPEC
-from ._system import RigidBodyCondition, check_rigid_bodies, Equilibrium, LumpedForm, MujocoTerms, SystemDefinition, scalar
+from ._system import (
+    RigidBodyCondition,
+    check_rigid_bodies,
+    Equilibrium,
+    LumpedForm,
+    MujocoTerms,
+    SystemDefinition,
+    scalar,
+)
 
 __all__ = ["NMSD_DEFINITION", "NMSDParameters", "NMSD", "nmsd_energy", "nmsd_potential"]
 
@@ -57,11 +65,9 @@ class NMSD(AbstractLagrangianSystem):
         return u[:1]
 
 
-
 def _nominal_lumped() -> dict[str, float]:
     p = NMSDParameters()
-    return {"m": float(p.m), "k1": float(p.k1), "k2": float(p.k2), "b1": float(p.b1),
-            "b2": float(p.b2), "gain": 1.0}
+    return {"m": float(p.m), "k1": float(p.k1), "k2": float(p.k2), "b1": float(p.b1), "b2": float(p.b2), "gain": 1.0}
 
 
 def _anchor_note(nominal, forced) -> str | None:
@@ -86,8 +92,7 @@ NMSD_LUMPED = LumpedForm(
 def write_nmsd_mujoco(model, p: Mapping[str, float]) -> MujocoTerms:
     """The mass; the linear spring and damper native, the cubic terms for the passive callback."""
     model.body_mass[model.body("mass").id] = p["m"]
-    return MujocoTerms(stiffness=(p["k1"],), damping=(p["b1"],), cubic_stiffness=(p["k2"],),
-                       cubic_damping=(p["b2"],))
+    return MujocoTerms(stiffness=(p["k1"],), damping=(p["b1"],), cubic_stiffness=(p["k2"],), cubic_damping=(p["b2"],))
 
 
 def nmsd_body_conditions(b: Mapping[str, float]) -> tuple[RigidBodyCondition, ...]:

@@ -17,7 +17,15 @@ import jax.numpy as jnp
 from .._x64 import ensure_x64
 from ..lagrangian import SystemSpec
 
-__all__ = ["Equilibrium", "LumpedForm", "RigidBodyCondition", "SystemDefinition", "check_rigid_bodies", "first_joint_input", "parameter_defaults"]
+__all__ = [
+    "Equilibrium",
+    "LumpedForm",
+    "RigidBodyCondition",
+    "SystemDefinition",
+    "check_rigid_bodies",
+    "first_joint_input",
+    "parameter_defaults",
+]
 
 #: ``b(name)``: the value of a lumped parameter (a traced array inside a fit)
 Lookup = Callable[[str], Any]
@@ -102,9 +110,11 @@ def check_rigid_bodies(lumped, conditions) -> None:
     """Raise, naming the first failed condition, if ``lumped`` has no rigid bodies."""
     for c in conditions:
         if not c.holds:
-            raise ValueError(f"lumped parameters {dict(lumped)}: {c.expression} = {c.value:.3g} must be > 0 "
-                             "for a MuJoCo body (no rigid bodies have these values; their lumped model runs "
-                             "them: dynamics='analytic')")
+            raise ValueError(
+                f"lumped parameters {dict(lumped)}: {c.expression} = {c.value:.3g} must be > 0 "
+                "for a MuJoCo body (no rigid bodies have these values; their lumped model runs "
+                "them: dynamics='analytic')"
+            )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -124,7 +124,7 @@ def _read(path: Path) -> tuple[dict, bytes]:
     raw = path.read_bytes()
     if not raw.startswith(MAGIC):
         raise CheckpointError(f"{path}: not a furuta-gym checkpoint (missing the header line)")
-    rest = raw[len(MAGIC):]
+    rest = raw[len(MAGIC) :]
     end = rest.find(b"\n")
     if end < 0:
         raise CheckpointError(f"{path}: corrupt checkpoint (truncated JSON header)")
@@ -194,9 +194,7 @@ def _skeleton(header: dict, path: Path, expected_system: str | None, expected_ki
     if expected_system is not None:
         want = get_spec(expected_system).name
         if system != want:
-            raise CheckpointError(
-                f"{path}: this checkpoint is a {system!r} model; expected a {want!r} model"
-            )
+            raise CheckpointError(f"{path}: this checkpoint is a {system!r} model; expected a {want!r} model")
     if expected_kind is not None and kind != expected_kind:
         raise CheckpointError(f"{path}: this checkpoint is a {kind!r} model; expected {expected_kind!r}")
     if kind not in MODEL_KINDS:
@@ -283,7 +281,9 @@ def save_training_state(path: str | Path, model, opt_state, header_extra: dict, 
     return path
 
 
-def load_training_state(path: str | Path, model_skeleton, opt_state_skeleton, *, with_best: bool = False) -> tuple[Any, ...]:
+def load_training_state(
+    path: str | Path, model_skeleton, opt_state_skeleton, *, with_best: bool = False
+) -> tuple[Any, ...]:
     """(model, opt_state, header) from :func:`save_training_state`; skeletons give the structure.
     ``with_best``: (model, opt_state, header, best model or None)."""
     path = Path(path)

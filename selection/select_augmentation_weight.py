@@ -32,9 +32,15 @@ def _config(system: str, kind: str, weight: float):
     """The validation run of one candidate μ."""
     from furuta_gym.training.reproduce import ReproduceConfig
 
-    return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), split="validation",
-                           train_overrides={"augmentation_weight": weight}, figures=False,
-                           progress=False, jobs=1)
+    return ReproduceConfig(
+        systems=(system,),
+        pairs=((kind, "prop"),),
+        split="validation",
+        train_overrides={"augmentation_weight": weight},
+        figures=False,
+        progress=False,
+        jobs=1,
+    )
 
 
 def _train(system: str, kind: str, weight: float, out: Path) -> None:
@@ -42,7 +48,12 @@ def _train(system: str, kind: str, weight: float, out: Path) -> None:
     from furuta_gym.training.reproduce import reproduce
 
     furuta_gym.enable_x64()
-    reproduce(out, _config(system, kind, weight), command=f"selection/select_augmentation_weight.py μ={weight!r}", log=lambda msg: None)
+    reproduce(
+        out,
+        _config(system, kind, weight),
+        command=f"selection/select_augmentation_weight.py μ={weight!r}",
+        log=lambda msg: None,
+    )
 
 
 def _run_dir(out: Path, system: str, kind: str, seed: int = 0) -> Path:
@@ -73,9 +84,15 @@ def _score(system: str, kind: str, runs: dict, seeds: tuple[int, ...] = (0,)) ->
             return DIVERGED_SCORE if v in (DIVERGED, FAILED) else float(v)
 
         # a cell shows DIVERGED if any seed's prediction diverged; the criterion counts it as +2
-        sets = {label: {k: DIVERGED if any(p[label][k] in (DIVERGED, FAILED) for p in per_seed)
-                        else float(np.mean([float(p[label][k]) for p in per_seed])) for k in per_seed[0][label]}
-                for label in per_seed[0]}
+        sets = {
+            label: {
+                k: DIVERGED
+                if any(p[label][k] in (DIVERGED, FAILED) for p in per_seed)
+                else float(np.mean([float(p[label][k]) for p in per_seed]))
+                for k in per_seed[0][label]
+            }
+            for label in per_seed[0]
+        }
         seed_means = [float(np.mean([value(v) for cells in p.values() for v in cells.values()])) for p in per_seed]
         scores[key] = {"mean": float(np.mean(seed_means)), "seed_means": seed_means, "sets": sets}
     return scores
@@ -105,8 +122,10 @@ def main(argv=None) -> None:
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         list(pool.map(_train, [args.system] * len(runs), [args.kind] * len(runs), runs, runs.values()))
     # what each model cost when it was trained (a run reused from an earlier invocation included)
-    seconds = {w: json.loads((_run_dir(out, args.system, args.kind) / "metrics.json").read_text())["_seconds"]["train"]
-               for w, out in runs.items()}
+    seconds = {
+        w: json.loads((_run_dir(out, args.system, args.kind) / "metrics.json").read_text())["_seconds"]["train"]
+        for w, out in runs.items()
+    }
     scores = _score(args.system, args.kind, runs)
     best = min(scores, key=lambda w: scores[w]["mean"])
     sets = list(next(iter(scores.values()))["sets"])
@@ -133,10 +152,20 @@ def main(argv=None) -> None:
         lines.append(f"| {w:g} | {text} | **{sc['mean']:.3f}**{mark} |")
     folder.mkdir(parents=True, exist_ok=True)
     (args.out / f"{args.system}_{args.kind}.md").write_text("\n".join(lines) + "\n")
-    (args.out / f"{args.system}_{args.kind}.json").write_text(json.dumps(
-        {"system": args.system, "kind": args.kind, "split": "validation", "chosen": best,
-         "scores": {f"{w:g}": sc for w, sc in scores.items()}, "train_seconds": {f"{w:g}": s for w, s in seconds.items()}},
-        indent=1) + "\n")
+    (args.out / f"{args.system}_{args.kind}.json").write_text(
+        json.dumps(
+            {
+                "system": args.system,
+                "kind": args.kind,
+                "split": "validation",
+                "chosen": best,
+                "scores": {f"{w:g}": sc for w, sc in scores.items()},
+                "train_seconds": {f"{w:g}": s for w, s in seconds.items()},
+            },
+            indent=1,
+        )
+        + "\n"
+    )
     print("\n".join(lines))
 
 

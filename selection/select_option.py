@@ -64,20 +64,30 @@ def _config(system: str, kind: str, where: str, name: str, value, seeds: int | t
 
     override = {name: value}
     seeds = tuple(range(seeds)) if isinstance(seeds, int) else tuple(seeds)
-    return ReproduceConfig(systems=(system,), pairs=((kind, "prop"),), seeds=seeds,
-                           figures=False, progress=False, jobs=1, split="validation",
-                           train_overrides=override if where == "train" else None,
-                           model_overrides=override if where == "model" else None)
+    return ReproduceConfig(
+        systems=(system,),
+        pairs=((kind, "prop"),),
+        seeds=seeds,
+        figures=False,
+        progress=False,
+        jobs=1,
+        split="validation",
+        train_overrides=override if where == "train" else None,
+        model_overrides=override if where == "model" else None,
+    )
 
 
-def _train(system: str, kind: str, where: str, name: str, value, out: Path,
-           seeds: int | tuple[int, ...] = 1) -> None:
+def _train(system: str, kind: str, where: str, name: str, value, out: Path, seeds: int | tuple[int, ...] = 1) -> None:
     import furuta_gym
     from furuta_gym.training.reproduce import reproduce
 
     furuta_gym.enable_x64()
-    reproduce(out, _config(system, kind, where, name, value, seeds),
-              command=f"selection/select_option.py {system} {kind} {where} {name}={value!r}", log=lambda msg: None)
+    reproduce(
+        out,
+        _config(system, kind, where, name, value, seeds),
+        command=f"selection/select_option.py {system} {kind} {where} {name}={value!r}",
+        log=lambda msg: None,
+    )
 
 
 def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path, seed: int = 0) -> bool:
@@ -120,10 +130,14 @@ def choose(seed_means: dict[str, list[float]], several_seeds: bool | None = None
             raise ValueError(f"{value!r} has {len(means)} seed means, {first!r} has {len(seed_means[first])}")
         diff = [b - a for a, b in zip(seed_means[first], means)]
         if len(means) < len(seed_means[first]) and (not diff or diff[-1] < 0):
-            raise ValueError(f"{value!r} has {len(means)} seed means, {first!r} has "
-                             f"{len(seed_means[first])}, and it was not beaten on its last seed")
-        paired[value] = {"differences": diff,
-                         "every_seed": len(means) == len(seed_means[first]) and all(d < 0 for d in diff)}
+            raise ValueError(
+                f"{value!r} has {len(means)} seed means, {first!r} has "
+                f"{len(seed_means[first])}, and it was not beaten on its last seed"
+            )
+        paired[value] = {
+            "differences": diff,
+            "every_seed": len(means) == len(seed_means[first]) and all(d < 0 for d in diff),
+        }
     better = [v for v in values[1:] if paired[v]["every_seed"]]
     chosen = min(better, key=lambda v: float(np.mean(seed_means[v]))) if better else first
     return chosen, paired
@@ -176,11 +190,17 @@ def _arguments(argv) -> argparse.Namespace:
     option = parser.add_mutually_exclusive_group(required=True)
     option.add_argument("--train", nargs="+", metavar=("NAME", "VALUE"), help="a TrainConfig field and its values")
     option.add_argument("--model", nargs="+", metavar=("NAME", "VALUE"), help="a model option and its values")
-    parser.add_argument("--reuse", type=Path, nargs="+", default=[],
-                        help="folders holding runs/ (a candidate of another selection: OUT/<system>_<kind>/<value>) "
-                             "to copy matching runs from (the first that has one)")
-    parser.add_argument("--seeds", type=int, default=1,
-                        help="model seeds per candidate (0 … N-1); the criterion is their mean")
+    parser.add_argument(
+        "--reuse",
+        type=Path,
+        nargs="+",
+        default=[],
+        help="folders holding runs/ (a candidate of another selection: OUT/<system>_<kind>/<value>) "
+        "to copy matching runs from (the first that has one)",
+    )
+    parser.add_argument(
+        "--seeds", type=int, default=1, help="model seeds per candidate (0 … N-1); the criterion is their mean"
+    )
     args = parse_selection_args(parser, argv, "results/selection")
     args.where = "train" if args.train else "model"
     args.name, *args.values = args.train or args.model
@@ -196,22 +216,44 @@ def _train_candidates(args) -> tuple[list, dict, dict]:
     (kind, value, config, out), {(kind, value): seeds trained} and {(kind, value): {seed: the
     folder its run was copied from}}."""
     seeds = tuple(range(args.seeds))
-    candidates = [(kind, text, _config(args.system, kind, args.where, args.name, _parse(text), args.seeds),
-                   args.out / f"{args.system}_{kind}" / text) for kind in args.kinds for text in args.values]
-    copied = {(k, t): {seed: str(src) for seed in seeds
-                       for src in [next((r for r in args.reuse
-                                         if _copy_matching_run(r, args.system, k, cfg, out, seed)), None)]
-                       if src is not None}
-              for k, t, cfg, out in candidates}
+    candidates = [
+        (
+            kind,
+            text,
+            _config(args.system, kind, args.where, args.name, _parse(text), args.seeds),
+            args.out / f"{args.system}_{kind}" / text,
+        )
+        for kind in args.kinds
+        for text in args.values
+    ]
+    copied = {
+        (k, t): {
+            seed: str(src)
+            for seed in seeds
+            for src in [next((r for r in args.reuse if _copy_matching_run(r, args.system, k, cfg, out, seed)), None)]
+            if src is not None
+        }
+        for k, t, cfg, out in candidates
+    }
     # spawn, not fork: comparing settings above already ran JAX, whose threads a forked child
     # would inherit mid-flight (it deadlocked)
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        def train(live, seed):
-            list(pool.map(_train, *zip(*[(args.system, k, args.where, args.name, _parse(t), out, (seed,))
-                                          for k, t, out in live])))
 
-        trained = _train_in_turn(args.values[0], [(k, t, out) for k, t, _, out in candidates], seeds, train,
-                                 lambda k, out, seed: _seed_mean(args.system, k, out, seed))
+        def train(live, seed):
+            list(
+                pool.map(
+                    _train,
+                    *zip(*[(args.system, k, args.where, args.name, _parse(t), out, (seed,)) for k, t, out in live]),
+                )
+            )
+
+        trained = _train_in_turn(
+            args.values[0],
+            [(k, t, out) for k, t, _, out in candidates],
+            seeds,
+            train,
+            lambda k, out, seed: _seed_mean(args.system, k, out, seed),
+        )
     return candidates, trained, copied
 
 
@@ -222,8 +264,10 @@ def _scores(args, candidates, trained, copied) -> dict[str, dict[str, dict]]:
     for kind, text, _, out in candidates:
         own = tuple(trained[(kind, text)])
         score = _score(args.system, kind, {text: out}, own)[text]
-        seconds = [json.loads((_run_dir(out, args.system, kind, seed) / "metrics.json").read_text())
-                   ["_seconds"]["train"] for seed in own]
+        seconds = [
+            json.loads((_run_dir(out, args.system, kind, seed) / "metrics.json").read_text())["_seconds"]["train"]
+            for seed in own
+        ]
         score["seeds"] = list(own)
         score["train_seconds"] = sum(seconds) / len(seconds)
         score["reused_from"] = {s: src for s, src in copied[(kind, text)].items() if s in own} or None
@@ -240,21 +284,30 @@ def _header(args, machine: dict, sets: list, names: list) -> list[str]:
         f"`python selection/select_option.py --system {args.system} --kinds {' '.join(args.kinds)} "
         f"--{args.where} {args.name} {' '.join(args.values)}"
         + (f" --seeds {args.seeds}" if several else "")
-        + (f" --reuse {' '.join(map(str, args.reuse))}" if args.reuse else "") + f" --out {args.out}`, "
+        + (f" --reuse {' '.join(map(str, args.reuse))}" if args.reuse else "")
+        + f" --out {args.out}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', 'cpu')}, "
         f"{machine['cpu_count']} cores. Training seconds from each run's metrics.json (runs trained "
         "beside others are slower than alone)"
-        + (f"; cells, mean and seconds are means over the model seeds a value was trained on "
-           f"({', '.join(map(str, range(args.seeds)))} in turn; a value beaten on a seed is not trained on later "
-           "ones), whose own means follow (± their standard deviation)" if several else "") + ".",
+        + (
+            f"; cells, mean and seconds are means over the model seeds a value was trained on "
+            f"({', '.join(map(str, range(args.seeds)))} in turn; a value beaten on a seed is not trained on later "
+            "ones), whose own means follow (± their standard deviation)"
+            if several
+            else ""
+        )
+        + ".",
         "",
         "Open-loop prediction log10 RMSE on the validation datasets (their own excitation; the test "
         "sets are never generated or scored). Lower is better; the mean is the criterion"
-        + (f", and a value replaces the recipe's ({first}) only if it is lower on every model seed"
-           if several else "") + ".",
+        + (f", and a value replaces the recipe's ({first}) only if it is lower on every model seed" if several else "")
+        + ".",
         "",
-        f"| model | {args.name} | " + " | ".join(f"{s} {n}" for s in sets for n in names) + " | mean |"
-        + (f" seeds | seed by seed vs {first} |" if several else "") + " train s |",
+        f"| model | {args.name} | "
+        + " | ".join(f"{s} {n}" for s in sets for n in names)
+        + " | mean |"
+        + (f" seeds | seed by seed vs {first} |" if several else "")
+        + " train s |",
         "|---|---|" + "---:|" * (len(sets) * len(names) + 2 + 2 * several),
     ]
 
@@ -279,10 +332,16 @@ def _decide(args, rows, sets: list, names: list) -> tuple[list[str], dict, dict]
                 mark += " ← chosen"
             reused = ""
             if sc["reused_from"]:
-                reused = " (reused)" if len(sc["reused_from"]) == len(sc["seeds"]) else f" (seed{'s' * (len(sc['reused_from']) > 1)} {', '.join(map(str, sc['reused_from']))} reused)"
+                reused = (
+                    " (reused)"
+                    if len(sc["reused_from"]) == len(sc["seeds"])
+                    else f" (seed{'s' * (len(sc['reused_from']) > 1)} {', '.join(map(str, sc['reused_from']))} reused)"
+                )
             per_seed = _seed_columns(sc, sc.get("vs_first"), args.seeds) if several else ""
-            lines.append(f"| {kind} | {text}{reused} | {cell_text} | **{sc['mean']:.3f}**{mark} |{per_seed}"
-                         f" {sc['train_seconds']:.0f} |")
+            lines.append(
+                f"| {kind} | {text}{reused} | {cell_text} | **{sc['mean']:.3f}**{mark} |{per_seed}"
+                f" {sc['train_seconds']:.0f} |"
+            )
     return lines, chosen, lowest
 
 
@@ -301,9 +360,20 @@ def main(argv=None) -> None:
     lines = _header(args, machine, sets, names) + table
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{args.system}.md").write_text("\n".join(lines) + "\n")
-    (args.out / f"{args.system}.json").write_text(json.dumps(
-        {"system": args.system, "option": {args.where: args.name}, "split": "validation",
-         "lower": lowest, "chosen": chosen, "scores": rows}, indent=1) + "\n")
+    (args.out / f"{args.system}.json").write_text(
+        json.dumps(
+            {
+                "system": args.system,
+                "option": {args.where: args.name},
+                "split": "validation",
+                "lower": lowest,
+                "chosen": chosen,
+                "scores": rows,
+            },
+            indent=1,
+        )
+        + "\n"
+    )
     print("\n".join(lines))
 
 

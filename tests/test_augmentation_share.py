@@ -23,9 +23,16 @@ def segments():
     u = 3.0 * chirp(t, 0.1, 1.1, 8.0)[:, None]
     xs = np.asarray(simulate(NMSD(), np.array([0.5, -1.0]), t, u, rtol=1e-10, atol=1e-12))
     n = 100
-    return [Trajectory(t[k * n : k * n + n + 1] - t[k * n], xs[k * n : k * n + n + 1, :1],
-                       u[k * n : k * n + n + 1], xs[k * n : k * n + n + 1, 1:], name=str(k))
-            for k in range(8)]
+    return [
+        Trajectory(
+            t[k * n : k * n + n + 1] - t[k * n],
+            xs[k * n : k * n + n + 1, :1],
+            u[k * n : k * n + n + 1],
+            xs[k * n : k * n + n + 1, 1:],
+            name=str(k),
+        )
+        for k in range(8)
+    ]
 
 
 def test_share_is_the_augmentation_velocity_change_relative_to_the_data_and_scale_free(segments):
@@ -41,14 +48,14 @@ def test_share_is_the_augmentation_velocity_change_relative_to_the_data_and_scal
     assert float(share) == pytest.approx(num / den, rel=1e-10)
     assert float(itau) == pytest.approx(float(integral_loss(model, w, rule="simpson", normalize="momentum")), rel=1e-12)
     # like L_Iτ on free data, the share cannot be lowered by shrinking the whole model
-    _, share3 = integral_loss_terms(model.with_scale(3.0), w, rule="simpson", normalize="momentum",
-                                    with_augmentation=True)
+    _, share3 = integral_loss_terms(
+        model.with_scale(3.0), w, rule="simpson", normalize="momentum", with_augmentation=True
+    )
     assert float(share3) == pytest.approx(float(share), rel=1e-10)
     # proposed_loss adds μ·P_a on top of L_Iτ + λ·L_traj
     short = make_windows(segments[:2], 3, stride=10)
     base = float(proposed_loss(model, w, short, 0.5, rule="simpson", normalize="momentum"))
-    with_mu = float(proposed_loss(model, w, short, 0.5, rule="simpson", normalize="momentum",
-                                  augmentation_weight=0.01))
+    with_mu = float(proposed_loss(model, w, short, 0.5, rule="simpson", normalize="momentum", augmentation_weight=0.01))
     assert with_mu - base == pytest.approx(0.01 * float(share), rel=1e-9)
 
 
@@ -64,12 +71,19 @@ def test_share_with_the_hermite_rule_integrates_at_its_interior_nodes(segments):
         q, qd, dt = x[:, :1], x[:, 1:], t[1] - t[0]
         total = 0.0
         for s in (0.5 - g, 0.5 + g):  # the cubic through (q, q̇) at both ends, written out here
-            qs = ((2 * s**3 - 3 * s**2 + 1) * q[:-1] + (-2 * s**3 + 3 * s**2) * q[1:]
-                  + dt * ((s**3 - 2 * s**2 + s) * qd[:-1] + (s**3 - s**2) * qd[1:]))
-            vs = ((6 * s**2 - 6 * s) * (q[:-1] - q[1:]) / dt + (3 * s**2 - 4 * s + 1) * qd[:-1]
-                  + (3 * s**2 - 2 * s) * qd[1:])
+            qs = (
+                (2 * s**3 - 3 * s**2 + 1) * q[:-1]
+                + (-2 * s**3 + 3 * s**2) * q[1:]
+                + dt * ((s**3 - 2 * s**2 + s) * qd[:-1] + (s**3 - s**2) * qd[1:])
+            )
+            vs = (
+                (6 * s**2 - 6 * s) * (q[:-1] - q[1:]) / dt
+                + (3 * s**2 - 4 * s + 1) * qd[:-1]
+                + (3 * s**2 - 2 * s) * qd[1:]
+            )
             acc = jax.vmap(lambda a, b: jnp.linalg.solve(model.mass_matrix(a), model.augmentation(a, b)))(
-                jnp.asarray(qs), jnp.asarray(vs))
+                jnp.asarray(qs), jnp.asarray(vs)
+            )
             total = total + 0.5 * dt * np.asarray(acc)
         num += float(np.sum(total**2))
         den += float(np.sum((qd[1:] - qd[:-1]) ** 2))
@@ -90,13 +104,15 @@ def test_weight_on_a_model_without_augmentation_or_negative_is_refused(segments)
 def test_the_weight_moves_a_spring_force_out_of_the_network_into_the_prior(segments):
     """L_Iτ alone is indifferent to whether the spring force sits in the prior (k1) or in F_a(p):
     started from a prior whose k1 is 30 % low, μ·P_a makes the prior take it back."""
-    cfg = dict(epochs=(300,), horizons=(None,), quadrature="simpson", learning_rate=1e-2, progress=False,
-               checkpoint_every=0)
+    cfg = dict(
+        epochs=(300,), horizons=(None,), quadrature="simpson", learning_rate=1e-2, progress=False, checkpoint_every=0
+    )
     hp = dict(prior=(("k1", 7.0),))
     runs = {}
     for mu in (0.0, 0.1):
-        model, history = train("aph", "nmsd", "prop", segments,
-                               TrainConfig.for_system("nmsd", augmentation_weight=mu, **cfg), hparams=hp)
+        model, history = train(
+            "aph", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", augmentation_weight=mu, **cfg), hparams=hp
+        )
         k1 = float(model.physical_parameters["k1"])
         runs[mu] = (k1, history[-1])
     (k1_free, h_free), (k1_mu, h_mu) = runs[0.0], runs[0.1]
@@ -165,10 +181,17 @@ def test_force_network_odd_in_velocity_holds_no_force_at_rest(system, kind):
 
 def test_only_augmented_delan_on_the_nmsd_has_an_odd_force_by_default():
     """The per-system choice made on validation data (models/_augmented.py, FORCE_DEFAULTS)."""
-    defaults = {(s, k): dict(make_model(s, k, 0).hparams)["odd_in_velocity"]
-                for s in ("nmsd", "furuta") for k in ("aph", "adln")}
-    assert defaults == {("nmsd", "aph"): False, ("nmsd", "adln"): True,
-                        ("furuta", "aph"): False, ("furuta", "adln"): False}
+    defaults = {
+        (s, k): dict(make_model(s, k, 0).hparams)["odd_in_velocity"]
+        for s in ("nmsd", "furuta")
+        for k in ("aph", "adln")
+    }
+    assert defaults == {
+        ("nmsd", "aph"): False,
+        ("nmsd", "adln"): True,
+        ("furuta", "aph"): False,
+        ("furuta", "adln"): False,
+    }
     assert make_model("nmsd", "adln", 0).force_net.odd_in_velocity is True
 
 
@@ -179,15 +202,15 @@ def test_checkpoints_from_before_the_force_network_choices_load_as_trained(tmp_p
 
     from furuta_gym.models import checkpoint as ckpt
 
-    old = make_model("furuta", "aph", jax.random.PRNGKey(2), prior_back_emf=True, linear_velocity=False,
-                     force_activation="tanh")
+    old = make_model(
+        "furuta", "aph", jax.random.PRNGKey(2), prior_back_emf=True, linear_velocity=False, force_activation="tanh"
+    )
     path = ckpt.save_model(tmp_path / "old.eqx", old)
     header, payload = ckpt._read(path)
     for key in ("prior_back_emf", "linear_velocity", "force_activation", "odd_in_velocity"):
         del header["hparams"][key]
     del header["format"]  # a form-1 header: written before the format was recorded
-    ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")},
-                old, overwrite=True)
+    ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")}, old, overwrite=True)
     assert "linear_velocity" not in json.dumps(ckpt.read_header(path)["hparams"])
     loaded = ckpt.load_model(path)
     q, qd, u = jnp.array([0.3, 1.0]), jnp.array([4.0, -2.0]), jnp.array([1.5])
@@ -210,8 +233,9 @@ def test_a_form_2_header_is_read_as_written_and_an_unknown_form_is_refused(tmp_p
     del header["hparams"]["odd_in_velocity"]
     ckpt._write(path, {k: v for k, v in header.items() if not k.startswith("payload")}, model, overwrite=True)
     assert ckpt.load_model(path).force_net.odd_in_velocity is True
-    ckpt._write(path, {**{k: v for k, v in header.items() if not k.startswith("payload")}, "format": 3},
-                model, overwrite=True)
+    ckpt._write(
+        path, {**{k: v for k, v in header.items() if not k.startswith("payload")}, "format": 3}, model, overwrite=True
+    )
     with pytest.raises(ckpt.CheckpointError, match=r"now\.eqx.*format 3"):
         ckpt.load_model(path)
 
@@ -244,10 +268,18 @@ def test_default_weight_is_on_for_both_augmented_kinds_and_zero_turns_it_off(seg
 
     assert set(AUGMENTATION_WEIGHT) == {(s, k) for s in ("furuta", "nmsd") for k in ("adln", "aph")}
     assert all(w > 0 for w in AUGMENTATION_WEIGHT.values())
-    cfg = TrainConfig.for_system("nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False,
-                                 checkpoint_every=0)
-    off = TrainConfig.for_system("nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False,
-                                 checkpoint_every=0, augmentation_weight=0.0)
+    cfg = TrainConfig.for_system(
+        "nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False, checkpoint_every=0
+    )
+    off = TrainConfig.for_system(
+        "nmsd",
+        epochs=(2,),
+        horizons=(None,),
+        quadrature="simpson",
+        progress=False,
+        checkpoint_every=0,
+        augmentation_weight=0.0,
+    )
     _, aph = train("aph", "nmsd", "prop", segments, off)
     _, adln = train("adln", "nmsd", "prop", segments, cfg)
     assert "fa_share" not in aph[-1] and aph[-1]["total"] == pytest.approx(aph[-1]["itau"], rel=1e-12)
@@ -266,8 +298,11 @@ def test_share_beyond_linear_leaves_the_viscous_term_free(segments):
     viscous = eqx.tree_at(lambda m: m.force_net.linear, model, jnp.array([[-0.7]]))
     # zero the network's last layer: F_a is then exactly W·q̇ (times the scales)
     last = viscous.force_net.net.layers[-1]
-    viscous = eqx.tree_at(lambda m: (m.force_net.net.layers[-1].weight, m.force_net.net.layers[-1].bias), viscous,
-                          (jnp.zeros_like(last.weight), jnp.zeros_like(last.bias)))
+    viscous = eqx.tree_at(
+        lambda m: (m.force_net.net.layers[-1].weight, m.force_net.net.layers[-1].bias),
+        viscous,
+        (jnp.zeros_like(last.weight), jnp.zeros_like(last.bias)),
+    )
     _, full = integral_loss_terms(viscous, w, with_augmentation=True)
     _, beyond = integral_loss_terms(viscous, w, with_augmentation=True, augmentation_part="beyond_linear")
     assert float(full) > 1e-3 and float(beyond) == 0.0

@@ -46,8 +46,18 @@ PRIMITIVE_CASES = {
     "reductions": lambda w, v: jnp.stack([jnp.max(w, axis=0), jnp.min(w, axis=0), jnp.prod(w[:2], axis=0)]),
     "cumulative": lambda w, v: jnp.concatenate([jnp.cumsum(w, axis=1).ravel(), jnp.cumsum(v[::-1])]),
     "where_clip_pow": lambda w, v: jnp.where(v > 0, jnp.clip(v, -0.5, 0.3), v**3 / (1 + v**2)),
-    "elementwise": lambda w, v: jnp.stack([jnp.exp(v), jnp.log1p(v**2), jnp.arctan2(v, 1.5), jnp.sign(v),
-                                           jnp.abs(v), jnp.cos(v), jnp.sqrt(v**2 + 1), jax.nn.sigmoid(v)]),
+    "elementwise": lambda w, v: jnp.stack(
+        [
+            jnp.exp(v),
+            jnp.log1p(v**2),
+            jnp.arctan2(v, 1.5),
+            jnp.sign(v),
+            jnp.abs(v),
+            jnp.cos(v),
+            jnp.sqrt(v**2 + 1),
+            jax.nn.sigmoid(v),
+        ]
+    ),
     "integers_and_iota": lambda w, v: jnp.arange(4) * v + (v > 0).astype(jnp.float64),
     "fori_loop": lambda w, v: jax.lax.fori_loop(0, 3, lambda i, x: jnp.tanh(w[:4] @ x) + i, v),
     "scan_with_outputs": _scan_with_outputs,
@@ -137,8 +147,13 @@ def test_c_kernel_env_equals_xla_kernel_env(name):
 def test_c_kernel_with_plant_effects_delay_randomisation_and_pickle(kind):
     # domain randomisation needs physical parameters: the analytic model has them, DeLaN not
     randomize = 0.1 if kind == "analytic" else None
-    kw = dict(dynamics=_dynamics("furuta", kind), plant=["coulomb", "cable_spring"],
-              actuation_delay=0.006, frame_skip=4, randomize=randomize)
+    kw = dict(
+        dynamics=_dynamics("furuta", kind),
+        plant=["coulomb", "cable_spring"],
+        actuation_delay=0.006,
+        frame_skip=4,
+        randomize=randomize,
+    )
     actions = np.random.default_rng(2).uniform(-5, 5, (200, 1))
     runs = {}
     for kernel in ("c", "xla"):
@@ -172,6 +187,7 @@ def test_c_kernel_broken_model_diverges_without_nan():
 
 
 # ----------------------------------------------------------------------------- the argument
+
 
 def test_kernel_argument_errors():
     with pytest.raises(ValueError, match=r"kernel must be one of \['auto', 'c', 'xla'\]"):

@@ -25,8 +25,9 @@ pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler on P
 
 NMSD_ID = "furuta_gym/NMSD-v0"
 V = np.random.default_rng(0).normal(size=4)
-as_root = pytest.mark.skipif(not hasattr(os, "getuid") or os.getuid() != 0,
-                             reason="simulating another user's file needs os.chown as root")
+as_root = pytest.mark.skipif(
+    not hasattr(os, "getuid") or os.getuid() != 0, reason="simulating another user's file needs os.chown as root"
+)
 
 
 @pytest.fixture
@@ -47,6 +48,7 @@ def _script(path, body):
 
 
 # ----------------------------------------------------------------- 1. checked against XLA
+
 
 def test_a_kernel_that_disagrees_with_xla_is_refused_with_a_warning(cache, monkeypatch):
     monkeypatch.setitem(translate._UNARY, "sin", "cos({0})")  # a translation bug
@@ -84,6 +86,7 @@ def test_a_good_kernel_is_checked_once_and_marked(cache, monkeypatch):
 
 
 # ------------------------------------------------------------------------ 2. the disk cache
+
 
 def test_the_cache_directory_is_private(cache):
     kernel = CKernel(lambda v: v * 3.0, V)
@@ -142,8 +145,11 @@ def test_eviction_keeps_the_newest_kernels(tmp_path):
             os.utime(path, (1000 + k, 1000 + k))
     kernel_cache._evict(tmp_path, keep=3)
     assert sorted(p.name for p in tmp_path.glob("*.so")) == ["kernel_3.so", "kernel_4.so", "kernel_5.so"]
-    assert sorted(p.name for p in tmp_path.glob("*.verified")) == ["kernel_3.verified", "kernel_4.verified",
-                                                                   "kernel_5.verified"]
+    assert sorted(p.name for p in tmp_path.glob("*.verified")) == [
+        "kernel_3.verified",
+        "kernel_4.verified",
+        "kernel_5.verified",
+    ]
 
 
 _WORKER = textwrap.dedent("""
@@ -160,8 +166,9 @@ def test_concurrent_processes_compile_a_kernel_once(tmp_path):
     # a slow compiler: both workers are waiting for the kernel at the same time
     wrapper = _script(tmp_path / "slow-cc", f'echo "$@" >> {log}\nsleep 1\nexec cc "$@"\n')
     env = dict(os.environ, CC=str(wrapper), FURUTA_GYM_CACHE=str(tmp_path / "cache"))
-    workers = [subprocess.Popen([sys.executable, "-c", _WORKER], env=env, stderr=subprocess.PIPE, text=True)
-               for _ in range(2)]
+    workers = [
+        subprocess.Popen([sys.executable, "-c", _WORKER], env=env, stderr=subprocess.PIPE, text=True) for _ in range(2)
+    ]
     for w in workers:
         assert w.wait(timeout=300) == 0, w.stderr.read()
     compiles = [line for line in log.read_text().splitlines() if "kernel.c" in line]
@@ -169,6 +176,7 @@ def test_concurrent_processes_compile_a_kernel_once(tmp_path):
 
 
 # ------------------------------------------------------------------------ 3. the primitives
+
 
 def _same_as_jax(fn, *args):
     kernel = CKernel(fn, *args)
@@ -190,8 +198,25 @@ def test_sign_of_signed_zero_is_the_zero_as_in_xla(cache):
 
 @pytest.mark.parametrize("dtype", ["int64", "int32", "int8", "uint8", "uint32"])
 def test_float_to_integer_saturates_and_nan_is_zero_as_in_xla(cache, dtype):
-    values = np.array([np.nan, np.inf, -np.inf, 1e300, -1e300, 2.0**63, -(2.0**63), 2.0**31, -(2.0**31) - 0.5,
-                       255.9, 256.0, -1.0, -0.5, 3.7, -3.7])
+    values = np.array(
+        [
+            np.nan,
+            np.inf,
+            -np.inf,
+            1e300,
+            -1e300,
+            2.0**63,
+            -(2.0**63),
+            2.0**31,
+            -(2.0**31) - 0.5,
+            255.9,
+            256.0,
+            -1.0,
+            -0.5,
+            3.7,
+            -3.7,
+        ]
+    )
     with np.errstate(over="ignore"):  # 1e300 as float32 is inf: meant
         narrow = values.astype(np.float32)
     _same_as_jax(lambda v, w: (v.astype(dtype), w.astype(dtype)), values, narrow)
@@ -199,8 +224,16 @@ def test_float_to_integer_saturates_and_nan_is_zero_as_in_xla(cache, dtype):
 
 def test_int64_extrema_above_two_to_the_53_are_exact(cache):
     x = np.array([2**60 + 1, 2**60 + 3, 2**60 + 2, -(2**62) - 1], dtype=np.int64)
-    _same_as_jax(lambda a: (jnp.max(a), jnp.min(a), jax.lax.cummax(a), jax.lax.cummin(a),
-                            jnp.clip(a, 2**60 + 2, 2**60 + 2 + 2**10)), x)
+    _same_as_jax(
+        lambda a: (
+            jnp.max(a),
+            jnp.min(a),
+            jax.lax.cummax(a),
+            jax.lax.cummin(a),
+            jnp.clip(a, 2**60 + 2, 2**60 + 2 + 2**10),
+        ),
+        x,
+    )
 
 
 def test_float32_nextafter_is_the_float32_neighbour(cache):
@@ -229,6 +262,7 @@ def test_optimization_barrier_passes_every_operand(cache):
 
 
 # ----------------------------------------------------------------------- 4. portability
+
 
 def test_cc_is_a_command_line(cache, tmp_path, monkeypatch):
     launcher = _script(tmp_path / "ccache", f'echo "$@" >> {tmp_path / "launched"}\nexec "$@"\n')

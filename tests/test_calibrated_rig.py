@@ -45,13 +45,21 @@ def test_a_plant_input_delay_is_the_input_seen_late():
 @pytest.fixture(scope="module")
 def rig_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("rig")
-    plant = Plant.nominal("furuta", effects=(Effect("coulomb_friction", "alpha", 5e-4),
-                                             Effect("spring", "alpha", 8e-4)))
+    plant = Plant.nominal(
+        "furuta", effects=(Effect("coulomb_friction", "alpha", 5e-4), Effect("spring", "alpha", 8e-4))
+    )
     path = root / "diagnosis.json"
     path.write_text(json.dumps({"plant": plant.to_json()}))
-    config = ReproduceConfig(quick=True, systems=("furuta",), pairs=(("dln", "traj"),),
-                             epochs={"furuta": (1, 0)}, progress=False, figures=False,
-                             plant=str(path), sensor="experiment")
+    config = ReproduceConfig(
+        quick=True,
+        systems=("furuta",),
+        pairs=(("dln", "traj"),),
+        epochs={"furuta": (1, 0)},
+        progress=False,
+        figures=False,
+        plant=str(path),
+        sensor="experiment",
+    )
     paths = reproduce(root / "out", config, log=lambda msg: None)
     return root, config, paths
 
@@ -70,7 +78,8 @@ def test_a_calibrated_rig_run_is_measured_as_the_qube_and_scored_beside_the_expe
         rows = list(csv.DictReader(fh))
     states = [r for r in rows if r["metric"] in ("alpha", "beta", "alpha_dot", "beta_dot")]
     assert len(states) == 8 and all(
-        r["paper"] == paper[("furuta", r["test_set"], "DLN", "traj", "exp_" + r["metric"])] for r in states)
+        r["paper"] == paper[("furuta", r["test_set"], "DLN", "traj", "exp_" + r["metric"])] for r in states
+    )
     assert all(r["paper"] == "" for r in rows if r["metric"] == "energy")
 
 
@@ -83,9 +92,14 @@ def test_a_rig_run_refuses_data_of_another_sensor_and_compares_physics_with_the_
     truth = truth_model("furuta", config)
     q = np.array([0.5, 0.2])
     # the cable spring is in the truth's potential, so the physics columns see it
-    assert abs(float(truth.potential(q)) - float(truth_model("furuta", ReproduceConfig()).potential(q))
-               - 0.5 * 8e-4 * 0.5**2) < 1e-12
-
+    assert (
+        abs(
+            float(truth.potential(q))
+            - float(truth_model("furuta", ReproduceConfig()).potential(q))
+            - 0.5 * 8e-4 * 0.5**2
+        )
+        < 1e-12
+    )
 
 
 def test_the_calibrated_protocol_docs_match_their_results():
@@ -94,6 +108,10 @@ def test_the_calibrated_protocol_docs_match_their_results():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    proc = subprocess.run([sys.executable, str(root / "experiments" / "calibrated_protocol_table.py"), "--check"],
-                          capture_output=True, text=True, cwd=root / "experiments")
+    proc = subprocess.run(
+        [sys.executable, str(root / "experiments" / "calibrated_protocol_table.py"), "--check"],
+        capture_output=True,
+        text=True,
+        cwd=root / "experiments",
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

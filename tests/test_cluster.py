@@ -40,8 +40,11 @@ def workspace(tmp_path_factory):
     executables, and the tests take seconds instead of minutes), the same single-thread XLA
     flags for both kinds of worker, the local pool's reference run, and a 2-CPU Ray instance."""
     root = tmp_path_factory.mktemp("cluster")
-    env = {"JAX_COMPILATION_CACHE_DIR": str(root / "jax"), "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
-           "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"}
+    env = {
+        "JAX_COMPILATION_CACHE_DIR": str(root / "jax"),
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+        "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+    }
     saved = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
     try:

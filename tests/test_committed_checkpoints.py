@@ -19,8 +19,7 @@ REAL = sorted(RESULTS.glob("real_models/runs/*/*.eqx"))
 def _states(system: str, rng, count: int = 200):
     """States and inputs in the training data's range (docs/reproduce.md, "Data")."""
     if system == "furuta":
-        return (rng.uniform(-np.pi, np.pi, (count, 2)), rng.uniform(-5, 5, (count, 2)),
-                rng.uniform(-3, 3, (count, 1)))
+        return (rng.uniform(-np.pi, np.pi, (count, 2)), rng.uniform(-5, 5, (count, 2)), rng.uniform(-3, 3, (count, 1)))
     return rng.uniform(-1, 1, (count, 1)), rng.uniform(-5, 5, (count, 1)), rng.uniform(-5, 5, (count, 1))
 
 
@@ -36,8 +35,9 @@ def test_a_committed_checkpoint_loads_and_predicts_finite_accelerations(path):
     assert np.all(np.isfinite(jax.vmap(model.forward_dynamics)(q, qd, u)))
 
 
-@pytest.mark.parametrize("path", [p for p in REPRODUCTION if "_prop" in p.parts[-3]],
-                         ids=lambda p: "/".join(p.parts[-4:-2]))
+@pytest.mark.parametrize(
+    "path", [p for p in REPRODUCTION if "_prop" in p.parts[-3]], ids=lambda p: "/".join(p.parts[-4:-2])
+)
 def test_a_reproduction_model_trained_with_l_prop_still_matches_the_true_system(path):
     """Measured when they were committed: 0.1–4 % relative RMS error of q̈ per joint; a field out
     of place or a changed forward pass gives errors of order one."""
@@ -46,7 +46,7 @@ def test_a_reproduction_model_trained_with_l_prop_still_matches_the_true_system(
     q, qd, u = _states(model.spec.name, np.random.default_rng(0))
     learned = jax.vmap(model.forward_dynamics)(q, qd, u)
     true = jax.vmap(truth.forward_dynamics)(q, qd, u)
-    relative = np.sqrt(np.mean((learned - true) ** 2, axis=0) / np.mean(true ** 2, axis=0))
+    relative = np.sqrt(np.mean((learned - true) ** 2, axis=0) / np.mean(true**2, axis=0))
     assert np.all(relative < 0.1), relative
 
 

@@ -77,8 +77,9 @@ def test_trajectory_loss_equals_the_previous_formulation_without_host_callbacks(
 
 def test_a_solve_hitting_max_steps_is_a_non_finite_loss_the_nan_guard_skips(furuta_free, tmp_path):
     model = make_model("furuta", "dln", jax.random.PRNGKey(4), hidden=(4, 4))
-    config = TrainConfig.for_system("furuta", epochs=(1,), horizons=(5,), batch_size=None, max_steps=1,
-                                    progress=False, checkpoint_every=0)
+    config = TrainConfig.for_system(
+        "furuta", epochs=(1,), horizons=(5,), batch_size=None, max_steps=1, progress=False, checkpoint_every=0
+    )
     windows = make_windows(furuta_free, 6, stride=5)
     loss = float(jax.jit(lambda w: trajectory_loss(model, w, max_steps=1))(windows))
     assert not np.isfinite(loss)  # 5 samples cannot be reached in one step: inf, no exception
@@ -102,8 +103,12 @@ def itau_step(furuta_free):
     assert not isinstance(step, _step_cache.ExportedStep)  # the tests leave the traced-step cache off
     windows = make_windows(furuta_free, 41, stride=40, cover_end=True)
     args = (params, optimizer.init(params), None, windows, jnp.asarray(1.0), jnp.asarray(1e-3))
-    key = {"loss": "itau", "config": repr(config), "optimizer": _step_cache.optimizer_description(optimizer),
-           "static": _step_cache.array_digest(static)}
+    key = {
+        "loss": "itau",
+        "config": repr(config),
+        "optimizer": _step_cache.optimizer_description(optimizer),
+        "static": _step_cache.array_digest(static),
+    }
     return step, args, key
 
 

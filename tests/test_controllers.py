@@ -78,13 +78,14 @@ def test_pfl_gives_commanded_rotor_acceleration(model):
     ubars = jnp.asarray(rng.uniform(-300, 300, 64))
     # a plant variant as design model too: PFL only uses the protocol, so it stays exact there
     variant = WithEffects(
-        model, [Effect("spring", "alpha", 2e-3), Effect("input_gain", "u", -0.2),
-                Effect("viscous_friction", "beta", 1e-4)]
+        model,
+        [Effect("spring", "alpha", 2e-3), Effect("input_gain", "u", -0.2), Effect("viscous_friction", "beta", 1e-4)],
     )
     # and learned models (untrained weights suffice: PFL is exact on whatever model it is given)
     from furuta_gym.models import make_model
 
     for m in (model, variant, make_model("furuta", "dln", 0), make_model("furuta", "adln", 1)):
+
         def achieved(x, ub, m=m):
             u = pfl_voltage(m, x, ub)
             return forward_dynamics(m, x[:2], x[2:], jnp.reshape(u, (1,)))[0]
@@ -127,9 +128,7 @@ def test_lqr_closed_loop_linearisation_is_stable(model, acts_on):
     np.testing.assert_allclose(d.K, c.K, rtol=0.05)
 
 
-def test_voltage_lqr_tolerates_unmodelled_cable_spring_where_pfl_reading_does_not(
-    model, spring_plant
-):
+def test_voltage_lqr_tolerates_unmodelled_cable_spring_where_pfl_reading_does_not(model, spring_plant):
     """Why the LQR acts on the voltage by default (docs/control.md): linearised on the spring
     plant, the voltage law stays stable; the same Q, R on ū through PFL does not (its rotor
     stiffness, −0.06 V/rad, is below the spring's)."""
@@ -194,9 +193,7 @@ def test_lqr_alone_catches_from_seeded_starts_near_upright(model):
 def test_swing_up_and_balance_on_mujoco_from_rest_and_seeded_starts(ctrl):
     x0s = near_rest_starts(11, seed=0)  # x0 = 0 exactly, then 10 seeded starts
     assert np.all(x0s[0] == 0.0)
-    recs = evaluate_on_env(
-        ctrl, lambda: gym.make("furuta_gym/Furuta-v0", episode_seconds=None), x0s, SECONDS
-    )
+    recs = evaluate_on_env(ctrl, lambda: gym.make("furuta_gym/Furuta-v0", episode_seconds=None), x0s, SECONDS)
     ms = [r.metrics for r in recs]
     assert all(m.success for m in ms), [m.as_dict() for m in ms if not m.success]
     assert all(m.peak_voltage <= 5.0 + 1e-12 for m in ms)
@@ -246,8 +243,9 @@ def test_energy_law_pumps_the_pendulum_energy_whatever_a_rotor_spring_stores(mod
     assert float(sprung.k_e) == pytest.approx(float(plain.k_e), rel=1e-12)
     for obs in ([1.0, 2.9, 0.5, 1.0], [-1.5, 3.1, -2.0, 0.3], [0.7, 0.4, 0.0, -5.0]):
         obs = jnp.asarray(obs)
-        assert float(sprung.desired_acceleration(obs)) == pytest.approx(float(plain.desired_acceleration(obs)),
-                                                                         rel=1e-12, abs=1e-12)
+        assert float(sprung.desired_acceleration(obs)) == pytest.approx(
+            float(plain.desired_acceleration(obs)), rel=1e-12, abs=1e-12
+        )
 
 
 def test_hysteresis_band_does_not_chatter(ctrl):
@@ -285,8 +283,11 @@ def test_jitted_policy_equals_python_policy_and_runs_in_vector_rollout(model, ct
 def test_auto_gain_pick_sits_above_the_stall_threshold(model):
     lqr = LQR.from_model(model)
     sweep = pick_k_e(
-        lambda k: SwingUpLQR(EnergySwingUp(model, k_e=k), lqr), model,
-        grid=(1000.0, 2000.0, 4000.0, 8000.0, 16000.0), n_starts=2, horizon=5.0,
+        lambda k: SwingUpLQR(EnergySwingUp(model, k_e=k), lqr),
+        model,
+        grid=(1000.0, 2000.0, 4000.0, 8000.0, 16000.0),
+        n_starts=2,
+        horizon=5.0,
     )
     rates = dict(zip(sweep.grid, sweep.catch_rate))
     assert rates[1000.0] < 1.0  # small gains stall under 5 V (pitfalls note)
@@ -326,8 +327,19 @@ def test_control_cli_writes_report_plot_and_refuses_overwrite(tmp_path, capsys):
     from furuta_gym.cli import main
 
     out, png = tmp_path / "r.json", tmp_path / "fig.png"
-    argv = ["control", "--plant", "analytic", "--episodes", "1", "--seconds", "4",
-            "--json", str(out), "--plot", str(png)]
+    argv = [
+        "control",
+        "--plant",
+        "analytic",
+        "--episodes",
+        "1",
+        "--seconds",
+        "4",
+        "--json",
+        str(out),
+        "--plot",
+        str(png),
+    ]
     assert main(argv) == 0
     rep = json.loads(out.read_text())
     assert rep["x0_zero"]["success"] and rep["episodes_total"] == 2

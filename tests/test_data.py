@@ -1,19 +1,22 @@
 """The measured-data loader/writer: formats, column maps, and one clear error per bad input."""
 
-
 import numpy as np
 import pytest
 
 from furuta_gym.data import DataError, Trajectory, load_trajectories, save_trajectories
 
 
-
 def _trajs(n=2, T=50, dof=2, vel=True):
     rng = np.random.default_rng(0)
     t = np.arange(T) * 0.002
     return [
-        Trajectory(t=t, q=rng.normal(size=(T, dof)), u=rng.normal(size=(T, 1)),
-                   qd=rng.normal(size=(T, dof)) if vel else None, name=f"run{k}")
+        Trajectory(
+            t=t,
+            q=rng.normal(size=(T, dof)),
+            u=rng.normal(size=(T, 1)),
+            qd=rng.normal(size=(T, dof)) if vel else None,
+            name=f"run{k}",
+        )
         for k in range(n)
     ]
 
@@ -103,7 +106,8 @@ def test_real_qube_log_loads_through_a_column_map_with_sign_and_offset():
 
     path = qube_closed_loop_files([1])[0]  # a vendored real run, as the user's own file
     (tr,) = load_trajectories(
-        path, "furuta",
+        path,
+        "furuta",
         column_map={"alpha": "theta", "beta": "alpha", "u": "plant_input"},
         offsets={"beta": np.pi},
     )

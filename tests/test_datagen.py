@@ -20,8 +20,12 @@ from furuta_gym.training.datagen import (
 
 # A tiny Furuta recipe keeps the simulated seconds (and the test time) small.
 TINY_FURUTA = FurutaRecipe(
-    n_train=4, n_test_free=2, test_free_duration=2.0, n_test_forced=1,
-    test_forced_duration=3.0, scale_fit_duration=2.0,
+    n_train=4,
+    n_test_free=2,
+    test_free_duration=2.0,
+    n_test_forced=1,
+    test_forced_duration=3.0,
+    scale_fit_duration=2.0,
 )
 
 
@@ -184,8 +188,18 @@ def test_bad_options_are_clear_errors():
 
 def test_generate_cli_writes_loader_ready_files_and_never_overwrites(tmp_path, capsys):
     out = tmp_path / "nmsd"
-    argv = ["generate", "--system", "nmsd", "--out", str(out), "--small", "--ground-truth", "analytic",
-            "--noise", "0.001"]
+    argv = [
+        "generate",
+        "--system",
+        "nmsd",
+        "--out",
+        str(out),
+        "--small",
+        "--ground-truth",
+        "analytic",
+        "--noise",
+        "0.001",
+    ]
     assert main(argv) == 0
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["ground_truth"] == "analytic" and manifest["sensor"]["noise_std"] == 0.001

@@ -15,7 +15,9 @@ def demo_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "out"
     proc = subprocess.run(
         [sys.executable, "-m", "furuta_gym", "demo", "--tiny", "--no-progress", "--out", str(out)],
-        capture_output=True, text=True, timeout=1500,
+        capture_output=True,
+        text=True,
+        timeout=1500,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, proc.stdout
@@ -23,9 +25,16 @@ def demo_dir(tmp_path_factory):
 
 def test_demo_writes_every_output(demo_dir):
     out, _ = demo_dir
-    for name in ("summary.json", "tracking.png", "swing_up.png", "data/train.csv",
-                 "models/dln_prop/model.eqx", "models/dln_traj/model.eqx",
-                 "diagnose/measured_log.csv", "diagnose/diagnosis.json"):
+    for name in (
+        "summary.json",
+        "tracking.png",
+        "swing_up.png",
+        "data/train.csv",
+        "models/dln_prop/model.eqx",
+        "models/dln_traj/model.eqx",
+        "diagnose/measured_log.csv",
+        "diagnose/diagnosis.json",
+    ):
         assert (out / name).is_file(), name
         assert (out / name).stat().st_size > 0, name
 
@@ -58,7 +67,9 @@ def test_demo_refuses_to_overwrite_a_previous_run(demo_dir):
     before = (out / "summary.json").read_bytes()
     proc = subprocess.run(
         [sys.executable, "-m", "furuta_gym", "demo", "--tiny", "--no-progress", "--out", str(out)],
-        capture_output=True, text=True, timeout=300,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert proc.returncode == 2 and "previous demo" in proc.stderr
     assert (out / "summary.json").read_bytes() == before
@@ -68,8 +79,9 @@ def test_demo_seeds_docs_block_matches_its_results():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    proc = subprocess.run([sys.executable, str(root / "experiments" / "demo_seeds.py"), "--check"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, str(root / "experiments" / "demo_seeds.py"), "--check"], capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 

@@ -47,8 +47,10 @@ def _check_found(res, name, joint, coefficient, rmse_joint=None):
     if rmse_joint is None:
         ratio = res.error_before.trajectory_rmse / res.error_after.trajectory_rmse
     else:
-        ratio = (res.error_before.trajectory_rmse_per_joint[rmse_joint]
-                 / res.error_after.trajectory_rmse_per_joint[rmse_joint])
+        ratio = (
+            res.error_before.trajectory_rmse_per_joint[rmse_joint]
+            / res.error_after.trajectory_rmse_per_joint[rmse_joint]
+        )
     assert ratio >= 2.0, res.table()
     # only the chosen effect(s) are significant, and they come first
     flags = [e.significant for e in res.effects]

@@ -21,8 +21,12 @@ import pytest
 
 from furuta_gym.diagnose import diagnose, measured_like
 from furuta_gym.diagnose import _intervals
-from furuta_gym.diagnose._intervals import (Interval, cluster_intervals, own_calculate_intervals,
-                                            sysid_calculate_intervals)
+from furuta_gym.diagnose._intervals import (
+    Interval,
+    cluster_intervals,
+    own_calculate_intervals,
+    sysid_calculate_intervals,
+)
 from furuta_gym.envs import Plant
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,8 +47,9 @@ def _clustered_problem(rng, G=120, m=8, P=3, sigma_u=1.0, sigma_e=0.5):
     groups = np.repeat(np.arange(G), m)
     X = rng.normal(size=(G, P))[groups] + 0.3 * rng.normal(size=(G * m, P))
     bread = np.linalg.inv(X.T @ X)
-    meat = sum(X[groups == g].T @ (sigma_u**2 * np.ones((m, m)) + sigma_e**2 * np.eye(m)) @ X[groups == g]
-               for g in range(G))
+    meat = sum(
+        X[groups == g].T @ (sigma_u**2 * np.ones((m, m)) + sigma_e**2 * np.eye(m)) @ X[groups == g] for g in range(G)
+    )
     return X, groups, bread @ meat @ bread
 
 

@@ -49,8 +49,9 @@ def test_a_learned_model_of_the_plant_itself_gets_nothing_added():
 
 def test_model_after_wraps_the_learned_model_and_reproduces_it_at_zero_effects():
     model = load_model(NMSD_DLN)
-    res = diagnose(measured_like("nmsd", [Effect("coulomb_friction", "p", 1.0)], seed=4, **NMSD_LOG), "nmsd",
-                   model=model)
+    res = diagnose(
+        measured_like("nmsd", [Effect("coulomb_friction", "p", 1.0)], seed=4, **NMSD_LOG), "nmsd", model=model
+    )
     q, qd = jnp.array([0.3]), jnp.array([-0.7])
     before = res.model_before
     # the learned model kept as it is: same mass matrix and potential

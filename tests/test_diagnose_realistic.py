@@ -32,8 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LOG = dict(n_trajectories=6, duration=10.0)
 CLOSED_LOOP = dict(window=0.1, oe_max_windows=64)
 SPRING_FRICTION = [Effect("spring", "alpha", 1.5e-3), Effect("coulomb_friction", "alpha", 8e-4)]
-RIG = [Effect("coulomb_friction", "alpha", 3e-4), Effect("com_offset", "beta", 2e-3),
-       Effect("actuator_lag", "u", 5e-3)]
+RIG = [Effect("coulomb_friction", "alpha", 3e-4), Effect("com_offset", "beta", 2e-3), Effect("actuator_lag", "u", 5e-3)]
 
 
 def _coefficient(res, name, joint):
@@ -66,8 +65,11 @@ def test_spring_held_by_dry_friction_is_found_with_the_friction():
     assert {e.status for e in res.effects[:2]} == {"selected"}
 
 
-CABLE_STICTION = [Effect("spring", "alpha", 1.5e-3, reference=0.1), Effect("coulomb_friction", "alpha", 6e-4),
-                  Effect("stiction", "alpha", 4e-4)]
+CABLE_STICTION = [
+    Effect("spring", "alpha", 1.5e-3, reference=0.1),
+    Effect("coulomb_friction", "alpha", 6e-4),
+    Effect("stiction", "alpha", 4e-4),
+]
 
 
 def _check_cable_with_stiction(res):
@@ -76,8 +78,12 @@ def _check_cable_with_stiction(res):
     within ±35 %, the rest position too (its rate over seeds is in docs/diagnose.md, generated
     from results/diagnose_sim)."""
     found = {(e.name, e.joint): e.coefficient for e in res.significant}
-    assert set(found) == {("spring", "alpha"), ("constant_torque", "alpha"), ("coulomb_friction", "alpha"),
-                          ("stiction", "alpha")}, res.table()
+    assert set(found) == {
+        ("spring", "alpha"),
+        ("constant_torque", "alpha"),
+        ("coulomb_friction", "alpha"),
+        ("stiction", "alpha"),
+    }, res.table()
     rest = found[("constant_torque", "alpha")] / found[("spring", "alpha")]
     assert rest == pytest.approx(0.1, rel=0.35), res.table()
     for p in CABLE_STICTION:
@@ -136,8 +142,9 @@ def test_measured_like_logs_encoder_counts_unless_told_exact_angles(excitation):
 
 
 def test_closed_loop_rig_effects_are_found():
-    res = diagnose(measured_like("furuta", RIG, excitation="closed_loop_prbs", seed=100, **LOG), "furuta",
-                   **CLOSED_LOOP)
+    res = diagnose(
+        measured_like("furuta", RIG, excitation="closed_loop_prbs", seed=100, **LOG), "furuta", **CLOSED_LOOP
+    )
     _check_planted(res, RIG)
 
 
@@ -145,9 +152,11 @@ def test_closed_loop_rig_effects_are_found():
 @pytest.mark.parametrize("seed", range(101, 106))
 @pytest.mark.parametrize("case", ["spring_friction", "rig", "cable_stiction"])
 def test_realistic_cases_over_seeds(case, seed):
-    effects, excitation, kw = {"spring_friction": (SPRING_FRICTION, "sine_sweep", {}),
-                               "cable_stiction": (CABLE_STICTION, "sine_sweep", {}),
-                               "rig": (RIG, "closed_loop_prbs", CLOSED_LOOP)}[case]
+    effects, excitation, kw = {
+        "spring_friction": (SPRING_FRICTION, "sine_sweep", {}),
+        "cable_stiction": (CABLE_STICTION, "sine_sweep", {}),
+        "rig": (RIG, "closed_loop_prbs", CLOSED_LOOP),
+    }[case]
     res = diagnose(measured_like("furuta", effects, excitation=excitation, seed=seed, **LOG), "furuta", **kw)
     if case == "cable_stiction":
         _check_cable_with_stiction(res)
@@ -157,8 +166,24 @@ def test_realistic_cases_over_seeds(case, seed):
 
 def test_real_runs_fit_on_some_judged_on_others_via_cli(tmp_path, capsys):
     out = tmp_path / "qube.json"
-    code = main(["diagnose", "qube:1-3", "--test", "qube:4,5", "--system", "furuta", "--skip", "0.5",
-                 "--window", "0.1", "--oe-windows", "64", "--json", str(out)])
+    code = main(
+        [
+            "diagnose",
+            "qube:1-3",
+            "--test",
+            "qube:4,5",
+            "--system",
+            "furuta",
+            "--skip",
+            "0.5",
+            "--window",
+            "0.1",
+            "--oe-windows",
+            "64",
+            "--json",
+            str(out),
+        ]
+    )
     assert code == 0
     assert "test-log errors" in capsys.readouterr().out
     doc = json.loads(out.read_text())
@@ -176,6 +201,7 @@ def test_qube_shorthand_rejects_bad_runs_and_other_systems():
 
 
 def test_published_diagnosis_numbers_match_their_result_files():
-    proc = subprocess.run([sys.executable, str(ROOT / "experiments" / "diagnose_tables.py"), "--check"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "experiments" / "diagnose_tables.py"), "--check"], capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

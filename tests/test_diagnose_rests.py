@@ -58,11 +58,13 @@ def test_sensor_resolution_is_the_encoder_count_of_quantised_joints_only():
 
 def test_effects_below_one_count_or_one_sample_are_kept_but_reported_not_resolved():
     notes: list[str] = []
-    effects = [EffectEvidence("com_offset", "beta", 2e-3, "rad", True, 0.1, 5.0, "selected"),
-               EffectEvidence("com_offset", "beta", 4e-3, "rad", True, 0.1, 5.0, "selected"),
-               EffectEvidence("input_delay", "u", 1.5e-3, "s", True, 0.1, 5.0, "selected"),
-               EffectEvidence("actuator_lag", "u", 5e-3, "s", True, 0.1, 5.0, "selected"),
-               EffectEvidence("com_offset", "beta", 1e-3, "rad", False, 0.0, 0.0, "tested")]
+    effects = [
+        EffectEvidence("com_offset", "beta", 2e-3, "rad", True, 0.1, 5.0, "selected"),
+        EffectEvidence("com_offset", "beta", 4e-3, "rad", True, 0.1, 5.0, "selected"),
+        EffectEvidence("input_delay", "u", 1.5e-3, "s", True, 0.1, 5.0, "selected"),
+        EffectEvidence("actuator_lag", "u", 5e-3, "s", True, 0.1, 5.0, "selected"),
+        EffectEvidence("com_offset", "beta", 1e-3, "rad", False, 0.0, 0.0, "tested"),
+    ]
     _mark_unresolved(effects, {"beta": COUNT}, DT, notes)
     assert [e.resolved for e in effects] == [False, True, False, True, True]
     assert all(e.significant for e in effects[:4])

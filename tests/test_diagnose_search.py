@@ -206,6 +206,7 @@ class _FakeFitter:
 
     def __init__(self):
         from types import SimpleNamespace
+
         self.settings, self.notes, self.built = SimpleNamespace(veto_t=2.0), [], []
         self.layout = SimpleNamespace(index=COEFFICIENT_ORDER.index)
 

@@ -15,8 +15,12 @@ from furuta_gym.effects import EFFECT_KINDS, Effect, EffectKind, MujocoForm, eff
 from furuta_gym.systems import get_spec
 
 ROOT = Path(furuta_gym.__file__).resolve().parent
-SOURCES = [p for folder in (ROOT, ROOT.parent / "models", ROOT.parent / "controllers")
-           for p in folder.rglob("*.py") if p != ROOT / "effects.py"]
+SOURCES = [
+    p
+    for folder in (ROOT, ROOT.parent / "models", ROOT.parent / "controllers")
+    for p in folder.rglob("*.py")
+    if p != ROOT / "effects.py"
+]
 NAMES = set(EFFECT_KINDS)
 
 
@@ -45,14 +49,19 @@ def _name_uses(tree) -> list[tuple[int, str]]:
 
 
 def test_no_effect_name_comparisons_outside_the_registry():
-    offenders = [f"{p.relative_to(ROOT.parent)}:{line}: {name!r}" for p in SOURCES
-                 for line, name in _name_uses(ast.parse(p.read_text()))]
+    offenders = [
+        f"{p.relative_to(ROOT.parent)}:{line}: {name!r}"
+        for p in SOURCES
+        for line, name in _name_uses(ast.parse(p.read_text()))
+    ]
     assert not offenders, "effect names compared outside furuta_gym/effects.py:\n" + "\n".join(offenders)
 
 
 def test_the_scan_finds_a_comparison():
-    tree = ast.parse('if e.name == "spring" or c.name in ("stiction", "x"):\n    k = {"com_offset": 1}\n'
-                     'key = f"coulomb_friction:{j}"\n')
+    tree = ast.parse(
+        'if e.name == "spring" or c.name in ("stiction", "x"):\n    k = {"com_offset": 1}\n'
+        'key = f"coulomb_friction:{j}"\n'
+    )
     assert sorted(n for _, n in _name_uses(tree)) == ["com_offset", "coulomb_friction:", "spring", "stiction"]
 
 
@@ -92,7 +101,9 @@ def test_a_new_kind_is_one_class():
         theta[layout.index("test_cubic_spring:beta")] = 3.0
         model = layout.model(jnp.asarray(theta))
         q, qd = jnp.asarray([0.0, 0.2]), jnp.zeros(2)
-        extra = model.nonconservative_force(q, qd) - layout.model(jnp.asarray(layout.nominal())).nonconservative_force(q, qd)
+        extra = model.nonconservative_force(q, qd) - layout.model(jnp.asarray(layout.nominal())).nonconservative_force(
+            q, qd
+        )
         np.testing.assert_allclose(np.asarray(extra), [0.0, -3.0 * 0.2**3], atol=1e-15)
         with pytest.raises(ValueError, match="registered twice"):
             type("_Again", (EffectKind,), {"name": "test_cubic_spring", "units": ("1", "1")})
@@ -102,9 +113,14 @@ def test_a_new_kind_is_one_class():
 
 def test_mujoco_forms_of_the_native_kinds():
     form = MujocoForm(np.zeros(2), np.zeros(2), np.zeros(2), shift=np.zeros(2))
-    for e in (Effect("spring", "alpha", 2e-3, reference=0.1), Effect("viscous_friction", "beta", 1e-5),
-              Effect("com_offset", "beta", 0.01), Effect("input_gain", "u", -0.2),
-              Effect("input_delay", "u", 0.004), Effect("coulomb_friction", "alpha", 1e-3)):
+    for e in (
+        Effect("spring", "alpha", 2e-3, reference=0.1),
+        Effect("viscous_friction", "beta", 1e-5),
+        Effect("com_offset", "beta", 0.01),
+        Effect("input_gain", "u", -0.2),
+        Effect("input_delay", "u", 0.004),
+        Effect("coulomb_friction", "alpha", 1e-3),
+    ):
         e.kind.to_mujoco(e, -1 if e.kind.on_input else e.joint_index(get_spec("furuta")), form)
     np.testing.assert_allclose(form.stiffness, [2e-3, 0.0])
     np.testing.assert_allclose(form.stiff_ref, [2e-4, 0.0])

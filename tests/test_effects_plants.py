@@ -114,8 +114,12 @@ def test_mujoco_forces_equal_model_with_effects(name):
     backend = MujocoBackend("furuta", effects=effects)
     model = WithEffects(Furuta(), effects)
     rhs = jax.jit(
-        lambda q, qd, u: lag.coriolis_force(model, q, qd) - lag.potential_derived_force(model, q, qd)
-        - model.nonconservative_force(q, qd) - model.input_force(q, qd, u)
+        lambda q, qd, u: (
+            lag.coriolis_force(model, q, qd)
+            - lag.potential_derived_force(model, q, qd)
+            - model.nonconservative_force(q, qd)
+            - model.input_force(q, qd, u)
+        )
     )
     rng = np.random.default_rng(0)
     d = backend.data
@@ -138,9 +142,11 @@ def test_mujoco_trajectory_equals_model_with_effects(name):
     us = np.repeat(np.random.default_rng(0).uniform(-3, 3, 13), 20)[:250]
     for x0 in ([0.2, 0.3, 0.0, 0.0], [0.0, np.pi - 0.2, 1.0, 0.0]):
         x0 = np.array(x0)
-        backends = [MujocoBackend("furuta", effects=effects),
-                    make_backend("furuta", Furuta(), effects=effects),
-                    MujocoBackend("furuta")]
+        backends = [
+            MujocoBackend("furuta", effects=effects),
+            make_backend("furuta", Furuta(), effects=effects),
+            MujocoBackend("furuta"),
+        ]
         for b in backends:
             b.reset(x0)
         xs = np.array([[b.step(np.array([u])) for b in backends] for u in us])
@@ -150,8 +156,9 @@ def test_mujoco_trajectory_equals_model_with_effects(name):
 
 def test_spring_reference_and_com_offset_rest_where_they_should():
     """The cable's neutral and the pendulum's shifted bottom are equilibria of the MuJoCo plant."""
-    plant = MujocoBackend("furuta", effects=[Effect("spring", "alpha", 2e-3, reference=0.4),
-                                             Effect("com_offset", "beta", 0.05)])
+    plant = MujocoBackend(
+        "furuta", effects=[Effect("spring", "alpha", 2e-3, reference=0.4), Effect("com_offset", "beta", 0.05)]
+    )
     plant.reset(np.array([0.4, 0.05, 0.0, 0.0]))
     for _ in range(250):
         x = plant.step(np.zeros(1))
@@ -211,8 +218,7 @@ def _run(env, actions, x0):
     return np.array([x0] + [env.step(np.array([a]))[4]["state"] for a in actions])
 
 
-@pytest.mark.parametrize("kwargs", [{}, {"frame_skip": 2, "actuation_delay": 0.002}],
-                         ids=["500Hz", "split-delay"])
+@pytest.mark.parametrize("kwargs", [{}, {"frame_skip": 2, "actuation_delay": 0.002}], ids=["500Hz", "split-delay"])
 def test_actuator_lag_mujoco_and_model_path_agree(kwargs):
     """τ = 5 ms, 0.2 s of ±3 V steps: measured ≤ 6.5e-5 rad and ≤ 0.34 % of the lag's own effect."""
     effects = [Effect("actuator_lag", "u", 0.005)]
@@ -264,10 +270,12 @@ def test_sine_sweep_rotor_sticks_off_zero_against_a_cable_spring():
 
 
 def test_closed_loop_prbs_balances_with_the_rig_effects():
-    effects = [Effect("coulomb_friction", "alpha", 3e-4), Effect("com_offset", "beta", 2e-3),
-               Effect("actuator_lag", "u", 0.005)]
-    data = measured_like("furuta", effects, excitation="closed_loop_prbs", n_trajectories=2,
-                         duration=10.0, seed=0)
+    effects = [
+        Effect("coulomb_friction", "alpha", 3e-4),
+        Effect("com_offset", "beta", 2e-3),
+        Effect("actuator_lag", "u", 0.005),
+    ]
+    data = measured_like("furuta", effects, excitation="closed_loop_prbs", n_trajectories=2, duration=10.0, seed=0)
     for tr in data:
         assert np.max(np.abs(tr.q[:, 1] - np.pi)) < 0.5
         assert np.mean(np.abs(tr.u) >= 10.0) < 0.01  # saturation is rare (here: never)

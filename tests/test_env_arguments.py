@@ -34,31 +34,34 @@ from furuta_gym.systems import get_spec
 FURUTA_ID, NMSD_ID, SWINGUP_ID = "furuta_gym/Furuta-v0", "furuta_gym/NMSD-v0", "furuta_gym/FurutaSwingUp-v0"
 
 
-@pytest.mark.parametrize("build, named", [
-    (lambda: Episode(frame_skip=0), "Episode.frame_skip"),
-    (lambda: Episode(frame_skip=2.0), "Episode.frame_skip"),
-    (lambda: Episode(seconds=-1.0), "Episode.seconds"),
-    (lambda: Episode(reset_noise_scale=math.nan), "Episode.reset_noise_scale"),
-    (lambda: Actuation(max_action=0.0), "Actuation.max_action"),
-    (lambda: Actuation(max_action="5"), "Actuation.max_action"),
-    (lambda: Actuation(delay=-0.002), "Actuation.delay"),
-    (lambda: Actuation(delay_steps=-1), "Actuation.delay_steps"),
-    (lambda: Sensors(encoder_counts=0), "Sensors.encoder_counts"),
-    (lambda: Sensors(position_resolution=math.nan), "Sensors.position_resolution"),
-    (lambda: Sensors(measurement_noise=-1.0), "Sensors.measurement_noise"),
-    (lambda: Sensors(measurement_noise=[[0.1]]), "Sensors.measurement_noise"),
-    (lambda: Sensors(velocity="kalman"), "Sensors.velocity"),
-    (lambda: Spaces(observation="polar"), "Spaces.observation"),
-    (lambda: Spaces(dtype="int32"), "Spaces.dtype"),
-    (lambda: Spaces(normalize_action="yes"), "Spaces.normalize_action"),
-    (lambda: Camera(width=0), "Camera.width"),
-    (lambda: Plant(effects=["spring"]), "Plant.effects"),
-    (lambda: Plant(randomize=1.5), "Plant.randomize"),
-    (lambda: Plant(randomize={"mp": -0.1}), "Plant.randomize"),
-    (lambda: Target(position="rand"), "target"),
-    (lambda: Target(position=(0.5, 0.1)), "low <= high"),
-    (lambda: Target(observe=1), "Target.observe"),
-])
+@pytest.mark.parametrize(
+    "build, named",
+    [
+        (lambda: Episode(frame_skip=0), "Episode.frame_skip"),
+        (lambda: Episode(frame_skip=2.0), "Episode.frame_skip"),
+        (lambda: Episode(seconds=-1.0), "Episode.seconds"),
+        (lambda: Episode(reset_noise_scale=math.nan), "Episode.reset_noise_scale"),
+        (lambda: Actuation(max_action=0.0), "Actuation.max_action"),
+        (lambda: Actuation(max_action="5"), "Actuation.max_action"),
+        (lambda: Actuation(delay=-0.002), "Actuation.delay"),
+        (lambda: Actuation(delay_steps=-1), "Actuation.delay_steps"),
+        (lambda: Sensors(encoder_counts=0), "Sensors.encoder_counts"),
+        (lambda: Sensors(position_resolution=math.nan), "Sensors.position_resolution"),
+        (lambda: Sensors(measurement_noise=-1.0), "Sensors.measurement_noise"),
+        (lambda: Sensors(measurement_noise=[[0.1]]), "Sensors.measurement_noise"),
+        (lambda: Sensors(velocity="kalman"), "Sensors.velocity"),
+        (lambda: Spaces(observation="polar"), "Spaces.observation"),
+        (lambda: Spaces(dtype="int32"), "Spaces.dtype"),
+        (lambda: Spaces(normalize_action="yes"), "Spaces.normalize_action"),
+        (lambda: Camera(width=0), "Camera.width"),
+        (lambda: Plant(effects=["spring"]), "Plant.effects"),
+        (lambda: Plant(randomize=1.5), "Plant.randomize"),
+        (lambda: Plant(randomize={"mp": -0.1}), "Plant.randomize"),
+        (lambda: Target(position="rand"), "target"),
+        (lambda: Target(position=(0.5, 0.1)), "low <= high"),
+        (lambda: Target(observe=1), "Target.observe"),
+    ],
+)
 def test_a_settings_object_refuses_a_bad_field_when_built(build, named):
     with pytest.raises(EnvArgumentError, match=named):
         build()
@@ -119,18 +122,43 @@ def test_one_signature_for_both_systems_and_the_vector_env():
 
 
 LEGACY = [
-    (FURUTA_ID, dict(max_voltage=3.0, frame_skip=5, episode_seconds=0.2, reset_noise_scale=0.05),
-     dict(actuation=Actuation(max_action=3.0), episode=Episode(frame_skip=5, seconds=0.2, reset_noise_scale=0.05))),
-    (FURUTA_ID, dict(encoder_counts=2048, velocity="filter", measurement_noise=1e-3, actuation_delay_steps=1),
-     dict(sensors=Sensors(encoder_counts=2048, velocity="filter", measurement_noise=1e-3),
-          actuation=Actuation(delay_steps=1))),
-    (FURUTA_ID, dict(plant="coulomb", effects=[Effect("spring", "alpha", 2e-3)], randomize=0.1,
-                     observation="trig", dtype="float32", normalize_action=True),
-     dict(plant=Plant("coulomb", effects=[Effect("spring", "alpha", 2e-3)], randomize=0.1),
-          spaces=Spaces("trig", "float32", normalize_action=True))),
-    (NMSD_ID, dict(target="random", observe_target=True, max_force=10.0, position_resolution=1e-3),
-     dict(task=Target("random", observe=True), actuation=Actuation(max_action=10.0),
-          sensors=Sensors(position_resolution=1e-3))),
+    (
+        FURUTA_ID,
+        dict(max_voltage=3.0, frame_skip=5, episode_seconds=0.2, reset_noise_scale=0.05),
+        dict(actuation=Actuation(max_action=3.0), episode=Episode(frame_skip=5, seconds=0.2, reset_noise_scale=0.05)),
+    ),
+    (
+        FURUTA_ID,
+        dict(encoder_counts=2048, velocity="filter", measurement_noise=1e-3, actuation_delay_steps=1),
+        dict(
+            sensors=Sensors(encoder_counts=2048, velocity="filter", measurement_noise=1e-3),
+            actuation=Actuation(delay_steps=1),
+        ),
+    ),
+    (
+        FURUTA_ID,
+        dict(
+            plant="coulomb",
+            effects=[Effect("spring", "alpha", 2e-3)],
+            randomize=0.1,
+            observation="trig",
+            dtype="float32",
+            normalize_action=True,
+        ),
+        dict(
+            plant=Plant("coulomb", effects=[Effect("spring", "alpha", 2e-3)], randomize=0.1),
+            spaces=Spaces("trig", "float32", normalize_action=True),
+        ),
+    ),
+    (
+        NMSD_ID,
+        dict(target="random", observe_target=True, max_force=10.0, position_resolution=1e-3),
+        dict(
+            task=Target("random", observe=True),
+            actuation=Actuation(max_action=10.0),
+            sensors=Sensors(position_resolution=1e-3),
+        ),
+    ),
 ]
 
 
@@ -140,7 +168,9 @@ def _run(env, steps=25):
     out = [obs, info["state"]]
     high = env.action_space.high[0]
     for _ in range(steps):
-        obs, reward, terminated, truncated, info = env.step(rng.uniform(-high, high, (1,)).astype(env.action_space.dtype))
+        obs, reward, terminated, truncated, info = env.step(
+            rng.uniform(-high, high, (1,)).astype(env.action_space.dtype)
+        )
         out += [obs, info["state"], [reward, terminated, truncated]]
     return np.concatenate([np.ravel(np.asarray(o, dtype=float)) for o in out])
 

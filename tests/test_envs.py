@@ -107,8 +107,9 @@ def test_pickle_roundtrip_continues_identically():
     nm.reset(seed=0)
     assert np.all(np.isfinite(nm.step(np.ones(1))[0]))
     # sensor filter and actuation delay memories travel too
-    sensed = gym.make(FURUTA_ID, velocity="filter", encoder_counts=2048, actuation_delay_steps=3,
-                      measurement_noise=1e-3).unwrapped
+    sensed = gym.make(
+        FURUTA_ID, velocity="filter", encoder_counts=2048, actuation_delay_steps=3, measurement_noise=1e-3
+    ).unwrapped
     sensed.reset(seed=2)
     for a in acts[:10]:
         sensed.step(a)
@@ -191,8 +192,7 @@ def test_out_of_range_action_is_clipped_to_the_voltage_limit():
         (NMSD_ID, 2.0, {"plant": "quadratic_drag", "randomize": 0.2}),
         (FURUTA_ID, 1.0, {"randomize": 0.2}),
     ],
-    ids=["furuta", "nmsd", "furuta-variants", "furuta-split-delay", "nmsd-drag-randomized",
-         "furuta-randomized"],
+    ids=["furuta", "nmsd", "furuta-variants", "furuta-split-delay", "nmsd-drag-randomized", "furuta-randomized"],
 )
 def test_analytic_backend_equals_mujoco_backend(env_id, seconds, kwargs):
     mj = gym.make(env_id, **kwargs).unwrapped
@@ -376,8 +376,21 @@ def test_rollout_cli_writes_plot_video_and_refuses_to_overwrite(tmp_path, capsys
     from furuta_gym.cli import main
 
     png, gif, csv = tmp_path / "r.png", tmp_path / "r.gif", tmp_path / "r.csv"
-    argv = ["rollout", "--system", "nmsd", "--policy", "chirp", "--seconds", "0.5",
-            "--out", str(png), "--video", str(gif), "--data", str(csv)]
+    argv = [
+        "rollout",
+        "--system",
+        "nmsd",
+        "--policy",
+        "chirp",
+        "--seconds",
+        "0.5",
+        "--out",
+        str(png),
+        "--video",
+        str(gif),
+        "--data",
+        str(csv),
+    ]
     assert main(argv) == 0
     assert png.stat().st_size > 1000 and gif.stat().st_size > 1000
     from furuta_gym.data import load_trajectories
@@ -432,8 +445,14 @@ def test_read_only_settings_report_what_was_configured():
     assert plain.max_episode_steps == 250  # 0.5 s at 500 Hz
     np.testing.assert_array_equal(plain.encoder_steps, [0.0, 0.0])
     assert plain.per_episode_state_features() == []
-    sensed = FurutaEnv(dynamics="analytic", encoder_counts=2048, measurement_noise=1e-3,
-                       velocity="filter", actuation_delay_steps=1, episode_seconds=None)
+    sensed = FurutaEnv(
+        dynamics="analytic",
+        encoder_counts=2048,
+        measurement_noise=1e-3,
+        velocity="filter",
+        actuation_delay_steps=1,
+        episode_seconds=None,
+    )
     np.testing.assert_allclose(sensed.encoder_steps, [2 * math.pi / 2048] * 2)
     sensed.encoder_steps[:] = 0.0  # a copy: the env keeps quantising
     assert sensed.encoder_steps[0] > 0
@@ -463,8 +482,9 @@ def test_initial_state_sampling_and_reset_options_without_an_episode():
         nmsd.apply_reset_options({"goal": 1.0})
 
 
-@pytest.mark.parametrize("env_id,randomize", [("furuta_gym/Furuta-v0", None), ("furuta_gym/Furuta-v0", 0.2),
-                                              ("furuta_gym/NMSD-v0", 0.2)])
+@pytest.mark.parametrize(
+    "env_id,randomize", [("furuta_gym/Furuta-v0", None), ("furuta_gym/Furuta-v0", 0.2), ("furuta_gym/NMSD-v0", 0.2)]
+)
 def test_info_energy_is_the_models_energy_at_the_plants_parameters(env_id, randomize):
     # the env's float energy (no JAX per step) and lagrangian.energy of the analytic model with
     # the plant's parameters (drawn anew at each reset) are one physics: equal to rounding

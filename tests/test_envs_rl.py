@@ -23,9 +23,7 @@ FURUTA_ID, NMSD_ID, SWINGUP_ID = (
     "furuta_gym/NMSD-v0",
     "furuta_gym/FurutaSwingUp-v0",
 )
-HEADLESS = sys.platform.startswith("linux") and not (
-    os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
-)
+HEADLESS = sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 def _no_warnings(fn, *args, **kwargs):
@@ -247,8 +245,13 @@ def test_nmsd_target_in_observation_and_random_per_reset():
 
 
 def test_nmsd_target_errors_pickle_and_vector():
-    for bad, match in (("rand", "target"), ((1.0,), "range"), ((0.5, 0.1), "low <= high"),
-                       (math.nan, "target"), ((0.0, 5e3), "target range")):
+    for bad, match in (
+        ("rand", "target"),
+        ((1.0,), "range"),
+        ((0.5, 0.1), "low <= high"),
+        (math.nan, "target"),
+        ((0.0, 5e3), "target range"),
+    ):
         with pytest.raises(EnvArgumentError, match=match):
             gym.make(NMSD_ID, target=bad)
     with pytest.raises(EnvArgumentError, match="observe_target"):
@@ -269,13 +272,11 @@ def test_nmsd_target_errors_pickle_and_vector():
     auto.close()
 
 
-
 def test_published_sac_comparison_matches_its_result_file():
     import subprocess
     import sys
     from pathlib import Path
 
     script = Path(__file__).resolve().parents[1] / "bench" / "sac_preset.py"
-    out = subprocess.run([sys.executable, str(script), "--check"], capture_output=True, text=True,
-                         cwd=script.parent)
+    out = subprocess.run([sys.executable, str(script), "--check"], capture_output=True, text=True, cwd=script.parent)
     assert out.returncode == 0, out.stdout + out.stderr

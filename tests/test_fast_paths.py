@@ -71,9 +71,7 @@ def _dynamics_and_parameter_gradient(model, q, qd, u):
     def loss(m):
         return jnp.sum(qdd(m) ** 2)
 
-    return eqx.filter_jit(
-        lambda m: (qdd(m), eqx.filter_grad(loss)(m), jax.vmap(m.mass_matrix)(q))
-    )(model)
+    return eqx.filter_jit(lambda m: (qdd(m), eqx.filter_grad(loss)(m), jax.vmap(m.mass_matrix)(q)))(model)
 
 
 def _assert_trees_close(a, b, rtol=1e-12):
@@ -121,9 +119,7 @@ def test_second_derivatives_through_the_features_equal_the_reference(monkeypatch
 def test_env_step_compiler_options_do_not_change_the_step(system):
     """The model-backed envs' compile options (YNNPACK for bare products only) give the default
     compile's RK4 step, for every model family, batched (where XLA picks library products)."""
-    models = [analytic_model(system)] + [
-        make_model(system, k, jax.random.PRNGKey(3)) for k in ("dln", "aph", "adln")
-    ]
+    models = [analytic_model(system)] + [make_model(system, k, jax.random.PRNGKey(3)) for k in ("dln", "aph", "adln")]
     n = models[0].spec.n_dof
     rng = np.random.default_rng(2)
     xs = jnp.asarray(rng.uniform(-2.0, 2.0, (256, 2 * n)))

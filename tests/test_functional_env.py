@@ -24,8 +24,14 @@ DELAN = Path(__file__).resolve().parents[1] / "results/reproduce/runs/furuta/dln
 def _states_and_actions(count: int, seed: int = 0):
     """Hanging, mid-swing and near-upright states; actions inside and beyond [−1, 1]."""
     rng = np.random.default_rng(seed)
-    xs = np.column_stack([rng.uniform(-4, 4, count), rng.uniform(-np.pi, 2 * np.pi, count),
-                          rng.uniform(-8, 8, count), rng.uniform(-12, 12, count)])
+    xs = np.column_stack(
+        [
+            rng.uniform(-4, 4, count),
+            rng.uniform(-np.pi, 2 * np.pi, count),
+            rng.uniform(-8, 8, count),
+            rng.uniform(-12, 12, count),
+        ]
+    )
     return xs, rng.uniform(-1.5, 1.5, (count, 1)).astype(np.float32)
 
 
@@ -90,19 +96,25 @@ def test_encoder_quantisation_matches_the_gymnasium_env_and_is_a_param():
 
     # one compiled observation, two encoders: vmapped over params
     state = env.state_at([0.3, 2.0, 0.1, -0.2], params)
-    both = jax.tree_util.tree_map(lambda *a: jnp.stack(a), params,
-                                  dataclasses.replace(params, quantization=jnp.zeros(2)))
+    both = jax.tree_util.tree_map(
+        lambda *a: jnp.stack(a), params, dataclasses.replace(params, quantization=jnp.zeros(2))
+    )
     obs = jax.vmap(lambda p: env.get_obs(state, p))(both)
     alpha_q, beta_q = np.round(0.3 / step) * step, np.round(2.0 / step) * step
-    np.testing.assert_allclose(np.asarray(obs[0, :4]), np.float32(
-        [np.cos(alpha_q), np.sin(alpha_q), np.cos(beta_q), np.sin(beta_q)]), atol=1e-7)
-    np.testing.assert_allclose(np.asarray(obs[1, :4]), np.float32(
-        [np.cos(0.3), np.sin(0.3), np.cos(2.0), np.sin(2.0)]), atol=1e-7)
+    np.testing.assert_allclose(
+        np.asarray(obs[0, :4]),
+        np.float32([np.cos(alpha_q), np.sin(alpha_q), np.cos(beta_q), np.sin(beta_q)]),
+        atol=1e-7,
+    )
+    np.testing.assert_allclose(
+        np.asarray(obs[1, :4]), np.float32([np.cos(0.3), np.sin(0.3), np.cos(2.0), np.sin(2.0)]), atol=1e-7
+    )
 
 
 def test_measurement_noise_is_drawn_from_the_step_key_with_the_params_std():
-    env, params = functional.make(SWINGUP, spaces=Spaces(observation="raw"),
-                                  sensors=Sensors(measurement_noise=[0.0, 0.0, 0.5, 0.0]))
+    env, params = functional.make(
+        SWINGUP, spaces=Spaces(observation="raw"), sensors=Sensors(measurement_noise=[0.0, 0.0, 0.5, 0.0])
+    )
     state = env.state_at(np.zeros(4), params)
     keys = jax.random.split(jax.random.PRNGKey(1), 4000)
     obs = jax.vmap(lambda k: env.get_obs(state, params, k))(keys)
@@ -158,11 +170,14 @@ def test_a_non_finite_action_ends_the_episode_as_a_divergence_without_nan():
     np.testing.assert_array_equal(np.asarray(new.x), np.asarray(state.x))
 
 
-@pytest.mark.parametrize("kwargs, what", [
-    (dict(dynamics="mujoco"), "mujoco"),
-    (dict(sensors=Sensors(velocity="filter")), "filter"),
-    (dict(plant="delay"), "delay"),
-])
+@pytest.mark.parametrize(
+    "kwargs, what",
+    [
+        (dict(dynamics="mujoco"), "mujoco"),
+        (dict(sensors=Sensors(velocity="filter")), "filter"),
+        (dict(plant="delay"), "delay"),
+    ],
+)
 def test_what_needs_per_copy_python_state_is_refused_by_name(kwargs, what):
     with pytest.raises(EnvArgumentError, match=what):
         functional.make(SWINGUP, **kwargs)

@@ -43,6 +43,10 @@ def test_a_docs_block_is_checked_against_its_body(tmp_path):
 
 
 def test_functional_env_benchmark_section_matches_its_results():
-    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "functional_env_speed.py"), "--check"],
-                          capture_output=True, text=True, cwd=ROOT / "bench")
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "functional_env_speed.py"), "--check"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT / "bench",
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -25,9 +25,12 @@ import qube_baselines as qb  # noqa: E402
 sys.path.remove(str(ROOT / "experiments"))
 
 BACK_EMF = 0.042**2 / 8.4  # km²/Rm, N m s/rad
-NOMINAL_DAMPING = {"quanser_robots": (3e-4, 1.5e-5), "armandpl": (3e-4, 1.5e-5),
-                   # gym_brt's published back-EMF term has the other sign: its Dr must hold twice it
-                   "gym_brt": (3e-4 + 2 * BACK_EMF, 1.5e-5)}
+NOMINAL_DAMPING = {
+    "quanser_robots": (3e-4, 1.5e-5),
+    "armandpl": (3e-4, 1.5e-5),
+    # gym_brt's published back-EMF term has the other sign: its Dr must hold twice it
+    "gym_brt": (3e-4 + 2 * BACK_EMF, 1.5e-5),
+}
 
 
 def _states(n, seed=0):
@@ -134,6 +137,7 @@ def test_sysid_recovers_a_motor_gain_and_an_input_delay_on_simulated_windows():
 def test_head_to_head_docs_table_matches_its_results():
     if not (ROOT / "results" / "head_to_head" / "summary.json").is_file():
         pytest.skip("results/head_to_head not generated")
-    proc = subprocess.run([sys.executable, str(ROOT / "experiments" / "head_to_head_table.py"), "--check"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "experiments" / "head_to_head_table.py"), "--check"], capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

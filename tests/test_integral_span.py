@@ -47,9 +47,10 @@ def balancing_windows():
 def _gravity_contrast(windows, span):
     """L_Iτ without gravity over L_Iτ of the truth: how strongly the loss tells the physical
     potential from none."""
+
     def loss(g):
-        return float(integral_loss(Furuta(FurutaParameters(g=g)), windows, rule="simpson", normalize="none",
-                                   span=span))
+        return float(integral_loss(Furuta(FurutaParameters(g=g)), windows, rule="simpson", normalize="none", span=span))
+
     return loss(0.0) / loss(9.81)
 
 
@@ -93,8 +94,7 @@ def test_the_scale_fit_over_a_longer_span_is_not_diluted_by_velocity_noise():
     xs = np.asarray(rollout_zoh(truth, jnp.array([0.3, -1.0]), jnp.asarray(us), dt, 20))[:n]
     noisy_qd = xs[:, 1:] + np.random.default_rng(0).normal(0.0, 0.05 * np.std(xs[:, 1]), size=(n, 1))
     traj = Trajectory(np.arange(n) * dt, xs[:, :1], us, noisy_qd, name="forced, noisy velocities")
-    factor = {span: fit_scale(truth.with_scale(1.0), [traj], rule="simpson", span=span)[1].factor
-              for span in (1, 20)}
+    factor = {span: fit_scale(truth.with_scale(1.0), [traj], rule="simpson", span=span)[1].factor for span in (1, 20)}
     assert factor[1] < 0.9 * 2.5  # diluted
     assert abs(factor[20] - 2.5) < 0.25 * abs(factor[1] - 2.5)
 
@@ -117,8 +117,10 @@ def test_reproduce_can_train_on_velocities_estimated_offline_and_records_it():
     t = np.arange(200) * 0.01
     q = np.stack([np.sin(2 * t), 0.5 * np.cos(3 * t)], axis=1)
     lagged = np.stack([2 * np.cos(2 * (t - 0.016)), -1.5 * np.sin(3 * (t - 0.016))], axis=1)
-    data = {"train": [Trajectory(t, q, np.zeros((200, 1)), lagged)],
-            "scale_fit": [Trajectory(t, q, np.ones((200, 1)), lagged)]}
+    data = {
+        "train": [Trajectory(t, q, np.zeros((200, 1)), lagged)],
+        "scale_fit": [Trajectory(t, q, np.ones((200, 1)), lagged)],
+    }
     offline = ReproduceConfig(systems=("furuta",), training_velocities="zero_phase")
     train, forced = _training_data("furuta", data, offline)
     exact = np.stack([2 * np.cos(2 * t), -1.5 * np.sin(3 * t)], axis=1)
@@ -136,8 +138,9 @@ def test_reproduce_command_line_names_the_span_and_the_training_velocities():
     from furuta_gym.cli import build_parser
     from furuta_gym.cli.reproduce import config_from_args
 
-    _, config = config_from_args(build_parser().parse_args(
-        ["reproduce", "--integral-span", "5", "--training-velocities", "zero_phase"]))
+    _, config = config_from_args(
+        build_parser().parse_args(["reproduce", "--integral-span", "5", "--training-velocities", "zero_phase"])
+    )
     assert (config.integral_span, config.training_velocities) == (5, "zero_phase")
     _, default = config_from_args(build_parser().parse_args(["reproduce"]))
     assert (default.integral_span, default.training_velocities) == (1, "recorded")

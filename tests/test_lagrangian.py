@@ -218,12 +218,13 @@ def test_rk4_zoh_matches_tight_diffrax_with_held_input():
 
 
 def test_import_does_not_touch_jax_x64_flag():
-    code = (
-        "import jax, furuta_gym, furuta_gym.models, furuta_gym.lagrangian;"
-        "print(jax.config.read('jax_enable_x64'))"
+    code = "import jax, furuta_gym, furuta_gym.models, furuta_gym.lagrangian;print(jax.config.read('jax_enable_x64'))"
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env={"PATH": "/usr/bin:/bin", "HOME": "/tmp"} | _pyenv(),
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         env={"PATH": "/usr/bin:/bin", "HOME": "/tmp"} | _pyenv())
     assert out.stdout.strip() == "False", out.stderr
 
 
@@ -236,8 +237,12 @@ def test_first_model_construction_switches_x64_on_with_one_warning():
         "    m = Furuta(); m2 = Furuta()\n"
         "print(jax.config.read('jax_enable_x64'), sum(issubclass(x.category, furuta_gym.Float64Warning) for x in w), m.params.mr.dtype)"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         env={"PATH": "/usr/bin:/bin", "HOME": "/tmp"} | _pyenv())
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env={"PATH": "/usr/bin:/bin", "HOME": "/tmp"} | _pyenv(),
+    )
     assert out.stdout.split() == ["True", "1", "float64"], out.stderr
 
 

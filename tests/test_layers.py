@@ -15,8 +15,7 @@ import furuta_gym
 ROOT = Path(furuta_gym.__file__).resolve().parent
 REPO = ROOT.parent
 # subpackage -> its folder (models/ and controllers/ are mapped into furuta_gym by package-dir)
-FOLDERS = {"furuta_gym": ROOT, "furuta_gym.models": REPO / "models",
-           "furuta_gym.controllers": REPO / "controllers"}
+FOLDERS = {"furuta_gym": ROOT, "furuta_gym.models": REPO / "models", "furuta_gym.controllers": REPO / "controllers"}
 FORBIDDEN = {
     "models": {"envs", "training", "diagnose", "cli", "controllers", "demo"},
     "spine": {"envs", "training", "diagnose", "cli", "controllers", "demo"},
@@ -85,8 +84,11 @@ def test_layers_point_one_way_and_packages_talk_through_public_names():
             if target_layer in FORBIDDEN.get(layer, set()):
                 problems.append(f"{name} imports {target} ({layer} must not depend on {target_layer})")
             private = any(p.startswith("_") and p != "__init__" for p in target.split(".")[2:3])
-            if private and _owner(target) != _owner(name) and target.split(".")[1] in {
-                    m.split(".")[1] for m in modules if m.count(".") >= 2}:
+            if (
+                private
+                and _owner(target) != _owner(name)
+                and target.split(".")[1] in {m.split(".")[1] for m in modules if m.count(".") >= 2}
+            ):
                 problems.append(f"{name} imports {target}, a private module of {_owner(target)}")
     assert not problems, "\n".join(sorted(set(problems)))
 
@@ -126,8 +128,10 @@ def test_no_code_branches_on_a_system_name():
 
 def test_the_branch_finder_sees_a_branch(tmp_path):
     sample = tmp_path / "sample.py"
-    sample.write_text('def f(system, systems):\n    return 1 if system == "furuta" else "nmsd" != system\n'
-                      'def g(systems):\n    return "furuta" in systems, "nmsd" not in systems, "x" in systems\n')
+    sample.write_text(
+        'def f(system, systems):\n    return 1 if system == "furuta" else "nmsd" != system\n'
+        'def g(systems):\n    return "furuta" in systems, "nmsd" not in systems, "x" in systems\n'
+    )
     assert _name_branches(sample) == [2, 2, 4, 4]
 
 
@@ -165,8 +169,7 @@ def _imported_modules(name: str, path: Path, is_package: bool, modules) -> set[s
 def _import_graph() -> dict[str, set[str]]:
     """Each module of the package -> the package's modules it imports."""
     modules = _modules()
-    return {name: _imported_modules(name, path, is_package, modules)
-            for name, (path, is_package) in modules.items()}
+    return {name: _imported_modules(name, path, is_package, modules) for name, (path, is_package) in modules.items()}
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:

@@ -89,8 +89,24 @@ def trained(tmp_path_factory):
     from furuta_gym.cli import main
 
     out = tmp_path_factory.mktemp("real") / "dln"
-    code = main(["train", "--system", "furuta", "--model", "dln", "--loss", "itau", "--data", "qube:1,2",
-                 "--out", str(out), "--epochs", "5", "--no-progress"])
+    code = main(
+        [
+            "train",
+            "--system",
+            "furuta",
+            "--model",
+            "dln",
+            "--loss",
+            "itau",
+            "--data",
+            "qube:1,2",
+            "--out",
+            str(out),
+            "--epochs",
+            "5",
+            "--no-progress",
+        ]
+    )
     assert code == 0
     return out
 
@@ -117,8 +133,14 @@ def test_cli_train_reads_a_plain_log_like_the_shipped_runs(tmp_path, capsys):
     with gzip.open(qube_closed_loop_files([2])[0], "rb") as src, raw.open("wb") as dst:
         shutil.copyfileobj(src, dst)
     m = QUBE_CLOSED_LOOP_MAPPING
-    opts = ["--column-map", ",".join(f"{k}={v}" for k, v in m["column_map"].items()),
-            "--sign", "beta=-1", "--offset", f"beta={math.pi!r}"]
+    opts = [
+        "--column-map",
+        ",".join(f"{k}={v}" for k, v in m["column_map"].items()),
+        "--sign",
+        "beta=-1",
+        "--offset",
+        f"beta={math.pi!r}",
+    ]
     base = ["train", "--system", "furuta", "--model", "dln", "--loss", "itau", "--epochs", "1", "--no-progress"]
     assert main(base + ["--data", str(raw), "--out", str(tmp_path / "a"), "--skip", "0.5", *opts]) == 0
     assert main(base + ["--data", "qube:2", "--out", str(tmp_path / "b")]) == 0
@@ -164,6 +186,7 @@ def test_diagnose_reads_logs_through_the_shared_helper():
 def test_real_models_docs_table_matches_its_results():
     if not (ROOT / "results" / "real_models" / "summary.json").is_file():
         pytest.skip("results/real_models not generated")
-    proc = subprocess.run([sys.executable, str(ROOT / "experiments" / "real_models_table.py"), "--check"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "experiments" / "real_models_table.py"), "--check"], capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

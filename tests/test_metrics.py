@@ -20,8 +20,12 @@ from furuta_gym.training.metrics import (
 
 # free and forced sets of one 5 s trajectory each share one compiled solve (same shapes)
 TINY_FURUTA = FurutaRecipe(
-    n_train=1, n_test_free=1, test_free_duration=5.0, n_test_forced=1,
-    test_forced_duration=5.0, scale_fit_duration=1.0,
+    n_train=1,
+    n_test_free=1,
+    test_free_duration=5.0,
+    n_test_forced=1,
+    test_forced_duration=5.0,
+    scale_fit_duration=1.0,
 )
 
 

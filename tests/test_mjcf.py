@@ -50,10 +50,9 @@ def test_mass_matrix_and_forces_equal_analytic_model(system, model):
     jq, jqd, ju = jnp.asarray(q), jnp.asarray(qd), jnp.asarray(u)
     M_ref = np.asarray(jax.vmap(model.mass_matrix)(jq))
     bias_ref = np.asarray(
-        jax.vmap(
-            lambda q_, qd_: lag.coriolis_force(model, q_, qd_)
-            - lag.potential_derived_force(model, q_, qd_)
-        )(jq, jqd)
+        jax.vmap(lambda q_, qd_: lag.coriolis_force(model, q_, qd_) - lag.potential_derived_force(model, q_, qd_))(
+            jq, jqd
+        )
     )
     nc_ref = np.asarray(jax.vmap(model.nonconservative_force)(jq, jqd))
     u_ref = np.asarray(jax.vmap(model.input_force)(jq, jqd, ju))

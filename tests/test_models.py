@@ -69,9 +69,7 @@ def test_scale_leaves_free_dynamics_unchanged_but_not_forced(models, system, kin
     n = model.spec.n_dof
     q, qd = (jnp.asarray(a[0]) for a in _random_states(n, 1, seed=2))
     zero, one = jnp.zeros(1), jnp.ones(1)
-    np.testing.assert_allclose(
-        forward_dynamics(model, q, qd, zero), forward_dynamics(scaled, q, qd, zero), rtol=1e-10
-    )
+    np.testing.assert_allclose(forward_dynamics(model, q, qd, zero), forward_dynamics(scaled, q, qd, zero), rtol=1e-10)
     forced_a = forward_dynamics(model, q, qd, one) - forward_dynamics(model, q, qd, zero)
     forced_b = forward_dynamics(scaled, q, qd, one) - forward_dynamics(scaled, q, qd, zero)
     np.testing.assert_allclose(forced_a, 3.0 * forced_b, rtol=1e-10)
@@ -102,7 +100,9 @@ def test_aphynity_back_emf_kept_in_the_prior_breaks_the_scale_symmetry():
     assert abs(float(a[0] - b[0])) > 1e-3 * abs(float(a[0]))
     lumped = make_model("furuta", "aph", 0)
     np.testing.assert_allclose(lumped.input_force(q, qd, jnp.array([2.0])), [0.042 / 8.4 * 2, 0.0], rtol=1e-14)
-    np.testing.assert_allclose(kept.input_force(q, qd, jnp.array([2.0])), [0.042 / 8.4 * (2 - 0.042 * 4), 0.0], rtol=1e-14)
+    np.testing.assert_allclose(
+        kept.input_force(q, qd, jnp.array([2.0])), [0.042 / 8.4 * (2 - 0.042 * 4), 0.0], rtol=1e-14
+    )
 
 
 @pytest.mark.parametrize("system", ["furuta", "nmsd"])

@@ -19,11 +19,20 @@ from furuta_gym.effects import Effect
 from furuta_gym.envs import MujocoBackend, Plant, plant_mjcf, save_mjcf
 from furuta_gym.models import analytic_model
 
-FURUTA_EFFECTS = (Effect("spring", "alpha", 2e-3, reference=0.1), Effect("coulomb_friction", "alpha", 5e-4),
-                  Effect("viscous_friction", "beta", 1e-5), Effect("com_offset", "beta", 0.01),
-                  Effect("input_gain", "u", -0.1), Effect("actuator_lag", "u", 3e-3))
-NATIVE = (Effect("spring", "alpha", 2e-3, reference=0.1), Effect("viscous_friction", "beta", 1e-5),
-          Effect("input_gain", "u", -0.1), Effect("actuator_lag", "u", 3e-3))
+FURUTA_EFFECTS = (
+    Effect("spring", "alpha", 2e-3, reference=0.1),
+    Effect("coulomb_friction", "alpha", 5e-4),
+    Effect("viscous_friction", "beta", 1e-5),
+    Effect("com_offset", "beta", 0.01),
+    Effect("input_gain", "u", -0.1),
+    Effect("actuator_lag", "u", 3e-3),
+)
+NATIVE = (
+    Effect("spring", "alpha", 2e-3, reference=0.1),
+    Effect("viscous_friction", "beta", 1e-5),
+    Effect("input_gain", "u", -0.1),
+    Effect("actuator_lag", "u", 3e-3),
+)
 
 
 def _rollout(backend, x0, n=400):
@@ -35,13 +44,32 @@ def _rollout(backend, x0, n=400):
 def _off_nominal(system):
     """Lumped values away from the pinned model's, still a rigid body on an arm."""
     nominal = Plant.nominal(system).lumped
-    factors = {"J1": 1.3, "J1b": 0.8, "Jc": 1.1, "J2": 0.9, "G": 1.2, "c_alpha": 2.0, "c_beta": 0.5, "K": 0.9,
-               "m": 1.5, "k1": 0.7, "k2": 2.0, "b1": 1.4, "b2": 0.5, "gain": 1.1}
+    factors = {
+        "J1": 1.3,
+        "J1b": 0.8,
+        "Jc": 1.1,
+        "J2": 0.9,
+        "G": 1.2,
+        "c_alpha": 2.0,
+        "c_beta": 0.5,
+        "K": 0.9,
+        "m": 1.5,
+        "k1": 0.7,
+        "k2": 2.0,
+        "b1": 1.4,
+        "b2": 0.5,
+        "gain": 1.1,
+    }
     return {k: v * factors[k] for k, v in nominal.items()}
 
 
-@pytest.mark.parametrize("system,effects", [("furuta", FURUTA_EFFECTS[:4] + FURUTA_EFFECTS[5:]),
-                                            ("nmsd", (Effect("spring", "p", 2.0), Effect("input_gain", "u", -0.1)))])
+@pytest.mark.parametrize(
+    "system,effects",
+    [
+        ("furuta", FURUTA_EFFECTS[:4] + FURUTA_EFFECTS[5:]),
+        ("nmsd", (Effect("spring", "p", 2.0), Effect("input_gain", "u", -0.1))),
+    ],
+)
 def test_nominal_plant_is_the_default_plant(system, effects):
     """(Not with the Furuta's input gain: the lumped form holds the back-EMF in the rotor's damping,
     where the gain does not scale it, as in the lumped model the diagnosis fits.)"""
@@ -71,8 +99,12 @@ def test_lumped_plant_is_the_lumped_model(system):
         mujoco.mj_fullM(backend.model, d, M)
         jq, jqd = jnp.asarray(q), jnp.asarray(qd)
         np.testing.assert_allclose(M, np.asarray(model.mass_matrix(jq)), rtol=1e-9, atol=1e-15)
-        rhs_ref = (lag.potential_derived_force(model, jq, jqd) - lag.coriolis_force(model, jq, jqd)
-                   + model.nonconservative_force(jq, jqd) + model.input_force(jq, jqd, jnp.asarray(u)))
+        rhs_ref = (
+            lag.potential_derived_force(model, jq, jqd)
+            - lag.coriolis_force(model, jq, jqd)
+            + model.nonconservative_force(jq, jqd)
+            + model.input_force(jq, jqd, jnp.asarray(u))
+        )
         rhs = d.qfrc_passive + d.qfrc_actuator - d.qfrc_bias
         np.testing.assert_allclose(rhs, np.asarray(rhs_ref), rtol=1e-9, atol=1e-12 * np.max(np.abs(rhs)))
 
@@ -110,8 +142,9 @@ def test_mjcf_round_trips(tmp_path):
     save_mjcf(full, tmp_path / "full.xml")
     loaded = Plant.load(tmp_path / "full.xml")
     assert loaded == full
-    np.testing.assert_array_equal(_rollout(MujocoBackend("furuta", plant=loaded), x0),
-                                  _rollout(MujocoBackend("furuta", plant=full), x0))
+    np.testing.assert_array_equal(
+        _rollout(MujocoBackend("furuta", plant=loaded), x0), _rollout(MujocoBackend("furuta", plant=full), x0)
+    )
     before = path.read_text()
     with pytest.raises(FileExistsError, match="rig.xml exists"):
         save_mjcf(full, path)
@@ -123,8 +156,9 @@ def test_mjcf_round_trips(tmp_path):
 
 def test_a_diagnosis_gives_its_plant(tmp_path):
     """A diagnosed cable spring ends up in the plant, the JSON carries it, ``--mjcf`` writes it."""
-    log = measured_like("furuta", [Effect("spring", "alpha", 5e-3)], seed=3, n_trajectories=4, duration=5.0,
-                        quantize=False)
+    log = measured_like(
+        "furuta", [Effect("spring", "alpha", 5e-3)], seed=3, n_trajectories=4, duration=5.0, quantize=False
+    )
     res = diagnose(log, "furuta", candidates=["spring:alpha", "coulomb_friction:alpha"])
     plant = res.plant()
     springs = [e for e in plant.effects if e.name == "spring"]
@@ -141,14 +175,26 @@ def test_a_diagnosis_gives_its_plant(tmp_path):
 
 
 def test_cli_writes_the_mjcf(tmp_path):
-    log = measured_like("furuta", [Effect("spring", "alpha", 5e-3)], seed=3, n_trajectories=4, duration=5.0,
-                        quantize=False)
+    log = measured_like(
+        "furuta", [Effect("spring", "alpha", 5e-3)], seed=3, n_trajectories=4, duration=5.0, quantize=False
+    )
     from furuta_gym.data import save_trajectories
 
     save_trajectories(tmp_path / "log.csv", log, "furuta")
     out = tmp_path / "rig.xml"
-    cmd = [sys.executable, "-m", "furuta_gym", "diagnose", str(tmp_path / "log.csv"), "--system", "furuta",
-           "--candidates", "spring:alpha", "--mjcf", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "furuta_gym",
+        "diagnose",
+        str(tmp_path / "log.csv"),
+        "--system",
+        "furuta",
+        "--candidates",
+        "spring:alpha",
+        "--mjcf",
+        str(out),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert [e.name for e in Plant.load(out).effects] == ["spring"]
@@ -176,8 +222,12 @@ def test_the_env_takes_a_plant_a_diagnosis_or_a_file(tmp_path):
     file gives the same env; MuJoCo and the lumped model agree on it; it says where it came from."""
     import gymnasium as gym
 
-    plant = Plant(effects=(Effect("spring", "alpha", 2e-3),), lumped=_off_nominal("furuta"), system="furuta",
-                  source="diagnosis (spring:alpha)")
+    plant = Plant(
+        effects=(Effect("spring", "alpha", 2e-3),),
+        lumped=_off_nominal("furuta"),
+        system="furuta",
+        source="diagnosis (spring:alpha)",
+    )
     (tmp_path / "p.json").write_text(json.dumps({"plant": plant.to_json()}))
 
     class _Diagnosis:
@@ -185,8 +235,12 @@ def test_the_env_takes_a_plant_a_diagnosis_or_a_file(tmp_path):
             return plant
 
     runs = {}
-    for name, given, dynamics in (("object", plant, "mujoco"), ("diagnosis", _Diagnosis(), "mujoco"),
-                                  ("file", str(tmp_path / "p.json"), "mujoco"), ("analytic", plant, "analytic")):
+    for name, given, dynamics in (
+        ("object", plant, "mujoco"),
+        ("diagnosis", _Diagnosis(), "mujoco"),
+        ("file", str(tmp_path / "p.json"), "mujoco"),
+        ("analytic", plant, "analytic"),
+    ):
         env = gym.make("furuta_gym/Furuta-v0", plant=given, dynamics=dynamics)
         assert env.unwrapped.plant.source == "diagnosis (spring:alpha)"
         env.reset(seed=1)
@@ -218,8 +272,10 @@ def test_the_shipped_real_data_plant():
     assert plant.source.startswith("diagnosis (") and plant.lumped["J1b"] < plant.lumped["J2"]
     assert any(n.startswith("J1b: held at its declared value") for n in doc["notes"])
     assert doc["plant"] == plant.to_json()
-    envs = [gym.make("furuta_gym/Furuta-v0", plant=plant),
-            gym.make("furuta_gym/Furuta-v0", plant=str(path), dynamics="analytic")]
+    envs = [
+        gym.make("furuta_gym/Furuta-v0", plant=plant),
+        gym.make("furuta_gym/Furuta-v0", plant=str(path), dynamics="analytic"),
+    ]
     states = []
     for env in envs:
         obs, _ = env.reset(seed=0, options={"state": np.array([0.0, 0.3, 0.0, 0.0])})

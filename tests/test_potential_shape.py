@@ -61,7 +61,10 @@ def test_the_analytic_models_have_the_physical_shape_and_do_not_warn():
 
 
 def test_the_equilibria_come_from_the_system_definition():
-    assert [(e.joint, e.shape) for e in system_definition("furuta").equilibria] == [("beta", "minimum"), ("beta", "maximum")]
+    assert [(e.joint, e.shape) for e in system_definition("furuta").equilibria] == [
+        ("beta", "minimum"),
+        ("beta", "maximum"),
+    ]
     assert [e.shape for e in system_definition("nmsd").equilibria] == ["minimum"]
     with pytest.raises(ValueError, match="shape must be"):
         type(system_definition("nmsd").equilibria[0])("x", (0.0,), "p", "saddle")
@@ -98,8 +101,9 @@ def _cosine_delan(sign: float, seed: int = 0):
 def test_a_delan_potential_is_checked_through_its_own_networks():
     physical, flipped = check_potential_shape(_cosine_delan(-1.0)), check_potential_shape(_cosine_delan(1.0))
     assert physical["physical"] and not flipped["physical"]
-    np.testing.assert_allclose([r["curvature"] for r in flipped["equilibria"]],
-                               [-r["curvature"] for r in physical["equilibria"]], rtol=1e-12)
+    np.testing.assert_allclose(
+        [r["curvature"] for r in flipped["equilibria"]], [-r["curvature"] for r in physical["equilibria"]], rtol=1e-12
+    )
 
 
 @pytest.fixture(scope="module")
@@ -171,6 +175,9 @@ def test_lprop_ablation_docs_table_matches_its_results():
     root = Path(__file__).resolve().parents[1]
     if not any((root / "results" / "lprop_ablation").glob("*_s*.json")):
         pytest.skip("results/lprop_ablation not generated")
-    proc = subprocess.run([sys.executable, str(root / "experiments" / "lprop_ablation_table.py"), "--check"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, str(root / "experiments" / "lprop_ablation_table.py"), "--check"],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

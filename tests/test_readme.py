@@ -44,9 +44,17 @@ def test_readme_results_table_matches_the_reproduction_tables():
 def test_nothing_in_the_repo_points_outside_it():
     """README, docs, code and tests stand alone: no path into the workshop beside the checkout."""
     root = README.parent
-    files = [*root.glob("*.md"), *(root / "docs").rglob("*.md"), *(root / "furuta_gym").rglob("*.py"),
-             *(root / "models").rglob("*.py"), *(root / "controllers").rglob("*.py"),
-             *(p for p in (root / "tests").rglob("*.py") if p.name != "test_readme.py")]
-    outside = [str(p.relative_to(root)) for p in files
-               if any(s in p.read_text(errors="replace") for s in ("../shared", "known_pitfalls"))]
+    files = [
+        *root.glob("*.md"),
+        *(root / "docs").rglob("*.md"),
+        *(root / "furuta_gym").rglob("*.py"),
+        *(root / "models").rglob("*.py"),
+        *(root / "controllers").rglob("*.py"),
+        *(p for p in (root / "tests").rglob("*.py") if p.name != "test_readme.py"),
+    ]
+    outside = [
+        str(p.relative_to(root))
+        for p in files
+        if any(s in p.read_text(errors="replace") for s in ("../shared", "known_pitfalls"))
+    ]
     assert not outside, outside

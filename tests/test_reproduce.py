@@ -84,8 +84,12 @@ def test_rerun_reuses_finished_models_and_refuses_other_settings(tiny_run):
     model_bytes = model_path.read_bytes()
     header, _ = ckpt._read(model_path)
     header["hparams"]["hidden"] = [8, 8]
-    ckpt._write(model_path, {k: v for k, v in header.items() if not k.startswith("payload")},
-                ckpt.load_model(model_path), overwrite=True)
+    ckpt._write(
+        model_path,
+        {k: v for k, v in header.items() if not k.startswith("payload")},
+        ckpt.load_model(model_path),
+        overwrite=True,
+    )
     try:
         with pytest.raises(ValueError, match="other settings"):
             reproduce(out, TINY, log=logs.append)
@@ -156,8 +160,10 @@ def test_parallel_jobs_give_the_sequential_models_and_a_seed_spread(tiny_run, tm
         assert paths[name].parent == tmp_path / "par" / "figures" and paths[name].stat().st_size > 10_000
     assert record["seconds"]["figures"] == record["seconds"]["figures/nmsd"] > 0
     seq = json.loads((out / "runs" / "nmsd" / "dln_prop" / "seed0" / "metrics.json").read_text())
-    par = [json.loads((tmp_path / "par" / "runs" / "nmsd" / "dln_prop" / f"seed{k}" / "metrics.json").read_text())
-           for k in (0, 1)]
+    par = [
+        json.loads((tmp_path / "par" / "runs" / "nmsd" / "dln_prop" / f"seed{k}" / "metrics.json").read_text())
+        for k in (0, 1)
+    ]
     for label in ("Chirp", "Square"):
         for metric in METRIC_COLUMNS["nmsd"]:
             # a worker process trains the very model the sequential run trained
@@ -195,15 +201,17 @@ def test_evaluate_cli_on_the_trained_checkpoint(tiny_run, tmp_path):
     out, _, _ = tiny_run
     ckpt = out / "runs" / "nmsd" / "dln_prop" / "seed0" / "model.eqx"
     js = tmp_path / "m.json"
-    assert main(["evaluate", str(ckpt), "--data", str(out / "data" / "nmsd" / "test_square.csv"),
-                 "--json", str(js)]) == 0
+    assert (
+        main(["evaluate", str(ckpt), "--data", str(out / "data" / "nmsd" / "test_square.csv"), "--json", str(js)]) == 0
+    )
     result = json.loads(js.read_text())
     (metrics,) = result["results"].values()
     stored = json.loads((ckpt.parent / "metrics.json").read_text())["Square"]
     for name in METRIC_COLUMNS["nmsd"]:
         assert metrics[name] == pytest.approx(stored[name], abs=1e-6)
-    assert main(["evaluate", str(ckpt), "--data", str(out / "data" / "nmsd" / "test_square.csv"),
-                 "--json", str(js)]) == 2  # never overwrites
+    assert (
+        main(["evaluate", str(ckpt), "--data", str(out / "data" / "nmsd" / "test_square.csv"), "--json", str(js)]) == 2
+    )  # never overwrites
 
 
 def test_table_conventions_na_x_and_seed_spread():
@@ -239,9 +247,35 @@ def test_cli_seeds_0_1_2_write_mean_and_spread_beside_the_paper(tiny_run, tmp_pa
 
     out = tmp_path / "seeds"
     shutil.copytree(tiny_run[0], out)
-    assert main(["reproduce", "--quick", "--out", str(out), "--system", "nmsd", "--pair", "dln:prop",
-                 "--prop-epochs", "20", "1", "0", "--ground-truth", "analytic", "--jobs", "1",
-                 "--no-figures", "--no-progress", "--seeds", "0", "1", "2"]) == 0
+    assert (
+        main(
+            [
+                "reproduce",
+                "--quick",
+                "--out",
+                str(out),
+                "--system",
+                "nmsd",
+                "--pair",
+                "dln:prop",
+                "--prop-epochs",
+                "20",
+                "1",
+                "0",
+                "--ground-truth",
+                "analytic",
+                "--jobs",
+                "1",
+                "--no-figures",
+                "--no-progress",
+                "--seeds",
+                "0",
+                "1",
+                "2",
+            ]
+        )
+        == 0
+    )
     seconds = json.loads((out / "run.json").read_text())["seconds"]
     assert [seconds[f"nmsd/dln_prop/seed{k}"]["status"] for k in (0, 1, 2)] == ["reused", "trained", "trained"]
     with open(out / "tables.csv") as fh:
@@ -276,8 +310,11 @@ def test_the_main_claim_is_counted_seed_by_seed_with_several_seeds():
     # the mean (-2.17) holds, on two of the three seeds
     assert "inertial -2.17 vs -2.00 (holds; on 2 of 3 seeds)" in lines
     one = ReproduceConfig(systems=("furuta",), pairs=cfg.pairs)
-    lines = "\n".join(_summary_lines(build_tables({("furuta", "dln", "prop"): prop[:1],
-                                                    ("furuta", "dln", "traj"): traj[:1]}, one), one))
+    lines = "\n".join(
+        _summary_lines(
+            build_tables({("furuta", "dln", "prop"): prop[:1], ("furuta", "dln", "traj"): traj[:1]}, one), one
+        )
+    )
     assert "inertial -3.00 vs -2.00 (holds)" in lines
 
 
@@ -300,7 +337,10 @@ def test_full_run_gives_single_models_a_longer_itau_stage_and_overrides_win():
     assert training_config("nmsd", full, 0, "prop", "adln").epochs == FULL_PROP_EPOCHS["nmsd"]
     assert training_config("nmsd", full, 0, "prop", "dln").epochs == (8000, *FULL_PROP_EPOCHS["nmsd"][1:])
     # the baselines, --quick and an explicit schedule are not touched
-    assert training_config("furuta", full, 0, "aph", "adln").epochs == training_config("furuta", full, 0, "aph", "aph").epochs
+    assert (
+        training_config("furuta", full, 0, "aph", "adln").epochs
+        == training_config("furuta", full, 0, "aph", "aph").epochs
+    )
     assert training_config("furuta", ReproduceConfig(quick=True), 0, "prop", "adln").epochs == (300, 4, 1)
     own = ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})
     assert training_config("furuta", own, 0, "prop", "adln").epochs == (50, 2, 1)
@@ -314,8 +354,12 @@ def test_full_run_fine_tunes_at_smaller_steps_where_the_recipe_says_so():
     from furuta_gym.training.reproduce import FULL_PROP_FINETUNE_LEARNING_RATE, training_config
 
     full = ReproduceConfig()
-    for system, kind, itau_step in (("furuta", "adln", 1e-3), ("furuta", "dln", 1e-3),
-                                    ("furuta", "aph", 1e-3), ("nmsd", "aph", 1e-2)):
+    for system, kind, itau_step in (
+        ("furuta", "adln", 1e-3),
+        ("furuta", "dln", 1e-3),
+        ("furuta", "aph", 1e-3),
+        ("nmsd", "aph", 1e-2),
+    ):
         step = FULL_PROP_FINETUNE_LEARNING_RATE[(system, kind)]
         assert step < 1e-3
         assert training_config(system, full, 0, "prop", kind).learning_rate == (itau_step, step, step)
@@ -347,11 +391,16 @@ def test_full_run_gives_single_l_prop_models_their_own_quadrature_and_overrides_
         assert training_config(system, full, 0, "prop", kind).quadrature == rule
         for loss in ("traj", "aph"):
             assert training_config(system, full, 0, loss, kind).quadrature == REPRODUCE_QUADRATURE
-        for other in (ReproduceConfig(quick=True), ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})):
+        for other in (
+            ReproduceConfig(quick=True),
+            ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)}),
+        ):
             assert training_config(system, other, 0, "prop", kind).quadrature == REPRODUCE_QUADRATURE
         forced = ReproduceConfig(train_overrides={"quadrature": "trapezoid"})
         assert training_config(system, forced, 0, "prop", kind).quadrature == "trapezoid"
-    untouched = [(s, k) for s in ("furuta", "nmsd") for k in ("dln", "aph", "adln") if (s, k) not in FULL_PROP_QUADRATURE]
+    untouched = [
+        (s, k) for s in ("furuta", "nmsd") for k in ("dln", "aph", "adln") if (s, k) not in FULL_PROP_QUADRATURE
+    ]
     assert untouched
     for system, kind in untouched:
         assert training_config(system, full, 0, "prop", kind).quadrature == REPRODUCE_QUADRATURE
@@ -419,8 +468,9 @@ def test_cli_executor_options_and_what_a_ray_worker_is_told():
     from furuta_gym.training._ray_sweep import worker_env
 
     parser = build_parser()
-    _, config = config_from_args(parser.parse_args(
-        ["reproduce", "--executor", "ray", "--address", "auto", "--cpus-per-task", "2"]))
+    _, config = config_from_args(
+        parser.parse_args(["reproduce", "--executor", "ray", "--address", "auto", "--cpus-per-task", "2"])
+    )
     assert (config.executor, config.address, config.cpus_per_task) == ("ray", "auto", 2)
     _, default = config_from_args(parser.parse_args(["reproduce"]))
     assert (default.executor, default.address) == ("local", None)  # the local pool stays the default
@@ -429,10 +479,19 @@ def test_cli_executor_options_and_what_a_ray_worker_is_told():
     with pytest.raises(ValueError, match="needs executor='ray'"):
         ReproduceConfig(address="auto")
     # a task's XLA threads follow its CPU request; the node's other XLA flags and the caches stay
-    env = worker_env(2, {"XLA_FLAGS": "--xla_force_host_platform_device_count=2 intra_op_parallelism_threads=8",
-                         "JAX_COMPILATION_CACHE_DIR": "/cache", "HOME": "/root"})
-    assert env["XLA_FLAGS"].split() == ["--xla_force_host_platform_device_count=2",
-                                        "--xla_cpu_multi_thread_eigen=true", "intra_op_parallelism_threads=2"]
+    env = worker_env(
+        2,
+        {
+            "XLA_FLAGS": "--xla_force_host_platform_device_count=2 intra_op_parallelism_threads=8",
+            "JAX_COMPILATION_CACHE_DIR": "/cache",
+            "HOME": "/root",
+        },
+    )
+    assert env["XLA_FLAGS"].split() == [
+        "--xla_force_host_platform_device_count=2",
+        "--xla_cpu_multi_thread_eigen=true",
+        "intra_op_parallelism_threads=2",
+    ]
     assert env["JAX_COMPILATION_CACHE_DIR"] == "/cache" and "HOME" not in env
     assert env["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false" and env["OMP_NUM_THREADS"] == "2"
     assert "multi_thread_eigen=false" in worker_env(1, {})["XLA_FLAGS"]
@@ -445,8 +504,9 @@ def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys
     default = _default_hparams("furuta", "adln")
     odd = _default_hparams("furuta", "adln", {"odd_in_velocity": True})
     assert default["odd_in_velocity"] is False and odd["odd_in_velocity"] is True
-    assert {k: v for k, v in odd.items() if k != "odd_in_velocity"} == \
-        {k: v for k, v in default.items() if k != "odd_in_velocity"}
+    assert {k: v for k, v in odd.items() if k != "odd_in_velocity"} == {
+        k: v for k, v in default.items() if k != "odd_in_velocity"
+    }
     record = {"system": "furuta", "model": "adln", "loss": "prop", "seed": 0, "train": {}}
     assert not same_settings(dict(record, model_hparams=odd), dict(record, model_hparams=default))
     with pytest.raises(ValueError, match="unknown DeLaN hyper-parameters|unknown"):
@@ -463,18 +523,25 @@ def test_quick_runs_compile_their_steps_fast_and_full_runs_do_not():
         assert not training_config("furuta", ReproduceConfig(), 0, loss, kind).fast_compile
 
 
-@pytest.mark.parametrize("system, files, labels", [
-    ("furuta", ["train.csv", "val_forced.csv", "val_free.csv", "val_scale_fit.csv"], {"Free", "Forced"}),
-    # the N-MSD's validation labels are not its test labels: its tables are written from them
-    ("nmsd", ["train.csv", "val_multisine.csv", "val_steps.csv"], {"Multisine", "Steps"}),
-])
+@pytest.mark.parametrize(
+    "system, files, labels",
+    [
+        ("furuta", ["train.csv", "val_forced.csv", "val_free.csv", "val_scale_fit.csv"], {"Free", "Forced"}),
+        # the N-MSD's validation labels are not its test labels: its tables are written from them
+        ("nmsd", ["train.csv", "val_multisine.csv", "val_steps.csv"], {"Multisine", "Steps"}),
+    ],
+)
 def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path, system, files, labels):
     """A selection run (split="validation") trains on the same training data, fits the Furuta scale
     on val_scale_fit and scores the validation sets only: no test file, no test label, no paper
     value; its runs record the split, so a test run never reuses them (and vice versa)."""
     config = ReproduceConfig(
-        quick=True, systems=(system,), pairs=(("dln", "prop"),),
-        prop_epochs={system: (10, 1, 0)}, progress=False, ground_truth="analytic",
+        quick=True,
+        systems=(system,),
+        pairs=(("dln", "prop"),),
+        prop_epochs={system: (10, 1, 0)},
+        progress=False,
+        ground_truth="analytic",
         split="validation",
     )
     paths = reproduce(tmp_path, config, log=lambda msg: None)
@@ -501,8 +568,8 @@ def _decision_log_rows() -> list[str]:
     from pathlib import Path
 
     docs = (Path(__file__).resolve().parents[1] / "docs" / "reproduce.md").read_text()
-    log = docs[docs.index("**Decision log.**"):]
-    table = log[log.index("| choice |"):]
+    log = docs[docs.index("**Decision log.**") :]
+    table = log[log.index("| choice |") :]
     return table[: table.index("\n\n")].splitlines()[2:]
 
 
@@ -540,12 +607,16 @@ def test_decision_log_quotes_match_their_evidence():
     number = r"[+−-]?\d+\.\d+"
     value = lambda text: float(text.replace("−", "-"))  # noqa: E731
     matches = lambda quoted, actual: all(  # noqa: E731
-        abs(a - value(q)) <= 0.5 * 10.0 ** -len(q.split(".")[1]) + 1e-12 for q, a in zip(quoted, actual))
+        abs(a - value(q)) <= 0.5 * 10.0 ** -len(q.split(".")[1]) + 1e-12 for q, a in zip(quoted, actual)
+    )
     checked = 0
     for row in _decision_log_rows():
-        evidence = [d for link in re.findall(r"\]\(\.\./(results/[^)]+)\.md\)", row)
-                    if (root / f"{link}.json").exists()
-                    for d in _seed_differences(json.loads((root / f"{link}.json").read_text()))]
+        evidence = [
+            d
+            for link in re.findall(r"\]\(\.\./(results/[^)]+)\.md\)", row)
+            if (root / f"{link}.json").exists()
+            for d in _seed_differences(json.loads((root / f"{link}.json").read_text()))
+        ]
         for triple in re.findall(rf"\(({number}), ({number}), ({number})\)", row):
             assert any(len(d) == 3 and matches(triple, d) for d in evidence), (row[:40], triple)
             checked += 1

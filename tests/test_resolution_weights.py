@@ -80,8 +80,9 @@ def test_weighted_itau_stays_scale_free_on_free_data(furuta_data):
     w = make_windows(furuta_data, 101, stride=100, cover_end=True)
     m = make_model("furuta", "dln", jax.random.PRNGKey(0))
     a = float(integral_loss_terms(m, w, rule="simpson", normalize="momentum", resolution_tolerance=3e-6)[0])
-    b = float(integral_loss_terms(m.with_scale(3.0), w, rule="simpson", normalize="momentum",
-                                  resolution_tolerance=3e-6)[0])
+    b = float(
+        integral_loss_terms(m.with_scale(3.0), w, rule="simpson", normalize="momentum", resolution_tolerance=3e-6)[0]
+    )
     assert b == pytest.approx(a, rel=1e-10)
 
 
@@ -95,9 +96,16 @@ def test_tolerance_must_be_positive():
 
 def test_training_with_the_weighting_records_it_and_lowers_itau(tmp_path):
     trs = [_whirl(NMSD(), [a, b], seconds=1.0) for a, b in [(0.8, 0.0), (-0.5, 2.0), (0.2, -3.0)]]
-    cfg = TrainConfig.for_system("nmsd", epochs=(30,), horizons=(None,), learning_rate=1e-2,
-                                 quadrature="simpson", resolution_tolerance=1e-7, progress=False,
-                                 checkpoint_every=0)
+    cfg = TrainConfig.for_system(
+        "nmsd",
+        epochs=(30,),
+        horizons=(None,),
+        learning_rate=1e-2,
+        quadrature="simpson",
+        resolution_tolerance=1e-7,
+        progress=False,
+        checkpoint_every=0,
+    )
     _, hist = train("dln", "nmsd", "itau", trs, cfg, out_dir=tmp_path)
     assert hist[-1]["itau"] < 0.5 * hist[0]["itau"]
     import json

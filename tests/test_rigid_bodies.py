@@ -18,9 +18,15 @@ def _result(error: float, **changes):
     params = {**NOMINAL, **changes}
     intervals = {k: Interval(0.9 * v, 1.1 * v, "output_error") for k, v in params.items()}
     intervals["J1b"] = Interval(-5e-5, 4.3e-4, "output_error")  # balancing logs hardly see J1b
-    return types.SimpleNamespace(system="furuta", parameters_after=params, fixed={"G": NOMINAL["G"]},
-                                 intervals=intervals, parameter_units={"J1b": "kg m^2"}, notes=[],
-                                 error_after=types.SimpleNamespace(trajectory_rmse=error))
+    return types.SimpleNamespace(
+        system="furuta",
+        parameters_after=params,
+        fixed={"G": NOMINAL["G"]},
+        intervals=intervals,
+        parameter_units={"J1b": "kg m^2"},
+        notes=[],
+        error_after=types.SimpleNamespace(trajectory_rmse=error),
+    )
 
 
 def test_an_unrealizable_fit_gets_its_least_determined_parameter_held_when_the_data_allow():

@@ -16,8 +16,11 @@ CHECKPOINT = ROOT / "results" / "reproduce" / "runs" / "furuta" / "dln_prop" / "
 def test_rl_learned_docs_table_matches_its_results():
     if not any((ROOT / "results" / "rl_learned").glob("*_seed0.json")):
         pytest.skip("results/rl_learned not generated")
-    proc = subprocess.run([sys.executable, str(EXPERIMENTS / "rl_from_learned_models_table.py"), "--check"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, str(EXPERIMENTS / "rl_from_learned_models_table.py"), "--check"],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
@@ -45,6 +48,10 @@ def test_a_learned_model_randomised_env_draws_its_scale_at_each_reset():
 def test_rl_wall_time_benchmark_section_matches_its_results():
     if "<!-- bench/rl_wall_time.py:start -->" not in (ROOT / "BENCHMARKS.md").read_text():
         pytest.skip("BENCHMARKS.md has no wall-time-to-swing-up section yet")
-    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "rl_wall_time.py"), "--check"],
-                          capture_output=True, text=True, cwd=ROOT / "bench")
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "rl_wall_time.py"), "--check"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT / "bench",
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -50,16 +50,24 @@ def test_seeds_are_trained_in_turn_and_a_beaten_value_is_not_trained_again():
 
     means = {"a": [0.0, 0.0, 0.0], "b": [0.1, -9.0, -9.0], "c": [-0.1, 0.2, -9.0], "d": [-0.1, -0.1, -0.1]}
     calls = []
-    trained = _train_in_turn("a", [("adln", v, f"out/{v}") for v in means], (0, 1, 2),
-                             lambda live, seed: calls.append((seed, [t for _, t, _ in live])),
-                             lambda kind, out, seed: means[out.split("/")[1]][seed])
+    trained = _train_in_turn(
+        "a",
+        [("adln", v, f"out/{v}") for v in means],
+        (0, 1, 2),
+        lambda live, seed: calls.append((seed, [t for _, t, _ in live])),
+        lambda kind, out, seed: means[out.split("/")[1]][seed],
+    )
     assert calls == [(0, ["a", "b", "c", "d"]), (1, ["a", "c", "d"]), (2, ["a", "d"])]
-    assert trained == {("adln", "a"): [0, 1, 2], ("adln", "b"): [0], ("adln", "c"): [0, 1],
-                       ("adln", "d"): [0, 1, 2]}
+    assert trained == {("adln", "a"): [0, 1, 2], ("adln", "b"): [0], ("adln", "c"): [0, 1], ("adln", "d"): [0, 1, 2]}
     # all beaten on seed 0: nothing more is trained
     calls.clear()
-    trained = _train_in_turn("a", [("adln", "a", "out/a"), ("adln", "b", "out/b")], (0, 1, 2),
-                             lambda live, seed: calls.append(seed), lambda kind, out, seed: means[out[4:]][seed])
+    trained = _train_in_turn(
+        "a",
+        [("adln", "a", "out/a"), ("adln", "b", "out/b")],
+        (0, 1, 2),
+        lambda live, seed: calls.append(seed),
+        lambda kind, out, seed: means[out[4:]][seed],
+    )
     assert calls == [0] and trained == {("adln", "a"): [0], ("adln", "b"): [0]}
 
 

@@ -36,8 +36,13 @@ def nmsd_data():
     long = _nmsd_trajectory([0.6, -2.0], 20.0, t1=20.0)
     n = int(round(2.0 / DT))
     train_set = [
-        Trajectory(long.t[k * n : k * n + n + 1] - long.t[k * n], long.q[k * n : k * n + n + 1],
-                   long.u[k * n : k * n + n + 1], long.qd[k * n : k * n + n + 1], name=str(k))
+        Trajectory(
+            long.t[k * n : k * n + n + 1] - long.t[k * n],
+            long.q[k * n : k * n + n + 1],
+            long.u[k * n : k * n + n + 1],
+            long.qd[k * n : k * n + n + 1],
+            name=str(k),
+        )
         for k in range(10)
     ]
     held_out = _nmsd_trajectory([-0.5, 3.0], 6.0, t1=20.0, t_offset=3.0, name="test")
@@ -62,12 +67,14 @@ def test_every_loss_gradient_is_finite_and_matches_finite_differences(nmsd_data)
 
     def losses(vec):
         m = eqx.combine(unravel(vec), static)
-        return jnp.stack([
-            trajectory_loss(m, traj_w),
-            integral_loss(m, int_w, normalize="momentum"),
-            integral_loss(m, int_w, normalize="none", rule="simpson"),
-            augmentation_penalty(m, traj_w),
-        ])
+        return jnp.stack(
+            [
+                trajectory_loss(m, traj_w),
+                integral_loss(m, int_w, normalize="momentum"),
+                integral_loss(m, int_w, normalize="none", rule="simpson"),
+                augmentation_penalty(m, traj_w),
+            ]
+        )
 
     # one compiled gradient for all four: a random positive combination, each loss divided by
     # its value so none hides under the others (a wrong gradient of any one shows up here)
@@ -91,7 +98,11 @@ def test_every_loss_gradient_is_finite_and_matches_finite_differences(nmsd_data)
 def test_short_nmsd_training_with_l_prop_lowers_losses_and_held_out_error(nmsd_data, tmp_path):
     train_set, held_out = nmsd_data
     config = TrainConfig(
-        epochs=(16,), horizons=(2,), learning_rate=1e-2, batch_size=128, progress=False,
+        epochs=(16,),
+        horizons=(2,),
+        learning_rate=1e-2,
+        batch_size=128,
+        progress=False,
         checkpoint_every=8,
     )
     hparams = dict(hidden=(16, 16))
@@ -140,7 +151,9 @@ def test_resume_continues_the_same_optimiser_state(nmsd_data, tmp_path):
     hp = dict(hidden=(4, 4))
     straight, h_straight = train("dln", "nmsd", "itau", train_set, _itau_config(), tmp_path / "a", hparams=hp)
     train("dln", "nmsd", "itau", train_set, _itau_config(epochs=(2,)), tmp_path / "b", hparams=hp)
-    resumed, h_resumed = train("dln", "nmsd", "itau", train_set, _itau_config(), tmp_path / "b", resume=True, hparams=hp)
+    resumed, h_resumed = train(
+        "dln", "nmsd", "itau", train_set, _itau_config(), tmp_path / "b", resume=True, hparams=hp
+    )
     assert len(h_resumed) == 4 and [h["itau"] for h in h_resumed] == [h["itau"] for h in h_straight]
     for a, b in zip(jax.tree_util.tree_leaves(straight), jax.tree_util.tree_leaves(resumed)):
         np.testing.assert_array_equal(a, b)
@@ -157,8 +170,16 @@ def test_resume_refuses_other_training_settings(nmsd_data, tmp_path):
     hp = dict(hidden=(4, 4))
     train("dln", "nmsd", "itau", train_set, _itau_config(epochs=(2,)), tmp_path, hparams=hp)
     with pytest.raises(ValueError, match="other training settings") as err:
-        train("dln", "nmsd", "itau", train_set, _itau_config(epochs=(3,), learning_rate=1e-3, lambda_traj=0.5),
-              tmp_path, resume=True, hparams=hp)
+        train(
+            "dln",
+            "nmsd",
+            "itau",
+            train_set,
+            _itau_config(epochs=(3,), learning_rate=1e-3, lambda_traj=0.5),
+            tmp_path,
+            resume=True,
+            hparams=hp,
+        )
     assert "learning_rate: saved 0.005, now 0.001" in str(err.value)
     assert "lambda_traj: saved 1.0, now 0.5" in str(err.value)
     assert "epochs" not in str(err.value)
@@ -173,8 +194,9 @@ def test_nan_guard_skips_poisoned_steps_and_never_saves_nan(nmsd_data, tmp_path)
     bad_q[50] = np.nan
     poisoned[3] = Trajectory(poisoned[3].t, bad_q, poisoned[3].u, poisoned[3].qd, name="bad")
     with pytest.warns(RuntimeWarning, match="NaN guard"):
-        model, history = train("dln", "nmsd", "itau", poisoned, _itau_config(epochs=(2,)), tmp_path,
-                               hparams=dict(hidden=(4, 4)))
+        model, history = train(
+            "dln", "nmsd", "itau", poisoned, _itau_config(epochs=(2,)), tmp_path, hparams=dict(hidden=(4, 4))
+        )
     skipped = sum(h["skipped"] for h in history)
     assert skipped >= 1 and skipped < sum(h["steps"] for h in history)
     assert all(np.all(np.isfinite(np.asarray(l))) for l in jax.tree_util.tree_leaves(model))
@@ -250,8 +272,24 @@ def test_cli_trains_writes_a_loadable_model_and_reports_bad_input(nmsd_data, tmp
     data = tmp_path / "train.csv"
     save_trajectories(data, nmsd_data[0][:4], "nmsd")
     out = tmp_path / "run"
-    args = ["train", "--system", "nmsd", "--model", "dln", "--loss", "itau", "--data", str(data),
-            "--out", str(out), "--epochs", "3", "--hidden", "4,4", "--no-progress"]
+    args = [
+        "train",
+        "--system",
+        "nmsd",
+        "--model",
+        "dln",
+        "--loss",
+        "itau",
+        "--data",
+        str(data),
+        "--out",
+        str(out),
+        "--epochs",
+        "3",
+        "--hidden",
+        "4,4",
+        "--no-progress",
+    ]
     assert main(args) == 0
     model = ckpt.load_model(out / "model.eqx", expected_system="nmsd")
     assert model.hyperparameters["hidden"] == (4, 4)
@@ -260,7 +298,23 @@ def test_cli_trains_writes_a_loadable_model_and_reports_bad_input(nmsd_data, tmp
     assert "--resume" in capsys.readouterr().err
     assert main(args[:-1] + ["--epochs", "4", "--resume", "--no-progress"]) == 0
     assert ckpt.read_header(out / "model.eqx")["meta"]["epoch"] == 4
-    assert main(["train", "--system", "furuta", "--model", "dln", "--loss", "itau", "--data", str(data),
-                 "--out", str(tmp_path / "x")]) == 2
+    assert (
+        main(
+            [
+                "train",
+                "--system",
+                "furuta",
+                "--model",
+                "dln",
+                "--loss",
+                "itau",
+                "--data",
+                str(data),
+                "--out",
+                str(tmp_path / "x"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "train.csv" in err

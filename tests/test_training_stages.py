@@ -21,14 +21,28 @@ def segments():
     u = chirp(t, 0.1, 1.1, 8.0)[:, None]
     xs = np.asarray(simulate(NMSD(), np.array([0.5, -1.0]), t, u, rtol=1e-10, atol=1e-12))
     n = 100
-    return [Trajectory(t[k * n : k * n + n + 1] - t[k * n], xs[k * n : k * n + n + 1, :1],
-                       u[k * n : k * n + n + 1], xs[k * n : k * n + n + 1, 1:], name=str(k))
-            for k in range(8)]
+    return [
+        Trajectory(
+            t[k * n : k * n + n + 1] - t[k * n],
+            xs[k * n : k * n + n + 1, :1],
+            u[k * n : k * n + n + 1],
+            xs[k * n : k * n + n + 1, 1:],
+            name=str(k),
+        )
+        for k in range(8)
+    ]
 
 
 def test_an_itau_stage_then_prop_stages(segments, tmp_path):
-    cfg = TrainConfig.for_system("nmsd", epochs=(30, 2), horizons=(None, 2), batch_size=64,
-                                 quadrature="simpson", progress=False, checkpoint_every=0)
+    cfg = TrainConfig.for_system(
+        "nmsd",
+        epochs=(30, 2),
+        horizons=(None, 2),
+        batch_size=64,
+        quadrature="simpson",
+        progress=False,
+        checkpoint_every=0,
+    )
     model, history = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "run")
     assert [h["stage"] for h in history] == [0] * 30 + [1] * 2
     first, last_itau, prop = history[0], history[29], history[30]
@@ -55,12 +69,30 @@ def test_learning_rate_per_stage(segments):
         TrainConfig(epochs=(1,), horizons=(2,), learning_rate=(0.0,))
     base = dict(horizons=(None, None), quadrature="simpson", progress=False, checkpoint_every=0)
     hp = dict(hidden=(8, 8))
-    two, _ = train("dln", "nmsd", "prop", segments,
-                   TrainConfig.for_system("nmsd", epochs=(5, 5), learning_rate=(1e-2, 1e-15), **base), hparams=hp)
-    one, _ = train("dln", "nmsd", "prop", segments,
-                   TrainConfig.for_system("nmsd", epochs=(5, 0), learning_rate=1e-2, **base), hparams=hp)
-    fast, _ = train("dln", "nmsd", "prop", segments,
-                    TrainConfig.for_system("nmsd", epochs=(5, 5), learning_rate=1e-2, **base), hparams=hp)
+    two, _ = train(
+        "dln",
+        "nmsd",
+        "prop",
+        segments,
+        TrainConfig.for_system("nmsd", epochs=(5, 5), learning_rate=(1e-2, 1e-15), **base),
+        hparams=hp,
+    )
+    one, _ = train(
+        "dln",
+        "nmsd",
+        "prop",
+        segments,
+        TrainConfig.for_system("nmsd", epochs=(5, 0), learning_rate=1e-2, **base),
+        hparams=hp,
+    )
+    fast, _ = train(
+        "dln",
+        "nmsd",
+        "prop",
+        segments,
+        TrainConfig.for_system("nmsd", epochs=(5, 5), learning_rate=1e-2, **base),
+        hparams=hp,
+    )
     a, b, c = (np.asarray(m.lagrangian_nets.potential_net.layers[0].weight) for m in (two, one, fast))
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     assert np.max(np.abs(c - b)) > 1e-4
@@ -72,9 +104,20 @@ def test_cosine_decay_within_each_stage(segments):
     leaves the model of the epoch before)."""
     cfg = TrainConfig(epochs=(5, 3), horizons=(None, 2), learning_rate=(1e-2, 1e-3), cosine_decay_to=0.01)
     rates = [cfg.epoch_learning_rate(e) for e in range(8)]
-    np.testing.assert_allclose(rates, [1e-2, 1e-2 * (0.01 + 0.99 * 0.5 * (1 + np.cos(np.pi / 4))), 1e-2 * 0.505,
-                                       1e-2 * (0.01 + 0.99 * 0.5 * (1 + np.cos(3 * np.pi / 4))), 1e-4,
-                                       1e-3, 1e-3 * 0.505, 1e-5], rtol=1e-12)
+    np.testing.assert_allclose(
+        rates,
+        [
+            1e-2,
+            1e-2 * (0.01 + 0.99 * 0.5 * (1 + np.cos(np.pi / 4))),
+            1e-2 * 0.505,
+            1e-2 * (0.01 + 0.99 * 0.5 * (1 + np.cos(3 * np.pi / 4))),
+            1e-4,
+            1e-3,
+            1e-3 * 0.505,
+            1e-5,
+        ],
+        rtol=1e-12,
+    )
     constant = TrainConfig(epochs=(5, 3), horizons=(None, 2), learning_rate=(1e-2, 1e-3))
     assert [constant.epoch_learning_rate(e) for e in range(8)] == [1e-2] * 5 + [1e-3] * 3
     for bad in (0.0, 1.5, -0.1):
@@ -83,11 +126,23 @@ def test_cosine_decay_within_each_stage(segments):
     with pytest.raises(ValueError, match="outside the 8 epochs"):
         cfg.epoch_learning_rate(8)
 
-    base = dict(horizons=(None,), quadrature="simpson", progress=False, checkpoint_every=0, learning_rate=1e-2,
-                keep_best_itau=False)
+    base = dict(
+        horizons=(None,),
+        quadrature="simpson",
+        progress=False,
+        checkpoint_every=0,
+        learning_rate=1e-2,
+        keep_best_itau=False,
+    )
     hp = dict(hidden=(8, 8))
-    decayed, _ = train("dln", "nmsd", "prop", segments,
-                       TrainConfig.for_system("nmsd", epochs=(2,), cosine_decay_to=1e-15, **base), hparams=hp)
+    decayed, _ = train(
+        "dln",
+        "nmsd",
+        "prop",
+        segments,
+        TrainConfig.for_system("nmsd", epochs=(2,), cosine_decay_to=1e-15, **base),
+        hparams=hp,
+    )
     one, _ = train("dln", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", epochs=(1,), **base), hparams=hp)
     two, _ = train("dln", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", epochs=(2,), **base), hparams=hp)
     a, b, c = (np.asarray(m.lagrangian_nets.potential_net.layers[0].weight) for m in (decayed, one, two))
@@ -96,7 +151,9 @@ def test_cosine_decay_within_each_stage(segments):
 
 
 def _weights(model):
-    return np.concatenate([np.ravel(leaf) for leaf in jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))])
+    return np.concatenate(
+        [np.ravel(leaf) for leaf in jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))]
+    )
 
 
 SPIKY = dict(horizons=(None,), quadrature="simpson", progress=False, checkpoint_every=0, learning_rate=0.1)
@@ -106,18 +163,31 @@ def test_a_full_batch_itau_stage_hands_on_its_lowest_loss_iterate(segments):
     """At a large step the L_Iτ loss jumps from epoch to epoch; the stage's result is the iterate
     of its lowest recorded loss (bit for bit the model after that many epochs), not the last."""
     hp = dict(hidden=(8, 8))
-    best, history = train("dln", "nmsd", "prop", segments,
-                          TrainConfig.for_system("nmsd", epochs=(12,), **SPIKY), hparams=hp)
-    last, history_last = train("dln", "nmsd", "prop", segments,
-                               TrainConfig.for_system("nmsd", epochs=(12,), keep_best_itau=False, **SPIKY), hparams=hp)
+    best, history = train(
+        "dln", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", epochs=(12,), **SPIKY), hparams=hp
+    )
+    last, history_last = train(
+        "dln",
+        "nmsd",
+        "prop",
+        segments,
+        TrainConfig.for_system("nmsd", epochs=(12,), keep_best_itau=False, **SPIKY),
+        hparams=hp,
+    )
     totals = [h["total"] for h in history]
     assert totals == [h["total"] for h in history_last]  # the same steps; only the hand-over differs
     after = history[-1]["best_after_epoch"]
     assert after < 11, f"the last iterates were the best ({totals}): this test needs a non-monotone stage"
     assert history[-1]["best_total"] == totals[after] == min(totals)
     assert "best_after_epoch" not in history_last[-1]
-    reference, _ = train("dln", "nmsd", "prop", segments,
-                         TrainConfig.for_system("nmsd", epochs=(after,), keep_best_itau=False, **SPIKY), hparams=hp)
+    reference, _ = train(
+        "dln",
+        "nmsd",
+        "prop",
+        segments,
+        TrainConfig.for_system("nmsd", epochs=(after,), keep_best_itau=False, **SPIKY),
+        hparams=hp,
+    )
     np.testing.assert_array_equal(_weights(best), _weights(reference))
     assert np.max(np.abs(_weights(best) - _weights(last))) > 1e-6
 
@@ -159,10 +229,21 @@ def test_a_one_epoch_itau_stage_keeps_its_step_when_it_lowered_the_loss(segments
     undone when its step helped (and is when it hurt)."""
     hp = dict(hidden=(8, 8))
     cfg = dict(horizons=(None,), quadrature="simpson", progress=False, checkpoint_every=0)
-    kept, history = train("dln", "nmsd", "prop", segments,
-                          TrainConfig.for_system("nmsd", epochs=(1,), learning_rate=1e-3, **cfg), hparams=hp)
-    plain, _ = train("dln", "nmsd", "prop", segments,
-                     TrainConfig.for_system("nmsd", epochs=(1,), learning_rate=1e-3, keep_best_itau=False, **cfg),
-                     hparams=hp)
+    kept, history = train(
+        "dln",
+        "nmsd",
+        "prop",
+        segments,
+        TrainConfig.for_system("nmsd", epochs=(1,), learning_rate=1e-3, **cfg),
+        hparams=hp,
+    )
+    plain, _ = train(
+        "dln",
+        "nmsd",
+        "prop",
+        segments,
+        TrainConfig.for_system("nmsd", epochs=(1,), learning_rate=1e-3, keep_best_itau=False, **cfg),
+        hparams=hp,
+    )
     assert history[-1]["best_after_epoch"] == 1 and history[-1]["best_total"] < history[-1]["total"]
     np.testing.assert_array_equal(_weights(kept), _weights(plain))

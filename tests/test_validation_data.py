@@ -67,8 +67,12 @@ def test_validation_sets_do_not_follow_the_test_sets(system):
         # so did the earlier scale fit, the test chirp; the reproduction's own random steps do not
         from furuta_gym.training.datagen import FurutaRecipe
 
-        chirp = generate_datasets(system, seed=0, ground_truth="analytic",
-                                  recipe=dataclasses.replace(FurutaRecipe.small(), scale_fit_input="chirp"))
+        chirp = generate_datasets(
+            system,
+            seed=0,
+            ground_truth="analytic",
+            recipe=dataclasses.replace(FurutaRecipe.small(), scale_fit_input="chirp"),
+        )
         assert sample_overlap(chirp["scale_fit"], tests["test_forced"], tol, angular) > 0.05
         assert sample_overlap(tests["scale_fit"], test_trajs, tol, angular) < 0.01
         np.testing.assert_array_equal(chirp["test_forced"][0].x, tests["test_forced"][0].x)
@@ -80,6 +84,7 @@ def test_published_overlap_table_matches_its_result_file():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    out = subprocess.run([sys.executable, str(root / "experiments" / "validation_overlap.py"), "--check"],
-                         capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, str(root / "experiments" / "validation_overlap.py"), "--check"], capture_output=True, text=True
+    )
     assert out.returncode == 0, out.stdout + out.stderr

@@ -57,9 +57,7 @@ class BlowUp(AbstractLagrangianSystem):
 
 @pytest.fixture(scope="module")
 def furuta_rollout():
-    x0s = jnp.array(
-        [[0.0, 0.05, 0.0, 0.0], [0.3, 3.0, -1.0, 0.5], [-0.2, 2.9, 2.0, -3.0]]
-    )
+    x0s = jnp.array([[0.0, 0.05, 0.0, 0.0], [0.3, 3.0, -1.0, 0.5], [-0.2, 2.9, 2.0, -3.0]])
     return x0s, rollout(Furuta(), lqr_like, x0s, 400, dt=DT, substeps=2, action_limit=5.0)
 
 
@@ -127,8 +125,11 @@ def _assert_same_step(batched, reference, atol=1e-12, rtol=1e-12):
     assert set(info) == set(info_r)
     for key in info_r:
         np.testing.assert_allclose(
-            np.asarray(info[key], dtype=float), np.asarray(info_r[key], dtype=float),
-            rtol=rtol, atol=atol, err_msg=key,
+            np.asarray(info[key], dtype=float),
+            np.asarray(info_r[key], dtype=float),
+            rtol=rtol,
+            atol=atol,
+            err_msg=key,
         )
 
 
@@ -278,9 +279,7 @@ def test_broken_model_diverges_in_one_copy_only():
     broken = NMSD(params=NMSDParameters(k2=-50.0))
     starts = np.array([[0.0, 0.0], [2.0, 0.0], [0.1, 0.0]])
     batched = NMSDVectorEnv(3, dynamics=broken, reset_noise_scale=0.0)
-    sync = gym.vector.SyncVectorEnv(
-        [lambda: gym.make(NMSD_ID, dynamics=broken, reset_noise_scale=0.0)] * 3
-    )
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make(NMSD_ID, dynamics=broken, reset_noise_scale=0.0)] * 3)
     out, ref = batched.reset(options={"state": starts}), sync.reset(options={"state": starts[0]})
     for k in (1, 2):  # SyncVectorEnv passes one options dict to all; start copies 1, 2 by hand
         sync.envs[k].reset(options={"state": starts[k]})
@@ -356,7 +355,10 @@ def test_make_vec_modes():
     with pytest.raises(ValueError, match="batched must be"):
         gym.make_vec(FURUTA_ID, num_envs=2, dynamics="analytic", batched="yes")
     env = gym.make_vec(
-        NMSD_ID, num_envs=2, vectorization_mode="vector_entry_point", dynamics="analytic",
+        NMSD_ID,
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        dynamics="analytic",
         batched=True,
     )
     assert isinstance(env.unwrapped, NMSDVectorEnv)
@@ -421,7 +423,7 @@ def test_split_and_worker_processes_give_every_copy_the_same_numbers():
         env = gym.make_vec("furuta_gym/NMSD-v0", num_envs=6, dynamics="analytic", workers=workers)
         assert isinstance(env, NMSDVectorEnv) and env.workers == workers
         env.reset(seed=1, options={"target": 0.4})
-        _, reward, *_ , info = env.step(np.full((6, 1), 2.0))
+        _, reward, *_, info = env.step(np.full((6, 1), 2.0))
         targets.append((reward, info["target"]))
         if workers:
             processes = env._workers._processes

@@ -51,8 +51,11 @@ SCRIPT = textwrap.dedent("""
 
 
 def test_two_host_devices_give_every_copy_the_one_device_numbers():
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2 "
-           "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"}
+    env = {
+        **os.environ,
+        "XLA_FLAGS": "--xla_force_host_platform_device_count=2 "
+        "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+    }
     out = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     result = json.loads(out.stdout.strip().splitlines()[-1])
@@ -76,8 +79,9 @@ def test_devices_arguments_are_checked():
         assert env.devices == tuple(jax.devices()[:1]) and env.chunks == 1
         obs, _ = env.reset(seed=0)
         with FurutaVectorEnv(3) as plain:
-            np.testing.assert_array_equal(env.step(np.ones((3, 1)))[0], (plain.reset(seed=0), plain.step(
-                np.ones((3, 1))))[1][0])
+            np.testing.assert_array_equal(
+                env.step(np.ones((3, 1)))[0], (plain.reset(seed=0), plain.step(np.ones((3, 1))))[1][0]
+            )
     too_many = len(jax.devices()) + 1
     with pytest.raises(ValueError, match="xla_force_host_platform_device_count"):
         FurutaVectorEnv(3, devices=too_many)
@@ -88,7 +92,7 @@ def test_devices_arguments_are_checked():
     import gymnasium as gym
 
     # devices=None is the default: it does not force the batched env on make_vec, devices=1 does
-    assert isinstance(gym.make_vec("furuta_gym/Furuta-v0", num_envs=3, dynamics="analytic", devices=None),
-                      gym.vector.SyncVectorEnv)
-    assert isinstance(gym.make_vec("furuta_gym/Furuta-v0", num_envs=3, dynamics="analytic", devices=1),
-                      FurutaVectorEnv)
+    assert isinstance(
+        gym.make_vec("furuta_gym/Furuta-v0", num_envs=3, dynamics="analytic", devices=None), gym.vector.SyncVectorEnv
+    )
+    assert isinstance(gym.make_vec("furuta_gym/Furuta-v0", num_envs=3, dynamics="analytic", devices=1), FurutaVectorEnv)

@@ -48,8 +48,9 @@ def require_compiler() -> list[str]:
     """The compiler command, or the CKernelError saying why there is none (checked before the
     step is translated: no work is wasted on a machine that cannot build it)."""
     if os.name == "nt":  # the cache's ownership checks and the flags below are POSIX-only
-        raise CKernelError("the C kernel is built on POSIX systems only (not on Windows); "
-                           "kernel='xla' works everywhere")
+        raise CKernelError(
+            "the C kernel is built on POSIX systems only (not on Windows); kernel='xla' works everywhere"
+        )
     command = _compiler_command()
     if command is None:
         raise CKernelError(
@@ -114,8 +115,10 @@ def _private_dir() -> Path:
 
 
 def _cache_dir() -> Path:
-    for path in (cache_root() / "c_kernels",
-                 Path(tempfile.gettempdir()) / f"furuta_gym_c_kernels_{os.getuid()}"):  # read-only home
+    for path in (
+        cache_root() / "c_kernels",
+        Path(tempfile.gettempdir()) / f"furuta_gym_c_kernels_{os.getuid()}",
+    ):  # read-only home
         if _usable_dir(path):
             return path
     return _private_dir()
@@ -168,8 +171,9 @@ def _compiler_works(command: list[str], directory: Path) -> bool:
         c_file = Path(tmp) / "trial.c"
         c_file.write_text("int fg_trial(int x) { return x + 1; }\n")
         try:
-            result = subprocess.run([*command, *_CFLAGS, str(c_file), "-o", str(Path(tmp) / "trial.so")],
-                                    capture_output=True, timeout=120)
+            result = subprocess.run(
+                [*command, *_CFLAGS, str(c_file), "-o", str(Path(tmp) / "trial.so")], capture_output=True, timeout=120
+            )
         except (OSError, subprocess.SubprocessError):
             return False
         return result.returncode == 0
@@ -182,14 +186,20 @@ def _build(command: list[str], source: str, directory: Path, library: Path) -> N
             c_file = Path(tmp) / "kernel.c"
             c_file.write_text(source)
             partial = Path(tmp) / "kernel.so"
-            result = subprocess.run([*command, *_CFLAGS, str(c_file), "-o", str(partial), "-lm"],
-                                    capture_output=True, text=True, timeout=600)
+            result = subprocess.run(
+                [*command, *_CFLAGS, str(c_file), "-o", str(partial), "-lm"],
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
             if result.returncode != 0:
                 # tell a broken compiler from a kernel it rejects
-                why = "" if _compiler_works(command, directory) else \
-                    " (it fails on a trivial test file too: not a working C compiler)"
-                raise CKernelError(f"the C compiler {cc} failed on the generated kernel{why}:\n"
-                                   f"{result.stderr[-2000:]}")
+                why = (
+                    ""
+                    if _compiler_works(command, directory)
+                    else " (it fails on a trivial test file too: not a working C compiler)"
+                )
+                raise CKernelError(f"the C compiler {cc} failed on the generated kernel{why}:\n{result.stderr[-2000:]}")
             os.chmod(partial, 0o700)
             os.replace(partial, library)  # atomic: a process without the lock sees all of it or none
     except (OSError, subprocess.SubprocessError) as exc:

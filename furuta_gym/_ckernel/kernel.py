@@ -43,7 +43,11 @@ def _disagreement(got: np.ndarray, want: np.ndarray) -> str | None:
         return f"shape {got.shape} vs {want.shape}"
     if not np.issubdtype(want.dtype, np.inexact):
         bad = got != want
-        return None if not bad.any() else f"{int(bad.sum())} element(s) differ exactly, e.g. {got[bad][0]} vs {want[bad][0]}"
+        return (
+            None
+            if not bad.any()
+            else f"{int(bad.sum())} element(s) differ exactly, e.g. {got[bad][0]} vs {want[bad][0]}"
+        )
     rtol, atol = _TOLERANCES.get(want.dtype.name, (1e-4, 1e-6))
     finite = np.abs(want[np.isfinite(want)])
     atol *= max(1.0, float(finite.max()) if finite.size else 1.0)  # cancellation scales with the output
@@ -103,10 +107,12 @@ class CKernel:
             for k, (g, w) in enumerate(zip(got, want)):
                 problem = _disagreement(g, w)
                 if problem:
-                    message = (f"the C kernel {self.name!r} disagrees with XLA on output {k} "
-                               f"({'example' if trial == 0 else 'random'} inputs, trial {trial}): "
-                               f"{problem}; primitives translated: {', '.join(sorted(self.primitives))}. "
-                               "Refusing it: XLA steps this model")
+                    message = (
+                        f"the C kernel {self.name!r} disagrees with XLA on output {k} "
+                        f"({'example' if trial == 0 else 'random'} inputs, trial {trial}): "
+                        f"{problem}; primitives translated: {', '.join(sorted(self.primitives))}. "
+                        "Refusing it: XLA steps this model"
+                    )
                     warnings.warn(message, CKernelWarning, stacklevel=3)
                     raise CKernelError(message)
 
@@ -139,16 +145,24 @@ class CKernel:
 
     @staticmethod
     def _check(buf, aval, what):
-        if not isinstance(buf, np.ndarray) or buf.shape != tuple(aval.shape) or buf.dtype != aval.dtype \
-                or not buf.flags.c_contiguous:
-            raise ValueError(f"{what}: expected a C-contiguous numpy array of shape {tuple(aval.shape)} "
-                             f"and dtype {aval.dtype}, got {getattr(buf, 'shape', type(buf))} "
-                             f"{getattr(buf, 'dtype', '')}")
+        if (
+            not isinstance(buf, np.ndarray)
+            or buf.shape != tuple(aval.shape)
+            or buf.dtype != aval.dtype
+            or not buf.flags.c_contiguous
+        ):
+            raise ValueError(
+                f"{what}: expected a C-contiguous numpy array of shape {tuple(aval.shape)} "
+                f"and dtype {aval.dtype}, got {getattr(buf, 'shape', type(buf))} "
+                f"{getattr(buf, 'dtype', '')}"
+            )
 
     def __call__(self, *args):
         """Convenience call (allocates; for tests and one-off use): same pytree as ``fn``."""
         leaves = jax.tree_util.tree_leaves(args)
-        inputs = [np.ascontiguousarray(np.asarray(x, dtype=a.dtype).reshape(a.shape)) for x, a in zip(leaves, self.in_avals)]
+        inputs = [
+            np.ascontiguousarray(np.asarray(x, dtype=a.dtype).reshape(a.shape)) for x, a in zip(leaves, self.in_avals)
+        ]
         _, outputs = self.new_buffers()
         self.bind(inputs, outputs)()
         return jax.tree_util.tree_unflatten(self.out_tree, outputs)

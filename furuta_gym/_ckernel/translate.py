@@ -153,6 +153,7 @@ _INT_BINARY = {"and": "({0} & {1})", "or": "({0} | {1})", "xor": "({0} ^ {1})", 
 # Index bookkeeping: structural operations become copies by (arithmetic) index runs
 # ---------------------------------------------------------------------------------------------
 
+
 def _runs(sources: np.ndarray, indices: np.ndarray):
     """Split the output positions into runs (source, first index, first output, length, stride)
     whose source index is an arithmetic progression."""
@@ -194,8 +195,19 @@ def _linear_tables(shape: Sequence[int], dims: Sequence[int]) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 #: primitives holding sub-programs: translated afresh each time (their insides are shared)
-_CALLS = frozenset({"scan", "while", "cond", "jit", "pjit", "closed_call", "custom_jvp_call",
-                    "custom_vjp_call", "custom_vjp_call_jaxpr"})
+_CALLS = frozenset(
+    {
+        "scan",
+        "while",
+        "cond",
+        "jit",
+        "pjit",
+        "closed_call",
+        "custom_jvp_call",
+        "custom_vjp_call",
+        "custom_vjp_call_jaxpr",
+    }
+)
 
 
 #: primitives linear in their data operands once their index operands are known:
@@ -226,14 +238,56 @@ def _is_false(value) -> bool:
 #: translation implements; any other parameter or value is refused (XLA steps the model)
 #: rather than silently ignored. A primitive not listed may carry no parameter at all.
 _ACCURACY = {"accuracy": _is_none}  # None: the default (libm-accurate) implementation
-_JAXPR_CALL = dict.fromkeys(("jaxpr", "name", "in_shardings", "out_shardings", "in_layouts", "out_layouts",
-                             "donated_invars", "ctx_mesh", "keep_unused", "inline", "compiler_options_kvs"), _any)
-_CUSTOM_CALL = dict.fromkeys(("call_jaxpr", "fun_jaxpr", "jvp_jaxpr_fun", "jvp_jaxpr_thunk", "fwd_jaxpr_thunk",
-                              "bwd", "num_consts", "out_trees", "symbolic_zeros"), _any)
+_JAXPR_CALL = dict.fromkeys(
+    (
+        "jaxpr",
+        "name",
+        "in_shardings",
+        "out_shardings",
+        "in_layouts",
+        "out_layouts",
+        "donated_invars",
+        "ctx_mesh",
+        "keep_unused",
+        "inline",
+        "compiler_options_kvs",
+    ),
+    _any,
+)
+_CUSTOM_CALL = dict.fromkeys(
+    (
+        "call_jaxpr",
+        "fun_jaxpr",
+        "jvp_jaxpr_fun",
+        "jvp_jaxpr_thunk",
+        "fwd_jaxpr_thunk",
+        "bwd",
+        "num_consts",
+        "out_trees",
+        "symbolic_zeros",
+    ),
+    _any,
+)
 _REDUCE = {"axes": _any, "out_sharding": _is_none}
 _PARAMS = {
-    **{n: _ACCURACY for n in ("exp", "exp2", "expm1", "log", "log1p", "tanh", "sin", "cos", "tan",
-                               "sqrt", "rsqrt", "cbrt", "logistic")},
+    **{
+        n: _ACCURACY
+        for n in (
+            "exp",
+            "exp2",
+            "expm1",
+            "log",
+            "log1p",
+            "tanh",
+            "sin",
+            "cos",
+            "tan",
+            "sqrt",
+            "rsqrt",
+            "cbrt",
+            "logistic",
+        )
+    },
     **{n: {"out_dtype": _is_none} for n in ("add", "sub", "mul", "div")},
     "integer_pow": {"y": _any},
     "convert_element_type": {"new_dtype": _any, "weak_type": _any, "sharding": _is_none},
@@ -254,13 +308,28 @@ _PARAMS = {
     **{n: _REDUCE for n in ("reduce_sum", "reduce_max", "reduce_min", "reduce_prod")},
     **{n: {"axis": _any, "reverse": _any} for n in ("cumsum", "cumprod", "cummax", "cummin")},
     # precision only selects among float32-on-accelerator algorithms; the CPU computes exactly
-    "dot_general": {"dimension_numbers": _any, "precision": _any, "preferred_element_type": _any,
-                    "out_sharding": _is_none},
-    "pjit": _JAXPR_CALL, "jit": _JAXPR_CALL,
+    "dot_general": {
+        "dimension_numbers": _any,
+        "precision": _any,
+        "preferred_element_type": _any,
+        "out_sharding": _is_none,
+    },
+    "pjit": _JAXPR_CALL,
+    "jit": _JAXPR_CALL,
     "closed_call": {"call_jaxpr": _any},
-    "custom_jvp_call": _CUSTOM_CALL, "custom_vjp_call": _CUSTOM_CALL, "custom_vjp_call_jaxpr": _CUSTOM_CALL,
-    "scan": {"jaxpr": _any, "length": _any, "reverse": _any, "num_consts": _any, "num_carry": _any,
-             "linear": _any, "unroll": _any, "_split_transpose": _is_false},
+    "custom_jvp_call": _CUSTOM_CALL,
+    "custom_vjp_call": _CUSTOM_CALL,
+    "custom_vjp_call_jaxpr": _CUSTOM_CALL,
+    "scan": {
+        "jaxpr": _any,
+        "length": _any,
+        "reverse": _any,
+        "num_consts": _any,
+        "num_carry": _any,
+        "linear": _any,
+        "unroll": _any,
+        "_split_transpose": _is_false,
+    },
     "while": {"cond_jaxpr": _any, "body_jaxpr": _any, "cond_nconsts": _any, "body_nconsts": _any},
     "cond": {"branches": _any, "linear": _any},
 }
@@ -271,8 +340,9 @@ def _check_params(name: str, params: dict) -> None:
     for key, value in params.items():
         accepts = allowed.get(key)
         if accepts is None or not accepts(value):
-            raise CKernelTranslationError(f"the C kernel does not implement {name!r} with {key}={value!r}; "
-                               "use the XLA kernel for this model")
+            raise CKernelTranslationError(
+                f"the C kernel does not implement {name!r} with {key}={value!r}; use the XLA kernel for this model"
+            )
 
 
 def _extremum(which: str, dtype) -> tuple[str, str]:
@@ -295,9 +365,11 @@ def _saturating_cast(value: str, dtype) -> str:
     both undefined). Bounds are powers of two, exact in either float type."""
     info = np.iinfo(dtype)
     upper = float(info.max) + 1.0  # 2**bits (unsigned) or 2**(bits-1): the first value too large
-    return (f"({value} != {value} ? {_c_literal(0, dtype)} : {value} >= {upper.hex()} ? "
-            f"{_c_literal(info.max, dtype)} : {value} < {float(info.min).hex()} ? {_c_literal(info.min, dtype)} "
-            f": ({_ctype(dtype)}){value})")
+    return (
+        f"({value} != {value} ? {_c_literal(0, dtype)} : {value} >= {upper.hex()} ? "
+        f"{_c_literal(info.max, dtype)} : {value} < {float(info.min).hex()} ? {_c_literal(info.min, dtype)} "
+        f": ({_ctype(dtype)}){value})"
+    )
 
 
 class _Var:
@@ -518,8 +590,9 @@ class _Translator:
             template = "({0} > {1} ? {0} : {1})" if name == "max" else "({0} < {1} ? {0} : {1})"
         if name in ("div", "rem") and integer:
             # C traps on a zero divisor where XLA returns a value: never risk the process
-            raise CKernelTranslationError(f"integer {name} has no C translation (a zero divisor would trap); "
-                               "use the XLA kernel for this model")
+            raise CKernelTranslationError(
+                f"integer {name} has no C translation (a zero divisor would trap); use the XLA kernel for this model"
+            )
         operands = [self.broadcast_reader(x, out.shape) for x in ins]
         self.loop(out.size, lambda i: f"{out.name}[{i}] = {template.format(*(read(i) for read in operands))};")
         return out
@@ -566,9 +639,11 @@ class _Translator:
         info = np.finfo(ins[0].dtype)
         if exponent_bits < info.nexp or mantissa_bits < info.nmant:
             # rounding to a narrower format (bfloat16-like) is not implemented bit-exactly
-            raise CKernelTranslationError(f"the C kernel does not implement 'reduce_precision' to "
-                               f"{exponent_bits} exponent / {mantissa_bits} mantissa bits on "
-                               f"{ins[0].dtype}; use the XLA kernel for this model")
+            raise CKernelTranslationError(
+                f"the C kernel does not implement 'reduce_precision' to "
+                f"{exponent_bits} exponent / {mantissa_bits} mantissa bits on "
+                f"{ins[0].dtype}; use the XLA kernel for this model"
+            )
         return [ins[0]]  # as wide as the type: exactly the identity
 
     def op_optimization_barrier(self, ins, avals):
@@ -655,7 +730,9 @@ class _Translator:
         return [self._gather_by_numpy(ins, avals[0], lambda *a: np.stack(a, axis=axis))]
 
     def op_unstack(self, ins, avals, axis):
-        return [self._gather_by_numpy(ins, aval, lambda a, k=k: np.take(a, k, axis=axis)) for k, aval in enumerate(avals)]
+        return [
+            self._gather_by_numpy(ins, aval, lambda a, k=k: np.take(a, k, axis=axis)) for k, aval in enumerate(avals)
+        ]
 
     def op_split(self, ins, avals, sizes, axis):
         bounds = np.cumsum((0,) + tuple(sizes))
@@ -675,7 +752,7 @@ class _Translator:
                 lo, hi, interior = int(lo), int(hi), int(interior)
                 n = shape[d]
                 dilated = n + max(n - 1, 0) * interior
-                full = np.full(a.shape[:d] + (dilated,) + a.shape[d + 1:], -1, dtype=np.int64)
+                full = np.full(a.shape[:d] + (dilated,) + a.shape[d + 1 :], -1, dtype=np.int64)
                 idx = [slice(None)] * a.ndim
                 idx[d] = slice(0, dilated, interior + 1)
                 full[tuple(idx)] = a
@@ -699,14 +776,20 @@ class _Translator:
         outer = _linear_tables(x.shape, kept)
         inner = _linear_tables(x.shape, sorted(axes))
         o_prog, i_prog = _progression(outer), _progression(inner)
-        o_expr = (lambda o: f"{o_prog[0]} + {o_prog[1]} * {o}") if o_prog else (lambda o, t=self.table(outer): f"{t}[{o}]")
-        i_expr = (lambda r: f"{i_prog[0]} + {i_prog[1]} * {r}") if i_prog else (lambda r, t=self.table(inner): f"{t}[{r}]")
+        o_expr = (
+            (lambda o: f"{o_prog[0]} + {o_prog[1]} * {o}") if o_prog else (lambda o, t=self.table(outer): f"{t}[{o}]")
+        )
+        i_expr = (
+            (lambda r: f"{i_prog[0]} + {i_prog[1]} * {r}") if i_prog else (lambda r, t=self.table(inner): f"{t}[{r}]")
+        )
         self.counter += 1
         o, r = f"o{self.counter}", f"r{self.counter}"
         acc = f"{_ctype(out.dtype)} acc = {init};"
         step = combine.format("acc", x.at(f"{o_expr(o)} + {i_expr(r)}"))
-        self.emit(f"for (int {o} = 0; {o} < {len(outer)}; ++{o}) {{ {acc} "
-                  f"for (int {r} = 0; {r} < {len(inner)}; ++{r}) acc = {step}; {out.name}[{o}] = acc; }}")
+        self.emit(
+            f"for (int {o} = 0; {o} < {len(outer)}; ++{o}) {{ {acc} "
+            f"for (int {r} = 0; {r} < {len(inner)}; ++{r}) acc = {step}; {out.name}[{o}] = acc; }}"
+        )
         return [out]
 
     def op_reduce_sum(self, ins, avals, axes, **_):
@@ -725,15 +808,17 @@ class _Translator:
         x = ins[0]
         out = self.fresh(avals[0])
         outer = _linear_tables(x.shape, [d for d in range(len(x.shape)) if d != axis])
-        stride = int(np.prod(x.shape[axis + 1:], dtype=np.int64))
+        stride = int(np.prod(x.shape[axis + 1 :], dtype=np.int64))
         n = x.shape[axis]
         self.counter += 1
         o, r = f"o{self.counter}", f"r{self.counter}"
         t = self.table(outer)
         position = f"{t}[{o}] + {stride} * ({n - 1} - {r})" if reverse else f"{t}[{o}] + {stride} * {r}"
-        self.emit(f"for (int {o} = 0; {o} < {len(outer)}; ++{o}) for (int {r} = 0; {r} < {n}; ++{r}) "
-                  f"{out.name}[{position}] = {r} == 0 ? {x.at(position)} : "
-                  f"{combine.format(out.name + '[' + position + (' + ' if reverse else ' - ') + str(stride) + ']', x.at(position))};")
+        self.emit(
+            f"for (int {o} = 0; {o} < {len(outer)}; ++{o}) for (int {r} = 0; {r} < {n}; ++{r}) "
+            f"{out.name}[{position}] = {r} == 0 ? {x.at(position)} : "
+            f"{combine.format(out.name + '[' + position + (' + ' if reverse else ' - ') + str(stride) + ']', x.at(position))};"
+        )
         return [out]
 
     def op_cumsum(self, ins, avals, axis, reverse):
@@ -753,20 +838,27 @@ class _Translator:
         lhs, rhs = ins
         if any(x.dtype != np.dtype(avals[0].dtype) for x in ins):
             # mixed types accumulate in a wider type in XLA; C would multiply in the narrow one
-            raise CKernelTranslationError(f"the C kernel does not implement 'dot_general' of {lhs.dtype} x {rhs.dtype} "
-                               f"into {avals[0].dtype}; use the XLA kernel for this model")
+            raise CKernelTranslationError(
+                f"the C kernel does not implement 'dot_general' of {lhs.dtype} x {rhs.dtype} "
+                f"into {avals[0].dtype}; use the XLA kernel for this model"
+            )
         out = self.fresh(avals[0])
         lfree = [d for d in range(len(lhs.shape)) if d not in lc and d not in lb]
         rfree = [d for d in range(len(rhs.shape)) if d not in rc and d not in rb]
         groups = {
-            "lb": _linear_tables(lhs.shape, lb), "li": _linear_tables(lhs.shape, lfree),
-            "lk": _linear_tables(lhs.shape, lc), "rb": _linear_tables(rhs.shape, rb),
-            "rj": _linear_tables(rhs.shape, rfree), "rk": _linear_tables(rhs.shape, rc),
+            "lb": _linear_tables(lhs.shape, lb),
+            "li": _linear_tables(lhs.shape, lfree),
+            "lk": _linear_tables(lhs.shape, lc),
+            "rb": _linear_tables(rhs.shape, rb),
+            "rj": _linear_tables(rhs.shape, rfree),
+            "rk": _linear_tables(rhs.shape, rc),
         }
         exprs = {}
         for key, t in groups.items():
             prog = _progression(t)
-            exprs[key] = (lambda v, pr=prog: f"{pr[0]} + {pr[1]} * {v}") if prog else (lambda v, n=self.table(t): f"{n}[{v}]")
+            exprs[key] = (
+                (lambda v, pr=prog: f"{pr[0]} + {pr[1]} * {v}") if prog else (lambda v, n=self.table(t): f"{n}[{v}]")
+            )
         nb, ni, nj, nk = len(groups["lb"]), len(groups["li"]), len(groups["rj"]), len(groups["lk"])
         self.counter += 1
         b, i, j, k = (f"{c}{self.counter}" for c in "bijk")
@@ -780,15 +872,21 @@ class _Translator:
             # unit stride: the compiler vectorises it; each output still sums in k order)
             self.emit(f"for (int {b} = 0; {b} < {nb}; ++{b}) for (int {i} = 0; {i} < {ni}; ++{i}) {{")
             self.emit(f"    for (int {j} = 0; {j} < {nj}; ++{j}) {out.name}[{o_index}] = 0;")
-            self.emit(f"    for (int {k} = 0; {k} < {nk}; ++{k}) for (int {j} = 0; {j} < {nj}; ++{j}) "
-                      f"{out.name}[{o_index}] += {product};")
+            self.emit(
+                f"    for (int {k} = 0; {k} < {nk}; ++{k}) for (int {j} = 0; {j} < {nj}; ++{j}) "
+                f"{out.name}[{o_index}] += {product};"
+            )
             self.emit("}")
         else:
             # a dot product per output; the reduction may be reassociated into SIMD lanes (the
             # result changes in the last bits, as XLA's own blocked sums do)
-            self.emit(f"for (int {b} = 0; {b} < {nb}; ++{b}) for (int {i} = 0; {i} < {ni}; ++{i}) "
-                      f"for (int {j} = 0; {j} < {nj}; ++{j}) {{ {_ctype(out.dtype)} acc = 0;")
-            self.emit(f"    _Pragma(\"omp simd reduction(+:acc)\") for (int {k} = 0; {k} < {nk}; ++{k}) acc += {product};")
+            self.emit(
+                f"for (int {b} = 0; {b} < {nb}; ++{b}) for (int {i} = 0; {i} < {ni}; ++{i}) "
+                f"for (int {j} = 0; {j} < {nj}; ++{j}) {{ {_ctype(out.dtype)} acc = 0;"
+            )
+            self.emit(
+                f'    _Pragma("omp simd reduction(+:acc)") for (int {k} = 0; {k} < {nk}; ++{k}) acc += {product};'
+            )
             self.emit(f"    {out.name}[{o_index}] = acc; }}")
         return [out]
 
@@ -837,7 +935,7 @@ class _Translator:
         self.emit("}")
 
     def op_scan(self, ins, avals, jaxpr, length, reverse, num_consts, num_carry, **_):
-        consts, init, xs = ins[:num_consts], ins[num_consts:num_consts + num_carry], ins[num_consts + num_carry:]
+        consts, init, xs = ins[:num_consts], ins[num_consts : num_consts + num_carry], ins[num_consts + num_carry :]
         carry = self._fresh_copies(init)
         ys = [self.fresh(aval) for aval in avals[num_carry:]]
         self.counter += 1
@@ -849,7 +947,7 @@ class _Translator:
 
     def _scan_body(self, jaxpr, consts, carry, xs, ys, index, num_consts, num_carry):
         x_slices = []
-        for x, var in zip(xs, jaxpr.jaxpr.invars[num_consts + num_carry:]):
+        for x, var in zip(xs, jaxpr.jaxpr.invars[num_consts + num_carry :]):
             self.counter += 1
             size = max(int(np.prod(var.aval.shape, dtype=np.int64)), 1)
             name = f"v{self.counter}"
@@ -862,7 +960,11 @@ class _Translator:
             self.loop(size, lambda i, d=dst, s=src, n=size: f"{d.name}[{index} * {n} + {i}] = {s.at(i)};")
 
     def op_while(self, ins, avals, cond_jaxpr, body_jaxpr, cond_nconsts, body_nconsts, **_):
-        cconsts, bconsts, init = ins[:cond_nconsts], ins[cond_nconsts:cond_nconsts + body_nconsts], ins[cond_nconsts + body_nconsts:]
+        cconsts, bconsts, init = (
+            ins[:cond_nconsts],
+            ins[cond_nconsts : cond_nconsts + body_nconsts],
+            ins[cond_nconsts + body_nconsts :],
+        )
         carry = self._fresh_copies(init)
         with self._block("for (;;) {"):
             (go,) = self.closed(cond_jaxpr, list(cconsts) + carry)
@@ -925,7 +1027,11 @@ def _translate(closed) -> tuple[str, set[str]]:
         t.emit("}")
     staged = "\n".join(t.lines)
     source = (
-        _PRELUDE + "\n".join(t.static_arrays) + "\n"
-        + "void fg_kernel(void *const *ins, void *const *outs) {\n" + staged + "\n}\n"
+        _PRELUDE
+        + "\n".join(t.static_arrays)
+        + "\n"
+        + "void fg_kernel(void *const *ins, void *const *outs) {\n"
+        + staged
+        + "\n}\n"
     )
     return source, t.primitives

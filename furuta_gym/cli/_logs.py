@@ -59,8 +59,10 @@ def read_logs(paths, system: str, column_map=None, sign=None, offset=None) -> li
     for path in paths:
         if path == "qube" or path.startswith("qube:"):
             if system != QUBE_CLOSED_LOOP_SYSTEM.name:
-                raise ValueError(f"{path!r}: the shipped QUBE-Servo runs are {QUBE_CLOSED_LOOP_SYSTEM.name} data; "
-                                 f"got --system {system}")
+                raise ValueError(
+                    f"{path!r}: the shipped QUBE-Servo runs are {QUBE_CLOSED_LOOP_SYSTEM.name} data; "
+                    f"got --system {system}"
+                )
             runs = qube_runs(path)
             files = qube_closed_loop_files(runs)  # checks the run numbers
             for run, file in zip(runs or range(1, len(files) + 1), files):
@@ -98,16 +100,23 @@ def load_logs(paths, args):
 def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | None, split_help: str) -> None:
     """The options of measured logs shared by ``train`` and ``evaluate``."""
     parser.add_argument(
-        "--column-map", metavar="CANON=FILECOL,...",
+        "--column-map",
+        metavar="CANON=FILECOL,...",
         help="columns under other names, e.g. alpha=theta,beta=alpha,u=plant_input",
     )
     parser.add_argument("--sign", metavar="CANON=±1,...", help="per-column sign, e.g. beta=-1")
     parser.add_argument("--offset", metavar="CANON=VALUE,...", help="per-column offset, e.g. beta=3.14159")
-    parser.add_argument("--skip", type=float, metavar="SECONDS",
-                        help="drop this many seconds at the start of every log (start transients; "
-                        f"default {QUBE_SKIP} s for qube:RUNS, the controller catching the pendulum, 0 for files)")
     parser.add_argument(
-        "--velocity", choices=["zero_phase", "derivative_filter"], default="zero_phase",
+        "--skip",
+        type=float,
+        metavar="SECONDS",
+        help="drop this many seconds at the start of every log (start transients; "
+        f"default {QUBE_SKIP} s for qube:RUNS, the controller catching the pendulum, 0 for files)",
+    )
+    parser.add_argument(
+        "--velocity",
+        choices=["zero_phase", "derivative_filter"],
+        default="zero_phase",
         help="velocity estimate when a log has none: zero-phase (offline, no lag; default) or the "
         "paper's causal derivative filter (ω0 = 100 rad/s, ξ = 0.8)",
     )
@@ -115,7 +124,9 @@ def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | No
     parser.add_argument("--split", type=float, default=split_default, metavar="SECONDS", help=split_help)
 
 
-def prepared_logs(paths, args, *, split: float | str | None = "measured", min_seconds: float = 0.0) -> tuple[list, list[str]]:
+def prepared_logs(
+    paths, args, *, split: float | str | None = "measured", min_seconds: float = 0.0
+) -> tuple[list, list[str]]:
     """Training / test trajectories of ``paths`` (:func:`furuta_gym.measured.prepare_log` per
     log; ``args`` carries the :func:`add_log_arguments` options and ``system``) and notes on what
     was estimated. ``split``: seconds per elementary trajectory, ``None`` whole logs, or
@@ -131,11 +142,19 @@ def prepared_logs(paths, args, *, split: float | str | None = "measured", min_se
         for tr in trajs:
             seconds: Any = split
             if split == "measured":
-                seconds = args.split if args.split is not None else (
-                    SPLIT_SECONDS[args.system] if tr.qd is None else None)
+                seconds = (
+                    args.split if args.split is not None else (SPLIT_SECONDS[args.system] if tr.qd is None else None)
+                )
             if tr.qd is None:
                 estimated.append(tr.name)
-            out += prepare_log(tr, source, velocity=args.velocity, cutoff_hz=args.cutoff, skip=skip,
-                               split=seconds or None, min_seconds=min_seconds)
+            out += prepare_log(
+                tr,
+                source,
+                velocity=args.velocity,
+                cutoff_hz=args.cutoff,
+                skip=skip,
+                split=seconds or None,
+                min_seconds=min_seconds,
+            )
     notes = [f"velocities estimated ({args.velocity}) for {len(estimated)} log(s)"] if estimated else []
     return out, notes

@@ -25,28 +25,38 @@ DESCRIPTION_SUCCESS = "upright |wrap(beta - pi)| < 0.1 rad held for 2 s"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--design", default="analytic",
-                        help="design model: 'analytic' or a checkpoint path (default analytic)")
-    parser.add_argument("--plant", default="mujoco",
-                        help="plant: 'mujoco', a MuJoCo plant preset (cable_spring, coulomb, ...), "
-                        "'analytic' or a checkpoint path (default mujoco)")
-    parser.add_argument("--episodes", type=int, default=20,
-                        help="seeded starts near the hanging rest, run besides x0 = 0 (default 20)")
+    parser.add_argument(
+        "--design", default="analytic", help="design model: 'analytic' or a checkpoint path (default analytic)"
+    )
+    parser.add_argument(
+        "--plant",
+        default="mujoco",
+        help="plant: 'mujoco', a MuJoCo plant preset (cable_spring, coulomb, ...), "
+        "'analytic' or a checkpoint path (default mujoco)",
+    )
+    parser.add_argument(
+        "--episodes", type=int, default=20, help="seeded starts near the hanging rest, run besides x0 = 0 (default 20)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of the starts (default 0)")
     parser.add_argument("--seconds", type=float, default=8.0, help="episode length (default 8 s)")
     parser.add_argument("--json", dest="json_out", required=True, help="write the report here")
     parser.add_argument("--plot", default=None, help="PNG: alpha, beta, u of the x0 = 0 episode")
     parser.add_argument("--video", default=None, help="MP4: rendered x0 = 0 episode")
     gains = parser.add_mutually_exclusive_group()
-    gains.add_argument("--k-e", type=float, default=None,
-                       help="energy gain (rad/s^2 per J of the design model's potential)")
-    gains.add_argument("--auto-gain", action="store_true",
-                       help="pick k_e by a seeded sweep on the design model")
-    parser.add_argument("--acts-on", choices=("voltage", "pfl"), default="voltage",
-                        help="LQR acts on the voltage (default) or on the PFL input")
+    gains.add_argument(
+        "--k-e", type=float, default=None, help="energy gain (rad/s^2 per J of the design model's potential)"
+    )
+    gains.add_argument("--auto-gain", action="store_true", help="pick k_e by a seeded sweep on the design model")
+    parser.add_argument(
+        "--acts-on",
+        choices=("voltage", "pfl"),
+        default="voltage",
+        help="LQR acts on the voltage (default) or on the PFL input",
+    )
     parser.add_argument("--voltage-limit", type=float, default=5.0, help="V (default 5)")
-    parser.add_argument("--sensor", action="store_true",
-                        help="measured-like observations: 2048-count encoders, filtered velocities")
+    parser.add_argument(
+        "--sensor", action="store_true", help="measured-like observations: 2048-count encoders, filtered velocities"
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace existing output files")
 
 
@@ -58,9 +68,7 @@ def load_design_model(design: str):
         return Furuta()
     path = Path(design)
     if not path.exists():
-        raise FileNotFoundError(
-            f"--design {design!r}: expected 'analytic' or an existing checkpoint file"
-        )
+        raise FileNotFoundError(f"--design {design!r}: expected 'analytic' or an existing checkpoint file")
     from furuta_gym.training.checkpoint import load_model
 
     return load_model(path, expected_system="furuta")
@@ -186,30 +194,48 @@ def run(args) -> int:
     make_env = plant_env_factory(args.plant, args.voltage_limit, args.sensor)
     t0 = time.perf_counter()
     ctrl = SwingUpLQR.from_model(
-        model, k_e=args.k_e, auto_gain=args.auto_gain, acts_on=args.acts_on,
-        voltage_limit=args.voltage_limit, seed=args.seed,
+        model,
+        k_e=args.k_e,
+        auto_gain=args.auto_gain,
+        acts_on=args.acts_on,
+        voltage_limit=args.voltage_limit,
+        seed=args.seed,
     )
     design_s = time.perf_counter() - t0
-    x0s = np.concatenate([np.zeros((1, 4)), near_rest_starts(args.episodes, args.seed, False)]) \
-        if args.episodes > 0 else np.zeros((1, 4))
+    x0s = (
+        np.concatenate([np.zeros((1, 4)), near_rest_starts(args.episodes, args.seed, False)])
+        if args.episodes > 0
+        else np.zeros((1, 4))
+    )
     t0 = time.perf_counter()
     records = evaluate_on_env(ctrl, make_env, x0s, args.seconds, seed=args.seed)
     run_s = time.perf_counter() - t0
-    report = summarise(records, {
-        "design": args.design, "plant": args.plant, "seed": args.seed,
-        "seconds": args.seconds, "voltage_limit": args.voltage_limit, "sensor": args.sensor,
-        "k_e": float(ctrl.swing_up.k_e), "acts_on": args.acts_on,
-        "lqr_K": np.asarray(ctrl.lqr.K).tolist(),
-        "lqr_closed_loop_eig_abs": np.abs(ctrl.lqr.design.closed_loop_eigenvalues).tolist(),
-        "catch_angle": ctrl.catch_angle, "release_angle": ctrl.release_angle,
-        "design_seconds": design_s, "run_seconds": run_s,
-    })
+    report = summarise(
+        records,
+        {
+            "design": args.design,
+            "plant": args.plant,
+            "seed": args.seed,
+            "seconds": args.seconds,
+            "voltage_limit": args.voltage_limit,
+            "sensor": args.sensor,
+            "k_e": float(ctrl.swing_up.k_e),
+            "acts_on": args.acts_on,
+            "lqr_K": np.asarray(ctrl.lqr.K).tolist(),
+            "lqr_closed_loop_eig_abs": np.abs(ctrl.lqr.design.closed_loop_eigenvalues).tolist(),
+            "catch_angle": ctrl.catch_angle,
+            "release_angle": ctrl.release_angle,
+            "design_seconds": design_s,
+            "run_seconds": run_s,
+        },
+    )
     Path(args.json_out).write_text(json.dumps(report, indent=2))
     if args.plot:
         plot_episode(records[0], args.plot, f"design {args.design} → plant {args.plant}, x0 = 0")
     if args.video:
-        render_video(ctrl, plant_env_factory(args.plant, args.voltage_limit, args.sensor, True),
-                     args.seconds, args.video)
+        render_video(
+            ctrl, plant_env_factory(args.plant, args.voltage_limit, args.sensor, True), args.seconds, args.video
+        )
     sr = report["success_rate"]
     print(
         f"design {args.design} on plant {args.plant}: x0 = 0 "

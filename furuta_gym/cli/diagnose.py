@@ -18,44 +18,68 @@ __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", metavar="DATA", nargs="+",
-                        help="measured data: CSV (long form, .csv.gz too), NPZ or MAT; several files "
-                        "are pooled. 'qube:RUNS' (e.g. qube:1-5, qube:2,7, qube) takes the real "
-                        "QUBE-Servo runs shipped with the package, in this project's convention")
+    parser.add_argument(
+        "data",
+        metavar="DATA",
+        nargs="+",
+        help="measured data: CSV (long form, .csv.gz too), NPZ or MAT; several files "
+        "are pooled. 'qube:RUNS' (e.g. qube:1-5, qube:2,7, qube) takes the real "
+        "QUBE-Servo runs shipped with the package, in this project's convention",
+    )
     parser.add_argument("--system", required=True, choices=sorted(SYSTEMS))
-    parser.add_argument("--test", metavar="TEST", nargs="+",
-                        help="logs never used for fitting (same format and options as DATA): "
-                        "errors before/after on them are reported beside the held-out split")
-    parser.add_argument("--model", metavar="CKPT",
-                        help="diagnose this trained model (a checkpoint of `furuta-gym train`) instead "
-                        "of the analytic one: it is kept as it is, the library's effects are fitted around it")
+    parser.add_argument(
+        "--test",
+        metavar="TEST",
+        nargs="+",
+        help="logs never used for fitting (same format and options as DATA): "
+        "errors before/after on them are reported beside the held-out split",
+    )
+    parser.add_argument(
+        "--model",
+        metavar="CKPT",
+        help="diagnose this trained model (a checkpoint of `furuta-gym train`) instead "
+        "of the analytic one: it is kept as it is, the library's effects are fitted around it",
+    )
     parser.add_argument("--json", metavar="OUT", help="write the result as JSON (pinned schema)")
     parser.add_argument("--report", metavar="DIR", help="write figures into DIR")
-    parser.add_argument("--mjcf", metavar="OUT.xml",
-                        help="write the diagnosed plant as MJCF (native terms in their elements, the rest as "
-                             "<custom> data that furuta-gym's plant= reads back)")
+    parser.add_argument(
+        "--mjcf",
+        metavar="OUT.xml",
+        help="write the diagnosed plant as MJCF (native terms in their elements, the rest as "
+        "<custom> data that furuta-gym's plant= reads back)",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace existing --json/--report outputs")
     parser.add_argument(
-        "--column-map", metavar="CANON=FILECOL,...",
+        "--column-map",
+        metavar="CANON=FILECOL,...",
         help="columns under other names, e.g. alpha=theta,beta=alpha,u=plant_input",
     )
     parser.add_argument("--sign", metavar="CANON=±1,...", help="per-column sign, e.g. beta=-1")
     parser.add_argument("--offset", metavar="CANON=VALUE,...", help="per-column offset, e.g. beta=3.14159")
     parser.add_argument(
-        "--velocity", choices=["zero_phase", "derivative_filter"], default="zero_phase",
+        "--velocity",
+        choices=["zero_phase", "derivative_filter"],
+        default="zero_phase",
         help="velocity estimate when DATA has none: zero-phase (offline, default) or the paper's "
         "causal derivative filter",
     )
     parser.add_argument("--cutoff", type=float, help="zero-phase velocity cutoff in Hz")
-    parser.add_argument("--fix", metavar="PARAM=VALUE,...",
-                        help="lumped parameters held at known values (the scale anchor), e.g. K=0.005")
+    parser.add_argument(
+        "--fix",
+        metavar="PARAM=VALUE,...",
+        help="lumped parameters held at known values (the scale anchor), e.g. K=0.005",
+    )
     parser.add_argument("--candidates", metavar="EFFECT:JOINT,...", help="restrict the library")
     parser.add_argument("--max-effects", type=int, help="at most this many effects are added (default 4)")
     parser.add_argument("--window", type=float, help="open-loop window for trajectory_rmse, s")
     parser.add_argument("--interval", type=float, help="equation-error interval, s (default 0.1)")
     parser.add_argument("--oe-windows", type=int, help="open-loop windows used by the output-error fit (default 24)")
-    parser.add_argument("--skip", type=float, default=0.0,
-                        help="drop this many seconds at the start of every trajectory (start transients)")
+    parser.add_argument(
+        "--skip",
+        type=float,
+        default=0.0,
+        help="drop this many seconds at the start of every trajectory (start transients)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,8 +95,13 @@ def run(args: argparse.Namespace) -> int:
     trajs = _load(args.data, args)
     test = _load(args.test, args) if args.test else None
     overrides = {"velocity": args.velocity}
-    for key, val in (("max_effects", args.max_effects), ("velocity_cutoff_hz", args.cutoff), ("window", args.window), ("interval", args.interval),
-                     ("oe_max_windows", args.oe_windows)):
+    for key, val in (
+        ("max_effects", args.max_effects),
+        ("velocity_cutoff_hz", args.cutoff),
+        ("window", args.window),
+        ("interval", args.interval),
+        ("oe_max_windows", args.oe_windows),
+    ):
         if val is not None:
             overrides[key] = val
     res = diagnose(

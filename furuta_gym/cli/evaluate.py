@@ -22,24 +22,33 @@ __all__ = ["add_arguments", "run"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("checkpoint", metavar="CKPT", help="a model saved by `furuta-gym train`")
     parser.add_argument(
-        "--data", action="append", required=True, metavar="TEST",
+        "--data",
+        action="append",
+        required=True,
+        metavar="TEST",
         help="test data in the measured-data format, or 'qube:RUNS' (e.g. qube:6-15) for the real "
         "QUBE-Servo runs shipped with the package (repeat for several test sets)",
     )
     parser.add_argument("--json", metavar="OUT", help="write the metrics as JSON here")
     parser.add_argument(
-        "--no-physics", action="store_true",
+        "--no-physics",
+        action="store_true",
         help="prediction metrics only (skip force decomposition and energy)",
     )
-    parser.add_argument("--window", type=float, metavar="SECONDS",
-                        help="score open-loop predictions over windows of this length started from "
-                        "the measured states, input held (e.g. 0.1 on the upright QUBE runs); "
-                        "default: one prediction per test trajectory")
+    parser.add_argument(
+        "--window",
+        type=float,
+        metavar="SECONDS",
+        help="score open-loop predictions over windows of this length started from "
+        "the measured states, input held (e.g. 0.1 on the upright QUBE runs); "
+        "default: one prediction per test trajectory",
+    )
     parser.add_argument("--rtol", type=float, default=1e-9, help="prediction solver rtol")
     parser.add_argument("--atol", type=float, default=1e-11, help="prediction solver atol")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
-    add_log_arguments(parser, None, "cut each log into trajectories of this many seconds before "
-                      "scoring (default: whole logs)")
+    add_log_arguments(
+        parser, None, "cut each log into trajectories of this many seconds before scoring (default: whole logs)"
+    )
 
 
 def _score(model, trajs, args, physics: bool) -> dict:
@@ -49,8 +58,13 @@ def _score(model, trajs, args, physics: bool) -> dict:
 
     if args.window:
         res = window_errors(model, trajs, args.window)
-        metrics = {**res["log10_rmse"], "rmse": res["rmse"], "n_windows": res["n_windows"],
-                   "n_diverged": res["n_diverged"], "window_seconds": res["window_seconds"]}
+        metrics = {
+            **res["log10_rmse"],
+            "rmse": res["rmse"],
+            "n_windows": res["n_windows"],
+            "n_diverged": res["n_diverged"],
+            "window_seconds": res["window_seconds"],
+        }
         if physics:
             full = evaluate_model(model, trajs, settings=EvaluationSettings(rtol=args.rtol, atol=args.atol))
             metrics.update({k: full[k] for k in ("inertial", "coriolis", "potential", "energy")})
@@ -77,16 +91,21 @@ def run(args: argparse.Namespace) -> int:
         metrics = _score(model, trajs, args, physics)
         if notes:
             metrics["note"] = "; ".join(notes) + (
-                "; force and energy metrics skipped (measured data: no ground truth)" if not args.no_physics else "")
+                "; force and energy metrics skipped (measured data: no ground truth)" if not args.no_physics else ""
+            )
         results[str(path)] = metrics
         cells = "  ".join(
-            f"{k}={format_value(v)}" for k, v in metrics.items() if not isinstance(v, (dict, list))
+            f"{k}={format_value(v)}"
+            for k, v in metrics.items()
+            if not isinstance(v, (dict, list))
             and k not in ("n_trajectories", "note", "n_windows", "n_diverged", "window_seconds")
         )
         print(f"{path}: {cells}")
         if not args.window and any(metrics.get(k) == DIVERGED for k in model.spec.state_names):
-            print(f"{path}: a prediction over a whole trajectory diverged; on an unstable system "
-                  "(the upright QUBE runs) score short windows: --window 0.1")
+            print(
+                f"{path}: a prediction over a whole trajectory diverged; on an unstable system "
+                "(the upright QUBE runs) score short windows: --window 0.1"
+            )
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         payload = {

@@ -13,24 +13,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--system", required=True, choices=sorted(SYSTEMS))
     parser.add_argument("--out", required=True, help="output folder (CSV files + manifest.json)")
     parser.add_argument("--seed", type=int, default=0, help="random seed for the initial states")
+    parser.add_argument("--quantize", action="store_true", help="round angles to 2048 counts/rev (Furuta)")
     parser.add_argument(
-        "--quantize", action="store_true", help="round angles to 2048 counts/rev (Furuta)"
-    )
-    parser.add_argument(
-        "--noise", type=float, default=0.0, metavar="STD",
+        "--noise",
+        type=float,
+        default=0.0,
+        metavar="STD",
         help="Gaussian position-noise std (rad or m) per 500 Hz sensor sample",
     )
     parser.add_argument(
-        "--velocity-noise", type=float, default=0.0, metavar="STD",
+        "--velocity-noise",
+        type=float,
+        default=0.0,
+        metavar="STD",
         help="Gaussian noise std added to exact velocities",
     )
     parser.add_argument(
-        "--velocity", choices=["exact", "filter"], default="exact",
+        "--velocity",
+        choices=["exact", "filter"],
+        default="exact",
         help="exact simulated velocities, or the paper's derivative filter (ω0 100, ξ 0.8)",
     )
     parser.add_argument("--small", action="store_true", help="a scaled-down recipe for quick runs")
     parser.add_argument(
-        "--ground-truth", choices=["auto", "mujoco", "analytic"], default="auto",
+        "--ground-truth",
+        choices=["auto", "mujoco", "analytic"],
+        default="auto",
         help="auto: the MuJoCo model when its backend is available, else the analytic model",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace existing files in --out")

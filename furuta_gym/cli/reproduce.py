@@ -24,90 +24,129 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _add_selection_arguments(parser: argparse.ArgumentParser) -> None:
     """What runs: scale, seeds, systems, pairs and epochs."""
     parser.add_argument(
-        "--quick", action="store_true",
+        "--quick",
+        action="store_true",
         help="scaled-down data and a few epochs: the whole pipeline in minutes (not the paper's numbers)",
     )
     parser.add_argument("--out", default=None, help="output folder (default results/reproduce[_quick])")
     parser.add_argument("--seed", type=int, default=0, help="data seed (and the model seed without --seeds)")
     parser.add_argument(
-        "--seeds", type=int, nargs="+", default=None, metavar="SEED",
+        "--seeds",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="SEED",
         help="model-initialisation seeds, e.g. --seeds 0 1 2: every model is trained once per seed "
-             "and each cell reads mean ± std over them (default: --seed alone)",
+        "and each cell reads mean ± std over them (default: --seed alone)",
     )
     parser.add_argument(
-        "--system", choices=sorted(SYSTEMS), action="append", dest="systems",
+        "--system",
+        choices=sorted(SYSTEMS),
+        action="append",
+        dest="systems",
         help="only this system (repeatable; default both)",
     )
     parser.add_argument(
-        "--pair", action="append", dest="pairs", metavar="MODEL:LOSS",
+        "--pair",
+        action="append",
+        dest="pairs",
+        metavar="MODEL:LOSS",
         help="only this model × loss pair, e.g. dln:prop (repeatable; default all six of the paper)",
     )
     parser.add_argument(
-        "--epochs", type=int, nargs=2, metavar=("STAGE1", "STAGE2"),
+        "--epochs",
+        type=int,
+        nargs=2,
+        metavar=("STAGE1", "STAGE2"),
         help="epochs of the 2-step and the long-horizon stage of the L_traj / L_aph runs (both systems)",
     )
     parser.add_argument(
-        "--prop-epochs", type=int, nargs=3, metavar=("ITAU", "STAGE1", "STAGE2"),
+        "--prop-epochs",
+        type=int,
+        nargs=3,
+        metavar=("ITAU", "STAGE1", "STAGE2"),
         help="epochs of the L_prop runs: L_Iτ alone, then the 2-step and long-horizon stages of "
-             "L_Iτ + λ·L_traj (both systems)",
+        "L_Iτ + λ·L_traj (both systems)",
     )
 
 
 def _add_data_arguments(parser: argparse.ArgumentParser) -> None:
     """Which plant and sensor make the data, and how the L_prop runs read it."""
     parser.add_argument(
-        "--ground-truth", choices=["auto", "mujoco", "analytic"], default="auto",
+        "--ground-truth",
+        choices=["auto", "mujoco", "analytic"],
+        default="auto",
         help="data from the MuJoCo model (auto: when available) or the analytic model",
     )
     parser.add_argument(
-        "--plant", default=None, metavar="FILE",
+        "--plant",
+        default=None,
+        metavar="FILE",
         help="generate the data on this plant (a diagnosis JSON from `diagnose --json`, or an MJCF "
-             "from `--mjcf`): the paper's protocol on your calibrated rig; the state columns then "
-             "sit beside the paper's experimental ones",
+        "from `--mjcf`): the paper's protocol on your calibrated rig; the state columns then "
+        "sit beside the paper's experimental ones",
     )
     parser.add_argument(
-        "--sensor", choices=["exact", "experiment"], default="exact",
+        "--sensor",
+        choices=["exact", "experiment"],
+        default="exact",
         help="exact states (the paper's simulated data) or as the QUBE measures them: 2048-count "
-             "encoders and the paper's derivative filter for velocities (its experiments)",
+        "encoders and the paper's derivative filter for velocities (its experiments)",
     )
     parser.add_argument(
-        "--integral-span", type=int, default=1, metavar="N",
+        "--integral-span",
+        type=int,
+        default=1,
+        metavar="N",
         help="quadrature intervals summed into one L_Iτ residual in the L_prop runs (default 1, the "
-             "paper's); a few velocity-filter time constants on --sensor experiment data",
+        "paper's); a few velocity-filter time constants on --sensor experiment data",
     )
     parser.add_argument(
-        "--training-velocities", choices=["recorded", "zero_phase"], default="recorded",
+        "--training-velocities",
+        choices=["recorded", "zero_phase"],
+        default="recorded",
         help="train (and fit the scale) on the sensor's velocities or on velocities re-estimated "
-             "offline from the angles without lag (the derivative filter lags by ~16 ms); the test "
-             "sets are scored as recorded",
+        "offline from the angles without lag (the derivative filter lags by ~16 ms); the test "
+        "sets are scored as recorded",
     )
     parser.add_argument(
-        "--quadrature", choices=["trapezoid", "simpson", "hermite"], default=None,
+        "--quadrature",
+        choices=["trapezoid", "simpson", "hermite"],
+        default=None,
         help="L_Iτ's rule and the scale fit's, for every run (default: the reproduction's recipe, "
-             "furuta_gym.training.reproduce.REPRODUCE_QUADRATURE, and FULL_PROP_QUADRATURE for "
-             "the L_prop models named there)",
+        "furuta_gym.training.reproduce.REPRODUCE_QUADRATURE, and FULL_PROP_QUADRATURE for "
+        "the L_prop models named there)",
     )
 
 
 def _add_execution_arguments(parser: argparse.ArgumentParser) -> None:
     """Where and how many models train at once."""
     parser.add_argument(
-        "--jobs", type=int, default=None, metavar="N",
+        "--jobs",
+        type=int,
+        default=None,
+        metavar="N",
         help="train N models at once in separate processes (default: the number of CPU cores, at most 8)",
     )
     parser.add_argument(
-        "--executor", choices=["local", "ray"], default="local",
+        "--executor",
+        choices=["local", "ray"],
+        default="local",
         help="where the models train: this machine's processes (default) or Ray tasks, one per "
-             "model × seed (pip install 'furuta-gym[cluster]'); the run folders are the same",
+        "model × seed (pip install 'furuta-gym[cluster]'); the run folders are the same",
     )
     parser.add_argument(
-        "--address", default=None,
+        "--address",
+        default=None,
         help="with --executor ray: the Ray cluster to join (e.g. auto, or ray://HOST:10001); without "
-             "it a local Ray instance runs --jobs tasks at once. On several machines --out must be "
-             "a folder all of them see at the same path",
+        "it a local Ray instance runs --jobs tasks at once. On several machines --out must be "
+        "a folder all of them see at the same path",
     )
     parser.add_argument(
-        "--cpus-per-task", type=int, default=1, metavar="N",
+        "--cpus-per-task",
+        type=int,
+        default=1,
+        metavar="N",
         help="with --executor ray: CPUs each model's task asks for (and the threads it may use)",
     )
 
@@ -132,8 +171,7 @@ def config_from_args(args: argparse.Namespace):
             kind, sep, loss = text.partition(":")
             if not sep or (kind, loss) not in PAPER_PAIRS:
                 raise ValueError(
-                    f"--pair {text!r}: expected MODEL:LOSS, one of "
-                    + ", ".join(f"{k}:{l}" for k, l in PAPER_PAIRS)
+                    f"--pair {text!r}: expected MODEL:LOSS, one of " + ", ".join(f"{k}:{l}" for k, l in PAPER_PAIRS)
                 )
             pairs.append((kind, loss))
         pairs = tuple(p for p in PAPER_PAIRS if p in set(pairs))  # the paper's row order

@@ -30,20 +30,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="mujoco",
         help="'mujoco' (ground truth, default), 'analytic', or a checkpoint path",
     )
-    parser.add_argument("--policy", choices=POLICIES, default="chirp",
-                        help="zero input, a linear chirp, or uniform random actions (default chirp)")
-    parser.add_argument("--amplitude", type=float, default=None,
-                        help="chirp/random amplitude (default: 60%% of the action limit)")
+    parser.add_argument(
+        "--policy",
+        choices=POLICIES,
+        default="chirp",
+        help="zero input, a linear chirp, or uniform random actions (default chirp)",
+    )
+    parser.add_argument(
+        "--amplitude", type=float, default=None, help="chirp/random amplitude (default: 60%% of the action limit)"
+    )
     parser.add_argument("--seconds", type=float, default=5.0, help="rollout length (default 5 s)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--state", type=float, nargs="+", default=None,
-                        help="initial state (q..., q_dot...), e.g. --state 0 3.0 0 0")
-    parser.add_argument("--plant", action="append", default=None,
-                        help="plant variant preset (repeatable), e.g. cable_spring, coulomb")
+    parser.add_argument(
+        "--state", type=float, nargs="+", default=None, help="initial state (q..., q_dot...), e.g. --state 0 3.0 0 0"
+    )
+    parser.add_argument(
+        "--plant", action="append", default=None, help="plant variant preset (repeatable), e.g. cable_spring, coulomb"
+    )
     parser.add_argument("--out", type=Path, default=Path("rollout.png"), help="PNG plot path")
     parser.add_argument("--video", type=Path, default=None, help="also write an .mp4 or .gif")
-    parser.add_argument("--data", type=Path, default=None,
-                        help="also write the trajectory (CSV or NPZ, the package's data format)")
+    parser.add_argument(
+        "--data", type=Path, default=None, help="also write the trajectory (CSV or NPZ, the package's data format)"
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace existing outputs")
 
 

@@ -62,43 +62,71 @@ def _horizons(text: str) -> tuple[int | float | None, ...]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--system", required=True, choices=sorted(SYSTEMS))
-    parser.add_argument("--model", required=True, choices=["dln", "aph", "adln"],
-                        help="DeLaN, APHYNITY or augmented DeLaN")
-    parser.add_argument("--loss", required=True, choices=["traj", "aph", "prop", "itau"],
-                        help="L_traj, L_aph (‖F_a‖ + λL_traj), L_prop (L_Iτ + λL_traj), or L_Iτ alone")
-    parser.add_argument("--data", required=True, nargs="+", metavar="DATA",
-                        help="training trajectories: CSV (.csv.gz too), NPZ or MAT in the long format, "
-                        "several pooled; 'qube:RUNS' (e.g. qube:1-5) takes the real QUBE-Servo runs "
-                        "shipped with the package")
-    parser.add_argument("--forced", help="forced trajectory file for the overall-scale fit "
-                        "(needed after training on free, u = 0, data; read like DATA, never split)")
+    parser.add_argument(
+        "--model", required=True, choices=["dln", "aph", "adln"], help="DeLaN, APHYNITY or augmented DeLaN"
+    )
+    parser.add_argument(
+        "--loss",
+        required=True,
+        choices=["traj", "aph", "prop", "itau"],
+        help="L_traj, L_aph (‖F_a‖ + λL_traj), L_prop (L_Iτ + λL_traj), or L_Iτ alone",
+    )
+    parser.add_argument(
+        "--data",
+        required=True,
+        nargs="+",
+        metavar="DATA",
+        help="training trajectories: CSV (.csv.gz too), NPZ or MAT in the long format, "
+        "several pooled; 'qube:RUNS' (e.g. qube:1-5) takes the real QUBE-Servo runs "
+        "shipped with the package",
+    )
+    parser.add_argument(
+        "--forced",
+        help="forced trajectory file for the overall-scale fit "
+        "(needed after training on free, u = 0, data; read like DATA, never split)",
+    )
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
-    parser.add_argument("--paper", action="store_true",
-                        help="the paper's recipe (50k+10k / 5k+1k epochs, full batch): hours on a CPU")
+    parser.add_argument(
+        "--paper", action="store_true", help="the paper's recipe (50k+10k / 5k+1k epochs, full batch): hours on a CPU"
+    )
     parser.add_argument("--epochs", type=_ints, help="epochs per stage, e.g. 200,20")
-    parser.add_argument("--horizons", type=_horizons,
-                        help="horizon per stage: samples, seconds or 'itau' (L_Iτ alone, with --loss prop), "
-                        "e.g. itau,2,1s (default 2,1s Furuta; 2,2s N-MSD)")
-    parser.add_argument("--lr", type=_rates,
-                        help="Adam learning rate, one value or one per stage, e.g. 1e-2,1e-3,1e-3 (default 1e-3)")
+    parser.add_argument(
+        "--horizons",
+        type=_horizons,
+        help="horizon per stage: samples, seconds or 'itau' (L_Iτ alone, with --loss prop), "
+        "e.g. itau,2,1s (default 2,1s Furuta; 2,2s N-MSD)",
+    )
+    parser.add_argument(
+        "--lr", type=_rates, help="Adam learning rate, one value or one per stage, e.g. 1e-2,1e-3,1e-3 (default 1e-3)"
+    )
     parser.add_argument("--weight-decay", type=float, help="AdamW weight decay (default 1e-5)")
     parser.add_argument("--batch-size", type=int, help="trajectory windows per step; 0 = full batch")
     parser.add_argument("--lambda", dest="lam", type=float, help="λ of L_prop / initial λ of L_aph (default 1)")
-    parser.add_argument("--lambda-step", type=float,
-                        help="dual-ascent step τ₂ on λ after each epoch (default 1000 for aph, 0 otherwise)")
-    parser.add_argument("--quadrature", choices=["trapezoid", "simpson", "hermite"],
-                        help="L_Iτ rule (default trapezoid, the paper's; hermite resolves the motion "
-                             "between samples from q and q̇ and all but removes the quadrature floor)")
-    parser.add_argument("--integral-span", type=int,
-                        help="quadrature intervals summed into one L_Iτ residual (default 1, the paper's); "
-                             "a few estimator time constants on encoder logs with estimated velocities")
+    parser.add_argument(
+        "--lambda-step",
+        type=float,
+        help="dual-ascent step τ₂ on λ after each epoch (default 1000 for aph, 0 otherwise)",
+    )
+    parser.add_argument(
+        "--quadrature",
+        choices=["trapezoid", "simpson", "hermite"],
+        help="L_Iτ rule (default trapezoid, the paper's; hermite resolves the motion "
+        "between samples from q and q̇ and all but removes the quadrature floor)",
+    )
+    parser.add_argument(
+        "--integral-span",
+        type=int,
+        help="quadrature intervals summed into one L_Iτ residual (default 1, the paper's); "
+        "a few estimator time constants on encoder logs with estimated velocities",
+    )
     parser.add_argument("--hidden", type=_ints, help="MLP widths, e.g. 16,16")
     parser.add_argument("--seed", type=int, help="random seed (weights, shuffling)")
     parser.add_argument("--checkpoint-every", type=int, help="model snapshot every N epochs")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_log_arguments(
-        parser, None,
+        parser,
+        None,
         "cut each log into elementary trajectories of this many seconds (0: keep whole); default: "
         "logs without velocities (measured) are cut as the paper cuts its experimental data, 1 s "
         "Furuta (2 s N-MSD), and generated data carrying velocities are kept whole",
@@ -110,10 +138,17 @@ def _describe_data(args, trajs, notes) -> dict:
     checkpoint's data hash identifies the data but cannot say where they came from)."""
     dur = sorted({round(len(tr) * tr.dt, 3) for tr in trajs})
     span = f"{dur[0]:g} s" if len(dur) == 1 else f"{dur[0]:g}-{dur[-1]:g} s"
-    print(f"training data: {len(trajs)} trajectories of {span} from {' '.join(args.data)}"
-          + "".join(f"; {n}" for n in notes))
-    return {"data": args.data, "forced": args.forced, "n_trajectories": len(trajs), "notes": notes,
-            **{k: getattr(args, k) for k in ("column_map", "sign", "offset", "skip", "velocity", "cutoff", "split")}}
+    print(
+        f"training data: {len(trajs)} trajectories of {span} from {' '.join(args.data)}"
+        + "".join(f"; {n}" for n in notes)
+    )
+    return {
+        "data": args.data,
+        "forced": args.forced,
+        "n_trajectories": len(trajs),
+        "notes": notes,
+        **{k: getattr(args, k) for k in ("column_map", "sign", "offset", "skip", "velocity", "cutoff", "split")},
+    }
 
 
 def _config(args):
@@ -121,9 +156,18 @@ def _config(args):
     from ..training.train import TrainConfig
 
     overrides = {}
-    for name, key in [("epochs", "epochs"), ("horizons", "horizons"), ("lr", "learning_rate"),
-                      ("weight_decay", "weight_decay"), ("lam", "lambda_traj"), ("lambda_step", "lambda_step"),
-                      ("quadrature", "quadrature"), ("integral_span", "integral_span"), ("seed", "seed"), ("checkpoint_every", "checkpoint_every")]:
+    for name, key in [
+        ("epochs", "epochs"),
+        ("horizons", "horizons"),
+        ("lr", "learning_rate"),
+        ("weight_decay", "weight_decay"),
+        ("lam", "lambda_traj"),
+        ("lambda_step", "lambda_step"),
+        ("quadrature", "quadrature"),
+        ("integral_span", "integral_span"),
+        ("seed", "seed"),
+        ("checkpoint_every", "checkpoint_every"),
+    ]:
         value = getattr(args, name)
         if value is not None:
             overrides[key] = value
@@ -150,8 +194,17 @@ def run(args: argparse.Namespace) -> int:
     config = _config(args)
     hparams = {"hidden": args.hidden} if args.hidden else None
     try:
-        model, history = train(args.model, args.system, args.loss, trajs, config, args.out,
-                               resume=args.resume, forced_trajs=forced, hparams=hparams)
+        model, history = train(
+            args.model,
+            args.system,
+            args.loss,
+            trajs,
+            config,
+            args.out,
+            resume=args.resume,
+            forced_trajs=forced,
+            hparams=hparams,
+        )
     except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM: every finished epoch is saved
         import sys
 

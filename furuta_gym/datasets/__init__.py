@@ -56,22 +56,15 @@ def qube_closed_loop_files(runs: Iterable[int] | None = None) -> list[Path]:
         run_numbers = list(range(1, QUBE_CLOSED_LOOP_RUNS + 1))
     else:
         if isinstance(runs, (int, str)):
-            raise ValueError(
-                f"runs must be a list of run numbers 1..{QUBE_CLOSED_LOOP_RUNS} or None, "
-                f"got {runs!r}"
-            )
+            raise ValueError(f"runs must be a list of run numbers 1..{QUBE_CLOSED_LOOP_RUNS} or None, got {runs!r}")
         run_numbers = list(runs)
         bad = [
             r
             for r in run_numbers
-            if isinstance(r, bool)
-            or not isinstance(r, numbers.Integral)
-            or not 1 <= r <= QUBE_CLOSED_LOOP_RUNS
+            if isinstance(r, bool) or not isinstance(r, numbers.Integral) or not 1 <= r <= QUBE_CLOSED_LOOP_RUNS
         ]
         if bad:
-            raise ValueError(
-                f"runs holds {bad!r}; valid run numbers are 1..{QUBE_CLOSED_LOOP_RUNS} (1-based)"
-            )
+            raise ValueError(f"runs holds {bad!r}; valid run numbers are 1..{QUBE_CLOSED_LOOP_RUNS} (1-based)")
     paths = [_QUBE_DIR / f"run{int(r):02d}.csv.gz" for r in run_numbers]
     missing = [p for p in paths if not p.is_file()]
     if missing:
@@ -79,9 +72,7 @@ def qube_closed_loop_files(runs: Iterable[int] | None = None) -> list[Path]:
     return paths
 
 
-def load_qube_closed_loop(
-    runs: Iterable[int] | None = None, skip_seconds: float = 0.5
-) -> list[Trajectory]:
+def load_qube_closed_loop(runs: Iterable[int] | None = None, skip_seconds: float = 0.5) -> list[Trajectory]:
     """Load the vendored QUBE-Servo runs as Furuta trajectories in the project's convention.
 
     ``runs``: 1-based run numbers (None: all 15). The first ``skip_seconds`` of each run (the
@@ -96,9 +87,7 @@ def load_qube_closed_loop(
         (tr,) = load_trajectories(path, QUBE_CLOSED_LOOP_SYSTEM.name, **QUBE_CLOSED_LOOP_MAPPING)
         keep = tr.t >= tr.t[0] + skip_seconds - 1e-9
         if keep.sum() < 3:
-            raise ValueError(
-                f"skip_seconds={skip_seconds!r} leaves fewer than 3 samples of {path.name}"
-            )
+            raise ValueError(f"skip_seconds={skip_seconds!r} leaves fewer than 3 samples of {path.name}")
         out.append(
             Trajectory(
                 t=tr.t[keep],

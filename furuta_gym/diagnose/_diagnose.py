@@ -89,8 +89,11 @@ class DiagnosisSettings:
         definition = system_definition(system)
         if self.evidence_weighting not in ("regressor", "uniform"):
             raise ValueError(f"evidence_weighting: expected 'regressor' or 'uniform', got {self.evidence_weighting!r}")
-        if isinstance(self.start_iterations, bool) or not isinstance(self.start_iterations, (int, np.integer)) \
-                or self.start_iterations < 0:
+        if (
+            isinstance(self.start_iterations, bool)
+            or not isinstance(self.start_iterations, (int, np.integer))
+            or self.start_iterations < 0
+        ):
             raise ValueError(f"start_iterations: expected an integer >= 0, got {self.start_iterations!r}")
         return dataclasses.replace(
             self,
@@ -142,9 +145,11 @@ def _spring_rests(effects) -> dict[str, float]:
     """{joint: rest position τ0/k} where ``effects`` hold a positive spring and a constant torque
     on one joint: −k·q + τ0 is one spring whose rest position is not zero (a cable's neutral)."""
     constant = {e.joint: e for e in effects if e.kind.is_constant_force}
-    return {e.joint: float(constant[e.joint].coefficient) / float(e.coefficient)
-            for e in effects if e.kind.absorbs_constant_force and e.joint in constant
-            and e.coefficient is not None and e.coefficient > 0}
+    return {
+        e.joint: float(constant[e.joint].coefficient) / float(e.coefficient)
+        for e in effects
+        if e.kind.absorbs_constant_force and e.joint in constant and e.coefficient is not None and e.coefficient > 0
+    }
 
 
 def _f(x):
@@ -244,10 +249,14 @@ class DiagnosisResult:
         :func:`~furuta_gym.envs.save_mjcf`. A diagnosis of a given (learned) model has none: use
         :attr:`model_after` as ``dynamics=``."""
         if self.layout.learned is not None:
-            raise ValueError("a diagnosis of a given model has no MuJoCo plant (its M and V are a "
-                             "network's); pass res.model_after as dynamics= instead")
+            raise ValueError(
+                "a diagnosis of a given model has no MuJoCo plant (its M and V are a "
+                "network's); pass res.model_after as dynamics= instead"
+            )
         found = ", ".join(f"{e.name}:{e.joint}" for e in self.found) or "no effect"
-        return Plant(effects=self.found, lumped=self.parameters_after, system=self.system, source=f"diagnosis ({found})")
+        return Plant(
+            effects=self.found, lumped=self.parameters_after, system=self.system, source=f"diagnosis ({found})"
+        )
 
     def to_json(self) -> dict:
         return {
@@ -259,8 +268,9 @@ class DiagnosisResult:
             "parameters_before": self.parameters_before,
             "parameters_after": self.parameters_after,
             "parameter_units": self.parameter_units,
-            "parameter_intervals": {k: None if self.intervals.get(k) is None else self.intervals[k].to_json()
-                                    for k in self.parameters_after},
+            "parameter_intervals": {
+                k: None if self.intervals.get(k) is None else self.intervals[k].to_json() for k in self.parameters_after
+            },
             "interval_method": self.interval_method,
             "test_error_before": None if self.test_before is None else self.test_before.to_json(),
             "test_error_after": None if self.test_after is None else self.test_after.to_json(),
@@ -326,9 +336,7 @@ def _check_data(trajs: list[Trajectory], spec, settings: DiagnosisSettings) -> N
             f"for fitting and held-out errors)"
         )
     if not any(len(tr) * dt > settings.window + 2 * settings.trim_seconds + dt for tr in trajs):
-        raise DataError(
-            f"too short: every trajectory is shorter than one {settings.window} s window"
-        )
+        raise DataError(f"too short: every trajectory is shorter than one {settings.window} s window")
     q_all = np.concatenate([tr.q for tr in trajs])
     for j, name in enumerate(spec.joint_names):
         rng = float(np.ptp(q_all[:, j]))
@@ -364,8 +372,10 @@ def _segments(trajs, qds, settings: DiagnosisSettings) -> list[_fit.Segment]:
     """Fit and held-out segments: every ``holdout_every``-th segment is held out."""
     dt = trajs[0].dt
     every = settings.holdout_every
-    segs = [_fit.Segment(name, t, q, qd, u, dt, i, (i % every) == (every - 1))
-            for i, (name, t, q, qd, u) in enumerate(_pieces(trajs, qds, settings))]
+    segs = [
+        _fit.Segment(name, t, q, qd, u, dt, i, (i % every) == (every - 1))
+        for i, (name, t, q, qd, u) in enumerate(_pieces(trajs, qds, settings))
+    ]
     if not any(s.held_out for s in segs) and len(segs) > 1:
         segs[-1].held_out = True
     if sum(s.held_out for s in segs) == 0 or sum(not s.held_out for s in segs) < 2:
@@ -384,8 +394,10 @@ def _test_segments(test, spec, settings, column_map, signs, offsets, dt) -> list
     if abs(trajs[0].dt - dt) > 1e-3 * dt:
         raise DataError(f"test: sample period {trajs[0].dt:.6g} s differs from the fit data's {dt:.6g} s; expected one")
     qds = [_velocities(tr, settings) for tr in trajs]
-    segs = [_fit.Segment(name, t, q, qd, u, dt, -1 - i, True)
-            for i, (name, t, q, qd, u) in enumerate(_pieces(trajs, qds, settings))]
+    segs = [
+        _fit.Segment(name, t, q, qd, u, dt, -1 - i, True)
+        for i, (name, t, q, qd, u) in enumerate(_pieces(trajs, qds, settings))
+    ]
     if not segs:
         raise DataError(f"test: too short; every test trajectory is shorter than one {settings.window} s window")
     return segs
@@ -404,8 +416,7 @@ def _in_span(prob, layout, free, candidate, fixed_idx) -> str | None:
         if gain_idx not in fixed_idx:
             return "absorbed: the motor/input gain is a fitted parameter of the declared model"
         if len(fixed_idx) < 2:
-            return ("not identifiable: the input gain is the only scale anchor (fix a second "
-                    "known parameter to test it)")
+            return "not identifiable: the input gain is the only scale anchor (fix a second known parameter to test it)"
     X = prob.R[:, :, free].reshape(prob.R.shape[0] * prob.R.shape[1], int(free.sum()))
     c = prob.R[:, :, j].reshape(-1)
     if np.linalg.norm(c) == 0:
@@ -451,9 +462,16 @@ class _Fitter:
         self.val_idx = np.sort(order[k:]) if order.size > k else self.oe_idx
 
     def build(self, dynamics: _fit.InputDynamics, segs=None) -> None:
-        _fit.build_regressors(self.segs + self.test_segs if segs is None else segs, self.layout,
-                              self.theta_fixed, self.stride, self.settings.input_hold,
-                              self.settings.block_seconds, dynamics, self.settings.exclude_rest)
+        _fit.build_regressors(
+            self.segs + self.test_segs if segs is None else segs,
+            self.layout,
+            self.theta_fixed,
+            self.stride,
+            self.settings.input_hold,
+            self.settings.block_seconds,
+            dynamics,
+            self.settings.exclude_rest,
+        )
         if segs is None:
             self.fit_prob = Problem(self.fit_segs, self.c_input)
             self.held_prob = Problem(self.held_segs, self.c_input)
@@ -461,9 +479,15 @@ class _Fitter:
 
     def comparer(self) -> _trace_mod.Comparer:
         """Cross-validated comparisons on the fit segments, blocks labelled by their recording."""
-        return _trace_mod.Comparer(self.fit_prob, self.layout, self.theta_fixed, self.fixed_idx, self.weights,
-                                   weighting=self.settings.evidence_weighting,
-                                   recordings=[s.name.rsplit("[", 1)[0] for s in self.fit_segs])
+        return _trace_mod.Comparer(
+            self.fit_prob,
+            self.layout,
+            self.theta_fixed,
+            self.fixed_idx,
+            self.weights,
+            weighting=self.settings.evidence_weighting,
+            recordings=[s.name.rsplit("[", 1)[0] for s in self.fit_segs],
+        )
 
     def fit_ee(self, effects: list[Candidate]):
         free = free_columns(self.layout, effects, self.fixed_idx)
@@ -494,8 +518,7 @@ class _Fitter:
         return _fit.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
 
     def window_rmse(self, theta, win) -> float:
-        return _fit.window_errors(self.layout, theta, win, self.substeps,
-                                 self.settings.start_iterations)[1]
+        return _fit.window_errors(self.layout, theta, win, self.substeps, self.settings.start_iterations)[1]
 
     def validation_rmse(self, theta, dynamics) -> float:
         return self.window_rmse(theta, self.fit_windows(dynamics, self.val_idx))
@@ -508,8 +531,9 @@ class _Fitter:
 
     def validation_predictions(self, theta, dynamics, start_iterations: int) -> np.ndarray:
         """(W, L, n): predicted positions of the fit-set validation windows."""
-        return _fit.predict_windows(self.layout, theta, self.fit_windows(dynamics, self.val_idx), self.substeps,
-                                    start_iterations)
+        return _fit.predict_windows(
+            self.layout, theta, self.fit_windows(dynamics, self.val_idx), self.substeps, start_iterations
+        )
 
     def record(self, theta, origin: FitOrigin) -> np.ndarray:
         """Remember which fit ``theta`` came from (its intervals are that fit's); returns it."""
@@ -537,18 +561,32 @@ class _Fitter:
         start, label, start_origin = theta0, "equation-error", ee
         if not _physical(self.layout, theta0) or self.window_rmse(nominal, win) < self.window_rmse(theta0, win):
             start, label = nominal, "nominal"
-            start_origin = ee.holding(np.flatnonzero(free[:nb]), "the nominal value kept (the refinement "
-                                      "started from the nominal parameters and did not predict better)")
-            self.notes.append("the equation-error estimate was non-physical or predicted worse than the "
-                              f"nominal model ({tag}); output error started from the nominal parameters")
-        th, ok = _fit.oe_fit(self.layout, start, free, win, self.substeps,
-                             max_nfev=self.settings.oe_max_nfev, start_iterations=self.settings.start_iterations)
+            start_origin = ee.holding(
+                np.flatnonzero(free[:nb]),
+                "the nominal value kept (the refinement "
+                "started from the nominal parameters and did not predict better)",
+            )
+            self.notes.append(
+                "the equation-error estimate was non-physical or predicted worse than the "
+                f"nominal model ({tag}); output error started from the nominal parameters"
+            )
+        th, ok = _fit.oe_fit(
+            self.layout,
+            start,
+            free,
+            win,
+            self.substeps,
+            max_nfev=self.settings.oe_max_nfev,
+            start_iterations=self.settings.start_iterations,
+        )
         if not ok:
             self.notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
             return self.record(th, start_origin)
         if _physical(self.layout, start) and self.validation_rmse(start, dynamics) < self.validation_rmse(th, dynamics):
-            self.notes.append(f"the {label} estimate predicts better on validation windows than the "
-                              f"output-error refinement; kept ({tag})")
+            self.notes.append(
+                f"the {label} estimate predicts better on validation windows than the "
+                f"output-error refinement; kept ({tag})"
+            )
             return self.record(start, start_origin)
         return self.record(th, FitOrigin("output_error", th, free, dynamics, self.settings.start_iterations))
 
@@ -607,20 +645,32 @@ def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputD
         tried = [(sums(_fit.InputDynamics(kind, float(x))), float(x)) for x in grid]
         best = min(tried, key=lambda p: p[0].sum())
         # refine between the grid's neighbours of its best point
-        res = minimize_scalar(lambda x: sums(_fit.InputDynamics(kind, x)).sum(), method="bounded",
-                              bounds=(max(0.0, best[1] - 0.5 * dt), best[1] + 0.5 * dt), options={"xatol": 1e-5})
+        res = minimize_scalar(
+            lambda x: sums(_fit.InputDynamics(kind, x)).sum(),
+            method="bounded",
+            bounds=(max(0.0, best[1] - 0.5 * dt), best[1] + 0.5 * dt),
+            options={"xatol": 1e-5},
+        )
         refined = (sums(_fit.InputDynamics(kind, float(res.x))), float(res.x))
         found[kind] = refined if refined[0].sum() < best[0].sum() else best
     ev = _prediction_evidence(found["delay"][0], found["lag"][0])
     lag_wins = ev.passes(fx.settings.min_improvement, fx.settings.z_threshold)
     dyn = _fit.InputDynamics("lag", found["lag"][1]) if lag_wins else _fit.InputDynamics("delay", found["delay"][1])
-    other = (INPUT_DYNAMICS_EFFECTS["delay"], found["delay"][1]) if lag_wins else (INPUT_DYNAMICS_EFFECTS["lag"], found["lag"][1])
-    fx.alternative = (f"{other[0]} {other[1]:.4g} s {'fits worse' if lag_wins else 'fits as well'} "
-                      f"(validation gain of the lag over the delay {ev.improvement:.1%}, t {ev.z:.1f})")
+    other = (
+        (INPUT_DYNAMICS_EFFECTS["delay"], found["delay"][1])
+        if lag_wins
+        else (INPUT_DYNAMICS_EFFECTS["lag"], found["lag"][1])
+    )
+    fx.alternative = (
+        f"{other[0]} {other[1]:.4g} s {'fits worse' if lag_wins else 'fits as well'} "
+        f"(validation gain of the lag over the delay {ev.improvement:.1%}, t {ev.z:.1f})"
+    )
     fx.notes.append(f"input dynamics: {dyn.kind} {dyn.seconds:.4g} s; {fx.alternative}")
     if dyn.seconds > 0.95 * fx.settings.max_delay:
-        fx.notes.append(f"input {dyn.kind} estimate {dyn.seconds:.4g} s is at the search bound max_delay = "
-                        f"{fx.settings.max_delay} s: it stands in for something else")
+        fx.notes.append(
+            f"input {dyn.kind} estimate {dyn.seconds:.4g} s is at the search bound max_delay = "
+            f"{fx.settings.max_delay} s: it stands in for something else"
+        )
     return dyn
 
 
@@ -678,10 +728,15 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
         todo = [step for step, _, _ in vetoed]
     for step, ev, flipped in vetoed:
         for c in step.members:
-            _not_confirmed(fx, evidence, c.key,
-                           f"the refit gives {', '.join(flipped)} the non-physical sign" if flipped else
-                           f"the refitted model predicts the fit-set validation windows significantly worse "
-                           f"(error {-ev.improvement:+.1%}, t {ev.z:.1f})")
+            _not_confirmed(
+                fx,
+                evidence,
+                c.key,
+                f"the refit gives {', '.join(flipped)} the non-physical sign"
+                if flipped
+                else f"the refitted model predicts the fit-set validation windows significantly worse "
+                f"(error {-ev.improvement:+.1%}, t {ev.z:.1f})",
+            )
     fx.build(dyn)
     accepted, theta = _drop_non_physical(fx, accepted, theta, dyn, evidence)
     return accepted, theta, dyn
@@ -746,8 +801,13 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
     the joint against ``min_breakaway_ratio`` × its Coulomb level and the model with it does not
     predict significantly worse. Returns (accepted, θ)."""
     s = fx.settings
-    todo = [c for c in library if c.kind.breakaway_above and c.key not in evidence
-            and f"{c.kind.breakaway_above}:{c.joint}" in {a.key for a in accepted}]
+    todo = [
+        c
+        for c in library
+        if c.kind.breakaway_above
+        and c.key not in evidence
+        and f"{c.kind.breakaway_above}:{c.joint}" in {a.key for a in accepted}
+    ]
     if not todo:
         return accepted, theta
     # whether a joint stops within a window depends on its start velocity, which a smoothed
@@ -774,8 +834,10 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
         if coef > 0 and _physical(fx.layout, th) and ev.passes(s.min_improvement, s.z_threshold):
             th = _breakaway_at_least(fx, th, c, bound)
         else:
-            fx.notes.append(f"{c.key}: tested by prediction given coulomb_friction:{c.joint}: ΔF {coef:.3g}, "
-                            f"validation gain {ev.improvement:.1%}, t {ev.z:.1f}; not added")
+            fx.notes.append(
+                f"{c.key}: tested by prediction given coulomb_friction:{c.joint}: ΔF {coef:.3g}, "
+                f"validation gain {ev.improvement:.1%}, t {ev.z:.1f}; not added"
+            )
             found = _stiction_from_rests(fx, base, c, bound, lambda th0: refit(th0, accepted)[0], dyn)
             if found is None:
                 continue
@@ -783,14 +845,16 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
             trial_pred = fx.validation_predictions(th, dyn, start)
             ev = _stiction_evidence(pred, trial_pred, measured)
             if ev.z <= -s.veto_t:
-                fx.notes.append(f"{c.key}: {how}, but predicts worse with it (gain {ev.improvement:.1%}, "
-                                f"t {ev.z:.1f}): not added")
+                fx.notes.append(
+                    f"{c.key}: {how}, but predicts worse with it (gain {ev.improvement:.1%}, t {ev.z:.1f}): not added"
+                )
                 continue
             th, how, trial_pred = _sized(fx, (th, how, trial_pred), fitted, c, bound, (dyn, start, measured))
             ev = _stiction_evidence(pred, trial_pred, measured)
         accepted, theta, base, pred = accepted + [c], th, th, trial_pred
-        evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z,
-                                         "selected", how)
+        evidence[c.key] = EffectEvidence(
+            c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z, "selected", how
+        )
     return accepted, theta
 
 
@@ -812,8 +876,14 @@ def _sized(fx: _Fitter, from_rests, fitted, c: Candidate, bound: _rests.RestBoun
     if not better.improvement > 0:
         return th_rests, how, pred_rests
     th = _breakaway_at_least(fx, th_fit, c, bound)
-    return th, (f"{how}; ΔF {th[i]:.3g} from the output-error fit with it free, which predicts the validation "
-                f"windows {better.improvement:.0%} better than ΔF {th_rests[i]:.3g} set from the rests"), pred_fit
+    return (
+        th,
+        (
+            f"{how}; ΔF {th[i]:.3g} from the output-error fit with it free, which predicts the validation "
+            f"windows {better.improvement:.0%} better than ΔF {th_rests[i]:.3g} set from the rests"
+        ),
+        pred_fit,
+    )
 
 
 def _stiction_evidence(pred, trial_pred, measured) -> _trace_mod.Evidence:
@@ -821,8 +891,9 @@ def _stiction_evidence(pred, trial_pred, measured) -> _trace_mod.Evidence:
     changes its prediction (the output-error form of its regressor): a joint that never nears rest
     there says nothing about it."""
     change = np.sum((trial_pred - pred) ** 2, axis=(1, 2))
-    return _prediction_evidence(_square_sums(pred, measured), _square_sums(trial_pred, measured),
-                                np.where(np.isfinite(change), change, 0.0))
+    return _prediction_evidence(
+        _square_sums(pred, measured), _square_sums(trial_pred, measured), np.where(np.isfinite(change), change, 0.0)
+    )
 
 
 def _raised_breakaway(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBound) -> np.ndarray:
@@ -843,8 +914,10 @@ def _breakaway_at_least(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBoun
         return theta
     i = fx.layout.index(c.key)
     _held_from(fx, out, theta, i, "raised to the force the rests held (a lower bound, not a fit)")
-    fx.notes.append(f"{c.key}: ΔF raised {theta[i]:.3g} -> {out[i]:.3g} to the force the rests held "
-                    f"({bound.held:.3g} over {bound.n_windows} windows of {fx.settings.rest_window:g} s)")
+    fx.notes.append(
+        f"{c.key}: ΔF raised {theta[i]:.3g} -> {out[i]:.3g} to the force the rests held "
+        f"({bound.held:.3g} over {bound.n_windows} windows of {fx.settings.rest_window:g} s)"
+    )
     return out
 
 
@@ -862,8 +935,10 @@ def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBoun
     s, i = fx.settings, fx.layout.index(c.key)
     j = fx.layout.index(f"{c.kind.breakaway_above}:{c.joint}")
     ratio = bound.held / base[j] if base[j] > 0 else 0.0
-    seen = (f"rests held the joint against up to {bound.held:.3g} ({ratio:.2f}× its Coulomb level, "
-            f"{bound.n_windows} windows of {s.rest_window:g} s)")
+    seen = (
+        f"rests held the joint against up to {bound.held:.3g} ({ratio:.2f}× its Coulomb level, "
+        f"{bound.n_windows} windows of {s.rest_window:g} s)"
+    )
     if ratio < s.min_breakaway_ratio:
         fx.notes.append(f"{c.key}: {seen}; under {s.min_breakaway_ratio:g}×: no stiction from rests")
         return None
@@ -882,8 +957,10 @@ def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBoun
 def _anchor(spec, layout, fixed, forced, notes):
     """The fixed lumped parameters (the scale anchor; with free data, the gain too)."""
     if layout.learned is not None:
-        notes.append("the given model is the declared model, as it is (overall scale held at 1); "
-                     "only the library's effects are fitted around it")
+        notes.append(
+            "the given model is the declared model, as it is (overall scale held at 1); "
+            "only the library's effects are fitted around it"
+        )
         return {"scale": 1.0}
     lumped = system_definition(spec).lumped
     nom = lumped.nominal()
@@ -939,23 +1016,41 @@ def _trace(fx: _Fitter, testable, evidence):
     """Run the search; record the accepted steps' evidence (each member given its partner)."""
     s = fx.settings
     comparer = fx.comparer()
-    same = _trace_mod.equivalent_pairs(fx.fit_prob, fx.layout, free_columns(fx.layout, [], fx.fixed_idx),
-                                       fx.weights, testable)
-    steps, _ = _trace_mod.search(comparer, testable, _trace_mod.SearchSettings(
-        s.z_threshold, s.min_improvement, s.max_effects, s.pair_pool, s.member_z_threshold), same)
+    same = _trace_mod.equivalent_pairs(
+        fx.fit_prob, fx.layout, free_columns(fx.layout, [], fx.fixed_idx), fx.weights, testable
+    )
+    steps, _ = _trace_mod.search(
+        comparer,
+        testable,
+        _trace_mod.SearchSettings(s.z_threshold, s.min_improvement, s.max_effects, s.pair_pool, s.member_z_threshold),
+        same,
+    )
     for step in steps:
         for other, member in step.equivalents.items():
             c = next(x for x in testable if x.key == other)
-            evidence[other] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), False, None, None,
-                                             "equivalent", f"indistinguishable from {member} on these data")
+            evidence[other] = EffectEvidence(
+                c.name,
+                c.joint,
+                None,
+                c.unit(fx.spec),
+                False,
+                None,
+                None,
+                "equivalent",
+                f"indistinguishable from {member} on these data",
+            )
         for c in step.members:
             ev = step.evidence[c.key]
             partner = [o.key for o in step.members if o != c]
-            note = (f"significant only together with {partner[0]} (pair: held-out gain "
-                    f"{step.pair_evidence.improvement:.1%}, z {step.pair_evidence.z:.1f}); evidence given it"
-                    if partner else "")
-            evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), True,
-                                             ev.improvement, ev.z, "selected", note)
+            note = (
+                f"significant only together with {partner[0]} (pair: held-out gain "
+                f"{step.pair_evidence.improvement:.1%}, z {step.pair_evidence.z:.1f}); evidence given it"
+                if partner
+                else ""
+            )
+            evidence[c.key] = EffectEvidence(
+                c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z, "selected", note
+            )
     return steps
 
 
@@ -976,8 +1071,9 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
         given = [a for a in accepted if a != c]
         score = comparer.compare(given, [c])
         if ev is None:
-            ev = evidence[c.key] = EffectEvidence(c.name, c.joint, None, c.unit(fx.spec), False,
-                                                  score.improvement, score.z, "tested")
+            ev = evidence[c.key] = EffectEvidence(
+                c.name, c.joint, None, c.unit(fx.spec), False, score.improvement, score.z, "tested"
+            )
         elif ev.status == "tested":
             ev.improvement, ev.z_score = score.improvement, score.z
         if ev.status == "tested" and score.improvement >= fx.settings.inconsistent_gain:
@@ -992,8 +1088,10 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
     for ev in (e for e in chosen if e.kind.is_constant_force and e.joint in rests):
         joint, rest = ev.joint, rests[ev.joint]
         ev.note = "; ".join(x for x in (ev.note, f"with spring:{joint}: its rest position is {rest:.3g} (tau0/k)") if x)
-    rest = sorted((e for e in evidence.values() if e.status in ("inconsistent", "tested", "not confirmed")),
-                  key=lambda e: -(e.improvement if e.improvement is not None else -np.inf))
+    rest = sorted(
+        (e for e in evidence.values() if e.status in ("inconsistent", "tested", "not confirmed")),
+        key=lambda e: -(e.improvement if e.improvement is not None else -np.inf),
+    )
     return chosen + rest + [e for e in evidence.values() if e.status in ("equivalent", "absorbed", "not identifiable")]
 
 
@@ -1003,12 +1101,16 @@ def _inconsistency(c: Candidate, score, settings: DiagnosisSettings) -> str:
     per = score.by_recording()
     helps = ", ".join(f"{k} ({v:+.0%})" for k, v in sorted(per.items(), key=lambda kv: -kv[1]) if v > 0)
     hurts = ", ".join(f"{k} ({v:+.0%})" for k, v in sorted(per.items(), key=lambda kv: kv[1]) if v < 0)
-    cause = ("its gain sits in a few blocks: the effect acts strongly in part of the data only, or it "
-             "changes between recordings (a cable's neutral or stiffness, friction that depends on "
-             "position), or another effect it needs is missing")
-    return (f"inconsistent: removes {score.improvement:.0%} of the held-out residual, but its t "
-            f"{score.z:.1f} < {settings.z_threshold:g}; helps on {helps or 'no recording'}; hurts on "
-            f"{hurts or 'no recording'}. Likely: {cause}")
+    cause = (
+        "its gain sits in a few blocks: the effect acts strongly in part of the data only, or it "
+        "changes between recordings (a cable's neutral or stiffness, friction that depends on "
+        "position), or another effect it needs is missing"
+    )
+    return (
+        f"inconsistent: removes {score.improvement:.0%} of the held-out residual, but its t "
+        f"{score.z:.1f} < {settings.z_threshold:g}; helps on {helps or 'no recording'}; hurts on "
+        f"{hurts or 'no recording'}. Likely: {cause}"
+    )
 
 
 def sensor_resolution(trajs: Sequence[Trajectory], spec) -> dict[str, float]:
@@ -1053,8 +1155,10 @@ def _fit_declared(fx: _Fitter) -> np.ndarray:
     weak = fx.weakly_identified(th_ee, free_base)
     if weak:
         fx.fixed_idx |= {fx.layout.index(k) for k in weak}
-        fx.notes.append("not identifiable from these data, held at nominal: " + ", ".join(
-            f"{k} (t {t:.1f} < {fx.settings.identify_t})" for k, t in weak.items()))
+        fx.notes.append(
+            "not identifiable from these data, held at nominal: "
+            + ", ".join(f"{k} (t {t:.1f} < {fx.settings.identify_t})" for k, t in weak.items())
+        )
         th_ee, free_base = fx.fit_ee([])
     return fx.refine(th_ee, free_base, _fit.NO_INPUT_DYNAMICS, "declared model")
 
@@ -1137,8 +1241,19 @@ def diagnose(
     Returns a :class:`DiagnosisResult`: effects ordered by held-out evidence (those marked
     ``significant`` were added), held-out (and test) errors before/after, fitted parameters, notes.
     """
-    once = functools.partial(_diagnose_once, data, system, test=test, column_map=column_map, signs=signs,
-                             offsets=offsets, candidates=candidates, model=model, settings=settings, **overrides)
+    once = functools.partial(
+        _diagnose_once,
+        data,
+        system,
+        test=test,
+        column_map=column_map,
+        signs=signs,
+        offsets=offsets,
+        candidates=candidates,
+        model=model,
+        settings=settings,
+        **overrides,
+    )
     result = once(fixed=fixed)
     if model is not None:  # a learned model is kept as it is: no lumped bodies to check
         return result
@@ -1166,16 +1281,23 @@ def _with_rigid_bodies(result: "DiagnosisResult", refit) -> "DiagnosisResult":
     unit = result.parameter_units.get(held, "")
     again = refit({held: declared})
     worse = again.error_after.trajectory_rmse / result.error_after.trajectory_rmse
-    why = (f"fitted free, {held} = {result.parameters_after[held]:.4g} {unit} gives {failed[0].expression} = "
-           f"{failed[0].value:.3g} ≤ 0, which no rigid bodies have (MuJoCo refuses such a plant)")
+    why = (
+        f"fitted free, {held} = {result.parameters_after[held]:.4g} {unit} gives {failed[0].expression} = "
+        f"{failed[0].value:.3g} ≤ 0, which no rigid bodies have (MuJoCo refuses such a plant)"
+    )
     if worse <= 1.0 + RIGID_BODY_TOLERANCE and not any(
-            not c.holds for c in definition.body_conditions(again.parameters_after)):
-        again.notes.append(f"{held}: held at its declared value {declared:.4g} {unit}, which the data do not "
-                           f"contradict: {why}; held-out error {again.error_after.trajectory_rmse:.4g} held, "
-                           f"{result.error_after.trajectory_rmse:.4g} free")
+        not c.holds for c in definition.body_conditions(again.parameters_after)
+    ):
+        again.notes.append(
+            f"{held}: held at its declared value {declared:.4g} {unit}, which the data do not "
+            f"contradict: {why}; held-out error {again.error_after.trajectory_rmse:.4g} held, "
+            f"{result.error_after.trajectory_rmse:.4g} free"
+        )
         return again
-    result.notes.append(f"{why}; holding {held} at its declared value predicts the held-out data {worse:.2f}× "
-                        "as badly, so the fit stands: its plant runs on dynamics='analytic' only")
+    result.notes.append(
+        f"{why}; holding {held} at its declared value predicts the held-out data {worse:.2f}× "
+        "as badly, so the fit stands: its plant runs on dynamics='analytic' only"
+    )
     return result
 
 
@@ -1207,8 +1329,9 @@ def _diagnose_once(
     spec = get_spec(system)
     layout = layout_for(spec.name, _given_model(model, spec))
     notes: list[str] = []
-    trajs, qds, settings = _prepare(data, spec, dataclasses.replace(settings or DiagnosisSettings(), **overrides),
-                                    column_map, signs, offsets)
+    trajs, qds, settings = _prepare(
+        data, spec, dataclasses.replace(settings or DiagnosisSettings(), **overrides), column_map, signs, offsets
+    )
     if any(tr.qd is None for tr in trajs):
         notes.append(f"velocities estimated ({settings.velocity})")
     segs = _segments(trajs, qds, settings)
@@ -1241,11 +1364,24 @@ def _diagnose_once(
 
     params = lambda th: {b: float(th[i]) for i, b in enumerate(layout.base)}  # noqa: E731
     return DiagnosisResult(
-        system=spec.name, effects=ordered, error_before=before, error_after=after,
-        parameters_before=params(th_before), parameters_after=params(th_after),
-        parameter_units=dict(zip(layout.base, layout.base_units)), fixed=dict(fixed), notes=notes,
-        settings=settings, layout=layout, theta_before=th_before, theta_after=th_after,
-        input_dynamics=dyn, test_before=test_before, test_after=test_after,
-        intervals=intervals, interval_method=interval_method,
-        _segments=segs, _test_segments=test_segs,
+        system=spec.name,
+        effects=ordered,
+        error_before=before,
+        error_after=after,
+        parameters_before=params(th_before),
+        parameters_after=params(th_after),
+        parameter_units=dict(zip(layout.base, layout.base_units)),
+        fixed=dict(fixed),
+        notes=notes,
+        settings=settings,
+        layout=layout,
+        theta_before=th_before,
+        theta_after=th_after,
+        input_dynamics=dyn,
+        test_before=test_before,
+        test_after=test_after,
+        intervals=intervals,
+        interval_method=interval_method,
+        _segments=segs,
+        _test_segments=test_segs,
     )

@@ -22,14 +22,28 @@ from scipy.linalg import eigh
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from ..lagrangian import (forward_dynamics_with_dry_friction, interval_difference, interval_integral, momentum,
-                          potential_derived_force)
+from ..lagrangian import (
+    forward_dynamics_with_dry_friction,
+    interval_difference,
+    interval_integral,
+    momentum,
+    potential_derived_force,
+)
 from ..simulate import rollout_zoh
 from ..systems import get_spec
 from ._library import ParameterLayout
 
-__all__ = ["Segment", "InputDynamics", "build_regressors", "ee_fit", "oe_fit", "window_errors", "window_residuals",
-           "delay_input", "lag_input"]
+__all__ = [
+    "Segment",
+    "InputDynamics",
+    "build_regressors",
+    "ee_fit",
+    "oe_fit",
+    "window_errors",
+    "window_residuals",
+    "delay_input",
+    "lag_input",
+]
 
 _CHUNK = 2048
 
@@ -272,8 +286,9 @@ class Windows:
     length: int
 
 
-def make_windows(segments: list[Segment], length: int, dynamics: InputDynamics = NO_INPUT_DYNAMICS,
-                 max_windows=None, rng=None):
+def make_windows(
+    segments: list[Segment], length: int, dynamics: InputDynamics = NO_INPUT_DYNAMICS, max_windows=None, rng=None
+):
     """Non-overlapping windows of ``length`` steps from each segment (start at measured states)."""
     x0, us, qs, seg_idx = [], [], [], []
     for i, s in enumerate(segments):
@@ -340,8 +355,7 @@ def _predictor(layout: ParameterLayout, dt: float, length: int, substeps: int, s
 
         return jax.vmap(one)(x0, us, q_measured)
 
-    return _compiled("predict", layout, dt, length, substeps, start_iterations,
-                     build=lambda: jax.jit(predict))
+    return _compiled("predict", layout, dt, length, substeps, start_iterations, build=lambda: jax.jit(predict))
 
 
 def _batches(win: "Windows"):
@@ -353,8 +367,7 @@ def _batches(win: "Windows"):
         yield idx.size, jnp.asarray(win.x0[pad]), jnp.asarray(win.us[pad]), jnp.asarray(win.q[pad])
 
 
-def predict_windows(layout, theta, win: Windows, substeps: int = 1,
-                    start_iterations: int = 0) -> np.ndarray:
+def predict_windows(layout, theta, win: Windows, substeps: int = 1, start_iterations: int = 0) -> np.ndarray:
     """Open-loop position predictions of each window; with ``start_iterations`` > 0 each window's
     start velocity is first re-estimated from its own positions (Gauss-Newton steps)."""
     predict = _predictor(layout, win.dt, win.length, substeps, start_iterations)
@@ -368,8 +381,7 @@ def window_residuals(layout, theta, win: Windows, substeps: int = 1, start_itera
     return (predict_windows(layout, theta, win, substeps, start_iterations) - win.q).reshape(-1)
 
 
-def window_square_sums(layout, theta, win: Windows, substeps: int = 1,
-                       start_iterations: int = 0) -> np.ndarray:
+def window_square_sums(layout, theta, win: Windows, substeps: int = 1, start_iterations: int = 0) -> np.ndarray:
     """(W,) sum of squared position errors of each open-loop window (inf where it blew up)."""
     err = predict_windows(layout, theta, win, substeps, start_iterations) - win.q
     ss = np.sum(err**2, axis=(1, 2))
@@ -438,8 +450,15 @@ def oe_fit(
     lo = lower[free] / scale[free]
     z0 = np.maximum(z0, lo + 1e-9)
     # scipy's annotation of jac leaves out the callable it takes
-    sol = least_squares(f, z0, jac=J, method="trf", bounds=(lo, np.inf), max_nfev=max_nfev,  # pyright: ignore[reportArgumentType]
-                        x_scale="jac")
+    sol = least_squares(
+        f,
+        z0,
+        jac=J,  # pyright: ignore[reportArgumentType]
+        method="trf",
+        bounds=(lo, np.inf),
+        max_nfev=max_nfev,
+        x_scale="jac",
+    )
     if sol.cost >= 0.5 * float(r0 @ r0):  # never return something worse than the start
         return theta_start, False
     return full(sol.x), True

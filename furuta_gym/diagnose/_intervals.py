@@ -23,8 +23,15 @@ from typing import Any
 import numpy as np
 from scipy.special import stdtrit
 
-__all__ = ["Interval", "Intervals", "cluster_intervals", "sysid_calculate_intervals",
-           "own_calculate_intervals", "LEVEL", "NEAR_NULL"]
+__all__ = [
+    "Interval",
+    "Intervals",
+    "cluster_intervals",
+    "sysid_calculate_intervals",
+    "own_calculate_intervals",
+    "LEVEL",
+    "NEAR_NULL",
+]
 
 LEVEL = 0.95
 # A direction is near-null when its eigenvalue of the column-normalised JᵀJ is below this share of
@@ -143,8 +150,9 @@ def cluster_intervals(J, r, clusters, estimate, level: float = LEVEL, near_null:
     cov = factor * h_inv @ (scores.T @ scores) @ h_inv / np.outer(norms, norms)
     t = float(stdtrit(max(G - 1, 1), 0.5 + level / 2))
     half = np.where(unbounded, np.inf, t * np.sqrt(np.maximum(np.diag(cov), 0.0)))
-    return Intervals(np.asarray(estimate, float), half, cov, iid_half / norms, V[:, ~keep].T, level, G,
-                     max(G - 1, 1), backend)
+    return Intervals(
+        np.asarray(estimate, float), half, cov, iid_half / norms, V[:, ~keep].T, level, G, max(G - 1, 1), backend
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -243,8 +251,10 @@ def _null_note(iv: Intervals, names: list[str], source: str) -> list[str]:
     out = []
     for v in iv.null_directions:
         involved = [n for n, c in zip(names, v) if abs(c) >= 0.1]
-        out.append(f"interval unbounded for {', '.join(involved)}: a near-null direction of the {source} "
-                   f"Jacobian (these data do not pin down that combination)")
+        out.append(
+            f"interval unbounded for {', '.join(involved)}: a near-null direction of the {source} "
+            f"Jacobian (these data do not pin down that combination)"
+        )
     return out
 
 
@@ -273,17 +283,22 @@ def fit_intervals(fx, theta, origin: FitOrigin):
     else:
         iv = cluster_intervals(J, r, clusters, estimate)
         notes += _null_note(iv, names, origin.kind.replace("_", "-"))
-    out = {n: None if iv is None else Interval(float(iv.lower[k]), float(iv.upper[k]), origin.kind,
-                                               float(iv.iid_half_width[k]))
-           for k, n in enumerate(names)}
+    out = {
+        n: None
+        if iv is None
+        else Interval(float(iv.lower[k]), float(iv.upper[k]), origin.kind, float(iv.iid_half_width[k]))
+        for k, n in enumerate(names)
+    }
     held = {}
     for i, why in origin.held:
         out[names_all[i]] = None
         held.setdefault(why, []).append(names_all[i])
     notes += [f"no interval for {', '.join(v)}: {why}" for why, v in held.items()]
     if not origin.recorded:
-        notes.append("the reported parameters are not a recorded fit's estimate; their intervals are "
-                     "taken from the output-error Jacobian at the reported values")
+        notes.append(
+            "the reported parameters are not a recorded fit's estimate; their intervals are "
+            "taken from the output-error Jacobian at the reported values"
+        )
     return out, notes, _method(origin, iv)
 
 

@@ -40,8 +40,15 @@ from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..models import system_definition
 from ..systems import get_spec
 
-__all__ = ["Candidate", "ParameterLayout", "LumpedModel", "LearnedWithLibrary", "layout_for",
-           "nominal_base", "check_input_linear"]
+__all__ = [
+    "Candidate",
+    "ParameterLayout",
+    "LumpedModel",
+    "LearnedWithLibrary",
+    "layout_for",
+    "nominal_base",
+    "check_input_linear",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,8 +125,7 @@ class ParameterLayout:
         if name in keys:
             return len(self.base) + keys.index(name)
         raise ValueError(
-            f"unknown parameter {name!r} for {self.system}; base parameters are "
-            f"{list(self.base)}, effects are {keys}"
+            f"unknown parameter {name!r} for {self.system}; base parameters are {list(self.base)}, effects are {keys}"
         )
 
     def nominal(self) -> np.ndarray:
@@ -141,8 +147,9 @@ def layout_for(system: str, learned: AbstractLagrangianSystem | None = None) -> 
     ``learned`` model, that model (scale 1) instead of the lumped declared model."""
     spec = get_spec(system)
     # library order (each kind's rank) breaks ties between effects the data cannot tell apart
-    kinds = sorted((k for k in EFFECT_KINDS.values() if k.typical is not None and not k.has_memory),
-                   key=lambda k: k.library_rank)
+    kinds = sorted(
+        (k for k in EFFECT_KINDS.values() if k.typical is not None and not k.has_memory), key=lambda k: k.library_rank
+    )
     cands = []
     for j in spec.joint_names:
         gravity = j in system_definition(spec).lumped.gravity_joints
@@ -175,8 +182,7 @@ def _library_force(theta, system, n_base, q, qd, dry_friction: bool):
     tau = [0.0 * qd[j] for j in range(spec.n_dof)]
 
     def in_tau_nc(k: EffectKind) -> bool:
-        return (not (k.on_input or k.in_potential or k.shifts_potential)
-                and (dry_friction or not k.is_dry_friction))
+        return not (k.on_input or k.in_potential or k.shifts_potential) and (dry_friction or not k.is_dry_friction)
 
     for e in _library_effects(theta, system, n_base, in_tau_nc):
         j = e.joint_index(spec)
@@ -251,8 +257,7 @@ class LearnedWithLibrary(AbstractLagrangianSystem):
         return self.theta[0] * self.base.mass_matrix(q)
 
     def potential(self, q):
-        return _library_potential(self.theta, self.spec.name, 1, q,
-                                  lambda x: self.theta[0] * self.base.potential(x))
+        return _library_potential(self.theta, self.spec.name, 1, q, lambda x: self.theta[0] * self.base.potential(x))
 
     def nonconservative_force(self, q, qd):
         zero_u = jnp.zeros(len(self.spec.input_names))
@@ -276,7 +281,11 @@ def check_input_linear(model: AbstractLagrangianSystem, seed: int = 0) -> None:
         driven = np.asarray(model.input_force(q, qd, u) - model.input_force(q, qd, jnp.zeros(m)))
         unit = np.asarray(model.input_force(q, qd, jnp.ones(m)) - model.input_force(q, qd, jnp.zeros(m)))
         ref = unit if ref is None else ref
-        if not (np.allclose(driven, unit * np.asarray(u)[0], rtol=1e-8, atol=1e-12)
-                and np.allclose(unit, ref, rtol=1e-8, atol=1e-12)):
-            raise ValueError("model: its input force is not B·u + f(q, q̇) with a constant B; the "
-                             "diagnosis of a given model needs that form")
+        if not (
+            np.allclose(driven, unit * np.asarray(u)[0], rtol=1e-8, atol=1e-12)
+            and np.allclose(unit, ref, rtol=1e-8, atol=1e-12)
+        ):
+            raise ValueError(
+                "model: its input force is not B·u + f(q, q̇) with a constant B; the "
+                "diagnosis of a given model needs that form"
+            )

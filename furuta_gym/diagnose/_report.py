@@ -29,8 +29,10 @@ def format_table(res) -> str:
     """Human-readable summary: effects by evidence, errors before/after, fitted parameters."""
     lines = [f"diagnosis of a {res.system} model"]
     lines.append("")
-    lines.append(f"{'effect':<18}{'joint':<7}{'coefficient':>13}{'± 95 %':>11}  {'unit':<15}{'held-out gain':>14}"
-                 f"{'z':>7}  verdict")
+    lines.append(
+        f"{'effect':<18}{'joint':<7}{'coefficient':>13}{'± 95 %':>11}  {'unit':<15}{'held-out gain':>14}"
+        f"{'z':>7}  verdict"
+    )
     for e in res.effects:
         verdict = "SIGNIFICANT" if e.significant else e.status.upper() if e.status == "inconsistent" else e.status
         if e.significant and not e.resolved:
@@ -46,23 +48,31 @@ def format_table(res) -> str:
         if e.status == "inconsistent":  # never just "none": say where it helps and where it hurts
             lines.append(f"-> {e.name}:{e.joint} {e.note}")
     lines.append("")
-    lines += _error_rows(f"held-out errors ({res.error_before.n_windows} open-loop windows of "
-                         f"{res.error_before.window_seconds} s)", res.error_before, res.error_after)
+    lines += _error_rows(
+        f"held-out errors ({res.error_before.n_windows} open-loop windows of {res.error_before.window_seconds} s)",
+        res.error_before,
+        res.error_after,
+    )
     if res.test_before is not None:
         # the test logs (``test=``) are never fitted nor used for any decision: the fairest score
-        lines += _error_rows(f"test-log errors ({res.test_before.n_windows} windows, logs never fitted)",
-                             res.test_before, res.test_after)
+        lines += _error_rows(
+            f"test-log errors ({res.test_before.n_windows} windows, logs never fitted)", res.test_before, res.test_after
+        )
     lines.append("")
     fixed = f"; fixed: {res.fixed}" if res.fixed else ""
     lines.append(f"fitted parameters (before -> after ± 95 % interval){fixed}")
     for k in res.parameters_before:
-        lines.append(f"  {k:<10}{res.parameters_before[k]:>13.5g} -> {res.parameters_after[k]:<13.5g}"
-                     f"{_pm(res.intervals.get(k)):<11}{res.parameter_units[k]}")
+        lines.append(
+            f"  {k:<10}{res.parameters_before[k]:>13.5g} -> {res.parameters_after[k]:<13.5g}"
+            f"{_pm(res.intervals.get(k)):<11}{res.parameter_units[k]}"
+        )
     if res.input_dynamics.kind != "none":
         name = "delay" if res.input_dynamics.kind == "delay" else "lag"
         ev = next((e for e in res.significant if e.kind.input_dynamics), None)
-        lines.append(f"  {name:<10}{0.0:>13.5g} -> {res.input_dynamics.seconds:<13.5g}"
-                     f"{_pm(None if ev is None else ev.interval):<11}s")
+        lines.append(
+            f"  {name:<10}{0.0:>13.5g} -> {res.input_dynamics.seconds:<13.5g}"
+            f"{_pm(None if ev is None else ev.interval):<11}s"
+        )
     for n in res.notes:
         lines.append(f"note: {n}")
     return "\n".join(lines)
@@ -81,7 +91,9 @@ def _pm(interval) -> str:
 def _error_rows(title, b, a) -> list[str]:
     lines = [f"{title:<60}{'before':>10}{'after':>13}{'ratio':>8}"]
     rows = [("trajectory_rmse", b.trajectory_rmse, a.trajectory_rmse)]
-    rows += [(f"  {j}", b.trajectory_rmse_per_joint[j], a.trajectory_rmse_per_joint[j]) for j in b.trajectory_rmse_per_joint]
+    rows += [
+        (f"  {j}", b.trajectory_rmse_per_joint[j], a.trajectory_rmse_per_joint[j]) for j in b.trajectory_rmse_per_joint
+    ]
     rows += [("residual_rms", b.residual_rms, a.residual_rms)]
     rows += [(f"  {j}", b.residual_rms_per_joint[j], a.residual_rms_per_joint[j]) for j in b.residual_rms_per_joint]
     for name, x, y in rows:
@@ -177,8 +189,16 @@ def _problem(res, segments, dynamics):
     regressors ``diagnose`` left in them)."""
     copies = [dataclasses.replace(s) for s in segments]
     theta0, st = _anchor(res), res.settings
-    _fit.build_regressors(copies, res.layout, theta0, _stride(res, segments[0].dt), st.input_hold,
-                          st.block_seconds, dynamics, st.exclude_rest)
+    _fit.build_regressors(
+        copies,
+        res.layout,
+        theta0,
+        _stride(res, segments[0].dt),
+        st.input_hold,
+        st.block_seconds,
+        dynamics,
+        st.exclude_rest,
+    )
     return Problem(copies, _fit.input_direction(res.layout, theta0))
 
 
@@ -230,8 +250,14 @@ def _plot_residual_over_time(res, segs, kind: str):
             ax = axes[i, j]
             rest = ~np.isfinite(rb[:, j])
             if rest.any():  # dry friction holds a joint at rest: its equation is left out
-                ax.bar(t[rest], 1, width=res.settings.interval, color="0.88",
-                       transform=ax.get_xaxis_transform(), label="at rest (left out of the fit)")
+                ax.bar(
+                    t[rest],
+                    1,
+                    width=res.settings.interval,
+                    color="0.88",
+                    transform=ax.get_xaxis_transform(),
+                    label="at rest (left out of the fit)",
+                )
             ax.axhline(0, color="0.6", lw=0.6)
             ax.plot(t, rb[:, j], "C3-", lw=1, label=f"before (declared), RMS {_rms(rb[:, j]):.3g}")
             ax.plot(t, ra[:, j], "C0-", lw=1, label=f"{_after_label(res)}, RMS {_rms(ra[:, j]):.3g}")
@@ -243,8 +269,11 @@ def _plot_residual_over_time(res, segs, kind: str):
             ax.tick_params(labelsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("time in the log [s]", fontsize=8)
-    fig.suptitle(f"{res.system}, {kind}: integral residual Z̄ − Ā per {res.settings.interval:g} s interval\n"
-                 f"(the impulse the model misses; 0 = perfect), declared model before vs after", fontsize=10)
+    fig.suptitle(
+        f"{res.system}, {kind}: integral residual Z̄ − Ā per {res.settings.interval:g} s interval\n"
+        f"(the impulse the model misses; 0 = perfect), declared model before vs after",
+        fontsize=10,
+    )
     return fig
 
 
@@ -325,22 +354,28 @@ def _plot_prediction_windows(res, segs, kind: str):
             if c == 0:
                 ax.set_ylabel(f"{name} [{qunit}]", fontsize=8)
             if j == 0:
-                ax.set_title(f"{tag}: {kind[:-1]} {names[w]}\nposition RMSE {err[w]:.3g} before, "
-                             f"{err_after[w]:.3g} after", fontsize=8)
+                ax.set_title(
+                    f"{tag}: {kind[:-1]} {names[w]}\nposition RMSE {err[w]:.3g} before, {err_after[w]:.3g} after",
+                    fontsize=8,
+                )
             if j == len(joints) - 1:
                 ax.set_xlabel("time in the log [s]", fontsize=8)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8)
-    fig.suptitle(f"{res.system}: open-loop predictions over {res.settings.window:g} s from the measured state, "
-                 f"{kind} ({tags.count('largest error')} windows with the largest declared-model error, "
-                 f"{tags.count('typical')} typical)", fontsize=10)
+    fig.suptitle(
+        f"{res.system}: open-loop predictions over {res.settings.window:g} s from the measured state, "
+        f"{kind} ({tags.count('largest error')} windows with the largest declared-model error, "
+        f"{tags.count('typical')} typical)",
+        fontsize=10,
+    )
     return fig
 
 
 def _shown_effect(res):
     """The strongest significant effect, else the top tested one (``res.effects`` is ordered by
     evidence, significant first), else None."""
-    return next((e for e in res.effects if e.significant),
-                next((e for e in res.effects if e.improvement is not None), None))
+    return next(
+        (e for e in res.effects if e.significant), next((e for e in res.effects if e.improvement is not None), None)
+    )
 
 
 def _effect_regressor(res, eff, prob):
@@ -369,8 +404,15 @@ def _plot_residual_vs_effect(res):
     if x is None or not np.any(x):
         ax.axis("off")
         ax.set_title(f"{res.system}: declared model's residual vs the strongest effect: not plotted", fontsize=9)
-        ax.text(0.5, 0.5, xlabel if x is None else f"the regressor of {eff.name}:{eff.joint} is zero on "
-                "these data", ha="center", va="center", wrap=True, fontsize=9)
+        ax.text(
+            0.5,
+            0.5,
+            xlabel if x is None else f"the regressor of {eff.name}:{eff.joint} is zero on these data",
+            ha="center",
+            va="center",
+            wrap=True,
+            fontsize=9,
+        )
         return fig
     names = [n for n, _, _ in _joint_labels(res)]
     # the effect's joint; an input effect acts where its regressor is largest (the rotor)
@@ -381,13 +423,19 @@ def _plot_residual_vs_effect(res):
     ax.plot(xs, r, ".", ms=3, alpha=0.5, label=f"held-out and test intervals ({keep.sum()})")
     if eff.coefficient is not None and np.isfinite(eff.coefficient):
         line = np.linspace(xs.min(), xs.max(), 2)
-        ax.plot(line, -eff.coefficient * line, "C3-",
-                label=f"− coefficient × regressor, coefficient {eff.coefficient:.3g} {eff.unit}")
+        ax.plot(
+            line,
+            -eff.coefficient * line,
+            "C3-",
+            label=f"− coefficient × regressor, coefficient {eff.coefficient:.3g} {eff.unit}",
+        )
     ax.axhline(0, color="0.6", lw=0.6)
     ax.set_xlabel(f"{xlabel} [{runit} per {eff.unit}]", fontsize=8)
     ax.set_ylabel(f"declared model's residual Z̄ − Ā on {names[j]} [{runit}]", fontsize=8)
     verdict = "significant" if eff.significant else "strongest tested, not significant"
-    ax.set_title(f"{res.system}: residual per {res.settings.interval:g} s interval vs {eff.name}:{eff.joint} "
-                 f"({verdict})", fontsize=9)
+    ax.set_title(
+        f"{res.system}: residual per {res.settings.interval:g} s interval vs {eff.name}:{eff.joint} ({verdict})",
+        fontsize=9,
+    )
     ax.legend(fontsize=7)
     return fig

@@ -42,6 +42,7 @@ class RestBound:
 def _holding(layout: ParameterLayout, j: int):
     """Batched friction force on joint ``j`` that holds it at rest: inverse dynamics of the model
     without its dry friction at (q, q̇ with q̇_j = 0, q̈ with q̈_j = 0), minus the input force."""
+
     def build():
         def one(theta, q, qd, qdd, u):
             model = layout.model(theta, dry_friction=False)
@@ -61,8 +62,15 @@ def _rest_windows(q_j: np.ndarray, length: int) -> list[tuple[int, int]]:
     return [(k, k + length) for s, e in zip(bounds[:-1], bounds[1:]) for k in range(e - length, s - 1, -length)]
 
 
-def rest_bound(layout: ParameterLayout, theta, segments: list[Segment], dynamics: InputDynamics,
-               joint: str, count: float, window: float) -> RestBound:
+def rest_bound(
+    layout: ParameterLayout,
+    theta,
+    segments: list[Segment],
+    dynamics: InputDynamics,
+    joint: str,
+    count: float,
+    window: float,
+) -> RestBound:
     """The largest mean force that held ``joint`` over a ``window``-second stretch at one encoder
     ``count`` in ``segments``, less the slack (see the module docstring)."""
     j = get_spec(layout.system).joint_names.index(joint)
@@ -76,12 +84,18 @@ def rest_bound(layout: ParameterLayout, theta, segments: list[Segment], dynamics
         idx = np.concatenate([np.arange(a, b) for a, b in spans])
         qdd = np.gradient(seg.qd, seg.dt, axis=0)
         u = dynamics.apply(seg.u, seg.dt)
-        force = np.asarray(holding(jnp.asarray(theta), jnp.asarray(seg.q[idx]), jnp.asarray(seg.qd[idx]),
-                                   jnp.asarray(qdd[idx]), jnp.asarray(u[idx])))
+        force = np.asarray(
+            holding(
+                jnp.asarray(theta),
+                jnp.asarray(seg.q[idx]),
+                jnp.asarray(seg.qd[idx]),
+                jnp.asarray(qdd[idx]),
+                jnp.asarray(u[idx]),
+            )
+        )
         means = np.abs(force.reshape(len(spans), length).mean(axis=1))
         held, n = max(held, float(means.max())), n + len(spans)
         m = layout.model(jnp.asarray(theta)).mass_matrix(jnp.asarray(seg.q[idx[0]]))
         mass = max(mass, float(m[j, j]))
     slack = 2.0 * mass * count / window**2
     return RestBound(joint, max(0.0, held - slack) if n else 0.0, n, slack)
-

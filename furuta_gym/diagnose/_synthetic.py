@@ -103,8 +103,11 @@ def sticky_rig(seed: int) -> list[Effect]:
     and a cable spring of 1.5e-3–2.5e-3 N·m/rad whose rest position is within ±0.1 rad."""
     rng = np.random.default_rng([seed, 43])
     coulomb, breakaway = rng.uniform(3e-4, 8e-4), rng.uniform(2.0, 3.0)
-    return [Effect("spring", "alpha", rng.uniform(1.5e-3, 2.5e-3), reference=rng.uniform(-0.1, 0.1)),
-            Effect("coulomb_friction", "alpha", coulomb), Effect("stiction", "alpha", (breakaway - 1.0) * coulomb)]
+    return [
+        Effect("spring", "alpha", rng.uniform(1.5e-3, 2.5e-3), reference=rng.uniform(-0.1, 0.1)),
+        Effect("coulomb_friction", "alpha", coulomb),
+        Effect("stiction", "alpha", (breakaway - 1.0) * coulomb),
+    ]
 
 
 def _telegraph(n: int, dt: float, rng, level: float, unit: float, most: int) -> np.ndarray:
@@ -138,9 +141,7 @@ class _Plant:
     """The plant behind its actuator (input delay of whole samples, actuator lag) at one sample
     period ``dt``: rolled out open loop (:meth:`roll`) or stepped by a controller (:meth:`step`)."""
 
-    def __init__(
-        self, system: str, effects: Sequence[Effect], plant: str, dt: float, substeps: int, fine: bool
-    ):
+    def __init__(self, system: str, effects: Sequence[Effect], plant: str, dt: float, substeps: int, fine: bool):
         self.dt = dt
         self.shift = int(round(sum(e.coefficient for e in effects if e.kind.input_dynamics == "delay") / dt))
         tau = actuator_lag_time(effects)
@@ -208,8 +209,9 @@ def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, cutoff: float
     count into 1.5 rad/s). u = PD + PRBS, saturated at ±10 V and held until the next sample.
     """
     dt, g = t[1] - t[0], BALANCE_GAINS
-    x = np.array([rng.uniform(-0.1, 0.1), np.pi + rng.uniform(-0.05, 0.05),
-                  rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05)])
+    x = np.array(
+        [rng.uniform(-0.1, 0.1), np.pi + rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05)]
+    )
     rotor_ref, pendulum_ref, feed = _excitation(len(t), dt, rng)
     sim.reset(x)
     smooth = 1.0 - math.exp(-cutoff * dt)
@@ -220,8 +222,12 @@ def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, cutoff: float
         v += smooth * ((q - q_prev) / dt - v)
         q_prev = q
         tilt = (q[1] - np.pi + np.pi) % (2 * np.pi) - np.pi  # β − π wrapped to [−π, π)
-        pd = (g["kp_theta"] * (q[0] - rotor_ref[k]) + g["kd_theta"] * v[0]
-              - g["kp_alpha"] * (tilt - pendulum_ref[k]) - g["kd_alpha"] * v[1])
+        pd = (
+            g["kp_theta"] * (q[0] - rotor_ref[k])
+            + g["kd_theta"] * v[0]
+            - g["kp_alpha"] * (tilt - pendulum_ref[k])
+            - g["kd_alpha"] * v[1]
+        )
         qs[k], us[k] = q, np.clip(pd + feed[k], -10.0, 10.0)
         if k + 1 < len(t):
             x = sim.step(us[k : k + 1])
@@ -270,8 +276,10 @@ def measured_like(
     definition = system_definition(system)
     if excitation not in definition.excitations:
         owners = [d.title for d in SYSTEM_DEFINITIONS.values() if excitation in d.excitations]
-        raise ValueError(f"excitation={excitation!r} is an experiment of {' and '.join(owners)}; "
-                         f"{definition.title} has {list(definition.excitations)}")
+        raise ValueError(
+            f"excitation={excitation!r} is an experiment of {' and '.join(owners)}; "
+            f"{definition.title} has {list(definition.excitations)}"
+        )
     rng = np.random.default_rng(seed)
     dt = definition.sample_period
     T = int(round(duration / dt)) + 1

@@ -150,8 +150,17 @@ def _as_normal(t: float, dof: float) -> float:
 class Comparer:
     """Cross-validated comparisons on one problem (stacked fit-segment regressors)."""
 
-    def __init__(self, prob, layout, theta_fixed, fixed_idx, weights, n_folds: int = 6,
-                 weighting: str = "regressor", recordings: Sequence[str] | None = None):
+    def __init__(
+        self,
+        prob,
+        layout,
+        theta_fixed,
+        fixed_idx,
+        weights,
+        n_folds: int = 6,
+        weighting: str = "regressor",
+        recordings: Sequence[str] | None = None,
+    ):
         self.prob, self.layout, self.weighting = prob, layout, weighting
         # the recording of each of the problem's segments (block_key's first column)
         self.recordings = None if recordings is None else list(recordings)
@@ -164,8 +173,7 @@ class Comparer:
     def _fit(self, train, effects: list[Candidate], theta_for_delay=None):
         free = free_columns(self.layout, effects, self.fixed_idx)
         with_delay = any(c.kind.input_dynamics for c in effects)
-        return fit_equation_error(train, self.layout, free, self.theta_fixed, self.weights, with_delay,
-                                  theta_for_delay)
+        return fit_equation_error(train, self.layout, free, self.theta_fixed, self.weights, with_delay, theta_for_delay)
 
     def physical_sign(self, base: list[Candidate], candidate: Candidate) -> bool:
         """Whether ``candidate``, fitted on all fit data beside ``base``, has a physical sign."""
@@ -202,8 +210,9 @@ class Comparer:
                 out[:, i] = 1.0
                 continue
             col = test.R[:, :, self.layout.index(c.key)]
-            out[:, i] = np.bincount(inv.ravel(), weights=((col * self.weights[None]) ** 2).sum(axis=1),
-                                    minlength=n_blocks)
+            out[:, i] = np.bincount(
+                inv.ravel(), weights=((col * self.weights[None]) ** 2).sum(axis=1), minlength=n_blocks
+            )
         return out
 
     def recording_of(self, test) -> np.ndarray:
@@ -237,8 +246,10 @@ def _representatives(pool, equivalents):
 def _best_pair(comparer, chosen, scores, pool, s: SearchSettings, equivalents=None):
     """The passing pair with the largest z among the ``pool`` largest-gain candidates, or None."""
     pool = _representatives(pool, equivalents or {})
-    ranked = sorted((c for c in pool if scores[c.key].improvement > 0 and comparer.physical_sign(chosen, c)),
-                    key=lambda c: -scores[c.key].improvement)[: s.pair_pool]
+    ranked = sorted(
+        (c for c in pool if scores[c.key].improvement > 0 and comparer.physical_sign(chosen, c)),
+        key=lambda c: -scores[c.key].improvement,
+    )[: s.pair_pool]
     best = None
     for a, b in itertools.combinations(ranked, 2):
         whole = comparer.compare(chosen, [a, b])
@@ -277,8 +288,11 @@ def search(comparer: Comparer, testable: list[Candidate], s: SearchSettings, equ
     while remaining and len(chosen) < s.max_effects:
         scores = {c.key: comparer.compare(chosen, [c]) for c in remaining}
         first_round = first_round or dict(scores)
-        passing = [c for c in remaining if scores[c.key].passes(s.min_improvement, s.z_threshold)
-                   and comparer.physical_sign(chosen, c)]
+        passing = [
+            c
+            for c in remaining
+            if scores[c.key].passes(s.min_improvement, s.z_threshold) and comparer.physical_sign(chosen, c)
+        ]
         if passing:
             best, same = _pick(passing, scores, remaining, equivalents or {})
             steps.append(Step((best,), {best.key: scores[best.key]}, equivalents=same))

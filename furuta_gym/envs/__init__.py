@@ -80,8 +80,9 @@ def register_envs() -> None:
             # episode length follows the control rate (frame_skip). gymnasium.make_vec goes to
             # make_vector_env: batched JAX or SyncVectorEnv, whichever is faster and supports
             # the options.
-            gymnasium.register(id=cls.env_id, entry_point=f"{cls.__module__}:{cls.__name__}",
-                               vector_entry_point=cls.vector_entry_point)
+            gymnasium.register(
+                id=cls.env_id, entry_point=f"{cls.__module__}:{cls.__name__}", vector_entry_point=cls.vector_entry_point
+            )
     if SWINGUP_ID not in gymnasium.registry:
         # no vector entry point: the batched JAX env keeps the raw float64 layout, so make_vec of
         # the preset steps copies of the single env (Gymnasium's sync/async vector envs)

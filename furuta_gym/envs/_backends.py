@@ -62,6 +62,7 @@ _ACCEPTED = (
     "written by `furuta-gym train`, or an AbstractLagrangianSystem object"
 )
 
+
 class AbstractBackend(abc.ABC):
     """Advance a system's state (q, q̇) one control period at a time, input held (zero-order hold).
 
@@ -239,8 +240,12 @@ def apply_parameters(
     for e in effects:  # each kind writes itself: native terms, or laws for the callback
         e.kind.to_mujoco(e, -1 if e.kind.on_input else e.joint_index(spec), form)
     assert form.shift is not None
-    extra = PassiveForces({dof: cubic for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping))
-                           if any(cubic)}, form.laws, form.shift, form.neutrals)
+    extra = PassiveForces(
+        {dof: cubic for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping)) if any(cubic)},
+        form.laws,
+        form.shift,
+        form.neutrals,
+    )
     # masses changed: refresh MuJoCo's derived constants (e.g. the constant mass of a body that
     # only slides, dof_M0, which the N-MSD uses instead of body_mass)
     mujoco.mj_setConst(model, mujoco.MjData(model) if data is None else data)
@@ -285,10 +290,15 @@ def _passive_callback(extra: PassiveForces, model: mujoco.MjModel):
     computed by MuJoCo on a scratch MjData of ``model``.
     """
     dofs = sorted(set(extra.cubic) | set(extra.effects) | set(extra.neutrals))
-    terms = tuple((dof, *extra.cubic.get(dof, (0.0, 0.0)),
-                   tuple(e.law(xp=_FloatMath) for e in extra.effects.get(dof, ()))
-                   + tuple(lambda q, v, n=n: n.force(q) for n in extra.neutrals.get(dof, ())))
-                  for dof in dofs)
+    terms = tuple(
+        (
+            dof,
+            *extra.cubic.get(dof, (0.0, 0.0)),
+            tuple(e.law(xp=_FloatMath) for e in extra.effects.get(dof, ()))
+            + tuple(lambda q, v, n=n: n.force(q) for n in extra.neutrals.get(dof, ())),
+        )
+        for dof in dofs
+    )
     shift = extra.shift
     if shift.any() and model.nq != model.nv:
         raise ValueError("com_offset needs hinge/slide joints only (qpos and qvel of equal size)")
@@ -345,8 +355,10 @@ class MujocoBackend(AbstractBackend):
         self.plant = plant
         if plant is not None:
             if plant.lumped is None or plant.presets or plant.system != self.system or effects or parameters:
-                raise ValueError(f"plant= is a whole {self.system} plant with its lumped parameters (presets "
-                                 "resolved into effects): give it alone, no effects= or parameters=")
+                raise ValueError(
+                    f"plant= is a whole {self.system} plant with its lumped parameters (presets "
+                    "resolved into effects): give it alone, no effects= or parameters="
+                )
             effects = plant.effects
         self.effects = tuple(effects)
         self.model = load_mjcf(self.system, actuator_lag=actuator_lag_time(self.effects) > 0)
@@ -386,7 +398,9 @@ class MujocoBackend(AbstractBackend):
         state survives: mj_setConst works in ``self.data`` and leaves qpos at qpos0."""
         d = self.data
         saved = (d.qpos.copy(), d.qvel.copy(), d.act.copy(), d.time)
-        extra = apply_parameters(self.model, self.system, self._parameters, self.effects, d, lumped=self.plant is not None)
+        extra = apply_parameters(
+            self.model, self.system, self._parameters, self.effects, d, lumped=self.plant is not None
+        )
         d.qpos[:], d.qvel[:], d.act[:], d.time = saved
         self._callback = _passive_callback(extra, self.model) if extra else None
         self._neutrals = [(dof, n) for dof, ns in extra.neutrals.items() for n in ns]
@@ -484,6 +498,7 @@ KERNELS = ("auto", "c", "xla")
 def _step_functions(static, rebuild, timestep: float, substeps: int):
     """The (full period, split period) steps of one model structure as plain JAX functions of
     ``(model arrays, x, u...)``: what both kernels compile."""
+
     def period(flat, x, u):
         system = eqx.combine(rebuild(flat), static)
         return jax.lax.fori_loop(0, substeps, lambda _, x_: rk4_step(system, x_, u, timestep), x)
@@ -586,12 +601,17 @@ class _CStepper:
                 if which == "period":
                     kernel = CKernel(period, self._dynamic, x, u, name=f"period step of {self._model_name}")
                 else:
-                    kernel = CKernel(split, self._dynamic, x, u, np.int64(0), u, name=f"split step of {self._model_name}")
+                    kernel = CKernel(
+                        split, self._dynamic, x, u, np.int64(0), u, name=f"split step of {self._model_name}"
+                    )
             except CKernelError as exc:
                 kernel = exc
                 if isinstance(exc, CKernelTranslationError):  # once per model structure: cached below
-                    warnings.warn(f"the {which} step of {self._model_name} has no C translation, XLA "
-                                  f"steps it: {exc}", CKernelWarning, stacklevel=2)
+                    warnings.warn(
+                        f"the {which} step of {self._model_name} has no C translation, XLA steps it: {exc}",
+                        CKernelWarning,
+                        stacklevel=2,
+                    )
             try:
                 _C_KERNEL_CACHE[key] = kernel
             except TypeError:  # unhashable static structure: no sharing, still correct
@@ -610,7 +630,7 @@ class _CStepper:
         if self._x_buf is None:
             self._x_buf = inputs[k]
         inputs[k] = self._x_buf
-        return kernel.bind(inputs, [self._x_buf]), inputs[k + 1:]
+        return kernel.bind(inputs, [self._x_buf]), inputs[k + 1 :]
 
     def reset(self, x) -> None:
         self._x_buf[:] = np.asarray(x, dtype=np.float64)
@@ -686,8 +706,10 @@ class ModelBackend(AbstractBackend):
         self.substeps = int(substeps)
         with_state = [e.name for e in effects if e.kind.has_memory and not e.kind.on_input]
         if with_state:
-            raise ValueError(f"effects {with_state} have memory that a model backend does not keep; "
-                             "use the MuJoCo plant (dynamics='mujoco')")
+            raise ValueError(
+                f"effects {with_state} have memory that a model backend does not keep; "
+                "use the MuJoCo plant (dynamics='mujoco')"
+            )
         self.effects = tuple(e for e in effects if not e.kind.has_memory)
         self._n = self.spec.n_dof
         self._scene = None
@@ -711,9 +733,7 @@ class ModelBackend(AbstractBackend):
 
         def rebuild(arrays):  # (vector, matrices) -> the model's dynamic pytree
             small, matrices = iter(unravel(arrays[0])), iter(arrays[1])
-            return jax.tree_util.tree_unflatten(
-                treedef, [next(matrices) if m else next(small) for m in is_matrix]
-            )
+            return jax.tree_util.tree_unflatten(treedef, [next(matrices) if m else next(small) for m in is_matrix])
 
         shapes = tuple((a.shape, str(a.dtype)) for a in leaves)
         treedef_key = (treedef, shapes, static)
@@ -823,8 +843,10 @@ def _lumped_backend(system, dynamics, substeps, effects, lumped, kernel) -> Abst
     if isinstance(dynamics, str) and dynamics == "analytic":
         timestep = float(load_mjcf(system).opt.timestep)
         return ModelBackend(LumpedSystem.of(system, lumped), timestep, substeps, effects, kernel=kernel)
-    raise ValueError(f"dynamics={dynamics!r}: a diagnosed plant (its lumped parameters) runs on "
-                     "dynamics='mujoco' or 'analytic' (its lumped model); a learned model has its own")
+    raise ValueError(
+        f"dynamics={dynamics!r}: a diagnosed plant (its lumped parameters) runs on "
+        "dynamics='mujoco' or 'analytic' (its lumped model); a learned model has its own"
+    )
 
 
 def make_backend(
@@ -871,9 +893,7 @@ def make_backend(
         else:
             raise ValueError(f"dynamics: unknown backend {name!r}; accepted: {_ACCEPTED}")
     else:
-        raise ValueError(
-            f"dynamics: expected {_ACCEPTED}; got an object of type {type(dynamics).__name__}"
-        )
+        raise ValueError(f"dynamics: expected {_ACCEPTED}; got an object of type {type(dynamics).__name__}")
     model_system = getattr(getattr(model, "spec", None), "name", None)
     if model_system != system:
         raise ValueError(
@@ -882,4 +902,3 @@ def make_backend(
         )
     timestep = float(load_mjcf(system).opt.timestep)
     return ModelBackend(model, timestep, substeps, effects, parameters, kernel=kernel)
-

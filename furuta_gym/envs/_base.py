@@ -73,6 +73,13 @@ def _clipped(value: float, limit: float) -> float:
     return limit if value > 0 else -limit
 
 
+def _env_settings(cls: type[LagrangianEnv], given: dict[str, Any], legacy: dict[str, Any]) -> dict[str, Any]:
+    """The settings objects of a ``cls`` env from its keywords, the plain ones of before mapped in."""
+    types = {**SETTINGS_TYPES, "task": cls.task_settings_type}
+    table = {**cls.legacy_keywords, cls.action_limit_name: ("actuation", "max_action")}
+    return settings_from_keywords(cls.__name__, given, types, legacy, table)
+
+
 class LagrangianEnv(BatchTemplate, gymnasium.Env):
     """Base of the furuta_gym envs (see :class:`furuta_gym.envs.FurutaEnv` for the user docs).
 
@@ -117,11 +124,10 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
     ):
         """See the class docs of :class:`~furuta_gym.envs.FurutaEnv` (the same keywords for
         every system and for the batched :class:`~furuta_gym.envs.vector.LagrangianVectorEnv`)."""
-        given = dict(plant=plant, task=task, episode=episode, actuation=actuation, sensors=sensors,
-                     spaces=spaces, camera=camera)
-        types = {**SETTINGS_TYPES, "task": self.task_settings_type}
-        table = {**self.legacy_keywords, self.action_limit_name: ("actuation", "max_action")}
-        settings = settings_from_keywords(type(self).__name__, given, types, legacy, table)
+        given = dict(
+            plant=plant, task=task, episode=episode, actuation=actuation, sensors=sensors, spaces=spaces, camera=camera
+        )
+        settings = _env_settings(type(self), given, legacy)
         # for pickling: rebuilt from the settings objects
         self._init_kwargs = dict(dynamics=dynamics, kernel=kernel, render_mode=render_mode, **settings)
         self.plant, self.task_settings = settings["plant"], settings["task"]
@@ -150,11 +156,13 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
         self.frame_skip = self.episode.frame_skip
         self.reset_noise_scale = self.episode.reset_noise_scale
         self.effects: tuple[Effect, ...] = resolve_effects(
-            self.system, self.plant.presets, self.plant.effects, self.plant_presets)
+            self.system, self.plant.presets, self.plant.effects, self.plant_presets
+        )
         self._randomize = parse_randomization(self.system, self.plant.randomize)
+        lumped = self.plant.lumped
         self.backend: AbstractBackend = make_backend(
-            self.system, dynamics, substeps=self.frame_skip, effects=self.effects, kernel=kernel,
-            lumped=self.plant.lumped)
+            self.system, dynamics, substeps=self.frame_skip, effects=self.effects, kernel=kernel, lumped=lumped
+        )
         if self._randomize:
             self.backend.set_parameters(self.backend.parameters)  # fail now, not at reset
         self._nominal_parameters = self.backend.parameters
@@ -174,7 +182,8 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
         env_lag = self._lag_tau if not self.backend.native_actuator_lag else 0.0
         self._actuator = (
             Actuator(delay, self.frame_skip, self.timestep, env_lag, len(self._spec.input_names))
-            if self._has_delay or env_lag > 0 else None
+            if self._has_delay or env_lag > 0
+            else None
         )
 
     def _init_observation(self) -> None:
@@ -187,8 +196,7 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
         self._action_high = 1.0 if self.normalize_action else self.max_action
         self._configure()
         # obs is the backend's state array itself: no sensor model, raw, float64
-        self._exact_observation = (self._observer.exact_sensors and self.observation == "raw"
-                                   and self.dtype == np.float64 and not self._extra_observation_size())
+        self._exact_observation = self._observer.is_the_state(self._extra_observation_size())
 
     @property
     def task(self):
@@ -253,9 +261,7 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
             )
         self._options(options)
         if self._randomize:
-            self.backend.set_parameters(
-                randomize_parameters(self._nominal_parameters, self._randomize, self.np_random)
-            )
+            self.backend.set_parameters(randomize_parameters(self._nominal_parameters, self._randomize, self.np_random))
             self._on_parameters(self.physical_parameters())
         if options.get("state") is not None:
             x0 = _start_state(options["state"], self._spec.state_names)

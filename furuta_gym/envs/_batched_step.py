@@ -37,9 +37,7 @@ class Quantizer:
 _STEP_CACHE: dict = {}
 
 
-def _batched_step(
-    static, treedef, energy_treedef, *, dt, substeps, action_limit, task, quantizer, packed=False
-):
+def _batched_step(static, treedef, energy_treedef, *, dt, substeps, action_limit, task, quantizer, packed=False):
     """One jitted ``(model leaves, energy-model leaves, xs, us) -> outputs`` for a model structure
     and task; cached so a second vector env of the same model and settings does not recompile.
     Taking flat lists of arrays (not the Equinox modules) keeps the per-call dispatch cheap.

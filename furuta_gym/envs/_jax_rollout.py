@@ -80,7 +80,9 @@ class Rollout(NamedTuple):
     done: Bool[Array, "N T"]
 
 
-def is_diverged(x: Float[Array, " 2n"], state_bound: float | tuple[float, ...] = DEFAULT_STATE_BOUND) -> Bool[Array, ""]:
+def is_diverged(
+    x: Float[Array, " 2n"], state_bound: float | tuple[float, ...] = DEFAULT_STATE_BOUND
+) -> Bool[Array, ""]:
     """True when the state is non-finite or any component exceeds ``state_bound`` in magnitude
     (one bound, or a tuple of one per component: ``inf`` leaves a component, e.g. an angle, to
     the finiteness test; see :func:`furuta_gym.envs._tasks.divergence_bounds`)."""
@@ -180,8 +182,7 @@ def rollout(
     step_fn, policy_state, stateful = _as_policy(policy, policy_state)
     batch = x0s[None] if single else x0s
     traced = any(
-        isinstance(leaf, jax.core.Tracer)
-        for leaf in jax.tree_util.tree_leaves((system, step_fn, batch, policy_state))
+        isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((system, step_fn, batch, policy_state))
     )
     n = batch.shape[0]
     chunks = _chunk_count(chunks, n)

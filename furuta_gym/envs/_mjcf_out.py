@@ -37,8 +37,10 @@ def plant_mjcf(plant: Plant) -> str:
     furuta-gym's ``plant=`` restores the rest. Numbers are written to full precision (MuJoCo's
     own writer keeps six digits)."""
     if plant.system is None or plant.lumped is None:
-        raise ValueError("plant_mjcf: the plant must be a whole one, with its system and lumped parameters "
-                         "(Plant.nominal(system), or a diagnosis' plant)")
+        raise ValueError(
+            "plant_mjcf: the plant must be a whole one, with its system and lumped parameters "
+            "(Plant.nominal(system), or a diagnosis' plant)"
+        )
     model = MujocoBackend(plant.system, plant=plant).model
     root = ET.fromstring(mjcf_text(plant.system, actuator_lag=model.na > 0))
     _write_model_into_xml(model, root)
@@ -74,13 +76,20 @@ def _write_model_into_xml(model: mujoco.MjModel, root: ET.Element) -> None:
         if inertial is None:
             inertial = ET.SubElement(body, "inertial")
         inertial.attrib.clear()
-        inertial.attrib.update(pos=_numbers(model.body_ipos[i]), quat=_numbers(model.body_iquat[i]),
-                               mass=_numbers(model.body_mass[i]), diaginertia=_numbers(model.body_inertia[i]))
+        inertial.attrib.update(
+            pos=_numbers(model.body_ipos[i]),
+            quat=_numbers(model.body_iquat[i]),
+            mass=_numbers(model.body_mass[i]),
+            diaginertia=_numbers(model.body_inertia[i]),
+        )
     for j in range(model.njnt):
         joint, dof = _named(root, "joint", model.joint(j).name), int(model.jnt_dofadr[j])
-        joint.attrib.update(armature=_numbers(model.dof_armature[dof]), damping=_numbers(model.dof_damping[dof]),
-                            stiffness=_numbers(model.jnt_stiffness[j]),
-                            springref=_numbers(model.qpos_spring[int(model.jnt_qposadr[j])]))
+        joint.attrib.update(
+            armature=_numbers(model.dof_armature[dof]),
+            damping=_numbers(model.dof_damping[dof]),
+            stiffness=_numbers(model.jnt_stiffness[j]),
+            springref=_numbers(model.qpos_spring[int(model.jnt_qposadr[j])]),
+        )
     for a in range(model.nu):
         actuator = _named(root, "*", model.actuator(a).name)
         actuator.attrib.update(gainprm=_numbers(model.actuator_gainprm[a]), biasprm=_numbers(model.actuator_biasprm[a]))

@@ -42,7 +42,7 @@ def present_components(z, angular, observation: str, bound: float, xp: Any = _FL
             parts.append(wrap_angle(z[j]))
         else:
             parts.append(xp.clip(z[j], -bound, bound))
-    return parts + [xp.clip(v, -bound, bound) for v in z[n:2 * n]]
+    return parts + [xp.clip(v, -bound, bound) for v in z[n : 2 * n]]
 
 
 class Observer:
@@ -50,8 +50,9 @@ class Observer:
     says; ``dt`` is the control period the derivative filter runs at, ``random`` gives the
     generator the noise is drawn from (called only when there is noise to draw)."""
 
-    def __init__(self, spec: SystemSpec, sensors: Sensors, layout: Spaces, dt: float,
-                 random: Callable[[], np.random.Generator]):
+    def __init__(
+        self, spec: SystemSpec, sensors: Sensors, layout: Spaces, dt: float, random: Callable[[], np.random.Generator]
+    ):
         if layout.observation != "raw" and not any(spec.angular):
             raise EnvArgumentError(
                 f"observation={layout.observation!r} wraps angles, but {spec.name} has no angular joint; "
@@ -66,6 +67,11 @@ class Observer:
         self.dtype = np.dtype(layout.dtype)
         #: components beyond ±state_bound are clipped in the bounded layouts (set by the task)
         self.state_bound = math.inf
+
+    def is_the_state(self, extra_size: int) -> bool:
+        """Whether the observation is the true state itself: exact sensors, the raw layout in
+        float64 and nothing appended (``extra_size`` components after the state)."""
+        return self.exact_sensors and self.observation == "raw" and self.dtype == np.float64 and not extra_size
 
     def reset(self, x: np.ndarray) -> None:
         """A new episode at ``x``: the derivative filter starts from the measured positions."""

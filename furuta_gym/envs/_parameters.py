@@ -50,14 +50,11 @@ def parse_randomization(system: str, randomize) -> dict[str, float]:
     elif isinstance(randomize, Mapping):
         unknown = sorted(set(randomize) - set(names))
         if unknown:
-            raise ValueError(
-                f"randomize: unknown {system} parameter(s) {unknown}; expected names among {names}"
-            )
+            raise ValueError(f"randomize: unknown {system} parameter(s) {unknown}; expected names among {names}")
         spreads = {str(k): float(v) for k, v in randomize.items()}
     else:
         raise ValueError(
-            f"randomize must be None, a relative spread (float) or a mapping "
-            f"{{parameter: spread}}; got {randomize!r}"
+            f"randomize must be None, a relative spread (float) or a mapping {{parameter: spread}}; got {randomize!r}"
         )
     for name, s in spreads.items():
         if not (np.isfinite(s) and 0.0 <= s < 1.0):
@@ -89,9 +86,7 @@ def resolve_effects(
         out.extend(presets[name])
     for e in effects or ():
         if not isinstance(e, Effect):
-            raise ValueError(
-                f"effects must be furuta_gym.effects.Effect objects, got {type(e).__name__}: {e!r}"
-            )
+            raise ValueError(f"effects must be furuta_gym.effects.Effect objects, got {type(e).__name__}: {e!r}")
         out.append(e)
     for e in out:
         if not e.kind.on_input:

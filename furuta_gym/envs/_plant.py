@@ -29,8 +29,10 @@ def plant_document(path: str | os.PathLike) -> dict[str, Any]:
         model = mujoco.MjModel.from_xml_path(str(path))
         text = _custom_text(model, PLANT_TEXT)
         if text is None:
-            raise ValueError(f"{path}: no <custom><text name={PLANT_TEXT!r}> element: not an MJCF written by "
-                             "furuta-gym (plain MuJoCo loads it, without the effects MJCF lacks)")
+            raise ValueError(
+                f"{path}: no <custom><text name={PLANT_TEXT!r}> element: not an MJCF written by "
+                "furuta-gym (plain MuJoCo loads it, without the effects MJCF lacks)"
+            )
         return json.loads(text)
     try:
         doc = json.loads(path.read_text())

@@ -42,8 +42,7 @@ class SceneRenderer:
         """An (height, width, 3) uint8 frame ("rgb_array") or a window ("human")."""
         if render_mode is None:
             gymnasium.logger.warn(
-                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
-                "to gymnasium.make"
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' to gymnasium.make"
             )
             return None
         model, data = backend.scene()

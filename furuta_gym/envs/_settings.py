@@ -122,21 +122,29 @@ class Plant:
     @classmethod
     def nominal(cls, system: str, effects: Sequence[Effect] = ()) -> "Plant":
         """The pinned model's lumped values as a plant, with ``effects``."""
-        return cls(effects=effects, lumped=system_definition(system).lumped.nominal(), system=system,
-                   source="nominal")
+        return cls(effects=effects, lumped=system_definition(system).lumped.nominal(), system=system, source="nominal")
 
     def to_json(self) -> dict[str, Any]:
         """The plant as JSON (a diagnosed plant: its system, lumped values, effects, source)."""
-        doc = {"system": self.system, "lumped": None if self.lumped is None else dict(self.lumped),
-               "source": self.source, "effects": [effect_json(e) for e in self.effects]}
+        doc = {
+            "system": self.system,
+            "lumped": None if self.lumped is None else dict(self.lumped),
+            "source": self.source,
+            "effects": [effect_json(e) for e in self.effects],
+        }
         return {**doc, "presets": list(self.presets)} if self.presets else doc
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any], where: str = "plant") -> "Plant":
         try:
             effects = tuple(Effect(**e) for e in doc.get("effects") or ())
-            return cls(presets=tuple(doc.get("presets") or ()), effects=effects, lumped=doc.get("lumped"),
-                       system=doc.get("system"), source=doc.get("source", ""))
+            return cls(
+                presets=tuple(doc.get("presets") or ()),
+                effects=effects,
+                lumped=doc.get("lumped"),
+                system=doc.get("system"),
+                source=doc.get("source", ""),
+            )
         except (AttributeError, TypeError, ValueError) as err:
             raise EnvArgumentError(f"{where}: not a plant (expected 'system', 'lumped', 'effects'): {err}") from None
 
@@ -170,8 +178,9 @@ def _checked_lumped(system, lumped, effects, randomize: bool) -> dict[str, Any]:
     names = definition.lumped.names
     missing, unknown = sorted(set(names) - set(lumped)), sorted(set(lumped) - set(names))
     if missing or unknown:
-        raise EnvArgumentError(f"Plant.lumped of {definition.name} must be exactly {list(names)}; "
-                               f"missing {missing}, unknown {unknown}")
+        raise EnvArgumentError(
+            f"Plant.lumped of {definition.name} must be exactly {list(names)}; missing {missing}, unknown {unknown}"
+        )
     if randomize:
         raise EnvArgumentError("Plant.randomize draws physical parameters; a plant with lumped ones has none")
     for e in effects:
@@ -196,8 +205,12 @@ class Episode:
             raise EnvArgumentError(f"Episode.seconds must be > 0 or None, got {self.seconds!r}")
         if not (_number(self.reset_noise_scale) >= 0 and math.isfinite(self.reset_noise_scale)):
             raise EnvArgumentError(f"Episode.reset_noise_scale must be >= 0, got {self.reset_noise_scale!r}")
-        _set(self, frame_skip=int(self.frame_skip), reset_noise_scale=float(self.reset_noise_scale),
-             seconds=None if self.seconds is None else float(self.seconds))
+        _set(
+            self,
+            frame_skip=int(self.frame_skip),
+            reset_noise_scale=float(self.reset_noise_scale),
+            seconds=None if self.seconds is None else float(self.seconds),
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -250,19 +263,24 @@ class Sensors:
         if values is None or values.size == 0 or not np.all(np.isfinite(values)) or np.any(values < 0):
             raise EnvArgumentError(
                 f"Sensors.measurement_noise must be a standard deviation >= 0, scalar or one per "
-                f"observation component; got {noise!r}")
+                f"observation component; got {noise!r}"
+            )
         _set(self, measurement_noise=float(values) if values.ndim == 0 else tuple(values.tolist()))
         if self.velocity not in ("exact", "filter"):
-            raise EnvArgumentError(f"Sensors.velocity must be 'exact' (true velocity) or 'filter' (the paper's derivative "
-                                   f"filter on the measured positions); got {self.velocity!r}")
+            raise EnvArgumentError(
+                f"Sensors.velocity must be 'exact' (true velocity) or 'filter' (the paper's derivative "
+                f"filter on the measured positions); got {self.velocity!r}"
+            )
 
     def quantization(self, spec: SystemSpec) -> tuple[float, ...]:
         """Quantisation step per joint of ``spec`` (rad or m; 0: exact)."""
         quant = np.zeros(spec.n_dof)
         if self.encoder_counts is not None:
             if not any(spec.angular):
-                raise EnvArgumentError(f"encoder_counts quantises angles, but {spec.name} has no angular joint; "
-                                       "use position_resolution (in joint units)")
+                raise EnvArgumentError(
+                    f"encoder_counts quantises angles, but {spec.name} has no angular joint; "
+                    "use position_resolution (in joint units)"
+                )
             quant[list(spec.angular)] = 2.0 * math.pi / self.encoder_counts
         if self.position_resolution is not None:
             quant[[not a for a in spec.angular]] = self.position_resolution
@@ -274,14 +292,19 @@ class Sensors:
         if noise.size not in (1, 2 * spec.n_dof):
             raise EnvArgumentError(
                 f"measurement_noise must be a standard deviation >= 0, scalar or one per observation "
-                f"component {spec.state_names}; got {self.measurement_noise!r}")
+                f"component {spec.state_names}; got {self.measurement_noise!r}"
+            )
         return tuple(float(s) for s in np.broadcast_to(noise, (2 * spec.n_dof,)))
 
     @property
     def exact(self) -> bool:
         """The observation is the true state."""
-        return (self.encoder_counts is None and self.position_resolution is None
-                and not np.any(self.measurement_noise) and self.velocity == "exact")
+        return (
+            self.encoder_counts is None
+            and self.position_resolution is None
+            and not np.any(self.measurement_noise)
+            and self.velocity == "exact"
+        )
 
 
 def _numeric(value: Any) -> bool:
@@ -350,7 +373,11 @@ LEGACY_KEYWORDS: dict[str, tuple[str, str]] = {
 
 #: each settings keyword's object type
 SETTINGS_TYPES: dict[str, type] = {
-    "plant": Plant, "episode": Episode, "actuation": Actuation, "sensors": Sensors, "spaces": Spaces,
+    "plant": Plant,
+    "episode": Episode,
+    "actuation": Actuation,
+    "sensors": Sensors,
+    "spaces": Spaces,
     "camera": Camera,
 }
 
@@ -381,12 +408,18 @@ def _as_plant(value: Any) -> Plant:
         return Plant.load(value)
     if isinstance(value, str) or isinstance(value, Sequence):
         return Plant(presets=value)
-    raise EnvArgumentError(f"plant must be a furuta_gym.envs.Plant(...), a diagnosis, a file or preset names; "
-                           f"got {value!r}")
+    raise EnvArgumentError(
+        f"plant must be a furuta_gym.envs.Plant(...), a diagnosis, a file or preset names; got {value!r}"
+    )
 
 
-def settings_from_keywords(owner: str, settings: dict[str, Any], types: Mapping[str, type | None],
-                           legacy: Mapping[str, Any], table: Mapping[str, tuple[str, str]]) -> dict[str, Any]:
+def settings_from_keywords(
+    owner: str,
+    settings: dict[str, Any],
+    types: Mapping[str, type | None],
+    legacy: Mapping[str, Any],
+    table: Mapping[str, tuple[str, str]],
+) -> dict[str, Any]:
     """The env's settings objects: ``settings`` (env keyword -> object, None or a shorthand) checked
     against ``types``, with the plain ``legacy`` keywords of ``table`` applied on top of them
     (one DeprecationWarning naming the new spelling). An unknown keyword is an EnvArgumentError."""
@@ -402,11 +435,16 @@ def settings_from_keywords(owner: str, settings: dict[str, Any], types: Mapping[
         target, field = table[keyword]
         fields.setdefault(target, {})[field] = value
     if fields:
-        hints = [f"{target}={types[target].__name__}({', '.join(f'{k}={v!r}' for k, v in values.items())})"
-                 for target, values in fields.items()]
+        hints = [
+            f"{target}={types[target].__name__}({', '.join(f'{k}={v!r}' for k, v in values.items())})"
+            for target, values in fields.items()
+        ]
         warnings.warn(
             f"{owner}: the keyword(s) {', '.join(k + '=' for k in legacy)} are deprecated; write "
-            f"{', '.join(hints)} (furuta_gym.envs)", DeprecationWarning, stacklevel=_outside_stacklevel())
+            f"{', '.join(hints)} (furuta_gym.envs)",
+            DeprecationWarning,
+            stacklevel=_outside_stacklevel(),
+        )
     for keyword, value in legacy.items():
         target, field = table[keyword]
         try:

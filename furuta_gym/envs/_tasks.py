@@ -141,9 +141,7 @@ class FurutaSwingUp:
         (volts,) = _components(u, 1)
         upright = 0.5 * (1.0 - xp.cos(beta))
         centred = 0.5 * (1.0 + tolerance(wrap_angle(alpha), margin=self.alpha_margin, xp=xp))
-        small_control = 0.2 * (
-            4.0 + tolerance(volts / self.max_voltage, margin=1.0, sigmoid="quadratic", xp=xp)
-        )
+        small_control = 0.2 * (4.0 + tolerance(volts / self.max_voltage, margin=1.0, sigmoid="quadratic", xp=xp))
         small_velocity = 0.5 * (1.0 + tolerance(beta_dot, margin=self.velocity_margin, xp=xp))
         return upright * centred * small_control * small_velocity
 
@@ -177,12 +175,8 @@ class NMSDReach:
         xp = _namespace(x_next)
         p, p_dot = _components(x_next, 2)
         (force,) = _components(u, 1)
-        at_target = tolerance(
-            p - self.target, half_width=self.tolerance_width, margin=self.target_margin, xp=xp
-        )
-        small_control = 0.2 * (
-            4.0 + tolerance(force / self.max_force, margin=1.0, sigmoid="quadratic", xp=xp)
-        )
+        at_target = tolerance(p - self.target, half_width=self.tolerance_width, margin=self.target_margin, xp=xp)
+        small_control = 0.2 * (4.0 + tolerance(force / self.max_force, margin=1.0, sigmoid="quadratic", xp=xp))
         small_velocity = 0.5 * (1.0 + tolerance(p_dot, margin=self.velocity_margin, xp=xp))
         return at_target * small_control * small_velocity
 

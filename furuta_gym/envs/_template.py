@@ -94,8 +94,9 @@ class BatchTemplate:
         if self._observer.filter is not None:
             features.append("velocity='filter'")
         if self._has_delay:
-            features.append("actuation delay (Actuation(delay=..., delay_steps=...), "
-                            "plant='delay' or an input_delay effect)")
+            features.append(
+                "actuation delay (Actuation(delay=..., delay_steps=...), plant='delay' or an input_delay effect)"
+            )
         if self._lag_tau > 0:
             features.append("actuator_lag (the lagged input is a state)")
         if self._randomize:

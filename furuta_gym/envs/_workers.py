@@ -81,9 +81,7 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
             ) from exc
         shm_in, shm_out = (_attach(name) for name in names)
         inputs = np.ndarray((num_envs, n_state + n_input), dtype=np.float64, buffer=shm_in.buf)
-        outputs = np.ndarray(
-            (num_envs, packed_output_width(n_state, n_input)), dtype=np.float64, buffer=shm_out.buf
-        )
+        outputs = np.ndarray((num_envs, packed_output_width(n_state, n_input)), dtype=np.float64, buffer=shm_out.buf)
         step, args = step_function(**settings, packed=True)
 
         def run():
@@ -227,13 +225,22 @@ class ProcessChunks:
                 raise
             for i, conn in enumerate(connections):  # slices go out in the order workers connect
                 core = cores[i % len(cores)] if cores else None
-                conn.send(([b.name for b in blocks], num_envs, n_state, n_input,
-                           int(bounds[i]), int(bounds[i + 1]), core, payload, list(sys.path)))
+                conn.send(
+                    (
+                        [b.name for b in blocks],
+                        num_envs,
+                        n_state,
+                        n_input,
+                        int(bounds[i]),
+                        int(bounds[i + 1]),
+                        core,
+                        payload,
+                        list(sys.path),
+                    )
+                )
                 self._connections.append(conn)
         # the finalizer holds no reference to self: it runs at close(), collection or exit
-        self._finalizer = weakref.finalize(
-            self, _shutdown, self._processes, self._connections, blocks
-        )
+        self._finalizer = weakref.finalize(self, _shutdown, self._processes, self._connections, blocks)
         self._collect("start")
 
     def _collect(self, what: str) -> None:

@@ -85,8 +85,7 @@ def _has_physical(model, system: str) -> bool:
 
 def _unsupported(template: LagrangianEnv) -> list[str]:
     """The template's settings a stateless functional copy does not reproduce."""
-    features = [f for f in template.per_episode_state_features()
-                if not f.startswith(_SUPPORTED_FEATURES)]
+    features = [f for f in template.per_episode_state_features() if not f.startswith(_SUPPORTED_FEATURES)]
     if template._extra_observation_size():
         features.append("observation components beyond the state (an observed target)")
     if not isinstance(template.backend, ModelBackend):
@@ -134,8 +133,7 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         spreads = template.parameter_spreads
         physical = _has_physical(model, self.system)
         if spreads and not physical:
-            raise EnvArgumentError("Plant.randomize draws an analytic model's physical parameters; "
-                                   "this model has none")
+            raise EnvArgumentError("Plant.randomize draws an analytic model's physical parameters; this model has none")
         noise = template.noise_std
         return EnvParams(
             model=dynamic,
@@ -143,8 +141,9 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
             reset_noise_scale=jnp.asarray(template.reset_noise_scale, float),
             quantization=jnp.asarray(template.encoder_steps, float),
             measurement_noise=jnp.asarray(noise, float) if noise.any() else None,
-            spreads=PARAMETER_CLASSES[self.system](**{
-                k: spreads.get(k, 0.0) for k in template.physical_parameters()}) if physical else None,
+            spreads=PARAMETER_CLASSES[self.system](**{k: spreads.get(k, 0.0) for k in template.physical_parameters()})
+            if physical
+            else None,
         )
 
     # ------------------------------------------------------------------ gymnax API
@@ -172,8 +171,7 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         key_x, key_physical, key_obs = jax.random.split(key, 3)
         scale = params.reset_noise_scale
         x0 = jax.random.uniform(key_x, (2 * self.n,), float, -scale, scale)
-        state = EnvState(x0, jnp.zeros((), jnp.int32), self._draw_physical(key_physical, params),
-                         jnp.zeros((), bool))
+        state = EnvState(x0, jnp.zeros((), jnp.int32), self._draw_physical(key_physical, params), jnp.zeros((), bool))
         return self.get_obs(state, params, key_obs), state
 
     def step_env(self, key: jax.Array, state: EnvState, action, params: EnvParams):
@@ -181,9 +179,16 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         action = jnp.reshape(jnp.asarray(action, float), (1,))
         volts = jnp.clip(action, -self.action_high, self.action_high) * (self.max_action / self.action_high)
         out = controlled_step(
-            self.plant(params, state), state.x, volts, dt=self.dt, substeps=self.substeps,
-            action_limit=self.max_action, state_bound=self.state_bounds,
-            reward_fn=self.task.reward, terminated_fn=self.task.terminated)
+            self.plant(params, state),
+            state.x,
+            volts,
+            dt=self.dt,
+            substeps=self.substeps,
+            action_limit=self.max_action,
+            state_bound=self.state_bounds,
+            reward_fn=self.task.reward,
+            terminated_fn=self.task.terminated,
+        )
         new = EnvState(out.state, state.time + 1, state.physical, out.diverged)
         info = {"diverged": out.diverged, "action": out.action[0]}
         return self.get_obs(new, params, key), new, out.reward, out.terminated, info
@@ -231,8 +236,9 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         return jax.tree_util.tree_unflatten(treedef, drawn)
 
 
-def make(env_id: str = "furuta_gym/FurutaSwingUp-v0", dynamics: Any = "analytic",
-         **kwargs) -> tuple[FunctionalEnv, EnvParams]:
+def make(
+    env_id: str = "furuta_gym/FurutaSwingUp-v0", dynamics: Any = "analytic", **kwargs
+) -> tuple[FunctionalEnv, EnvParams]:
     """``(env, params)`` of the registered Gymnasium env ``env_id`` made with ``dynamics`` and
     ``kwargs`` (the same keywords as ``gymnasium.make``), as ``gymnax.make`` returns them.
 
@@ -241,12 +247,15 @@ def make(env_id: str = "furuta_gym/FurutaSwingUp-v0", dynamics: Any = "analytic"
     default params' spreads, quantisation and noise.
     """
     if kernel := kwargs.pop("kernel", None):
-        raise EnvArgumentError(f"kernel={kernel!r} chooses a single env's step kernel; the functional env is traced JAX")
+        raise EnvArgumentError(
+            f"kernel={kernel!r} chooses a single env's step kernel; the functional env is traced JAX"
+        )
     if isinstance(dynamics, str) and dynamics == "mujoco":
-        raise EnvArgumentError("dynamics='mujoco' is not a JAX function: the functional env runs 'analytic', "
-                               "a checkpoint path or a Lagrangian model")
+        raise EnvArgumentError(
+            "dynamics='mujoco' is not a JAX function: the functional env runs 'analytic', "
+            "a checkpoint path or a Lagrangian model"
+        )
     gym_env = gymnasium.make(env_id, dynamics=dynamics, kernel="xla", disable_env_checker=True, **kwargs)
     template = cast(LagrangianEnv, gym_env.unwrapped)
     env = FunctionalEnv(template, max_steps=gym_env.spec.max_episode_steps, name=env_id)
     return env, env.default_params
-

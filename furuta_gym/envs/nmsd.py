@@ -30,10 +30,12 @@ class Target:
     observe: bool = False
 
     def __post_init__(self):
-        if isinstance(self.position, str) or (np.ndim(self.position) == 1
-                                              and not isinstance(self.position, (int, float))):
-            object.__setattr__(self, "position", self.position if isinstance(self.position, str)
-                               else _target_range(self.position))
+        if isinstance(self.position, str) or (
+            np.ndim(self.position) == 1 and not isinstance(self.position, (int, float))
+        ):
+            object.__setattr__(
+                self, "position", self.position if isinstance(self.position, str) else _target_range(self.position)
+            )
             _target_range(self.position)
         else:
             object.__setattr__(self, "position", _check_target(self.position, "Target.position"))
@@ -129,7 +131,10 @@ class NMSDEnv(LagrangianEnv):
     default_max_action: ClassVar[float] = 20.0
     task_settings_type: ClassVar[type | None] = Target
     legacy_keywords: ClassVar[Mapping[str, tuple[str, str]]] = {
-        **LEGACY_KEYWORDS, "target": ("task", "position"), "observe_target": ("task", "observe")}
+        **LEGACY_KEYWORDS,
+        "target": ("task", "position"),
+        "observe_target": ("task", "observe"),
+    }
     #: (low, high) of a random target per reset, None for a fixed target
     _target_range: tuple[float, float] | None = None
     reset_option_names: ClassVar[tuple[str, ...]] = ("state", "target")
@@ -195,9 +200,7 @@ def _target_range(target: Any) -> tuple[float, float]:
     """``"random"`` → :data:`DEFAULT_TARGET_RANGE`; ``(low, high)`` → itself, checked."""
     if isinstance(target, str):
         if target != "random":
-            raise EnvArgumentError(
-                f"target must be a position in m, 'random' or a (low, high) range, got {target!r}"
-            )
+            raise EnvArgumentError(f"target must be a position in m, 'random' or a (low, high) range, got {target!r}")
         return DEFAULT_TARGET_RANGE
     if len(target) != 2:
         raise EnvArgumentError(f"a target range must be (low, high) in m, got {target!r}")

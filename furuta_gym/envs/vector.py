@@ -184,8 +184,9 @@ class LagrangianVectorEnv(VectorEnv):
         backend = template.backend
         assert isinstance(backend, ModelBackend)
         self.num_envs = int(num_envs)
-        self._chunked = (_ConcurrentChunks(self.num_envs, int(chunks)) if devices is None
-                         else ShardedSteps(self.num_envs, devices))
+        self._chunked = (
+            _ConcurrentChunks(self.num_envs, int(chunks)) if devices is None else ShardedSteps(self.num_envs, devices)
+        )
         self.spec_system = template.system_spec
         self._n = template.system_spec.n_dof
         self.dt = template.dt
@@ -197,9 +198,7 @@ class LagrangianVectorEnv(VectorEnv):
         analytic_params = PARAMETER_CLASSES[backend.system](**parameters)
 
         # energy in info is the paper's model at the plant's parameters, as the single env reports
-        self._energy_model = eqx.tree_at(
-            lambda m: m.params, analytic_model(backend.system), analytic_params
-        )
+        self._energy_model = eqx.tree_at(lambda m: m.params, analytic_model(backend.system), analytic_params)
         self._quantizer = Quantizer(tuple(float(s) for s in template.encoder_steps))
         self._workers = None
         self._set_task(template.task)
@@ -320,9 +319,7 @@ class LagrangianVectorEnv(VectorEnv):
         elif isinstance(seed, Sequence) and not isinstance(seed, str):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
-                raise ValueError(
-                    f"seed: a list of seeds must have num_envs={self.num_envs} entries, got {len(seeds)}"
-                )
+                raise ValueError(f"seed: a list of seeds must have num_envs={self.num_envs} entries, got {len(seeds)}")
         else:
             raise ValueError(f"seed must be None, an int or a list of num_envs ints, got {seed!r}")
         return [seeding.np_random(s)[0] for s in seeds]
@@ -383,8 +380,7 @@ class LagrangianVectorEnv(VectorEnv):
         unknown = sorted(set(options) - allowed)
         if unknown:
             raise EnvArgumentError(
-                f"reset: unknown option(s) {unknown}; expected any of "
-                f"{sorted(allowed | {'reset_mask'})}"
+                f"reset: unknown option(s) {unknown}; expected any of {sorted(allowed | {'reset_mask'})}"
             )
         idx = np.flatnonzero(mask)
         if seed is not None or self._needs_reset:
@@ -444,9 +440,7 @@ class LagrangianVectorEnv(VectorEnv):
         if self._workers is not None:
             x_next, obs, u, reward, terminated, diverged, e = self._workers.step(self._x, us)
         else:
-            x_next, obs, u, reward, terminated, diverged, e = self._chunked(
-                self._step_fn, self._step_args, self._x, us
-            )
+            x_next, obs, u, reward, terminated, diverged, e = self._chunked(self._step_fn, self._step_args, self._x, us)
         reward = reward.astype(np.float64)
         mode = self.autoreset_mode
         resetting = self._autoreset if mode == AutoresetMode.NEXT_STEP else np.zeros_like(self._autoreset)
@@ -502,8 +496,9 @@ class LagrangianVectorEnv(VectorEnv):
         }
         info.update(self._extra_info(self.num_envs))
         if not mask.all():
-            info = {k: np.where(mask.reshape((-1,) + (1,) * (v.ndim - 1)), v, 0).astype(v.dtype)
-                    for k, v in info.items()}
+            info = {
+                k: np.where(mask.reshape((-1,) + (1,) * (v.ndim - 1)), v, 0).astype(v.dtype) for k, v in info.items()
+            }
         return _with_masks(info, mask)
 
     # ------------------------------------------------------------------ pure-JAX rollouts
@@ -583,8 +578,11 @@ def _with_env_keywords(init):
     keywords are written once, on :meth:`LagrangianEnv.__init__`."""
     own = [p for p in inspect.signature(init).parameters.values() if p.kind is not p.VAR_KEYWORD]
     names = {p.name for p in own}
-    env = [p for name, p in inspect.signature(LagrangianEnv.__init__).parameters.items()
-           if name != "self" and name not in names]
+    env = [
+        p
+        for name, p in inspect.signature(LagrangianEnv.__init__).parameters.items()
+        if name != "self" and name not in names
+    ]
     init.__signature__ = inspect.Signature(own + env)
     return init
 
@@ -634,8 +632,7 @@ class NMSDVectorEnv(LagrangianVectorEnv):
         if options.get("target") is not None:
             if partial:
                 raise EnvArgumentError(
-                    "options['target'] changes the task of every copy: pass it to a full reset "
-                    "(no reset_mask)"
+                    "options['target'] changes the task of every copy: pass it to a full reset (no reset_mask)"
                 )
             self._template.apply_reset_options(options)
             self._set_task(self._template.task)

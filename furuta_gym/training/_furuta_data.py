@@ -83,39 +83,63 @@ def _test_sets(r: FurutaRecipe, gt, seed, oversample) -> dict[str, list[Clean]]:
 
     out = {}
     x0s = uniform(stream(seed, "train"), r.n_train, train_ranges)
-    out["train"] = run_batch(gt, x0s, r.train_duration, np.zeros_like, oversample,
-                             [f"free{k:02d}" for k in range(r.n_train)])
+    out["train"] = run_batch(
+        gt, x0s, r.train_duration, np.zeros_like, oversample, [f"free{k:02d}" for k in range(r.n_train)]
+    )
     x0s = uniform(stream(seed, "test_free"), r.n_test_free, test_ranges)
-    out["test_free"] = run_batch(gt, x0s, r.test_free_duration, np.zeros_like, oversample,
-                                 [f"free{k}" for k in range(r.n_test_free)])
+    out["test_free"] = run_batch(
+        gt, x0s, r.test_free_duration, np.zeros_like, oversample, [f"free{k}" for k in range(r.n_test_free)]
+    )
     x0s = uniform(stream(seed, "test_forced"), r.n_test_forced, test_ranges)
-    out["test_forced"] = run_batch(gt, x0s, r.test_forced_duration, u_chirp, oversample,
-                                   [f"chirp{k}" for k in range(r.n_test_forced)])
+    out["test_forced"] = run_batch(
+        gt, x0s, r.test_forced_duration, u_chirp, oversample, [f"chirp{k}" for k in range(r.n_test_forced)]
+    )
     if r.scale_fit_input == "steps":
         out["scale_fit"] = run_each(
-            gt, "scale_fit_input", seed, r.n_scale_fit, train_ranges, r.scale_fit_duration,
-            lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng), oversample,
+            gt,
+            "scale_fit_input",
+            seed,
+            r.n_scale_fit,
+            train_ranges,
+            r.scale_fit_duration,
+            lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng),
+            oversample,
         )
         return out
     x0s = uniform(stream(seed, "scale_fit"), r.n_scale_fit, train_ranges)
-    out["scale_fit"] = run_batch(gt, x0s, r.scale_fit_duration, u_chirp, oversample,
-                                 [f"scale{k}" for k in range(r.n_scale_fit)])
+    out["scale_fit"] = run_batch(
+        gt, x0s, r.scale_fit_duration, u_chirp, oversample, [f"scale{k}" for k in range(r.n_scale_fit)]
+    )
     return out
 
 
 def _validation_sets(r: FurutaRecipe, gt, seed, oversample) -> dict[str, list[Clean]]:
     ranges = r.train_ranges
     free = uniform(stream(seed, "val_free"), r.n_val_free, ranges)
-    out = {"val_free": run_batch(gt, free, r.val_free_duration, np.zeros_like, oversample,
-                                 [f"free{k}" for k in range(r.n_val_free)])}
+    out = {
+        "val_free": run_batch(
+            gt, free, r.val_free_duration, np.zeros_like, oversample, [f"free{k}" for k in range(r.n_val_free)]
+        )
+    }
     out["val_forced"] = run_each(
-        gt, "val_forced", seed, r.n_val_forced, ranges, r.val_forced_duration,
+        gt,
+        "val_forced",
+        seed,
+        r.n_val_forced,
+        ranges,
+        r.val_forced_duration,
         lambda rng: lambda t: multisine(t, r.chirp_f0, r.chirp_f1, r.val_multisine_tones, r.amplitude, rng),
         oversample,
     )
     out["val_scale_fit"] = run_each(
-        gt, "val_scale_fit", seed, 1, ranges, r.val_scale_fit_duration,
-        lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng), oversample,
+        gt,
+        "val_scale_fit",
+        seed,
+        1,
+        ranges,
+        r.val_scale_fit_duration,
+        lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng),
+        oversample,
     )
     return out
 

@@ -73,20 +73,33 @@ def _segments(long: Clean, r: NMSDRecipe, oversample: int) -> list[Clean]:
 def _test_sets(r: NMSDRecipe, gt, seed, oversample) -> dict[str, list[Clean]]:
     ranges = (r.p0_range, r.pd0_range)
     x0 = uniform(stream(seed, "train"), 1, ranges)
-    (long,) = run_batch(gt, x0, r.train_duration,
-                        lambda t: chirp(t, r.chirp_f0, r.chirp_f1, r.train_duration, r.amplitude),
-                        oversample, ["train"])
+    (long,) = run_batch(
+        gt,
+        x0,
+        r.train_duration,
+        lambda t: chirp(t, r.chirp_f0, r.chirp_f1, r.train_duration, r.amplitude),
+        oversample,
+        ["train"],
+    )
     out = {"train": _segments(long, r, oversample)}
     x0s = uniform(stream(seed, "test_chirp"), r.n_test_chirp, ranges)
     out["test_chirp"] = run_batch(
-        gt, x0s, r.test_chirp_duration,
+        gt,
+        x0s,
+        r.test_chirp_duration,
         lambda t: chirp(t, r.chirp_f0, r.chirp_f1, r.test_chirp_duration, r.amplitude),
-        oversample, [f"chirp{k}" for k in range(r.n_test_chirp)])
+        oversample,
+        [f"chirp{k}" for k in range(r.n_test_chirp)],
+    )
     x0s = uniform(stream(seed, "test_square"), r.n_test_square, ranges)
     out["test_square"] = run_batch(
-        gt, x0s, r.test_square_duration,
+        gt,
+        x0s,
+        r.test_square_duration,
         lambda t: square_pulse(t, r.pulse_start, r.pulse_width, r.amplitude),
-        oversample, [f"square{k}" for k in range(r.n_test_square)])
+        oversample,
+        [f"square{k}" for k in range(r.n_test_square)],
+    )
     return out
 
 
@@ -94,10 +107,18 @@ def _validation_sets(r: NMSDRecipe, gt, seed, oversample) -> dict[str, list[Clea
     ranges = (r.val_p0_range, r.val_pd0_range)
     out = {}
     for name, n, duration, make_u in (
-        ("val_multisine", r.n_val_multisine, r.val_multisine_duration,
-         lambda rng: lambda t: multisine(t, r.chirp_f0, r.chirp_f1, r.val_multisine_tones, r.amplitude, rng)),
-        ("val_steps", r.n_val_steps, r.val_steps_duration,
-         lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng)),
+        (
+            "val_multisine",
+            r.n_val_multisine,
+            r.val_multisine_duration,
+            lambda rng: lambda t: multisine(t, r.chirp_f0, r.chirp_f1, r.val_multisine_tones, r.amplitude, rng),
+        ),
+        (
+            "val_steps",
+            r.n_val_steps,
+            r.val_steps_duration,
+            lambda rng: lambda t: random_steps(t, r.val_steps_hold, r.amplitude, rng),
+        ),
     ):
         out[name] = run_each(gt, name, seed, n, ranges, duration, make_u, oversample)
     return out

@@ -30,8 +30,14 @@ MAX_RETRIES = 3
 _LOCAL_OBJECT_STORE_BYTES = 128 * 2**20
 # Forwarded to the workers when set here: where the compilation caches live and whether they
 # are on, headless rendering for the figures.
-_FORWARDED_ENV = ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
-                  "FURUTA_GYM_CACHE", "FURUTA_GYM_COMPILATION_CACHE", "FURUTA_GYM_STEP_CACHE", "MUJOCO_GL")
+_FORWARDED_ENV = (
+    "JAX_COMPILATION_CACHE_DIR",
+    "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
+    "FURUTA_GYM_CACHE",
+    "FURUTA_GYM_COMPILATION_CACHE",
+    "FURUTA_GYM_STEP_CACHE",
+    "MUJOCO_GL",
+)
 _THREAD_FLAGS = ("--xla_cpu_multi_thread_eigen", "intra_op_parallelism_threads")
 
 
@@ -69,8 +75,12 @@ class RayExecutor:
 
     def __init__(self, ray, cpus_per_task: int):
         self._ray = ray
-        self._options = dict(num_cpus=cpus_per_task, max_retries=MAX_RETRIES, retry_exceptions=False,
-                             runtime_env={"env_vars": worker_env(cpus_per_task)})
+        self._options = dict(
+            num_cpus=cpus_per_task,
+            max_retries=MAX_RETRIES,
+            retry_exceptions=False,
+            runtime_env={"env_vars": worker_env(cpus_per_task)},
+        )
         self._remote = {}
 
     def submit(self, fn, args, name: str):
@@ -94,8 +104,9 @@ def ray_executor(address: str | None, jobs: int, cpus_per_task: int):
     started = False
     if not ray.is_initialized():
         if address is None:
-            ray.init(num_cpus=jobs * cpus_per_task, include_dashboard=False,
-                     object_store_memory=_LOCAL_OBJECT_STORE_BYTES)
+            ray.init(
+                num_cpus=jobs * cpus_per_task, include_dashboard=False, object_store_memory=_LOCAL_OBJECT_STORE_BYTES
+            )
         else:
             ray.init(address=address)
         started = True

@@ -70,7 +70,4 @@ def run_each(gt, name, seed, n, ranges, duration, make_u, oversample) -> list[Cl
     signal ``make_u(rng)`` (one seeded stream per dataset)."""
     rng = stream(seed, name)
     x0s = uniform(rng, n, ranges)
-    return [
-        run_batch(gt, x0s[k : k + 1], duration, make_u(rng), oversample, [f"{name}{k}"])[0]
-        for k in range(n)
-    ]
+    return [run_batch(gt, x0s[k : k + 1], duration, make_u(rng), oversample, [f"{name}{k}"])[0] for k in range(n)]

@@ -148,8 +148,14 @@ class ExportedStep:
     ``key`` too.
     """
 
-    def __init__(self, step: Callable, key: dict[str, Any], cache_dir: Path,
-                 compiler_options: dict[str, Any] | None = None, export_step: Callable | None = None):
+    def __init__(
+        self,
+        step: Callable,
+        key: dict[str, Any],
+        cache_dir: Path,
+        compiler_options: dict[str, Any] | None = None,
+        export_step: Callable | None = None,
+    ):
         self._step = step
         self._key = key
         self._dir = Path(cache_dir)
@@ -210,7 +216,9 @@ class ExportedStep:
                 header = json.dumps({"terms": terms}).encode()
                 self._write(path, len(header).to_bytes(4, "little") + header + bytes(exp.serialize()))
             except Exception as e:
-                warnings.warn(f"training step not exported ({type(e).__name__}: {e}); using the jitted step", stacklevel=3)
+                warnings.warn(
+                    f"training step not exported ({type(e).__name__}: {e}); using the jitted step", stacklevel=3
+                )
                 return None
 
         run = jax.jit(exp.call, compiler_options=self._compiler_options)
@@ -222,8 +230,7 @@ class ExportedStep:
             # compilation on that too, so the first and second calls each compiled the whole step
             # (once per training run). Committing every argument
             # where it already lives makes all calls alike: one compilation, same results.
-            leaves = [leaf if leaf.committed else jax.device_put(leaf, next(iter(leaf.devices())))
-                      for leaf in leaves]
+            leaves = [leaf if leaf.committed else jax.device_put(leaf, next(iter(leaf.devices()))) for leaf in leaves]
             out = run(*leaves)
             params = jax.tree_util.tree_unflatten(params_def, out[:n_params])
             opt_state = jax.tree_util.tree_unflatten(opt_def, out[n_params : n_params + n_opt])
@@ -244,8 +251,12 @@ class ExportedStep:
             if jax.tree_util.tree_structure(params) != params_def or jax.tree_util.tree_structure(opt_state) != opt_def:
                 raise ValueError("the step changed the structure of params or opt_state")
             terms_keys[:] = list(terms)  # the live step's order, so histories read the same
-            return (*jax.tree_util.tree_leaves(params), *jax.tree_util.tree_leaves(opt_state),
-                    *[terms[k] for k in terms_keys], ok)
+            return (
+                *jax.tree_util.tree_leaves(params),
+                *jax.tree_util.tree_leaves(opt_state),
+                *[terms[k] for k in terms_keys],
+                ok,
+            )
 
         specs = [jax.ShapeDtypeStruct(leaf.shape, leaf.dtype, weak_type=leaf.aval.weak_type) for leaf in leaves]
         exp = export.export(jax.jit(flat_step))(*specs)

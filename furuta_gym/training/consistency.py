@@ -23,8 +23,14 @@ import numpy as np
 from ..lagrangian import SystemSpec
 from ..models import system_definition
 
-__all__ = ["DataCoverageWarning", "PotentialShapeWarning", "check_data_coverage", "check_potential_shape",
-           "warn_data_coverage", "warn_potential_shape"]
+__all__ = [
+    "DataCoverageWarning",
+    "PotentialShapeWarning",
+    "check_data_coverage",
+    "check_potential_shape",
+    "warn_data_coverage",
+    "warn_potential_shape",
+]
 
 #: how near an equilibrium (rad or m, along its joint) a sample must come to count as visiting it
 COVERAGE_RADIUS = 0.5
@@ -69,8 +75,17 @@ def check_potential_shape(model, system: str | SystemSpec | None = None) -> dict
     joints = tuple(names.index(e.joint) for e in eqs)
     points = jnp.asarray([e.q for e in eqs], dtype=float)
     curv = [float(c) for c in _curvatures(model, points, joints)]
-    rows = [{"name": e.name, "q": list(e.q), "joint": e.joint, "expected": e.shape, "curvature": c,
-             "ok": bool(c > 0 if e.shape == "minimum" else c < 0)} for e, c in zip(eqs, curv)]
+    rows = [
+        {
+            "name": e.name,
+            "q": list(e.q),
+            "joint": e.joint,
+            "expected": e.shape,
+            "curvature": c,
+            "ok": bool(c > 0 if e.shape == "minimum" else c < 0),
+        }
+        for e, c in zip(eqs, curv)
+    ]
     return {"physical": all(r["ok"] for r in rows), "equilibria": rows}
 
 
@@ -79,11 +94,17 @@ def shape_message(result: dict) -> str | None:
     wrong = [r for r in result["equilibria"] if not r["ok"]]
     if not wrong:
         return None
-    parts = [f"{r['name']} must be a {r['expected']} (∂²V/∂{r['joint']}² {'>' if r['expected'] == 'minimum' else '<'} 0) "
-             f"but the learned curvature is {r['curvature']:.3g}" for r in wrong]
-    return ("learned potential is not physical: " + "; ".join(parts)
-            + ". The data may not determine the potential there (e.g. closed-loop data near one "
-              "equilibrium); a swing-up or LQR designed on this model rests on the wrong shape.")
+    parts = [
+        f"{r['name']} must be a {r['expected']} (∂²V/∂{r['joint']}² {'>' if r['expected'] == 'minimum' else '<'} 0) "
+        f"but the learned curvature is {r['curvature']:.3g}"
+        for r in wrong
+    ]
+    return (
+        "learned potential is not physical: "
+        + "; ".join(parts)
+        + ". The data may not determine the potential there (e.g. closed-loop data near one "
+        "equilibrium); a swing-up or LQR designed on this model rests on the wrong shape."
+    )
 
 
 def warn_potential_shape(model, system: str | SystemSpec | None = None, *, stacklevel: int = 2) -> dict:
@@ -118,10 +139,12 @@ def coverage_message(result: dict) -> str | None:
     if not missed:
         return None
     seen = [f"{r['name']} ({r['share']:.0%} of the samples)" for r in result["equilibria"] if r["share"] > 0]
-    return (f"the training data never come within {result['radius']:g} of {' or '.join(missed)} "
-            f"({result['n_samples']} samples): what the model learns there is extrapolation, and a design that "
-            "relies on it (an energy swing-up through it) is not supported by these data"
-            + (f"; one about {', '.join(seen)} is (e.g. an LQR catch)." if seen else "."))
+    return (
+        f"the training data never come within {result['radius']:g} of {' or '.join(missed)} "
+        f"({result['n_samples']} samples): what the model learns there is extrapolation, and a design that "
+        "relies on it (an energy swing-up through it) is not supported by these data"
+        + (f"; one about {', '.join(seen)} is (e.g. an LQR catch)." if seen else ".")
+    )
 
 
 def warn_data_coverage(trajs, system: str | SystemSpec, *, stacklevel: int = 2) -> dict:

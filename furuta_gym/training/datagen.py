@@ -137,14 +137,12 @@ class SensorOptions:
             raise ValueError(f"velocity must be 'exact' or 'filter', got {self.velocity!r}")
         if self.noise_std < 0 or self.velocity_noise_std < 0:
             raise ValueError(
-                f"noise_std and velocity_noise_std must be ≥ 0, got {self.noise_std}, "
-                f"{self.velocity_noise_std}"
+                f"noise_std and velocity_noise_std must be ≥ 0, got {self.noise_std}, {self.velocity_noise_std}"
             )
         ratio = self.sensor_rate_hz / DATA_RATE_HZ
         if ratio < 1 or abs(ratio - round(ratio)) > 1e-9:
             raise ValueError(
-                f"sensor_rate_hz must be an integer multiple of {DATA_RATE_HZ:g} Hz, "
-                f"got {self.sensor_rate_hz}"
+                f"sensor_rate_hz must be an integer multiple of {DATA_RATE_HZ:g} Hz, got {self.sensor_rate_hz}"
             )
         if self.velocity_noise_std > 0 and self.velocity == "filter":
             raise ValueError("velocity_noise_std applies to exact velocities, not velocity='filter'")
@@ -155,12 +153,7 @@ class SensorOptions:
 
     @property
     def is_exact(self) -> bool:
-        return (
-            not self.quantize
-            and self.noise_std == 0
-            and self.velocity == "exact"
-            and self.velocity_noise_std == 0
-        )
+        return not self.quantize and self.noise_std == 0 and self.velocity == "exact" and self.velocity_noise_std == 0
 
 
 # --------------------------------------------------------------------------------------------
@@ -209,9 +202,7 @@ class AnalyticGroundTruth:
 
         def chunk(x0, us, dt):
             # one fixed-length chunk of sample intervals: compiled once for every dataset
-            _, xs = jax.lax.scan(
-                interval, x0, (us[:-1], us[1:], jnp.full(us.shape[0] - 1, dt))
-            )
+            _, xs = jax.lax.scan(interval, x0, (us[:-1], us[1:], jnp.full(us.shape[0] - 1, dt)))
             return xs
 
         return jax.jit(jax.vmap(chunk, in_axes=(0, 0, None)))
@@ -259,8 +250,9 @@ class MujocoGroundTruth:
         self.substeps = int(substeps)
         self.plant = plant
         self._backend = MujocoBackend(self.system, substeps=1, plant=plant)
-        self._delay = 0.0 if plant is None else sum(e.coefficient for e in plant.effects
-                                                    if e.kind.input_dynamics == "delay")
+        self._delay = (
+            0.0 if plant is None else sum(e.coefficient for e in plant.effects if e.kind.input_dynamics == "delay")
+        )
 
     @property
     def name(self) -> str:
@@ -310,9 +302,7 @@ def default_ground_truth(system: str, kind: str = "auto") -> GroundTruth:
 # --------------------------------------------------------------------------------------------
 
 
-def _measure(
-    clean: Clean, n_dof: int, angular: Sequence[bool], options: SensorOptions, rng
-) -> Trajectory:
+def _measure(clean: Clean, n_dof: int, angular: Sequence[bool], options: SensorOptions, rng) -> Trajectory:
     q_true, qd_true = clean.x[:, :n_dof], clean.x[:, n_dof:]
     q = q_true.copy()
     if options.noise_std > 0:
@@ -329,9 +319,7 @@ def _measure(
         if options.velocity_noise_std > 0:
             qd = qd + rng.normal(0.0, options.velocity_noise_std, size=qd.shape)
     k = options.oversample
-    return Trajectory(
-        t=np.round(clean.t[::k], 10), q=q[::k], u=clean.u[::k], qd=qd[::k], name=clean.name
-    )
+    return Trajectory(t=np.round(clean.t[::k], 10), q=q[::k], u=clean.u[::k], qd=qd[::k], name=clean.name)
 
 
 def _warm_filter(q: np.ndarray, qd0: np.ndarray, dt: float, options: SensorOptions) -> np.ndarray:
@@ -340,9 +328,7 @@ def _warm_filter(q: np.ndarray, qd0: np.ndarray, dt: float, options: SensorOptio
     n_warm = int(round(0.2 / dt))
     back = (np.arange(-n_warm, 0) * dt)[:, None]
     history = q[0][None, :] + back * qd0[None, :]
-    filtered = derivative_filter(
-        np.concatenate([history, q], axis=0), dt, options.filter_omega0, options.filter_xi
-    )
+    filtered = derivative_filter(np.concatenate([history, q], axis=0), dt, options.filter_omega0, options.filter_xi)
     return filtered[n_warm:]
 
 
@@ -368,8 +354,7 @@ def generate_datasets(
     ``ground_truth`` is a name for :func:`default_ground_truth` or a callable
     ``(x0s (B, 2n), t (T,), us (B, T, m)) -> states (B, T, 2n)``.
     """
-    return _generate(system, "test", seed=seed, small=small, recipe=recipe, sensor=sensor,
-                     ground_truth=ground_truth)
+    return _generate(system, "test", seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=ground_truth)
 
 
 def generate_validation(
@@ -388,8 +373,9 @@ def generate_validation(
     N-MSD: ``val_multisine`` (3 × 25 s, 8 tones over 0.1–1.1 Hz) and ``val_steps`` (3 × 15 s of
     random ±5 N steps held 1–3 s), from x0 inside the training trajectory's range. Their overlap
     with the test sets is measured by ``experiments/validation_overlap.py`` (docs/reproduce.md)."""
-    return _generate(system, "validation", seed=seed, small=small, recipe=recipe, sensor=sensor,
-                     ground_truth=ground_truth)
+    return _generate(
+        system, "validation", seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=ground_truth
+    )
 
 
 _NOISE_STREAM = {"test": 7919, "validation": 7927}  # sensor-noise streams, one per kind
@@ -408,8 +394,7 @@ def _generate(system, kind, *, seed, small, recipe, sensor, ground_truth):
     if not isinstance(recipe, data.recipe):
         raise ValueError(f"recipe for {spec.name} must be a {data.recipe.__name__}, got {recipe!r}")
     gt = default_ground_truth(spec.name, ground_truth) if isinstance(ground_truth, str) else ground_truth
-    make, names = ((data.make_test, data.test_names) if kind == "test"
-                   else (data.make_validation, data.validation_names))
+    make, names = (data.make_test, data.test_names) if kind == "test" else (data.make_validation, data.validation_names)
     clean = make(recipe, gt, seed, sensor.oversample)
     out = {}
     for name, trajs in clean.items():
@@ -484,8 +469,7 @@ def write_datasets(
         existing = [str(p) for p in [*paths.values(), manifest_path] if p.exists()]
         if existing:
             raise FileExistsError(
-                f"{existing[0]}: exists; refusing to overwrite generated data "
-                f"(choose another --out or pass overwrite)"
+                f"{existing[0]}: exists; refusing to overwrite generated data (choose another --out or pass overwrite)"
             )
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {}
@@ -531,12 +515,12 @@ def generate(
     t0 = time.perf_counter()
     if split not in ("test", "validation"):
         raise ValueError(f"split must be 'test' or 'validation', got {split!r}")
-    datasets = generate_datasets(
-        spec.name, seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=gt
-    )
+    datasets = generate_datasets(spec.name, seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=gt)
     if split == "validation":
-        datasets = {"train": datasets["train"], **generate_validation(
-            spec.name, seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=gt)}
+        datasets = {
+            "train": datasets["train"],
+            **generate_validation(spec.name, seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=gt),
+        }
     metadata = {
         "seed": seed,
         **({"split": split} if split != "test" else {}),

@@ -97,9 +97,7 @@ def _window_starts(T: int, length: int, stride: int, cover_end: bool) -> list[in
     return starts
 
 
-def make_windows(
-    trajs: Sequence[Trajectory], length: int, stride: int = 1, *, cover_end: bool = False
-) -> Windows:
+def make_windows(trajs: Sequence[Trajectory], length: int, stride: int = 1, *, cover_end: bool = False) -> Windows:
     """Cut trajectories into windows of ``length`` samples every ``stride`` samples.
 
     Trajectories shorter than ``length`` are skipped; with ``cover_end`` a last window aligned to
@@ -126,8 +124,7 @@ def make_windows(
             us.append(u[s : s + length])
     if not ts:
         raise ValueError(
-            f"no trajectory has {length} samples; shortest has "
-            f"{min(len(tr) for tr in trajs) if trajs else 0}"
+            f"no trajectory has {length} samples; shortest has {min(len(tr) for tr in trajs) if trajs else 0}"
         )
     return Windows(jnp.asarray(np.stack(ts)), jnp.asarray(np.stack(xs)), jnp.asarray(np.stack(us)))
 
@@ -154,6 +151,7 @@ def _runtime_checks_as_nan():
     """
     try:
         from equinox import _errors
+
         checked = _errors.branched_error_if_impl_jit
     except (ImportError, AttributeError):  # pragma: no cover - another Equinox layout
         yield
@@ -174,8 +172,15 @@ def _runtime_checks_as_nan():
 
 def _predict(model, t, x, u, rtol, atol, max_steps):
     return simulate(
-        model, x[0], t - t[0], u, input_interpolation="linear", rtol=rtol, atol=atol,
-        max_steps=max_steps, throw=False,
+        model,
+        x[0],
+        t - t[0],
+        u,
+        input_interpolation="linear",
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        throw=False,
     )
 
 
@@ -206,8 +211,9 @@ def trajectory_loss(
 AUGMENTATION_PARTS = ("full", "beyond_linear")
 
 
-def resolution_weights(windows: Windows, n_dof: int, rule: QuadratureRule,
-                       tolerance: float | None) -> Float[Array, "B K"]:
+def resolution_weights(
+    windows: Windows, n_dof: int, rule: QuadratureRule, tolerance: float | None
+) -> Float[Array, "B K"]:
     """Per window and quadrature interval, 1 / (1 + (e / tolerance)²) with e the norm over joints
     of :func:`~furuta_gym.lagrangian.quadrature_consistency` (∫q̇ dt − Δq, from the data alone);
     all ones when ``tolerance`` is None.
@@ -241,8 +247,14 @@ def span_sum(x: Float[Array, " K *rest"], span: int) -> Float[Array, " G *rest"]
     return jnp.concatenate([x, pad]).reshape(groups, span, *x.shape[1:]).sum(axis=1)
 
 
-def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmentation: bool = False,
-                    augmentation_part: str = "full", span: int = 1):
+def _integral_parts(
+    model,
+    windows: Windows,
+    rule: QuadratureRule,
+    with_augmentation: bool = False,
+    augmentation_part: str = "full",
+    span: int = 1,
+):
     """Per window: the residual Z̄ − Ā and the model's momentum changes Δp̂ over the quadrature
     intervals (summed ``span`` at a time) and, if asked, the velocity changes the data-driven
     force accounts for, ∫M̂⁻¹F_a dt, with the data's own velocity changes Δq̇ over the same
@@ -258,8 +270,9 @@ def _integral_parts(model, windows: Windows, rule: QuadratureRule, with_augmenta
         if not with_augmentation:
             return r, dp, None, None
         force = model.augmentation if augmentation_part == "full" else model.augmentation_beyond_linear
-        acc = interval_quadrature(lambda q_, qd_, u_: solve_mass_matrix(model.mass_matrix(q_), force(q_, qd_)),
-                                  q, qd, u, dt, rule)
+        acc = interval_quadrature(
+            lambda q_, qd_, u_: solve_mass_matrix(model.mass_matrix(q_), force(q_, qd_)), q, qd, u, dt, rule
+        )
         return r, dp, span_sum(acc, span), span_sum(interval_difference(qd, rule), span)
 
     return jax.vmap(one)(windows.t, windows.x, windows.u)
@@ -272,9 +285,7 @@ def _normalised(sq, dp, normalize: str, size):
         return sq / jax.lax.stop_gradient(jnp.sum(dp**2))
     if normalize == "none":
         return sq / size
-    raise ValueError(
-        f"normalize must be 'auto', 'momentum', 'momentum_fixed' or 'none', got {normalize!r}"
-    )
+    raise ValueError(f"normalize must be 'auto', 'momentum', 'momentum_fixed' or 'none', got {normalize!r}")
 
 
 def integral_loss(
@@ -292,8 +303,9 @@ def integral_loss(
     residual relative to the model's own momentum changes (dimensionless).
     ``resolution_tolerance`` and ``span``: see :func:`integral_loss_terms`.
     """
-    return integral_loss_terms(model, windows, rule=rule, normalize=normalize,
-                               resolution_tolerance=resolution_tolerance, span=span)[0]
+    return integral_loss_terms(
+        model, windows, rule=rule, normalize=normalize, resolution_tolerance=resolution_tolerance, span=span
+    )[0]
 
 
 def integral_loss_terms(
@@ -375,8 +387,7 @@ def augmentation_penalty(model, windows: Windows) -> Float[Array, ""]:
     """APHYNITY's ‖F_a‖²: mean over all window samples of ‖F_a(q, q̇) / force_scale‖²."""
     if not getattr(model, "has_augmentation", False):
         raise ValueError(
-            f"the APHYNITY penalty needs a model with a data-driven force F_a (aph or adln), "
-            f"got {type(model).__name__}"
+            f"the APHYNITY penalty needs a model with a data-driven force F_a (aph or adln), got {type(model).__name__}"
         )
     n = model.spec.n_dof
     x = windows.x.reshape(-1, windows.x.shape[-1])
@@ -404,7 +415,11 @@ def proposed_loss(
     """L_prop = L_Iτ + λ·L_traj (paper eq. 11) + μ·P_a with μ = ``augmentation_weight`` (models
     with F_a only; see :func:`integral_loss_terms`, also for ``resolution_tolerance``)."""
     itau, share = integral_loss_terms(
-        model, integral_windows, rule=rule, normalize=normalize, with_augmentation=augmentation_weight != 0.0,
+        model,
+        integral_windows,
+        rule=rule,
+        normalize=normalize,
+        with_augmentation=augmentation_weight != 0.0,
         resolution_tolerance=resolution_tolerance,
     )
     total = itau + lam * trajectory_loss(model, trajectory_windows, **traj_kwargs)

@@ -92,10 +92,7 @@ def _stack_set(trajs: Sequence[Trajectory], n_dof: int):
                 "with velocities or estimate them with furuta_gym.signals.zero_phase_velocity)"
             )
         if np.asarray(tr.q).shape[1] != n_dof:
-            raise DataError(
-                f"trajectory {tr.name!r} has {np.asarray(tr.q).shape[1]} joint(s); the model has "
-                f"{n_dof}"
-            )
+            raise DataError(f"trajectory {tr.name!r} has {np.asarray(tr.q).shape[1]} joint(s); the model has {n_dof}")
     return trajs
 
 
@@ -127,8 +124,14 @@ def predict(
             def one(p, x0, us, ts=ts):
                 m = eqx.combine(p, static)
                 return simulate(
-                    m, x0, ts, us, rtol=settings.rtol, atol=settings.atol,
-                    max_steps=settings.max_steps, throw=False,
+                    m,
+                    x0,
+                    ts,
+                    us,
+                    rtol=settings.rtol,
+                    atol=settings.atol,
+                    max_steps=settings.max_steps,
+                    throw=False,
                 )
 
             fn = jax.jit(jax.vmap(one, in_axes=(None, 0, 0)))
@@ -151,9 +154,7 @@ def prediction_errors(
     any trajectory's prediction diverged."""
     preds = predictions if predictions is not None else predict(model, trajs, settings)
     names = model.spec.state_names
-    diverged = any(
-        (not np.all(np.isfinite(p))) or np.max(np.abs(p)) > settings.divergence_bound for p in preds
-    )
+    diverged = any((not np.all(np.isfinite(p))) or np.max(np.abs(p)) > settings.divergence_bound for p in preds)
     if diverged:
         return {name: DIVERGED for name in names}
     err = np.concatenate([p - tr.x for p, tr in zip(preds, trajs)], axis=0)
@@ -196,14 +197,11 @@ def force_decomposition_errors(
     learned = _terms_along(model, q, qd, qdd)
     true = _terms_along(truth, q, qd, qdd)
     return {
-        name: log10_rmse(np.asarray(getattr(learned, name)) - np.asarray(getattr(true, name)))
-        for name in FORCE_TERMS
+        name: log10_rmse(np.asarray(getattr(learned, name)) - np.asarray(getattr(true, name))) for name in FORCE_TERMS
     }
 
 
-def energy_along(
-    system: AbstractLagrangianSystem, q, qd, q_rest=None, normalize: bool = True
-) -> np.ndarray:
+def energy_along(system: AbstractLagrangianSystem, q, qd, q_rest=None, normalize: bool = True) -> np.ndarray:
     """E(t) of ``system`` along (q, q̇) with V shifted so V(q_rest) = 0 (q_rest defaults to 0),
     divided by E(t = 0) when ``normalize``."""
     q = jnp.asarray(q, dtype=float)
@@ -252,9 +250,7 @@ def evaluate_model(
     if truth is None:
         truth = analytic_model(model.spec.name)
     if truth.spec.name != model.spec.name:
-        raise ValueError(
-            f"truth is a {truth.spec.name} model but the model is a {model.spec.name} model"
-        )
+        raise ValueError(f"truth is a {truth.spec.name} model but the model is a {model.spec.name} model")
     preds = predict(model, trajs, settings)
     result: dict[str, Any] = dict(prediction_errors(model, trajs, settings, preds))
     if physics:

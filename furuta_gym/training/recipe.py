@@ -13,8 +13,17 @@ from __future__ import annotations
 
 import dataclasses
 
-__all__ = ["RunRecipe", "RECIPE", "SYSTEM_ROWS", "PAPER_SCHEDULE", "QUICK_EPOCHS", "QUICK_PROP_EPOCHS",
-           "DEFAULT_QUADRATURE", "DEFAULT_LEARNING_RATE", "recipe_row"]
+__all__ = [
+    "RunRecipe",
+    "RECIPE",
+    "SYSTEM_ROWS",
+    "PAPER_SCHEDULE",
+    "QUICK_EPOCHS",
+    "QUICK_PROP_EPOCHS",
+    "DEFAULT_QUADRATURE",
+    "DEFAULT_LEARNING_RATE",
+    "recipe_row",
+]
 
 DEFAULT_QUADRATURE = "simpson"
 DEFAULT_LEARNING_RATE = 1e-3
@@ -51,12 +60,19 @@ def _prop(epochs, *, decisions=(), **settings) -> RunRecipe:
 #: Each system's rows before per-model choices: the baselines' schedule (also for pairs the paper
 #: does not report) and L_prop's (a model kind without a row of its own takes it).
 SYSTEM_ROWS = {
-    "furuta": {"baseline": RunRecipe(epochs=(60, 200), decisions=_BASELINE),
-               "prop": _prop((6000, 20, 60))},
-    "nmsd": {"baseline": RunRecipe(epochs=(100, 100), decisions=_BASELINE),
-             "prop": _prop((4000, 30, 30), itau_learning_rate=1e-2,
-                           decisions=("L_Iτ quadrature, N-MSD", "L_Iτ step, N-MSD",
-                                      "fine-tuning step, N-MSD DeLaN and augmented DeLaN"))},
+    "furuta": {"baseline": RunRecipe(epochs=(60, 200), decisions=_BASELINE), "prop": _prop((6000, 20, 60))},
+    "nmsd": {
+        "baseline": RunRecipe(epochs=(100, 100), decisions=_BASELINE),
+        "prop": _prop(
+            (4000, 30, 30),
+            itau_learning_rate=1e-2,
+            decisions=(
+                "L_Iτ quadrature, N-MSD",
+                "L_Iτ step, N-MSD",
+                "fine-tuning step, N-MSD DeLaN and augmented DeLaN",
+            ),
+        ),
+    },
 }
 
 
@@ -69,30 +85,69 @@ def _row(system, *, replaces=(), **changes) -> RunRecipe:
 
 
 RECIPE: dict[tuple[str, str | None, str], RunRecipe] = {
-    **{(s, k, loss): SYSTEM_ROWS[s]["baseline"] for s in SYSTEM_ROWS
-       for k, loss in (("dln", "traj"), ("aph", "aph"), ("adln", "aph"))},
+    **{
+        (s, k, loss): SYSTEM_ROWS[s]["baseline"]
+        for s in SYSTEM_ROWS
+        for k, loss in (("dln", "traj"), ("aph", "aph"), ("adln", "aph"))
+    },
     ("furuta", "dln", "prop"): _row(
-        "furuta", epochs=(12000, 20, 60), finetune_learning_rate=1e-6,
-        decisions=("L_Iτ quadrature, Furuta DeLaN", "L_Iτ epochs, Furuta DeLaN", "fine-tuning step, Furuta DeLaN")),
+        "furuta",
+        epochs=(12000, 20, 60),
+        finetune_learning_rate=1e-6,
+        decisions=("L_Iτ quadrature, Furuta DeLaN", "L_Iτ epochs, Furuta DeLaN", "fine-tuning step, Furuta DeLaN"),
+    ),
     ("furuta", "aph", "prop"): _row(
-        "furuta", quadrature="hermite", finetune_learning_rate=1e-4, augmentation_weight=0.1,
-        decisions=("L_Iτ quadrature, Furuta APHYNITY", "fine-tuning step, APHYNITY", "μ per system and kind",
-                   "F_a design")),
+        "furuta",
+        quadrature="hermite",
+        finetune_learning_rate=1e-4,
+        augmentation_weight=0.1,
+        decisions=(
+            "L_Iτ quadrature, Furuta APHYNITY",
+            "fine-tuning step, APHYNITY",
+            "μ per system and kind",
+            "F_a design",
+        ),
+    ),
     ("furuta", "adln", "prop"): _row(
-        "furuta", epochs=(24000, 20, 60), quadrature="hermite", finetune_learning_rate=3e-4,
+        "furuta",
+        epochs=(24000, 20, 60),
+        quadrature="hermite",
+        finetune_learning_rate=3e-4,
         augmentation_weight=10.0,
-        decisions=("L_Iτ epochs, Furuta augmented DeLaN", "fine-tuning step, Furuta augmented DeLaN",
-                   "L_Iτ quadrature, Furuta augmented DeLaN", "μ per system and kind", "F_a design")),
+        decisions=(
+            "L_Iτ epochs, Furuta augmented DeLaN",
+            "fine-tuning step, Furuta augmented DeLaN",
+            "L_Iτ quadrature, Furuta augmented DeLaN",
+            "μ per system and kind",
+            "F_a design",
+        ),
+    ),
     ("nmsd", "dln", "prop"): _row("nmsd", epochs=(8000, 30, 30), decisions=("L_Iτ epochs, N-MSD DeLaN",)),
     ("nmsd", "aph", "prop"): _row(
-        "nmsd", quadrature="trapezoid", finetune_learning_rate=1e-4, augmentation_weight=1e-4,
+        "nmsd",
+        quadrature="trapezoid",
+        finetune_learning_rate=1e-4,
+        augmentation_weight=1e-4,
         replaces=("L_Iτ quadrature, N-MSD", "fine-tuning step, N-MSD DeLaN and augmented DeLaN"),
-        decisions=("L_Iτ quadrature, N-MSD APHYNITY", "fine-tuning step, APHYNITY", "μ per system and kind",
-                   "F_a design")),
+        decisions=(
+            "L_Iτ quadrature, N-MSD APHYNITY",
+            "fine-tuning step, APHYNITY",
+            "μ per system and kind",
+            "F_a design",
+        ),
+    ),
     ("nmsd", "adln", "prop"): _row(
-        "nmsd", quadrature="trapezoid", augmentation_weight=1e-2, replaces=("L_Iτ quadrature, N-MSD",),
-        decisions=("L_Iτ quadrature, N-MSD augmented DeLaN", "μ per system and kind", "F_a design",
-                   "N-MSD augmented DeLaN F_a odd in q̇")),
+        "nmsd",
+        quadrature="trapezoid",
+        augmentation_weight=1e-2,
+        replaces=("L_Iτ quadrature, N-MSD",),
+        decisions=(
+            "L_Iτ quadrature, N-MSD augmented DeLaN",
+            "μ per system and kind",
+            "F_a design",
+            "N-MSD augmented DeLaN F_a odd in q̇",
+        ),
+    ),
 }
 
 #: the paper's training schedule per system (appendix A.2): epochs of the 2-step and the
@@ -114,5 +169,6 @@ def recipe_row(system: str, kind: str | None, loss: str, epochs: tuple[int, ...]
     row = RECIPE.get((system, kind, loss)) or SYSTEM_ROWS[system]["prop" if loss == "prop" else "baseline"]
     if epochs is None:
         return row
-    return dataclasses.replace(row, epochs=tuple(epochs), quadrature=DEFAULT_QUADRATURE,
-                               finetune_learning_rate=DEFAULT_LEARNING_RATE)
+    return dataclasses.replace(
+        row, epochs=tuple(epochs), quadrature=DEFAULT_QUADRATURE, finetune_learning_rate=DEFAULT_LEARNING_RATE
+    )

@@ -103,8 +103,7 @@ METRIC_COLUMNS = {
 }
 #: How the data are measured (:attr:`ReproduceConfig.sensor`): the paper's simulated data, or as its
 #: QUBE recordings were.
-SENSORS = {"exact": SensorOptions(),
-           "experiment": SensorOptions(quantize=True, velocity="filter")}
+SENSORS = {"exact": SensorOptions(), "experiment": SensorOptions(quantize=True, velocity="filter")}
 #: What the models train on (:attr:`ReproduceConfig.training_velocities`).
 TRAINING_VELOCITIES = ("recorded", "zero_phase")
 #: Where the models are trained (:attr:`ReproduceConfig.executor`).
@@ -152,6 +151,7 @@ class ReproduceConfig:
     :func:`~furuta_gym.signals.zero_phase_velocity`), as one would process logged data; the test
     sets are scored as recorded either way.
     """
+
     quick: bool = False
     seeds: tuple[int, ...] = (0,)
     data_seed: int = 0
@@ -194,11 +194,13 @@ class ReproduceConfig:
         if not self.seeds:
             raise ValueError("seeds must name at least one seed")
         if not (isinstance(self.integral_span, int) and self.integral_span >= 1):
-            raise ValueError(f"integral_span must be a positive integer (intervals per L_Iτ residual), "
-                             f"got {self.integral_span!r}")
+            raise ValueError(
+                f"integral_span must be a positive integer (intervals per L_Iτ residual), got {self.integral_span!r}"
+            )
         if self.training_velocities not in TRAINING_VELOCITIES:
-            raise ValueError(f"training_velocities must be one of {TRAINING_VELOCITIES}, "
-                             f"got {self.training_velocities!r}")
+            raise ValueError(
+                f"training_velocities must be one of {TRAINING_VELOCITIES}, got {self.training_velocities!r}"
+            )
         if self.sensor not in SENSORS:
             raise ValueError(f"sensor must be one of {sorted(SENSORS)}, got {self.sensor!r}")
         if self.plant is not None and self.ground_truth == "analytic":
@@ -216,10 +218,12 @@ class ReproduceConfig:
 FULL_PROP_EPOCHS = {s: rows["prop"].epochs for s, rows in SYSTEM_ROWS.items()}
 REPRODUCE_QUADRATURE = DEFAULT_QUADRATURE
 _PROP_ROWS = {(s, k): row for (s, k, loss), row in RECIPE.items() if loss == "prop"}
-FULL_PROP_QUADRATURE = {key: row.quadrature for key, row in _PROP_ROWS.items()
-                        if row.quadrature != DEFAULT_QUADRATURE}
-FULL_PROP_FINETUNE_LEARNING_RATE = {key: row.finetune_learning_rate for key, row in _PROP_ROWS.items()
-                                    if row.finetune_learning_rate != DEFAULT_LEARNING_RATE}
+FULL_PROP_QUADRATURE = {key: row.quadrature for key, row in _PROP_ROWS.items() if row.quadrature != DEFAULT_QUADRATURE}
+FULL_PROP_FINETUNE_LEARNING_RATE = {
+    key: row.finetune_learning_rate
+    for key, row in _PROP_ROWS.items()
+    if row.finetune_learning_rate != DEFAULT_LEARNING_RATE
+}
 
 
 def _run_recipe(system: str, config: ReproduceConfig, loss: str, kind: str | None) -> RunRecipe:
@@ -252,8 +256,14 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
     horizons = tuple(TrainConfig.for_system(name).horizons)
     if loss == "prop" and len(row.epochs) == 3:  # a leading stage of L_Iτ alone
         horizons = (None, *horizons)
-    overrides: dict[str, Any] = dict(epochs=row.epochs, horizons=horizons, seed=seed, progress=config.progress,
-                     checkpoint_every=0, quadrature=row.quadrature)
+    overrides: dict[str, Any] = dict(
+        epochs=row.epochs,
+        horizons=horizons,
+        seed=seed,
+        progress=config.progress,
+        checkpoint_every=0,
+        quadrature=row.quadrature,
+    )
     if config.quick:  # a few hundred steps per model: compiling them is most of the run
         overrides["fast_compile"] = True
     if loss == "prop":
@@ -304,8 +314,13 @@ def _datasets(system: str, out: Path, config: ReproduceConfig):
     manifest = folder / "manifest.json"
     if manifest.exists():
         meta = json.loads(manifest.read_text())
-        held = (meta.get("seed"), bool(meta.get("small")), meta.get("split", "test"),
-                meta.get("plant"), meta.get("sensor_name", "exact"))
+        held = (
+            meta.get("seed"),
+            bool(meta.get("small")),
+            meta.get("split", "test"),
+            meta.get("plant"),
+            meta.get("sensor_name", "exact"),
+        )
         wanted = (config.data_seed, config.small, config.split, _plant_json(config), config.sensor)
         if held != wanted:
             names = ("seed", "small", "split", "plant", "sensor")
@@ -335,8 +350,16 @@ def _generate_data(system: str, folder: Path, config: ReproduceConfig) -> None:
     truth = config.ground_truth
     if config.plant is not None:
         truth = MujocoGroundTruth(system, plant=Plant.load(config.plant))
-    generate(system, folder, seed=config.data_seed, small=config.small, ground_truth=truth,
-             sensor=SENSORS[config.sensor], overwrite=True, split=config.split)
+    generate(
+        system,
+        folder,
+        seed=config.data_seed,
+        small=config.small,
+        ground_truth=truth,
+        sensor=SENSORS[config.sensor],
+        overwrite=True,
+        split=config.split,
+    )
     if config.plant is not None or config.sensor != "exact":
         path = folder / "manifest.json"
         meta = json.loads(path.read_text())
@@ -344,15 +367,15 @@ def _generate_data(system: str, folder: Path, config: ReproduceConfig) -> None:
         path.write_text(json.dumps(meta, indent=2) + "\n")
 
 
-def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[str],
-                     config: ReproduceConfig) -> None:
+def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[str], config: ReproduceConfig) -> None:
     """Re-create data files a manifest lists but the folder lacks (a committed run keeps the
     manifest, not the CSVs): the data are seeded, so they must come out byte for byte as
     recorded; anything else is an error, never a silent change of the data under the models."""
 
     with tempfile.TemporaryDirectory() as tmp:
-        fresh_config = dataclasses.replace(config, ground_truth=meta.get("ground_truth", "auto")
-                                           if config.plant is None else config.ground_truth)
+        fresh_config = dataclasses.replace(
+            config, ground_truth=meta.get("ground_truth", "auto") if config.plant is None else config.ground_truth
+        )
         _generate_data(system, Path(tmp), fresh_config)
         for name in missing:
             entry = meta["files"][name]
@@ -380,8 +403,15 @@ def run_settings(system: str, kind: str, loss: str, seed: int, config: Reproduce
     so it compares with a saved record as it is."""
     train = training_config(system, config, seed, loss, kind).to_json()
     train.pop("progress", None)
-    settings = {"schema": RUN_RECORD_SCHEMA, "system": system, "model": kind, "loss": loss, "seed": seed,
-                "train": train, "model_hparams": _default_hparams(system, kind, config.model_overrides)}
+    settings = {
+        "schema": RUN_RECORD_SCHEMA,
+        "system": system,
+        "model": kind,
+        "loss": loss,
+        "seed": seed,
+        "train": train,
+        "model_hparams": _default_hparams(system, kind, config.model_overrides),
+    }
     if config.split != "test":  # the scale is fitted on the split's own trajectory
         settings["split"] = config.split
     if config.training_velocities != "recorded":
@@ -436,9 +466,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
 
             saved["model_hparams"] = json.loads(json.dumps(read_header(model_path).get("hparams", {}), default=str))
         if not same_settings(saved, cfg_json):
-            raise ValueError(
-                f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out"
-            )
+            raise ValueError(f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out")
     if metrics_path.exists():
         metrics = json.loads(metrics_path.read_text())
         if model_path.exists() or "_error" in metrics:
@@ -455,15 +483,25 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
         status = "resumed" if resume else "trained"
         train_trajs, forced = _training_data(system, data, config)
         try:
-            train(kind, system, loss, train_trajs, tcfg, out_dir=run_dir, resume=resume,
-                  forced_trajs=forced, hparams=config.model_overrides)
+            train(
+                kind,
+                system,
+                loss,
+                train_trajs,
+                tcfg,
+                out_dir=run_dir,
+                resume=resume,
+                forced_trajs=forced,
+                hparams=config.model_overrides,
+            )
             error = None if model_path.exists() else "training ended without a finite model"
         except (ValueError, FloatingPointError, RuntimeError) as exc:  # e.g. a failed scale fit
             error = f"{type(exc).__name__}: {exc}"
         if error is not None:
             # recorded, never hidden: every cell of this model reads "fail" in the tables
-            metrics: dict[str, Any] = {label: {m: FAILED for m in METRIC_COLUMNS[system]}
-                       for label in EVALUATION_SETS[config.split][system]}
+            metrics: dict[str, Any] = {
+                label: {m: FAILED for m in METRIC_COLUMNS[system]} for label in EVALUATION_SETS[config.split][system]
+            }
             metrics["_error"] = error
             metrics_path.write_text(json.dumps(metrics, indent=1) + "\n")
             return metrics, time.perf_counter() - t0, "failed"
@@ -509,8 +547,10 @@ def truth_model(system: str, config: ReproduceConfig):
 
     plant = Plant.load(config.plant)
     if plant.lumped is None:
-        raise ValueError(f"plant {config.plant}: has no lumped parameters (a diagnosis or an MJCF furuta-gym "
-                         "wrote has them); a preset plant has no model to compare the physics with")
+        raise ValueError(
+            f"plant {config.plant}: has no lumped parameters (a diagnosis or an MJCF furuta-gym "
+            "wrote has them); a preset plant has no model to compare the physics with"
+        )
     effects = [e for e in plant.effects if not e.kind.has_memory]
     base = LumpedSystem.of(system, plant.lumped)
     return WithEffects(base, effects) if effects else base
@@ -532,16 +572,32 @@ def _run_task(system, kind, loss, seed, out, config, data=None, truth=None):
 #: the others idle (LPT scheduling).
 EXPECTED_SECONDS = {
     "full": {
-        ("nmsd", "dln", "traj"): 349, ("nmsd", "dln", "prop"): 953, ("nmsd", "aph", "aph"): 60,
-        ("nmsd", "aph", "prop"): 175, ("nmsd", "adln", "aph"): 449, ("nmsd", "adln", "prop"): 943,
-        ("furuta", "dln", "traj"): 55, ("furuta", "dln", "prop"): 297, ("furuta", "aph", "aph"): 42,
-        ("furuta", "aph", "prop"): 105, ("furuta", "adln", "aph"): 61, ("furuta", "adln", "prop"): 1808,
+        ("nmsd", "dln", "traj"): 349,
+        ("nmsd", "dln", "prop"): 953,
+        ("nmsd", "aph", "aph"): 60,
+        ("nmsd", "aph", "prop"): 175,
+        ("nmsd", "adln", "aph"): 449,
+        ("nmsd", "adln", "prop"): 943,
+        ("furuta", "dln", "traj"): 55,
+        ("furuta", "dln", "prop"): 297,
+        ("furuta", "aph", "aph"): 42,
+        ("furuta", "aph", "prop"): 105,
+        ("furuta", "adln", "aph"): 61,
+        ("furuta", "adln", "prop"): 1808,
     },
     "quick": {
-        ("nmsd", "dln", "traj"): 38, ("nmsd", "dln", "prop"): 56, ("nmsd", "aph", "aph"): 32,
-        ("nmsd", "aph", "prop"): 39, ("nmsd", "adln", "aph"): 44, ("nmsd", "adln", "prop"): 62,
-        ("furuta", "dln", "traj"): 42, ("furuta", "dln", "prop"): 39, ("furuta", "aph", "aph"): 36,
-        ("furuta", "aph", "prop"): 44, ("furuta", "adln", "aph"): 45, ("furuta", "adln", "prop"): 49,
+        ("nmsd", "dln", "traj"): 38,
+        ("nmsd", "dln", "prop"): 56,
+        ("nmsd", "aph", "aph"): 32,
+        ("nmsd", "aph", "prop"): 39,
+        ("nmsd", "adln", "aph"): 44,
+        ("nmsd", "adln", "prop"): 62,
+        ("furuta", "dln", "traj"): 42,
+        ("furuta", "dln", "prop"): 39,
+        ("furuta", "aph", "aph"): 36,
+        ("furuta", "aph", "prop"): 44,
+        ("furuta", "adln", "aph"): 45,
+        ("furuta", "adln", "prop"): 49,
     },
 }
 
@@ -572,6 +628,7 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log) -> It
     error, seconds))`` once per system, made as soon as that system's last model is done (in the
     pool: beside the models still training, and in the worker that has most likely compiled the
     models' predictions already)."""
+
     def report(task, result):
         system, kind, loss, seed = task
         log(f"[{system}] {MODEL_LABELS[kind]} ({LOSS_LABELS[loss]}) seed {seed}: {result[2]} in {result[1]} s")
@@ -601,8 +658,7 @@ def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, rep
         yield "model", task, result
     if config.figures:
         for system in dict.fromkeys(t[0] for t in tasks):
-            yield "figures", system, _figures_task(system, out, config, loaded[system]["data"],
-                                                   loaded[system]["truth"])
+            yield "figures", system, _figures_task(system, out, config, loaded[system]["data"], loaded[system]["truth"])
 
 
 class _PoolExecutor:
@@ -627,8 +683,10 @@ def _drain(executor, tasks, out: Path, config: ReproduceConfig, report):
     left: dict[str, int] = {}
     for t in tasks:
         left[t[0]] = left.get(t[0], 0) + 1
-    pending = {executor.submit(_run_task, (*task, out, config), _task_name(task)): ("model", task)
-               for task in _longest_first(tasks, config)}
+    pending = {
+        executor.submit(_run_task, (*task, out, config), _task_name(task)): ("model", task)
+        for task in _longest_first(tasks, config)
+    }
     while pending:
         for handle in executor.first_done(pending):
             what, item = pending.pop(handle)
@@ -676,8 +734,9 @@ def reproduce(
         timings[f"{system}/data"] = round(time.perf_counter() - t0, 1)
         log(f"[{system}] data ready ({meta.get('ground_truth')} ground truth) in {timings[f'{system}/data']} s")
         models_for_figures[system] = {"data": data, "truth": truth_model(system, config)}
-    tasks = [(system, kind, loss, seed) for system in config.systems
-             for kind, loss in config.pairs for seed in config.seeds]
+    tasks = [
+        (system, kind, loss, seed) for system in config.systems for kind, loss in config.pairs for seed in config.seeds
+    ]
     figure_paths: dict[str, dict] = {}
     for what, item, result in _run_all(tasks, out, config, models_for_figures, log):
         if what == "figures":
@@ -695,8 +754,9 @@ def reproduce(
             timings[f"{system}/{kind}_{loss}/seed{seed}"]["original"] = metrics["_seconds"]
         results[(system, kind, loss, seed)] = metrics
     # the paper's row order and seed order, whatever order the jobs finished in
-    results = {(s, k, l): [results[(s, k, l, seed)] for seed in config.seeds]
-               for s in config.systems for k, l in config.pairs}
+    results = {
+        (s, k, l): [results[(s, k, l, seed)] for seed in config.seeds] for s in config.systems for k, l in config.pairs
+    }
     paths = {}
     rows = build_tables(results, config)
     paths["tables.csv"] = _write_csv(out / "tables.csv", rows)
@@ -745,7 +805,9 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
             for kind, loss in config.pairs:
                 per_seed = results.get((system, kind, loss), [])
                 for metric in METRIC_COLUMNS[system]:
-                    paper_value = paper.get((system, label, MODEL_LABELS[kind], loss, _paper_metric(metric, config)), "")
+                    paper_value = paper.get(
+                        (system, label, MODEL_LABELS[kind], loss, _paper_metric(metric, config)), ""
+                    )
                     values = []
                     if kind == "aph" and metric in PHYSICS_METRICS:
                         ours_text, mean, std, ndiv = "N/A", None, None, 0
@@ -790,7 +852,7 @@ def _seed_text(value) -> str:
 
 
 def _compare(mean, ours_text, paper_value) -> str:
-    """"yes"/"no" when both cells are numbers (lower is better), "" otherwise."""
+    """ "yes"/"no" when both cells are numbers (lower is better), "" otherwise."""
     try:
         p = float(paper_value)
     except (TypeError, ValueError):
@@ -810,8 +872,16 @@ def _write_csv(path: Path, rows: list[dict]) -> Path:
 
 
 _METRIC_HEADERS = {
-    "p": "p", "p_dot": "ṗ", "alpha": "α", "beta": "β", "alpha_dot": "α̇", "beta_dot": "β̇",
-    "inertial": "Inertial", "coriolis": "Coriolis", "potential": "Potential-derived", "energy": "Energy",
+    "p": "p",
+    "p_dot": "ṗ",
+    "alpha": "α",
+    "beta": "β",
+    "alpha_dot": "α̇",
+    "beta_dot": "β̇",
+    "inertial": "Inertial",
+    "coriolis": "Coriolis",
+    "potential": "Potential-derived",
+    "energy": "Energy",
 }
 
 
@@ -835,8 +905,7 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
     ]
     if config.quick:
         lines += [
-            "> **Quick run**: scaled-down data and a few epochs — checks the pipeline, not the "
-            "paper's numbers.",
+            "> **Quick run**: scaled-down data and a few epochs — checks the pipeline, not the paper's numbers.",
             "",
         ]
     for system in config.systems:
@@ -851,7 +920,8 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
                 cells = []
                 for c in cols:
                     r = next(
-                        r for r in rows
+                        r
+                        for r in rows
                         if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"])
                         == (system, label, MODEL_LABELS[kind], loss, c)
                     )
@@ -877,8 +947,15 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
         out.append(f"- All rows: {n_yes} of {len(allnum)} numeric cells at or below the paper's.")
 
     def row_of(system, label, model, loss, metric) -> Any:  # the row (a dict), or None
-        return next((r for r in rows if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"])
-                     == (system, label, model, loss, metric)), None)
+        return next(
+            (
+                r
+                for r in rows
+                if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"])
+                == (system, label, model, loss, metric)
+            ),
+            None,
+        )
 
     def mean_of(*key):
         r = row_of(*key)
@@ -888,8 +965,10 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
         claim = system_data(system).main_claim
         if claim is None:
             continue
-        out.append(f"- Main claim ({claim}: L_prop gives a better force decomposition than L_traj for "
-                   "DLN and than L_aph for ADLN), ours:")
+        out.append(
+            f"- Main claim ({claim}: L_prop gives a better force decomposition than L_traj for "
+            "DLN and than L_aph for ADLN), ours:"
+        )
         for model, base in (("DLN", "traj"), ("ADLN", "aph")):
             if ((model.lower(), base) not in config.pairs) or ((model.lower(), "prop") not in config.pairs):
                 continue
@@ -901,8 +980,9 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
                     if a is None or b is None:
                         parts.append(f"{metric}: n/a")
                     else:
-                        seeds = _seeds_holding(row_of(system, label, model, "prop", metric),
-                                               row_of(system, label, model, base, metric))
+                        seeds = _seeds_holding(
+                            row_of(system, label, model, "prop", metric), row_of(system, label, model, base, metric)
+                        )
                         parts.append(f"{metric} {a:.2f} vs {b:.2f} ({'holds' if a < b else 'does not hold'}{seeds})")
                 out.append(f"  - {model} {label}: " + "; ".join(parts))
     out.append("")

@@ -63,8 +63,11 @@ __all__ = ["TrainConfig", "train", "training_step", "fit_scale", "data_hash", "L
 LOSSES = ("traj", "aph", "prop", "itau")
 #: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
 #: TrainConfig.augmentation_weight is None: the recipe's (furuta_gym.training.recipe).
-AUGMENTATION_WEIGHT = {(s, k): row.augmentation_weight for (s, k, loss), row in RECIPE.items()
-                       if loss == "prop" and row.augmentation_weight is not None}
+AUGMENTATION_WEIGHT = {
+    (s, k): row.augmentation_weight
+    for (s, k, loss), row in RECIPE.items()
+    if loss == "prop" and row.augmentation_weight is not None
+}
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
@@ -151,15 +154,12 @@ class TrainConfig:
         object.__setattr__(self, "epochs", tuple(int(e) for e in self.epochs))
         object.__setattr__(self, "horizons", tuple(self.horizons))
         if len(self.epochs) != len(self.horizons):
-            raise ValueError(
-                f"epochs {self.epochs} and horizons {self.horizons} must have one entry per stage"
-            )
+            raise ValueError(f"epochs {self.epochs} and horizons {self.horizons} must have one entry per stage")
         if isinstance(self.learning_rate, (tuple, list)):
             object.__setattr__(self, "learning_rate", tuple(float(r) for r in self.learning_rate))
             if len(self.learning_rate) != len(self.epochs):
                 raise ValueError(
-                    f"learning_rate {self.learning_rate} must be one value or one per stage "
-                    f"({len(self.epochs)} stages)"
+                    f"learning_rate {self.learning_rate} must be one value or one per stage ({len(self.epochs)} stages)"
                 )
         rates = self.learning_rate if isinstance(self.learning_rate, tuple) else (self.learning_rate,)
         if not all(float(r) > 0 for r in rates):
@@ -240,12 +240,13 @@ def _check_resumable_config(state_path, saved: dict | None, current: dict) -> No
     if saved is None:
         return
     current = json.loads(json.dumps(current))  # tuples as the saved JSON holds them: lists
-    differ = sorted(k for k in current.keys() & saved.keys()
-                    if k not in RESUMABLE_CHANGES and saved[k] != current[k])
+    differ = sorted(k for k in current.keys() & saved.keys() if k not in RESUMABLE_CHANGES and saved[k] != current[k])
     if differ:
         detail = "; ".join(f"{k}: saved {saved[k]!r}, now {current[k]!r}" for k in differ)
-        raise ValueError(f"{state_path}: cannot resume with other training settings ({detail}); "
-                         "train into another output directory, or resume with the saved settings")
+        raise ValueError(
+            f"{state_path}: cannot resume with other training settings ({detail}); "
+            "train into another output directory, or resume with the saved settings"
+        )
 
 
 def data_hash(trajs: Sequence[Trajectory]) -> str:
@@ -347,13 +348,17 @@ def _build_optimizer(model, config: TrainConfig):
     adam = optax.adamw(1.0, weight_decay=config.weight_decay, mask=mask)
     opt = optax.chain(optax.clip_by_global_norm(config.grad_clip), adam) if config.grad_clip else adam
     # _make_step may store a step traced with this optimiser on disk: record what defines it
-    _step_cache.register_optimizer(opt, f"adamw lr=1 (scaled per step) wd={config.weight_decay!r} "
-                                   f"clip={config.grad_clip!r} mask={_step_cache.array_digest(mask)}")
+    _step_cache.register_optimizer(
+        opt,
+        f"adamw lr=1 (scaled per step) wd={config.weight_decay!r} "
+        f"clip={config.grad_clip!r} mask={_step_cache.array_digest(mask)}",
+    )
     return opt, trainable, params
 
 
-def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization: Normalization,
-               augmentation_weight: float = 0.0):
+def _make_step(
+    static, optimizer, loss: str, config: TrainConfig, normalization: Normalization, augmentation_weight: float = 0.0
+):
     traj_kw: dict[str, Any] = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
     use_traj = loss in ("traj", "aph", "prop")
     use_int = loss in ("prop", "itau")
@@ -370,8 +375,13 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
             if use_int:
                 assert int_b is not None
                 terms["itau"], share = integral_loss_terms(
-                    model, int_b, rule=config.quadrature, normalize=normalization, with_augmentation=use_share,
-                    augmentation_part=config.augmentation_part, resolution_tolerance=config.resolution_tolerance,
+                    model,
+                    int_b,
+                    rule=config.quadrature,
+                    normalize=normalization,
+                    with_augmentation=use_share,
+                    augmentation_part=config.augmentation_part,
+                    resolution_tolerance=config.resolution_tolerance,
                     span=config.integral_span,
                 )
                 total = total + terms["itau"]
@@ -408,18 +418,29 @@ def _make_step(static, optimizer, loss: str, config: TrainConfig, normalization:
     cache_dir = _step_cache.step_cache_dir()
     described = _step_cache.optimizer_description(optimizer)
     if cache_dir is not None and described is not None:
-        key = {"loss": loss, "normalization": normalization, "config": repr(config),
-               "augmentation_weight": repr(float(augmentation_weight)),
-               "optimizer": described, "static": _step_cache.array_digest(static)}
+        key = {
+            "loss": loss,
+            "normalization": normalization,
+            "config": repr(config),
+            "augmentation_weight": repr(float(augmentation_weight)),
+            "optimizer": described,
+            "static": _step_cache.array_digest(static),
+        }
         # JAX takes compiler options on an outermost jit only: the step is exported without them
         # and the stored computation compiled with them
-        return _step_cache.ExportedStep(live_step, key, cache_dir, compiler_options=compiler_options,
-                                        export_step=eqx.filter_jit(step) if compiler_options else None)
+        return _step_cache.ExportedStep(
+            live_step,
+            key,
+            cache_dir,
+            compiler_options=compiler_options,
+            export_step=eqx.filter_jit(step) if compiler_options else None,
+        )
     return live_step
 
 
-def training_step(model, config: TrainConfig, loss: str, normalization: Normalization = "momentum",
-                  augmentation_weight: float = 0.0):
+def training_step(
+    model, config: TrainConfig, loss: str, normalization: Normalization = "momentum", augmentation_weight: float = 0.0
+):
     """One optimiser step of ``loss`` for ``model``, built as :func:`train` builds it, with its
     starting parameters and optimiser state: ``(step, params, opt_state)``.
 
@@ -492,22 +513,38 @@ def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict]
     stage = stages.of_epoch(epoch)
     loss_now = stages.loss(stage)
     traj_batches, int_batches = _epoch_batches(
-        np.random.default_rng([config.seed, epoch]), None if loss_now == "itau" else stages.windows(stage),
-        stages.int_windows, config)
+        np.random.default_rng([config.seed, epoch]),
+        None if loss_now == "itau" else stages.windows(stage),
+        stages.int_windows,
+        config,
+    )
     params_before = run.params
-    means, skipped = _run_steps(stages.step(stage), run, traj_batches, int_batches,
-                                config.epoch_learning_rate(epoch))
+    means, skipped = _run_steps(stages.step(stage), run, traj_batches, int_batches, config.epoch_learning_rate(epoch))
     record_best = {}
     # one full-batch step: its loss is exactly the loss of the parameters it started from
     if config.keep_best_itau and loss_now == "itau" and len(int_batches) == 1:
-        record_best = _keep_best_itau(run, stages.step(stage), stage, epoch, stages.bounds, means, params_before,
-                                      int_batches[0], ok=len(traj_batches) > skipped)
+        record_best = _keep_best_itau(
+            run,
+            stages.step(stage),
+            stage,
+            epoch,
+            stages.bounds,
+            means,
+            params_before,
+            int_batches[0],
+            ok=len(traj_batches) > skipped,
+        )
     if stages.lam_step and "traj" in means:
         run.lam = run.lam + stages.lam_step * means["traj"]
     record = {
-        "epoch": epoch + 1, "stage": stage,
+        "epoch": epoch + 1,
+        "stage": stage,
         "horizon": None if loss_now == "itau" else stages.windows(stage).length - 1,
-        **means, "lambda": run.lam, "steps": len(traj_batches), "skipped": skipped, **record_best,
+        **means,
+        "lambda": run.lam,
+        "steps": len(traj_batches),
+        "skipped": skipped,
+        **record_best,
         "seconds": time.perf_counter() - t0,
     }
     return record, means
@@ -556,12 +593,24 @@ def train(
     _, static = eqx.partition(model, trainable)
     run = _RunState(params=params, opt_state=optimizer.init(params), lam=float(config.lambda_traj))
     out = Path(out_dir) if out_dir is not None else None
-    run_info = {"model_kind": model_kind, "system": spec.name, "loss": loss, "data_hash": dhash,
-                "config": config.to_json()}
+    run_info = {
+        "model_kind": model_kind,
+        "system": spec.name,
+        "loss": loss,
+        "data_hash": dhash,
+        "config": config.to_json(),
+    }
     if out is not None:
         static = _open_run_dir(out, resume, model, trainable, run, run_info, static)
-    stages = _Stages(config, loss, trajs, dt, shortest, int_windows,
-                     lambda name: _make_step(static, optimizer, name, config, normalization, augmentation_weight))
+    stages = _Stages(
+        config,
+        loss,
+        trajs,
+        dt,
+        shortest,
+        int_windows,
+        lambda name: _make_step(static, optimizer, name, config, normalization, augmentation_weight),
+    )
     with _polite_stop(out, run) as stop, _progress_bar(config, run.start_epoch, f"{model_kind}/{loss}") as bar:
         for epoch in range(run.start_epoch, config.total_epochs):
             record, means = _run_epoch(stages, run, epoch)
@@ -647,8 +696,9 @@ def _open_run_dir(out: Path, resume: bool, model, trainable, run: _RunState, run
             "--resume) or choose another output directory"
         )
     if resume and state_path.exists():
-        m0, run.opt_state, header, best_model = ckpt.load_training_state(state_path, model, run.opt_state,
-                                                                         with_best=True)
+        m0, run.opt_state, header, best_model = ckpt.load_training_state(
+            state_path, model, run.opt_state, with_best=True
+        )
         st = header["state"]
         for key in ("model_kind", "system", "loss", "data_hash"):
             if st["run"][key] != run_info[key]:
@@ -697,8 +747,9 @@ def _run_steps(step, run: _RunState, traj_batches, int_batches, learning_rate: f
     sums: dict[str, float] = {}
     skipped = 0
     for tb, ib_ in zip(traj_batches, int_batches):
-        run.params, run.opt_state, terms, ok = step(run.params, run.opt_state, tb, ib_, jnp.asarray(run.lam),
-                                                    jnp.asarray(learning_rate))
+        run.params, run.opt_state, terms, ok = step(
+            run.params, run.opt_state, tb, ib_, jnp.asarray(run.lam), jnp.asarray(learning_rate)
+        )
         if bool(ok):
             for k, v in terms.items():
                 sums[k] = sums.get(k, 0.0) + float(v)
@@ -708,8 +759,9 @@ def _run_steps(step, run: _RunState, traj_batches, int_batches, learning_rate: f
     return ({k: v / n_ok for k, v in sums.items()} if n_ok else {}), skipped
 
 
-def _keep_best_itau(run: _RunState, step, stage: int, epoch: int, bounds, means, params_before, int_batch,
-                    ok: bool) -> dict:
+def _keep_best_itau(
+    run: _RunState, step, stage: int, epoch: int, bounds, means, params_before, int_batch, ok: bool
+) -> dict:
     """keep_best_itau: track the lowest-loss iterate of a full-batch L_Iτ stage and hand it on
     when the stage ends; returns the history fields of that hand-over (or {})."""
     best = run.best
@@ -721,8 +773,9 @@ def _keep_best_itau(run: _RunState, step, stage: int, epoch: int, bounds, means,
     # the stage ends: its last step's result is evaluated too (a step at rate 0 is just the loss;
     # the step is pure, so its other outputs are dropped), then the stage hands on whichever
     # iterate had the lowest loss
-    _, _, final_terms, final_ok = step(run.params, run.opt_state, None, int_batch, jnp.asarray(run.lam),
-                                       jnp.asarray(0.0))
+    _, _, final_terms, final_ok = step(
+        run.params, run.opt_state, None, int_batch, jnp.asarray(run.lam), jnp.asarray(0.0)
+    )
     if bool(final_ok) and float(final_terms["total"]) < best["total"]:
         best = {"stage": stage, "after": epoch + 1, "total": float(final_terms["total"]), "params": run.params}
     run.params = best["params"]
@@ -730,8 +783,9 @@ def _keep_best_itau(run: _RunState, step, stage: int, epoch: int, bounds, means,
     return {"best_after_epoch": best["after"], "best_total": best["total"]}
 
 
-def _save_epoch(out: Path | None, record: dict, run: _RunState, static, run_info: dict,
-                config: TrainConfig, loss: str) -> None:
+def _save_epoch(
+    out: Path | None, record: dict, run: _RunState, static, run_info: dict, config: TrainConfig, loss: str
+) -> None:
     """The epoch's history line, the resumable state and (every ``checkpoint_every``) a snapshot."""
     if out is None:
         return
@@ -752,8 +806,12 @@ def _save_epoch(out: Path | None, record: dict, run: _RunState, static, run_info
         best_model = eqx.combine(run.best["params"], static)
     ckpt.save_training_state(out / STATE_FILE, model_now, run.opt_state, extra, best_model=best_model)
     if snapshot:
-        ckpt.save_model(out / f"model_epoch{epoch:06d}.eqx", model_now,
-                        {**meta, "potential_shape": record["potential_shape"]}, overwrite=True)
+        ckpt.save_model(
+            out / f"model_epoch{epoch:06d}.eqx",
+            model_now,
+            {**meta, "potential_shape": record["potential_shape"]},
+            overwrite=True,
+        )
 
 
 def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: int, steps: int) -> None:
@@ -767,8 +825,7 @@ def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: in
         bar.update(1)
     if skipped:
         warnings.warn(
-            f"epoch {epoch + 1}: skipped {skipped} of {steps} step(s) with a non-finite loss or "
-            "gradient (NaN guard)",
+            f"epoch {epoch + 1}: skipped {skipped} of {steps} step(s) with a non-finite loss or gradient (NaN guard)",
             RuntimeWarning,
             stacklevel=3,
         )
@@ -814,8 +871,13 @@ def _progress_bar(config: TrainConfig, start_epoch: int, desc: str):
 def _finish(model, history: list, config: TrainConfig, loss: str, dhash: str, trajs, forced_trajs, out):
     """The trained model (with its overall scale fitted on ``forced_trajs``), saved with its
     history when there is an ``out`` directory; returns ``(model, history)``."""
-    meta = {"data_hash": dhash, "epoch": len(history), "loss": loss, "config": config.to_json(),
-            "final": history[-1] if history else None}
+    meta = {
+        "data_hash": dhash,
+        "epoch": len(history),
+        "loss": loss,
+        "config": config.to_json(),
+        "final": history[-1] if history else None,
+    }
     if forced_trajs:
         model, fit = fit_scale(model, forced_trajs, rule=config.quadrature, span=config.integral_span)
         meta["scale_fit"] = fit.to_json()
