@@ -17,6 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 from scipy import signal
 
+from ..envs.vector import scan_closed_loop
 from ..lagrangian import AbstractLagrangianSystem
 from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter_coefficients, quantize_encoder
 from ._base import AbstractController
@@ -87,7 +88,6 @@ def closed_loop(
     The loop is the envs' (:func:`furuta_gym.envs.vector.rollout`): the same controlled step, and a
     plant state that diverges (non-finite or beyond 1e6) is frozen at its last finite value, with
     zero voltage recorded from then on."""
-    from ..envs.vector import scan_closed_loop
 
     x0 = jnp.asarray(x0, dtype=float)
     out, obs, cstates = scan_closed_loop(

@@ -22,6 +22,7 @@ from ..lagrangian import AbstractLagrangianSystem
 from ._base import AbstractController, wrap_angle
 from ._energy import EnergySwingUp
 from ._lqr import DEFAULT_Q, DEFAULT_R, LQR, ActsOn
+from ._tuning import pick_k_e
 
 __all__ = ["SwingUpLQR", "SWING_UP", "BALANCE"]
 
@@ -100,7 +101,6 @@ class SwingUpLQR(AbstractController):
         if auto_gain:
             if k_e is not None:
                 raise ValueError("give either k_e or auto_gain=True, not both")
-            from ._tuning import pick_k_e
 
             return pick_k_e(build, model, dt=dt, seed=seed).controller
         return build(k_e)

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..lagrangian import AbstractLagrangianSystem
+from ._energy import default_k_e
 from ._metrics import episode_metrics
 from ._rollout import closed_loop
 
@@ -90,8 +91,6 @@ def pick_k_e(
     """Pick k_e on the design model (see the module docstring); ``build(k_e)`` makes a
     :class:`SwingUpLQR` with that gain; ``grid`` overrides the default relative grid."""
     if grid is None:
-        from ._energy import default_k_e
-
         k0 = default_k_e(model)
         grid = [k0 * f for f in GRID_FACTORS]
     grid = tuple(sorted(float(k) for k in grid))

@@ -10,6 +10,8 @@ measures what it buys (BENCHMARKS.md, "Single-env speed").
 
 from __future__ import annotations
 
+import jax
+
 __all__ = ["inline_cpu_dispatch"]
 
 
@@ -20,12 +22,11 @@ def inline_cpu_dispatch() -> None:
     when it creates its CPU backend); afterwards it raises :class:`RuntimeError` rather than
     silently doing nothing. Affects every JAX computation of the process.
     """
-    import jax
 
     if not jax.config.read("jax_cpu_enable_async_dispatch"):
         return
     try:  # JAX has no public way to ask whether its backends exist yet
-        from jax._src import xla_bridge
+        from jax._src import xla_bridge  # noqa: PLC0415  JAX internals that may move: inside the try
 
         initialized = xla_bridge.backends_are_initialized()
     except (ImportError, AttributeError):  # moved in another JAX version: cannot tell, set it

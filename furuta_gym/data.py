@@ -21,6 +21,8 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+from scipy.io import loadmat
+from scipy.io.matlab import MatReadError
 
 from .lagrangian import SystemSpec
 from .systems import SYSTEMS, get_spec
@@ -103,9 +105,6 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
         with np.load(path, allow_pickle=False) as z:
             return {k: np.ravel(z[k]) for k in z.files}
     if suffix == ".mat":
-        from scipy.io import loadmat
-        from scipy.io.matlab import MatReadError
-
         try:
             m = loadmat(path, squeeze_me=True)
         except NotImplementedError:  # scipy reads MAT v4-v7.2, not the HDF5-based v7.3

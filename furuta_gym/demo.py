@@ -24,13 +24,16 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from tqdm.auto import tqdm
 
 from ._x64 import ensure_x64
 from .controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
 from .data import save_trajectories
 from .diagnose import diagnose, measured_like
 from .effects import Effect
+from .models import Furuta
 from .training.datagen import FurutaRecipe, generate_datasets, write_datasets
+from .training.metrics import FORCE_TERMS, energy_error, force_decomposition_errors
 from .training.train import TrainConfig, train
 
 __all__ = ["DemoConfig", "run_demo"]
@@ -71,7 +74,6 @@ class DemoConfig:
 
 
 def _bar(total: int, desc: str, enabled: bool):
-    from tqdm.auto import tqdm
 
     return tqdm(total=total, desc=desc, disable=not enabled, leave=True)
 
@@ -83,7 +85,7 @@ def run_demo(
 
     Refuses an ``out_dir`` that already holds a demo (``summary.json``) unless ``overwrite``.
     """
-    import matplotlib
+    import matplotlib  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     matplotlib.use("Agg")
 
@@ -195,8 +197,6 @@ def _physics_vs_truth(models: dict, datasets: dict) -> dict:
     """3b. What the paper's loss is for: each learned model's energy and its force decomposition
     (inertial, Coriolis, potential-derived terms) against the analytic truth, along the held-out
     trajectories' recorded states (log10 RMSE; the forces' the mean over the three terms)."""
-    from .models import Furuta
-    from .training.metrics import FORCE_TERMS, energy_error, force_decomposition_errors
 
     held_out = datasets["test_free"] + datasets["test_forced"]
     physics = {}
@@ -334,7 +334,7 @@ def summary_table(summary: dict) -> str:
 
 
 def _plot_tracking(path, t, tracks):
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
     n = len(t) + 1
@@ -354,7 +354,7 @@ def _plot_tracking(path, t, tracks):
 
 
 def _plot_control(path, record):
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     fig, axes = plt.subplots(3, 1, figsize=(8, 6), sharex=True)
     axes[0].plot(record.t, record.xs[:, 0])
@@ -372,7 +372,7 @@ def _plot_control(path, record):
 
 
 def _video(path, xs, fps: int = 30):
-    import imageio.v2 as imageio
+    import imageio.v2 as imageio  # noqa: PLC0415  only the video needs it
 
     env = gym.make("furuta_gym/Furuta-v0", render_mode="rgb_array")
     env.reset(seed=0)

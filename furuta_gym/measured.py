@@ -33,6 +33,7 @@ from .data import DataError, Trajectory
 from .models import SYSTEM_DEFINITIONS
 from .signals import ENCODER_COUNTS_PER_REV, derivative_filter, zero_phase_velocity
 from .simulate import rollout_zoh
+from .training.metrics import DIVERGED
 
 __all__ = [
     "SPLIT_SECONDS",
@@ -209,7 +210,6 @@ def window_errors(
     "window_seconds"}``; RMSE in the states' units (rad, rad/s). As in the paper's tables, a
     model whose prediction diverges on any window scores ``"X"`` on every state (``rmse``
     then holds the RMSE over the windows that did not)."""
-    from .training.metrics import DIVERGED
 
     x0, us, xs = prediction_windows(trajs, seconds, stride)
     dt = float(np.median([tr.dt for tr in trajs]))

@@ -31,8 +31,8 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
 from ._definitions import system_definition
+from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
 from ._system import first_joint_input
-from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams
 
 __all__ = ["LagrangianNetworks", "DeLaN", "known_damping_force"]
 
@@ -120,7 +120,6 @@ class DeLaN(AbstractLearnedSystem):
     hparams: tuple[tuple[str, Any], ...] = eqx.field(static=True)
 
     def __init__(self, system: str, *, key: PRNGKeyArray, **hparams):
-        from ._learned import system_defaults
 
         spec = get_spec(system)
         hp = system_defaults(spec.name)

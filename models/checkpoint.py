@@ -35,6 +35,11 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
+
+from ..systems import get_spec
+from ._factory import MODEL_KINDS, make_model
+from ._learned import AbstractLearnedSystem
 
 __all__ = [
     "CheckpointError",
@@ -147,7 +152,6 @@ def read_header(path: str | Path) -> dict:
 
 
 def _model_header(model, meta: dict | None) -> dict:
-    from ..models import AbstractLearnedSystem
 
     if not isinstance(model, AbstractLearnedSystem):
         raise TypeError(
@@ -187,8 +191,6 @@ def _form_1_hparams(kind: str, hparams: dict) -> dict:
 
 
 def _skeleton(header: dict, path: Path, expected_system: str | None, expected_kind: str | None = None):
-    from ..models import MODEL_KINDS, make_model
-    from ..systems import get_spec
 
     system, kind = header.get("system"), header.get("model_kind")
     if expected_system is not None:
@@ -259,7 +261,6 @@ def _deserialise_prefix(payload: bytes, skeleton):
 
 
 def _check_finite(tree, path) -> None:
-    import jax.numpy as jnp
 
     leaves = [l for l in jax.tree_util.tree_leaves(eqx.filter(tree, eqx.is_inexact_array))]
     if not all(bool(jnp.all(jnp.isfinite(l))) for l in leaves):

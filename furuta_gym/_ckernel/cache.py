@@ -129,7 +129,7 @@ def _locked(directory: Path):
     """Hold the cache directory's lock: concurrent workers wanting the same kernel compile it
     once (the others wait, then find it). Without fcntl there is no lock, only duplicate work."""
     try:
-        import fcntl
+        import fcntl  # noqa: PLC0415  POSIX only: elsewhere no lock
     except ImportError:
         yield
         return

@@ -12,6 +12,7 @@ from typing import Any, Callable, Sequence
 
 import jax
 import numpy as np
+from jax.extend.core import Literal
 
 from .errors import CKernelError, CKernelTranslationError
 
@@ -458,7 +459,6 @@ class _Translator:
 
     # -- the jaxpr walk -----------------------------------------------------------------------
     def read(self, env: dict, atom) -> _Var:
-        from jax.extend.core import Literal
 
         if isinstance(atom, Literal):
             aval: Any = atom.aval  # a ShapedArray

@@ -19,22 +19,21 @@ from ..effects import EFFECT_KINDS, INPUT_DYNAMICS_EFFECTS, Effect, EffectKind, 
 from ..envs import Plant
 from ..lagrangian import AbstractLagrangianSystem
 from ..measured import estimate_velocities
-from ..signals import ENCODER_COUNTS_PER_REV
-from ..systems import get_spec
 from ..models import system_definition
 from ..models.checkpoint import load_model
-from . import _fit
-from . import _intervals
-from . import _rests
+from ..signals import ENCODER_COUNTS_PER_REV
+from ..systems import get_spec
+from . import _fit, _intervals, _rests
 from . import _trace as _trace_mod
 from ._intervals import FitOrigin, Interval
-from ._problem import Problem, fit_equation_error, free_columns
 from ._library import (
     Candidate,
     ParameterLayout,
     check_input_linear,
     layout_for,
 )
+from ._problem import Problem, fit_equation_error, free_columns
+from ._report import format_table
 
 __all__ = ["diagnose", "DiagnosisResult", "EffectEvidence", "ErrorSummary", "DiagnosisSettings"]
 
@@ -281,7 +280,6 @@ class DiagnosisResult:
         }
 
     def table(self) -> str:
-        from ._report import format_table
 
         return format_table(self)
 

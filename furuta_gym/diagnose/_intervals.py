@@ -23,6 +23,9 @@ from typing import Any
 import numpy as np
 from scipy.special import stdtrit
 
+from ..effects import INPUT_DYNAMICS_EFFECTS
+from . import _fit
+
 __all__ = [
     "Interval",
     "Intervals",
@@ -47,7 +50,7 @@ def _mujoco_calculate_intervals():
     """``mujoco.sysid.calculate_intervals``, or None: ``mujoco.sysid`` is missing on older MuJoCo
     and empty without its optional dependencies (``mujoco[sysid]``)."""
     try:
-        from mujoco.sysid import calculate_intervals
+        from mujoco.sysid import calculate_intervals  # noqa: PLC0415  the optional [sysid] extra
     except ImportError:
         return None
     return calculate_intervals
@@ -203,7 +206,6 @@ def _oe_problem(fx, origin: FitOrigin):
     """(r, J, clusters) of the output-error fit: position errors of its windows at its estimate,
     central differences (steps as the fit's), one cluster per window; the input dynamics' seconds
     as a last column (forward difference: the windows' inputs are transformed again)."""
-    from . import _fit
 
     win = fx.fit_windows(origin.dynamics, fx.oe_idx)
 
@@ -262,7 +264,6 @@ def fit_intervals(fx, theta, origin: FitOrigin):
     """({parameter or effect key: Interval or None}, notes, method) of the reported ``theta``
     from the fit ``origin``. Fixed and held parameters get None (held ones with a note); a
     parameter reached by a near-null direction gets an unbounded Interval and a note."""
-    from ..effects import INPUT_DYNAMICS_EFFECTS
 
     names_all = list(fx.layout.base) + [c.key for c in fx.layout.candidates]
     kind = origin.dynamics.kind

@@ -159,7 +159,7 @@ def _save(fig, path: Path) -> None:
 
 def _figure(layout: Any = "tight", **kw):
     # a bare Figure (no pyplot): no global backend switch, no open-figure registry to leak into
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     return Figure(layout=layout, **kw)
 

@@ -40,6 +40,7 @@ from scipy.signal import lfilter
 from .._x64 import ensure_x64
 from ..data import Trajectory
 from ..effects import ActuatorLag, Effect, WithEffects, actuator_lag_time
+from ..envs import MujocoBackend
 from ..models import SYSTEM_DEFINITIONS, analytic_model, system_definition
 from ..signals import chirp, quantize_encoder
 from ..simulate import rk4_zoh_step, rollout_zoh
@@ -148,8 +149,6 @@ class _Plant:
         mem = [e for e in effects if e.kind.input_dynamics != "delay"]
         self.backend, self.lag = None, None
         if plant == "mujoco":
-            from ..envs import MujocoBackend
-
             # the lag is native. ``fine``: ``substeps`` RK4 steps per sample, as the analytic
             # plant; else one MJCF step (2 ms / 10 ms), as the chirp data always had
             n = substeps if fine else 1

@@ -10,11 +10,13 @@
 See docs/envs.md.
 """
 
+import gymnasium
+
 from ._backends import AbstractBackend, ModelBackend, MujocoBackend, load_checkpoint, make_backend
 from ._base import LagrangianEnv
-from ._settings import Actuation, Camera, EnvArgumentError, Episode, Plant, Sensors, Spaces
 from ._mjcf_out import plant_mjcf, save_mjcf
 from ._parameters import default_parameters
+from ._settings import Actuation, Camera, EnvArgumentError, Episode, Plant, Sensors, Spaces
 from ._tasks import DEFAULT_STATE_BOUND, FurutaSwingUp, NMSDReach, is_diverged, tolerance
 from .furuta import FurutaEnv
 from .nmsd import NMSDEnv, Target
@@ -72,7 +74,6 @@ SWINGUP_EPISODE_STEPS = 500
 
 def register_envs() -> None:
     """Register the envs with Gymnasium (idempotent; called by ``import furuta_gym``)."""
-    import gymnasium
 
     for cls in ENV_CLASSES:
         if cls.env_id not in gymnasium.registry:

@@ -48,7 +48,7 @@ class SceneRenderer:
         model, data = backend.scene()
         update_scene(model, data)
         if self._renderer is None or self._renderer.model is not model:
-            from gymnasium.envs.mujoco.mujoco_rendering import MujocoRenderer
+            from gymnasium.envs.mujoco.mujoco_rendering import MujocoRenderer  # noqa: PLC0415  a window's GL context only when one is shown
 
             self.close()
             self._renderer = MujocoRenderer(

@@ -24,6 +24,7 @@ import math
 import types
 from typing import Any
 
+import jax.numpy as jnp
 import numpy as np
 
 __all__ = [
@@ -52,7 +53,6 @@ def _namespace(x):
         return _SCALAR
     if isinstance(x, np.ndarray):
         return np
-    import jax.numpy as jnp  # only reached with JAX inputs
 
     return jnp
 

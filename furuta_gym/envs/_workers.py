@@ -22,15 +22,18 @@ import pickle
 import secrets
 import subprocess
 import sys
+import threading
 import traceback
 import weakref
-from multiprocessing import shared_memory
+from multiprocessing import resource_tracker, shared_memory
 from multiprocessing.connection import Client, Listener
 
+import jax
 import numpy as np
 
-from ._jax_rollout import chunk_bounds
+from .._x64 import enable_x64
 from ._batched_step import packed_output_width, step_function, unpack_outputs
+from ._jax_rollout import chunk_bounds
 
 __all__ = ["ProcessChunks"]
 
@@ -50,10 +53,8 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
     try:
         # the env's import path first, so a model class importable there is importable here
         sys.path[:] = list(path) + [p for p in sys.path if p not in path]
-        from .._x64 import enable_x64
 
         enable_x64()  # the env's own process already runs in float64 (and warned if it switched)
-        import jax
 
         if core is not None and hasattr(os, "sched_setaffinity"):
             # XLA:CPU sizes its thread pool from the cores this process may use when its backend
@@ -118,8 +119,6 @@ def _attach(name: str) -> shared_memory.SharedMemory:
     would otherwise unlink it (with a "leaked" warning) when the worker exits: the env owns it."""
     block = shared_memory.SharedMemory(name=name)
     try:
-        from multiprocessing import resource_tracker
-
         resource_tracker.unregister(getattr(block, "_name"), "shared_memory")
     except Exception:  # the tracker's layout is CPython's; without it only a warning is at stake
         pass
@@ -128,7 +127,6 @@ def _attach(name: str) -> shared_memory.SharedMemory:
 
 def _accept_workers(listener, processes, count: int) -> list:
     """Accept ``count`` connections, failing fast when a worker exits before it connects."""
-    import threading
 
     accepted: list = []
 

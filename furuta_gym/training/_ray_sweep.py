@@ -43,7 +43,7 @@ _THREAD_FLAGS = ("--xla_cpu_multi_thread_eigen", "intra_op_parallelism_threads")
 
 def _import_ray():
     try:
-        import ray
+        import ray  # noqa: PLC0415  the optional [cluster] extra
     except ImportError as exc:
         raise ImportError("--executor ray needs Ray: pip install 'furuta-gym[cluster]'") from exc
     return ray

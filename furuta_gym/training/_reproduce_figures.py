@@ -42,7 +42,7 @@ def _label(kind, loss) -> str:
 
 def make_figures(out: Path, config, per_system: dict) -> dict[str, Path]:
     """The four figures of each system (module docstring) into ``out/figures``; returns their paths."""
-    import matplotlib
+    import matplotlib  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     matplotlib.use("Agg")
     fig_dir = out / "figures"
@@ -67,7 +67,7 @@ def make_figures(out: Path, config, per_system: dict) -> dict[str, Path]:
 
 def _predictions(system, data, truth, models, tr, k):
     """Open-loop predictions on the first ``k`` samples of the first forced trajectory."""
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     n = truth.spec.n_dof
     fig, axes = plt.subplots(2 * n, 1, figsize=(8, 2.0 * 2 * n), sharex=True, squeeze=False)
@@ -103,7 +103,7 @@ def _energy_cases(system):
 
 
 def _energy_over_state(system, truth, physics):
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     for ax, (x, q, qd, xlabel) in zip(axes, _energy_cases(system)):
@@ -119,7 +119,7 @@ def _energy_over_state(system, truth, physics):
 
 
 def _energy_over_time(system, data, truth, physics):
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     tr_e = data[system_data(system).energy_set][0]
     fig, ax = plt.subplots(figsize=(7, 3.4))
@@ -137,7 +137,7 @@ def _energy_over_time(system, data, truth, physics):
 
 def _forces(system, truth, physics, tr, k):
     """Inertial, Coriolis and potential forces per joint along the first ``k`` samples of ``tr``."""
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     n = truth.spec.n_dof
     q, qd = jnp.asarray(tr.q[:k]), jnp.asarray(tr.qd[:k])
@@ -163,7 +163,7 @@ def _forces(system, truth, physics, tr, k):
 
 
 def _save(fig, path: Path) -> Path:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     fig.savefig(path, dpi=110)
     plt.close(fig)

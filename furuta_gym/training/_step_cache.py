@@ -42,6 +42,7 @@ from typing import Any, Callable
 import jax
 import jax.core
 import numpy as np
+from jax import export
 
 __all__ = ["step_cache_dir", "ExportedStep"]
 
@@ -57,7 +58,7 @@ def step_cache_dir() -> Path | None:
     if not base:
         return None
     try:
-        import flatbuffers  # noqa: F401  (jax.export's serialisation needs it)
+        import flatbuffers  # noqa: F401, PLC0415  (jax.export's serialisation needs it)
     except ImportError:
         return None
     return Path(base) / _SUBDIR
@@ -194,7 +195,6 @@ class ExportedStep:
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:32]
 
     def _load_or_export(self, args, leaves, treedef, sig):
-        from jax import export
 
         params_def = jax.tree_util.tree_structure(args[0])
         opt_def = jax.tree_util.tree_structure(args[1])
@@ -240,7 +240,6 @@ class ExportedStep:
         return call
 
     def _export(self, treedef, leaves, n_params, n_opt, params_def, opt_def):
-        from jax import export
 
         terms_keys: list[str] = []
         step = self._export_step

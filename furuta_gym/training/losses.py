@@ -150,7 +150,7 @@ def _runtime_checks_as_nan():
     another thread tracing Equinox checks at the same moment.
     """
     try:
-        from equinox import _errors
+        from equinox import _errors  # noqa: PLC0415  Equinox internals that may move: inside the try
 
         checked = _errors.branched_error_if_impl_jit
     except (ImportError, AttributeError):  # pragma: no cover - another Equinox layout

@@ -46,15 +46,16 @@ import numpy as np
 
 from .. import __version__, enable_x64, ensure_x64
 from ..data import load_trajectories
-from ..models import analytic_model, make_model, system_definition
+from ..effects import WithEffects
+from ..envs import Plant
+from ..models import LumpedSystem, analytic_model, make_model, system_definition
 from ..signals import zero_phase_velocity
 from ..systems import get_spec
-from . import _reproduce_figures
+from . import _ray_sweep, _reproduce_figures
 from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 from .checkpoint import load_model, package_versions, read_header
 from .datagen import SYSTEM_DATA, MujocoGroundTruth, SensorOptions, generate, system_data
 from .metrics import evaluate_model, metrics_to_json
-from .train import MODEL_FILE, STATE_FILE, TrainConfig, train
 from .recipe import (
     DEFAULT_LEARNING_RATE,
     DEFAULT_QUADRATURE,
@@ -65,6 +66,7 @@ from .recipe import (
     RunRecipe,
     recipe_row,
 )
+from .train import MODEL_FILE, STATE_FILE, TrainConfig, train
 
 __all__ = [
     "PAPER_PAIRS",
@@ -338,14 +340,12 @@ def _datasets(system: str, out: Path, config: ReproduceConfig):
 
 def _plant_json(config: ReproduceConfig) -> dict | None:
     """The plant of ``config`` as JSON (what a data manifest records), or None."""
-    from ..envs import Plant
 
     return None if config.plant is None else json.loads(json.dumps(Plant.load(config.plant).to_json()))
 
 
 def _generate_data(system: str, folder: Path, config: ReproduceConfig) -> None:
     """Write the run's datasets of ``system`` to ``folder`` (with ``config``'s plant and sensor)."""
-    from ..envs import Plant
 
     truth = config.ground_truth
     if config.plant is not None:
@@ -541,9 +541,6 @@ def truth_model(system: str, config: ReproduceConfig):
     (its lumped parameters with its memoryless effects)."""
     if config.plant is None:
         return analytic_model(system)
-    from ..effects import WithEffects
-    from ..envs import Plant
-    from ..models import LumpedSystem
 
     plant = Plant.load(config.plant)
     if plant.lumped is None:
@@ -639,8 +636,6 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log) -> It
     # Progress bars of parallel workers would overwrite each other: the log lines stay.
     worker_config = dataclasses.replace(config, progress=False)
     if config.executor == "ray":
-        from . import _ray_sweep
-
         with _ray_sweep.ray_executor(config.address, config.jobs, config.cpus_per_task) as executor:
             yield from _drain(executor, tasks, _ray_sweep.absolute(out), worker_config, report)
         return

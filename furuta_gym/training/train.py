@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from tqdm.auto import tqdm
 
 from .._x64 import ensure_x64
 from ..data import Trajectory
@@ -858,8 +859,6 @@ def _polite_stop(out: Path | None, run: _RunState):
 def _progress_bar(config: TrainConfig, start_epoch: int, desc: str):
     bar = None
     if config.progress and config.total_epochs > start_epoch:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=config.total_epochs, initial=start_epoch, desc=desc, unit="ep")
     try:
         yield bar
