@@ -88,7 +88,6 @@ def closed_loop(
     The loop is the envs' (:func:`furuta_gym.envs.vector.rollout`): the same controlled step, and a
     plant state that diverges (non-finite or beyond 1e6) is frozen at its last finite value, with
     zero voltage recorded from then on."""
-
     x0 = jnp.asarray(x0, dtype=float)
     out, obs, cstates = scan_closed_loop(
         plant,

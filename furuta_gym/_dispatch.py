@@ -22,7 +22,6 @@ def inline_cpu_dispatch() -> None:
     when it creates its CPU backend); afterwards it raises :class:`RuntimeError` rather than
     silently doing nothing. Affects every JAX computation of the process.
     """
-
     if not jax.config.read("jax_cpu_enable_async_dispatch"):
         return
     try:  # JAX has no public way to ask whether its backends exist yet

@@ -197,7 +197,6 @@ def _physics_vs_truth(models: dict, datasets: dict) -> dict:
     """3b. What the paper's loss is for: each learned model's energy and its force decomposition
     (inertial, Coriolis, potential-derived terms) against the analytic truth, along the held-out
     trajectories' recorded states (log10 RMSE; the forces' the mean over the three terms)."""
-
     held_out = datasets["test_free"] + datasets["test_forced"]
     physics = {}
     for loss, model in models.items():

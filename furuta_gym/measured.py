@@ -210,7 +210,6 @@ def window_errors(
     "window_seconds"}``; RMSE in the states' units (rad, rad/s). As in the paper's tables, a
     model whose prediction diverges on any window scores ``"X"`` on every state (``rmse``
     then holds the RMSE over the windows that did not)."""
-
     x0, us, xs = prediction_windows(trajs, seconds, stride)
     dt = float(np.median([tr.dt for tr in trajs]))
     pred = window_predictions(model, x0, us, dt, substeps)

@@ -206,7 +206,6 @@ def _oe_problem(fx, origin: FitOrigin):
     """(r, J, clusters) of the output-error fit: position errors of its windows at its estimate,
     central differences (steps as the fit's), one cluster per window; the input dynamics' seconds
     as a last column (forward difference: the windows' inputs are transformed again)."""
-
     win = fx.fit_windows(origin.dynamics, fx.oe_idx)
 
     def res(theta, w=win):
@@ -264,7 +263,6 @@ def fit_intervals(fx, theta, origin: FitOrigin):
     """({parameter or effect key: Interval or None}, notes, method) of the reported ``theta``
     from the fit ``origin``. Fixed and held parameters get None (held ones with a note); a
     parameter reached by a near-null direction gets an unbounded Interval and a note."""
-
     names_all = list(fx.layout.base) + [c.key for c in fx.layout.candidates]
     kind = origin.dynamics.kind
     dyn_key = f"{INPUT_DYNAMICS_EFFECTS[kind]}:u" if kind != "none" else None

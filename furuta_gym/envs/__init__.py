@@ -74,7 +74,6 @@ SWINGUP_EPISODE_STEPS = 500
 
 def register_envs() -> None:
     """Register the envs with Gymnasium (idempotent; called by ``import furuta_gym``)."""
-
     for cls in ENV_CLASSES:
         if cls.env_id not in gymnasium.registry:
             # no max_episode_steps: the env truncates itself after `episode_seconds`, so the

@@ -127,7 +127,6 @@ def _attach(name: str) -> shared_memory.SharedMemory:
 
 def _accept_workers(listener, processes, count: int) -> list:
     """Accept ``count`` connections, failing fast when a worker exits before it connects."""
-
     accepted: list = []
 
     def accept():

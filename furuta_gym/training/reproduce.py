@@ -340,13 +340,11 @@ def _datasets(system: str, out: Path, config: ReproduceConfig):
 
 def _plant_json(config: ReproduceConfig) -> dict | None:
     """The plant of ``config`` as JSON (what a data manifest records), or None."""
-
     return None if config.plant is None else json.loads(json.dumps(Plant.load(config.plant).to_json()))
 
 
 def _generate_data(system: str, folder: Path, config: ReproduceConfig) -> None:
     """Write the run's datasets of ``system`` to ``folder`` (with ``config``'s plant and sensor)."""
-
     truth = config.ground_truth
     if config.plant is not None:
         truth = MujocoGroundTruth(system, plant=Plant.load(config.plant))
@@ -371,7 +369,6 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
     """Re-create data files a manifest lists but the folder lacks (a committed run keeps the
     manifest, not the CSVs): the data are seeded, so they must come out byte for byte as
     recorded; anything else is an error, never a silent change of the data under the models."""
-
     with tempfile.TemporaryDirectory() as tmp:
         fresh_config = dataclasses.replace(
             config, ground_truth=meta.get("ground_truth", "auto") if config.plant is None else config.ground_truth
@@ -447,7 +444,6 @@ def _without_inert_settings(settings: dict) -> dict:
 def _default_hparams(system: str, kind: str, overrides: dict | None = None) -> dict:
     """The architecture a new model of this kind gets, with ``overrides`` (so a run trained with
     another is never silently reused)."""
-
     model = make_model(system, kind, jax.random.PRNGKey(0), **(overrides or {}))
     return json.loads(json.dumps(dict(model.hparams), default=str))
 
