@@ -144,13 +144,13 @@ def itau_stage(run: Path) -> dict:
     from furuta_gym.models import make_model
     from furuta_gym.models.checkpoint import load_training_state
     from furuta_gym.training.reproduce import ReproduceConfig, truth_model
-    from furuta_gym.training.train import TrainConfig, _build_optimizer
+    from furuta_gym.training import TrainConfig, training_step
 
     cfg = json.loads((run / "reproduce_config.json").read_text())
     tuples = lambda d: {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}  # noqa: E731
     skeleton = make_model("furuta", cfg["model"], jax.random.PRNGKey(0), **tuples(cfg["model_hparams"]))
-    optimizer, _, params = _build_optimizer(skeleton, TrainConfig(**tuples(cfg["train"])))
-    model, _, header = load_training_state(run / "train_state.eqx", skeleton, optimizer.init(params))
+    _, _, opt_state = training_step(skeleton, TrainConfig(**tuples(cfg["train"])), "itau")  # the state's skeleton
+    model, _, header = load_training_state(run / "train_state.eqx", skeleton, opt_state)
     truth = truth_model("furuta", ReproduceConfig(plant=str(PLANT)))
     states = np.random.default_rng(0).uniform([-3, -3, -5, -5], [3, 3, 5, 5], (20, 4))
 
