@@ -13,7 +13,7 @@ from typing import cast
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import signal
+import scipy  # scipy.signal loads on first use: a slow import that an env without filtered sensors never needs
 
 __all__ = [
     "ENCODER_COUNTS_PER_REV",
@@ -92,7 +92,7 @@ def derivative_filter_coefficients(dt: float, omega0: float = 100.0, xi: float =
     """
     num = [omega0**2, 0.0]
     den = [1.0, 2.0 * xi * omega0, omega0**2]
-    b, a, _ = cast(tuple, signal.cont2discrete((num, den), dt, method="bilinear"))  # (num, den, dt)
+    b, a, _ = cast(tuple, scipy.signal.cont2discrete((num, den), dt, method="bilinear"))  # (num, den, dt)
     b, a = np.ravel(b), np.ravel(a)
     return b / a[0], a / a[0]
 
@@ -105,7 +105,7 @@ class DerivativeFilter:
 
     def __init__(self, dt: float, n_channels: int, omega0: float = 100.0, xi: float = 0.8):
         self.b, self.a = derivative_filter_coefficients(dt, omega0, xi)
-        self._zi_unit = signal.lfilter_zi(self.b, self.a)
+        self._zi_unit = scipy.signal.lfilter_zi(self.b, self.a)
         self.n_channels = n_channels
         self._z = None
 
@@ -121,7 +121,7 @@ class DerivativeFilter:
             self.reset(y)
         out = np.empty(self.n_channels)
         for c in range(self.n_channels):
-            o, self._z[:, c] = signal.lfilter(self.b, self.a, [y[c]], zi=self._z[:, c])
+            o, self._z[:, c] = scipy.signal.lfilter(self.b, self.a, [y[c]], zi=self._z[:, c])
             out[c] = o[0]
         return out
 
@@ -133,9 +133,9 @@ def derivative_filter(y, dt: float, omega0: float = 100.0, xi: float = 0.8):
     """
     y = np.asarray(y, dtype=float)
     b, a = derivative_filter_coefficients(dt, omega0, xi)
-    zi = signal.lfilter_zi(b, a)
+    zi = scipy.signal.lfilter_zi(b, a)
     zi = zi.reshape((-1,) + (1,) * (y.ndim - 1)) * y[:1]
-    out, _ = signal.lfilter(b, a, y, axis=0, zi=zi)
+    out, _ = scipy.signal.lfilter(b, a, y, axis=0, zi=zi)
     return out
 
 
@@ -146,7 +146,7 @@ def zero_phase_velocity(y, dt: float, cutoff_hz: float | None = None, order: int
     fs = 1.0 / dt
     if cutoff_hz is None:
         cutoff_hz = min(25.0, 0.2 * fs)
-    b, a = cast(tuple, signal.butter(order, cutoff_hz, fs=fs))  # (b, a) in its default output
+    b, a = cast(tuple, scipy.signal.butter(order, cutoff_hz, fs=fs))  # (b, a) in its default output
     padlen = min(3 * max(len(a), len(b)), y.shape[0] - 1)
-    smooth = signal.filtfilt(b, a, y, axis=0, padlen=padlen)
+    smooth = scipy.signal.filtfilt(b, a, y, axis=0, padlen=padlen)
     return np.gradient(smooth, dt, axis=0)
