@@ -46,7 +46,7 @@ class DemoConfig:
     seed: int = 0
     n_train: int = 16  # free 1 s training trajectories at 100 Hz
     epochs: tuple[int, ...] = (150, 40)  # (2-step stage, 1 s stage)
-    horizons: tuple[int | float, ...] = (2, 1.0)  # per stage: samples (int) or seconds
+    horizons: tuple[int | float, ...] | None = None  # per stage, samples (int) or s; None: the paper's
     tracking_seconds: float = 2.0  # held-out comparison in the env
     control_seconds: float = 6.0
     control_starts: int = 4  # seeded starts near rest, besides x0 = 0
@@ -141,9 +141,8 @@ def _generate(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> di
 
 def _train(cfg: DemoConfig, out: Path, datasets: dict, loss: str, progress: bool, overwrite: bool):
     """2. A DeLaN trained with ``loss`` on the demo's data."""
-    tc = TrainConfig.for_system(
-        "furuta", epochs=cfg.epochs, horizons=cfg.horizons, seed=cfg.seed, progress=progress, checkpoint_every=10**9
-    )
+    schedule = {"epochs": cfg.epochs} | ({"horizons": cfg.horizons} if cfg.horizons is not None else {})
+    tc = TrainConfig.for_system("furuta", **schedule, seed=cfg.seed, progress=progress, checkpoint_every=10**9)
     run_dir = out / "models" / f"dln_{loss}"
     if run_dir.exists() and overwrite:
         shutil.rmtree(run_dir)
@@ -284,13 +283,17 @@ def _report(cfg: DemoConfig, out: Path, t_fine, tracks, record, progress: bool) 
     return video
 
 
-def _closer(block: dict, columns: dict[str, str]) -> str:
+def _closer(block: dict, columns: dict[str, str], shown: str) -> str:
     """Which model is closer to the truth in each column of a block (lower is closer), e.g.
-    "closer: L_prop on forces, L_traj on energy"."""
-    wins: dict[str, list[str]] = {"L_prop": [], "L_traj": []}
+    "closer: L_prop on forces, L_traj on energy"; values equal as ``shown`` (the table's format)
+    are "about equal": the table names no winner its own numbers do not show."""
+    wins: dict[str, list[str]] = {"L_prop": [], "L_traj": [], "about equal": []}
     for key, label in columns.items():
-        wins["L_prop" if block["prop"][key] < block["traj"][key] else "L_traj"].append(label)
-    return "closer: " + ", ".join(f"{name} on {' and '.join(labels)}" for name, labels in wins.items() if labels)
+        prop, traj = block["prop"][key], block["traj"][key]
+        tie = format(prop, shown) == format(traj, shown)
+        wins["about equal" if tie else "L_prop" if prop < traj else "L_traj"].append(label)
+    parts = [f"{name} on {' and '.join(labels)}" for name, labels in wins.items() if labels]
+    return "closer: " + ", ".join(parts)
 
 
 def summary_table(summary: dict) -> str:
@@ -307,14 +310,14 @@ def summary_table(summary: dict) -> str:
         (
             "  DeLaN L_traj",
             f"{tr['traj']['rmse_alpha']:.3g} / {tr['traj']['rmse_beta']:.3g}",
-            _closer(tr, {"rmse_alpha": "α", "rmse_beta": "β"}),
+            _closer(tr, {"rmse_alpha": "α", "rmse_beta": "β"}, ".3g"),
         ),
         ("Physics vs true (held-out states)", "log10 RMSE energy / forces", "forces: inertial, Coriolis, gravity"),
         ("  DeLaN L_prop", f"{ph['prop']['energy']:.2f} / {ph['prop']['forces']:.2f}", ""),
         (
             "  DeLaN L_traj",
             f"{ph['traj']['energy']:.2f} / {ph['traj']['forces']:.2f}",
-            _closer(ph, {"energy": "energy", "forces": "forces"}),
+            _closer(ph, {"energy": "energy", "forces": "forces"}, ".2f"),
         ),
         (
             "Swing-up on MuJoCo (L_prop design)",

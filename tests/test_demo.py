@@ -50,8 +50,8 @@ def test_demo_summary_numbers_are_finite_and_sensible(demo_dir):
         assert all(math.isfinite(physics[k]) for k in ("energy", "forces", "inertial", "coriolis", "potential"))
         assert abs(physics["forces"] - (physics["inertial"] + physics["coriolis"] + physics["potential"]) / 3) < 1e-12
     # the table says which model is closer on each column, and that is what the numbers say
-    assert _closer(s["physics"], {"energy": "energy", "forces": "forces"}) in stdout
-    assert _closer(s["tracking"], {"rmse_alpha": "α", "rmse_beta": "β"}) in stdout
+    assert _closer(s["physics"], {"energy": "energy", "forces": "forces"}, ".2f") in stdout
+    assert _closer(s["tracking"], {"rmse_alpha": "α", "rmse_beta": "β"}, ".3g") in stdout
     c = s["control"]
     assert 0.0 <= c["success_rate"] <= 1.0 and c["episodes"] >= 2
     assert c["peak_voltage"] <= 5.0 + 1e-9  # the env's default voltage limit holds
@@ -87,6 +87,13 @@ def test_demo_seeds_docs_block_matches_its_results():
 
 def test_the_summary_names_the_closer_model_per_column():
     block = {"prop": {"energy": -1.29, "forces": -2.30}, "traj": {"energy": -1.73, "forces": -2.21}}
-    assert _closer(block, {"energy": "energy", "forces": "forces"}) == "closer: L_prop on forces, L_traj on energy"
+    assert (
+        _closer(block, {"energy": "energy", "forces": "forces"}, ".2f") == "closer: L_prop on forces, L_traj on energy"
+    )
     block = {"prop": {"a": 0.1, "b": 0.2}, "traj": {"a": 0.3, "b": 0.4}}
-    assert _closer(block, {"a": "α", "b": "β"}) == "closer: L_prop on α and β"
+    assert _closer(block, {"a": "α", "b": "β"}, ".3g") == "closer: L_prop on α and β"
+    # a difference the table's precision does not show names no winner
+    block = {"prop": {"energy": -1.294, "forces": -1.951}, "traj": {"energy": -1.73, "forces": -1.948}}
+    assert _closer(block, {"energy": "energy", "forces": "forces"}, ".2f") == (
+        "closer: L_traj on energy, about equal on forces"
+    )
