@@ -423,14 +423,19 @@ def oe_fit(
         th[free] = z * scale[free]
         return th
 
+    last: dict[bytes, np.ndarray] = {}
+
     def f(z):
         r = (predict_windows(layout, full(z), win, substeps, start_iterations) - win.q).reshape(-1)
-        return np.where(np.isfinite(r), r, 1e3)
+        last.clear()
+        last[z.tobytes()] = r = np.where(np.isfinite(r), r, 1e3)
+        return r.copy()  # the cached one stays as computed whatever the solver does with its copy
 
     def J(z):
         # forward differences: one compiled predictor serves the fit and the evaluation (an
-        # autodiff Jacobian through the RK4 scan costs far more to compile than it saves here)
-        r0 = f(z)
+        # autodiff Jacobian through the RK4 scan costs far more to compile than it saves here);
+        # the trust region asks for the Jacobian where it has just evaluated the residual
+        r0 = last[z.tobytes()] if z.tobytes() in last else f(z)
         cols = []
         for i in range(z.size):
             h = 1e-6 * max(1.0, abs(z[i]))
