@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib.metadata
 import json
 import time
 from pathlib import Path
@@ -78,6 +79,7 @@ __all__ = [
     "generate_datasets",
     "write_datasets",
     "generate",
+    "data_package_versions",
     "SystemData",
     "SYSTEM_DATA",
     "system_data",
@@ -486,6 +488,19 @@ def write_datasets(
     return paths
 
 
+def data_package_versions() -> dict[str, str]:
+    """Versions of the packages whose arithmetic makes generated data's bytes: MuJoCo's (its
+    integrator and contact solver change between releases), numpy's, jax's and scipy's. A
+    manifest records them so that data that no longer regenerate byte for byte say why."""
+    out = {}
+    for name in ("mujoco", "numpy", "jax", "jaxlib", "scipy"):
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = "unknown"
+    return out
+
+
 def _json_default(o):
     if dataclasses.is_dataclass(o) and not isinstance(o, type):
         return dataclasses.asdict(o)
@@ -531,6 +546,7 @@ def generate(
         "ground_truth": getattr(gt, "name", type(gt).__name__),
         "input_convention": "u samples linearly interpolated between samples",
         "furuta_gym_version": __version__,
+        "packages": data_package_versions(),
         "seconds": round(time.perf_counter() - t0, 2),
     }
     return write_datasets(out_dir, datasets, spec.name, metadata=metadata, overwrite=overwrite)

@@ -54,7 +54,7 @@ from ..systems import get_spec
 from . import _ray_sweep, _reproduce_figures
 from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 from .checkpoint import load_model, package_versions, read_header
-from .datagen import SYSTEM_DATA, MujocoGroundTruth, SensorOptions, generate, system_data
+from .datagen import SYSTEM_DATA, MujocoGroundTruth, SensorOptions, data_package_versions, generate, system_data
 from .metrics import evaluate_model, metrics_to_json
 from .recipe import (
     DEFAULT_LEARNING_RATE,
@@ -381,10 +381,20 @@ def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[st
             if entry.get("sha256") not in (None, digest):
                 raise ValueError(
                     f"{folder / entry['path']}: missing, and regenerating it from its manifest gave "
-                    f"other data (sha256 {digest[:12]}… ≠ {entry['sha256'][:12]}…; another MuJoCo or "
-                    "numpy version?). Restore the file or choose another --out"
+                    f"other data (sha256 {digest[:12]}… ≠ {entry['sha256'][:12]}…; "
+                    f"{_version_differences(meta)}). Restore the file or choose another --out"
                 )
             shutil.copyfile(fresh, folder / entry["path"])
+
+
+def _version_differences(meta: dict) -> str:
+    """How this machine's packages differ from those the manifest's data were generated with."""
+    recorded = meta.get("packages")
+    if recorded is None:
+        return "the manifest does not record the package versions; another MuJoCo or numpy version?"
+    now = data_package_versions()
+    diff = [f"{name} {v} (now {now.get(name)})" for name, v in recorded.items() if now.get(name) != v]
+    return "generated with " + ", ".join(diff) if diff else "same package versions as recorded"
 
 
 #: The form of a run record (``reproduce_config.json``); a record without the key is form 1.
@@ -1054,7 +1064,7 @@ def _write_run_record(path: Path, config: ReproduceConfig, command, timings, dat
         "quadrature_by_model": _quadrature_by_model(config),
         "data": data_meta,
         "machine": machine_info(),
-        "packages": package_versions(),
+        "packages": package_versions() | data_package_versions(),
         "seconds": timings,
     }
     path.write_text(json.dumps(record, indent=1, default=str) + "\n")
