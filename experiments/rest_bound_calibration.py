@@ -1,4 +1,4 @@
-"""Calibrating the breakaway bound from rests (``furuta_gym.diagnose._rests``) on simulated logs.
+"""Calibrating the breakaway bound from rests (``furuta_gym.diagnose.held_at_rest``) on simulated logs.
 
 For logs whose rotor has dry friction with no stiction (open-loop sine sweeps with a cable spring
 and Coulomb friction of 4e-4 or 8e-4 N m) and for sticky sweeps with a breakaway 2–3× the Coulomb
@@ -23,11 +23,8 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.diagnose import DiagnosisSettings, layout_for, measured_like, sticky_rig  # noqa: E402
-from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment  # noqa: E402
-from furuta_gym.diagnose._rests import rest_bound  # noqa: E402
+from furuta_gym.diagnose import DiagnosisSettings, held_at_rest, layout_for, measured_like, sticky_rig  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
-from furuta_gym.measured import estimate_velocities  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "diagnose_rest_bound"
 COUNT = 2 * np.pi / 2048
@@ -44,12 +41,8 @@ def _bound(effects, excitation: str, seed: int) -> dict:
             theta[layout.index(f"{e.name}:{e.joint}")] = e.coefficient
         if e.name == "spring" and e.reference:
             theta[layout.index("constant_torque:alpha")] = e.coefficient * e.reference
-    segs = []
-    for i, tr in enumerate(measured_like("furuta", effects, excitation=excitation, seed=seed, **LOG)):
-        qd = estimate_velocities(tr).qd
-        segs.append(Segment(tr.name, tr.t, tr.q, qd, tr.u, tr.dt, i, False))
-    window = DiagnosisSettings().rest_window
-    b = rest_bound(layout, theta, segs, NO_INPUT_DYNAMICS, "alpha", COUNT, window)
+    log = measured_like("furuta", effects, excitation=excitation, seed=seed, **LOG)
+    b = held_at_rest(log, "alpha", layout, theta, window=DiagnosisSettings().rest_window, count=COUNT)
     by = {e.name: e.coefficient for e in effects}
     breakaway = by["coulomb_friction"] + by.get("stiction", 0.0)
     return {

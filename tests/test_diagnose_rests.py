@@ -12,7 +12,7 @@ import pytest
 
 import furuta_gym
 from furuta_gym.data import Trajectory
-from furuta_gym.diagnose import layout_for
+from furuta_gym.diagnose import held_at_rest, layout_for
 from furuta_gym.diagnose._diagnose import EffectEvidence, _mark_unresolved, sensor_resolution
 from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment
 from furuta_gym.diagnose._rests import rest_bound
@@ -45,6 +45,20 @@ def test_a_rotor_held_at_one_count_bounds_its_breakaway_by_the_force_it_was_held
     # a rotor that never stays on one count for a whole window says nothing
     moving = _segment(np.arange(400.0), np.full(400, 0.2))
     assert rest_bound(layout, theta, [moving], NO_INPUT_DYNAMICS, "alpha", COUNT, 0.2).n_windows == 0
+
+
+def test_held_at_rest_takes_measured_trajectories_and_estimates_their_velocities():
+    layout = layout_for("furuta")
+    theta = layout.nominal()
+    theta[layout.index("spring:alpha")] = 2e-3
+    counts = np.concatenate([np.full(300, 5.0), 5.0 + np.arange(1, 101)])
+    seg = _segment(counts, np.full(counts.size, 0.2))
+    log = [Trajectory(t=seg.t, q=seg.q, u=seg.u, qd=None, name="run")]
+    bound = held_at_rest(log, "alpha", layout, theta)  # the diagnosis' window, the QUBE's encoder
+    expected = rest_bound(layout, theta, [seg], NO_INPUT_DYNAMICS, "alpha", COUNT, 0.2)
+    assert bound.n_windows == expected.n_windows == 3
+    # the estimated velocity is zero along a rest: the same force held it
+    assert bound.held == pytest.approx(expected.held, rel=1e-6) and bound.held > 0
 
 
 def test_sensor_resolution_is_the_encoder_count_of_quantised_joints_only():

@@ -9,6 +9,7 @@ refits and reports the held-out errors before and after. See ``docs/diagnose.md`
 from ._diagnose import DiagnosisResult, DiagnosisSettings, EffectEvidence, ErrorSummary, diagnose
 from ._fit import InputDynamics
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
+from ._rests import RestBound, held_at_rest
 from ._report import write_figures as write_report_figures
 from ._report import write_json as write_report_json
 from ._synthetic import measured_like, sticky_rig
@@ -26,6 +27,8 @@ __all__ = [
     "nominal_base",
     "measured_like",
     "sticky_rig",
+    "held_at_rest",
+    "RestBound",
     "write_report_figures",
     "write_report_json",
 ]

@@ -15,17 +15,21 @@ reversals and biases friction fitted from velocities low.
 from __future__ import annotations
 
 import dataclasses
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..data import Trajectory
 from ..lagrangian import inverse_dynamics
+from ..measured import estimate_velocities
+from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
-from ._fit import InputDynamics, Segment, _compiled
+from ._fit import NO_INPUT_DYNAMICS, InputDynamics, Segment, _compiled
 from ._library import ParameterLayout
 
-__all__ = ["RestBound", "rest_bound"]
+__all__ = ["RestBound", "rest_bound", "held_at_rest"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,3 +103,24 @@ def rest_bound(
         mass = max(mass, float(m[j, j]))
     slack = 2.0 * mass * count / window**2
     return RestBound(joint, max(0.0, held - slack) if n else 0.0, n, slack)
+
+
+def held_at_rest(
+    trajectories: Sequence[Trajectory],
+    joint: str,
+    layout: ParameterLayout,
+    theta,
+    *,
+    window: float = 0.2,
+    count: float = 2 * np.pi / ENCODER_COUNTS_PER_REV,
+) -> RestBound:
+    """The force that held ``joint`` at rest in measured ``trajectories`` under the model
+    ``layout``/``theta`` (e.g. the true one, to judge the bound itself): what the diagnosis
+    compares with a fitted Coulomb level. ``count`` is the encoder's resolution (rad); velocities
+    are estimated where a trajectory has none, as the diagnosis estimates them."""
+    segments = []
+    for i, tr in enumerate(trajectories):
+        tr = estimate_velocities(tr)  # measured velocities are kept
+        assert tr.qd is not None
+        segments.append(Segment(tr.name, tr.t, tr.q, tr.qd, tr.u, tr.dt, i, False))
+    return rest_bound(layout, theta, segments, NO_INPUT_DYNAMICS, joint, count, window)
