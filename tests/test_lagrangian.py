@@ -1,5 +1,6 @@
 """The spine: autodiff-derived dynamics against hand-derived Euler–Lagrange, residual properties."""
 
+import functools
 import subprocess
 import sys
 
@@ -97,14 +98,20 @@ def _true_trajectory(model, x0, dt, T, u_fn):
     return ts, xs, us
 
 
+@functools.cache
+def _sine_driven_nmsd(dt: float, T: int):
+    """The N-MSD under a 0.7 Hz sine from one state, solved tightly: shared by the rules' cases
+    (each tight solve costs seconds)."""
+    return _true_trajectory(NMSD(), jnp.array([0.8, -2.0]), dt, T, lambda t: 3 * jnp.sin(2 * jnp.pi * 0.7 * t))
+
+
 @pytest.mark.parametrize("rule", ["trapezoid", "simpson", "hermite"])
 def test_integral_residual_is_at_the_quadrature_floor_and_scales_with_dt(rule):
     model = NMSD()
     x0 = jnp.array([0.8, -2.0])
-    u_fn = lambda t: 3 * jnp.sin(2 * jnp.pi * 0.7 * t)  # noqa: E731
     rms = []
     for dt in (0.02, 0.01):
-        ts, xs, us = _true_trajectory(model, x0, dt, int(round(4.0 / dt)) + 1, u_fn)
+        ts, xs, us = _sine_driven_nmsd(dt, int(round(4.0 / dt)) + 1)
         if rule == "hermite":  # its Z̄ takes u linear between samples: give the plant that input
             xs = _linear_input_trajectory(model, x0, us, dt)
         r = lg.integral_residual(model, xs[:, :1], xs[:, 1:], us, dt, rule)
@@ -118,7 +125,7 @@ def test_integral_residual_is_at_the_quadrature_floor_and_scales_with_dt(rule):
         # same order as Simpson's, a far smaller constant (the states between samples are resolved)
         assert rms[1] < 1e-2 * _relative_floor(model, xs, us, dt, "simpson")
         # an input smooth between the samples is integrated as if linear: second order there
-        _, smooth, _ = _true_trajectory(model, x0, dt, xs.shape[0], u_fn)
+        _, smooth, _ = _sine_driven_nmsd(dt, xs.shape[0])
         assert _relative_floor(model, smooth, us, dt, "hermite") > 10 * rms[1]
     # a wrong model is far above the floor: V × 1.1 and a sign-flipped input
     wrong_v = NMSD(params=type(model.params)(k1=11.0, k2=5.5))
