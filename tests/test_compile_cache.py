@@ -43,31 +43,48 @@ def _has_host_callback(lowered) -> bool:
     return any(m in text for m in HOST_CALLBACK_MARKERS)
 
 
-def test_trajectory_loss_equals_the_previous_formulation_without_host_callbacks(furuta_free, monkeypatch):
+def _now_and_before(furuta_free, monkeypatch, differentiate: bool):
+    """The trajectory loss (with its gradient if ``differentiate``) as compiled now and under the
+    previous formulation (vector field not jitted, diffrax's checks as host callbacks), and the
+    lowering of each."""
     model = make_model("furuta", "dln", jax.random.PRNGKey(3), hidden=(4, 4))
     windows = make_windows(furuta_free, 4, stride=9)
     params, static = eqx.partition(model, model.trainable())
 
+    def loss(p):
+        return trajectory_loss(eqx.combine(p, static), windows)
+
     def now(p):
-        return jax.value_and_grad(lambda p_: trajectory_loss(eqx.combine(p_, static), windows))(p)
+        return jax.value_and_grad(loss)(p) if differentiate else loss(p)
 
     def before(p):  # a distinct function: traced afresh under the patched (previous) formulation
-        return jax.value_and_grad(lambda p_: trajectory_loss(eqx.combine(p_, static), windows))(p)
+        return jax.value_and_grad(loss)(p) if differentiate else loss(p)
 
     lowered_now = jax.jit(now).lower(params)
-    assert not _has_host_callback(lowered_now)  # what lets the persistent cache store the step
-    value_now, grad_now = lowered_now.compile()(params)
-
-    # the previous formulation: vector field not jitted, diffrax's checks as host callbacks
     with monkeypatch.context() as m:
         m.setattr(simulate_module, "_vector_field_once", vector_field)
         m.setattr(losses_module, "_runtime_checks_as_nan", contextlib.nullcontext)
         lowered_before = jax.jit(before).lower(params)
+    return (lowered_now, lowered_now.compile()(params)), (lowered_before, lowered_before.compile()(params))
+
+
+def test_trajectory_loss_equals_the_previous_formulation_without_host_callbacks(furuta_free, monkeypatch):
+    # the value here; its gradient is checked against finite differences in test_training, and
+    # against the previous formulation's under -m slow (two backward solves to compile)
+    (lowered_now, value_now), (lowered_before, value_before) = _now_and_before(furuta_free, monkeypatch, False)
+    assert not _has_host_callback(lowered_now)  # what lets the persistent cache store the step
     if losses_module.os.environ.get("EQX_ON_ERROR", "raise") == "raise":
         assert _has_host_callback(lowered_before)  # so the check above can fail
-    value_before, grad_before = lowered_before.compile()(params)
-
     assert np.isfinite(float(value_now)) and float(value_now) > 0
+    assert float(value_now) == pytest.approx(float(value_before), rel=1e-12, abs=0)
+
+
+@pytest.mark.slow
+def test_trajectory_loss_gradient_equals_the_previous_formulation(furuta_free, monkeypatch):
+    (lowered_now, (value_now, grad_now)), (_, (value_before, grad_before)) = _now_and_before(
+        furuta_free, monkeypatch, True
+    )
+    assert not _has_host_callback(lowered_now)
     assert float(value_now) == pytest.approx(float(value_before), rel=1e-12, abs=0)
     flat_now = jax.flatten_util.ravel_pytree(grad_now)[0]
     flat_before = jax.flatten_util.ravel_pytree(grad_before)[0]
