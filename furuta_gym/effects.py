@@ -72,6 +72,8 @@ __all__ = [
     "EFFECT_UNITS",
     "INPUT_DYNAMICS_EFFECTS",
     "WithEffects",
+    "spring_rests",
+    "merge_spring_rests",
     "ActuatorLag",
     "CableNeutral",
     "actuator_lag_time",
@@ -544,3 +546,28 @@ class WithEffects(AbstractLagrangianSystem):
     def input_force(self, q, qd, u):
         gain = 1.0 + sum(e.kind.input_gain(e) for e in self.effects)
         return gain * self.base.input_force(q, qd, u)
+
+
+def spring_rests(effects) -> dict[str, float]:
+    """{joint: rest position τ0/k} where ``effects`` (anything with ``kind``, ``joint`` and
+    ``coefficient``) hold a positive spring and a constant force on one joint: −k·q + τ0 is one
+    spring whose rest position is not zero (a cable's neutral)."""
+    constant = {e.joint: e for e in effects if e.kind.is_constant_force}
+    return {
+        e.joint: float(constant[e.joint].coefficient) / float(e.coefficient)
+        for e in effects
+        if e.kind.absorbs_constant_force and e.joint in constant and e.coefficient is not None and e.coefficient > 0
+    }
+
+
+def merge_spring_rests(effects: Sequence[Effect]) -> list[Effect]:
+    """``effects`` with each spring and constant force on one joint written as one spring with
+    its rest position (:func:`spring_rests`); the rest unchanged, in order."""
+    rests = spring_rests(effects)
+    out = []
+    for e in effects:
+        if e.joint in rests and e.kind.absorbs_constant_force:
+            out.append(dataclasses.replace(e, reference=rests[e.joint]))
+        elif not (e.joint in rests and e.kind.is_constant_force):
+            out.append(e)
+    return out

@@ -2,20 +2,20 @@
 lumped Lagrangian model), the MJCF written for other tools and read back, and a diagnosis's
 plant end to end (object, JSON, ``diagnose --mjcf``)."""
 
+import dataclasses
 import json
-import subprocess
-import sys
 
-import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
 
 import furuta_gym.lagrangian as lag
+from furuta_gym.cli import main
+from furuta_gym.data import save_trajectories
 from furuta_gym.diagnose import diagnose, measured_like
 from furuta_gym.diagnose._library import layout_for
-from furuta_gym.effects import Effect
+from furuta_gym.effects import Effect, merge_spring_rests
 from furuta_gym.envs import MujocoBackend, Plant, plant_mjcf, save_mjcf
 from furuta_gym.models import analytic_model
 
@@ -164,6 +164,18 @@ def test_a_diagnosis_gives_its_plant(tmp_path):
     springs = [e for e in plant.effects if e.name == "spring"]
     assert len(springs) == 1 and springs[0].coefficient == pytest.approx(5e-3, rel=0.2)
     assert plant.lumped == res.parameters_after and "spring:alpha" in plant.source
+    # a plant for prediction: an effect reported inconsistent joins at its tested coefficient
+    tested = next(e for e in res.effects if (e.name, e.joint) == ("coulomb_friction", "alpha"))
+    assert not tested.significant and res.inconsistent == []
+    assert res.plant(include_inconsistent=True) == plant  # nothing inconsistent: the same plant
+    marked = dataclasses.replace(tested, coefficient=3e-4, status="inconsistent")
+    res_marked = dataclasses.replace(res, effects=[marked if e is tested else e for e in res.effects])
+    assert res_marked.plant() == plant
+    predictive = res_marked.plant(include_inconsistent=True)
+    assert [(e.name, e.coefficient) for e in predictive.effects if e.name == "coulomb_friction"] == [
+        ("coulomb_friction", 3e-4)
+    ]
+    assert "inconsistent, included: coulomb_friction:alpha" in predictive.source
     (tmp_path / "res.json").write_text(json.dumps(res.to_json()))
     assert Plant.load(tmp_path / "res.json") == plant
     # the plant predicts the log it came from about as the diagnosed model does
@@ -174,33 +186,37 @@ def test_a_diagnosis_gives_its_plant(tmp_path):
     assert np.sqrt(np.mean((sim[:, 0] - tr.q[1:251, 0]) ** 2)) < 0.05
 
 
-def test_cli_writes_the_mjcf(tmp_path):
+def test_cli_writes_the_mjcf(tmp_path, capsys):
+    """In process, on the log and candidates of the test above (its compiled fit is reused)."""
     log = measured_like(
         "furuta", [Effect("spring", "alpha", 5e-3)], seed=3, n_trajectories=4, duration=5.0, quantize=False
     )
-    from furuta_gym.data import save_trajectories
-
     save_trajectories(tmp_path / "log.csv", log, "furuta")
     out = tmp_path / "rig.xml"
-    cmd = [
-        sys.executable,
-        "-m",
-        "furuta_gym",
-        "diagnose",
-        str(tmp_path / "log.csv"),
-        "--system",
-        "furuta",
-        "--candidates",
-        "spring:alpha",
-        "--mjcf",
-        str(out),
-    ]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    args = ["diagnose", str(tmp_path / "log.csv"), "--system", "furuta"]
+    args += ["--candidates", "spring:alpha,coulomb_friction:alpha", "--mjcf", str(out)]
+    assert main(args) == 0
     assert [e.name for e in Plant.load(out).effects] == ["spring"]
-    again = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-    assert again.returncode != 0 and "refusing to overwrite" in again.stderr
-    jax.clear_caches()
+    capsys.readouterr()
+    assert main(args) != 0 and "refusing to overwrite" in capsys.readouterr().err
+    # the flag that shapes the plant needs the plant
+    assert main(args[:-2] + ["--with-inconsistent"]) != 0
+    err = capsys.readouterr().err
+    assert "--with-inconsistent: shapes the --mjcf plant; give --mjcf OUT.xml too" in err
+
+
+def test_a_spring_and_a_constant_torque_on_one_joint_are_one_spring_with_its_rest():
+    """How a plant is written from fitted effects (``found``, and ``plant(include_inconsistent=
+    True)`` when the spring is the inconsistent one and the constant torque was found)."""
+    torque, friction = Effect("constant_torque", "alpha", -1.3e-4), Effect("coulomb_friction", "alpha", 4.4e-4)
+    assert merge_spring_rests([torque, friction]) == [torque, friction]
+    merged = merge_spring_rests([torque, friction, Effect("spring", "alpha", 8.7e-4)])
+    assert [e.name for e in merged] == ["coulomb_friction", "spring"]
+    assert merged[1].reference == pytest.approx(-1.3e-4 / 8.7e-4)
+    # a torque on another joint, or a spring that pushes away, is left as it is
+    other = [Effect("constant_torque", "beta", 1e-4), Effect("spring", "alpha", 8.7e-4)]
+    assert merge_spring_rests(other) == other
+    assert merge_spring_rests([torque, Effect("spring", "alpha", -1e-4)])[0] == torque
 
 
 def test_the_lumped_model_backend_steps_as_the_plant():

@@ -48,6 +48,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="write the diagnosed plant as MJCF (native terms in their elements, the rest as "
         "<custom> data that furuta-gym's plant= reads back)",
     )
+    parser.add_argument(
+        "--with-inconsistent",
+        action="store_true",
+        help="--mjcf: include the effects reported inconsistent too, at their tested coefficients "
+        "(a plant for prediction; see docs/diagnose.md, head to head)",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace existing --json/--report outputs")
     parser.add_argument(
         "--column-map",
@@ -89,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnose import write_report_figures as write_figures
     from ..diagnose import write_report_json as write_json
 
+    if args.with_inconsistent and not args.mjcf:
+        raise ValueError("--with-inconsistent: shapes the --mjcf plant; give --mjcf OUT.xml too")
     for out in (args.json, args.mjcf):
         if out and Path(out).exists() and not args.overwrite:
             raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
@@ -122,5 +130,6 @@ def run(args: argparse.Namespace) -> int:
     if args.mjcf:
         from ..envs import save_mjcf
 
-        print(f"wrote {save_mjcf(res.plant(), args.mjcf, overwrite=args.overwrite)}")
+        plant = res.plant(include_inconsistent=args.with_inconsistent)
+        print(f"wrote {save_mjcf(plant, args.mjcf, overwrite=args.overwrite)}")
     return 0

@@ -15,7 +15,15 @@ from scipy.optimize import minimize_scalar
 
 from .._x64 import ensure_x64
 from ..data import DataError, Trajectory, load_trajectories
-from ..effects import EFFECT_KINDS, INPUT_DYNAMICS_EFFECTS, Effect, EffectKind, WithEffects
+from ..effects import (
+    EFFECT_KINDS,
+    INPUT_DYNAMICS_EFFECTS,
+    Effect,
+    EffectKind,
+    WithEffects,
+    merge_spring_rests,
+    spring_rests,
+)
 from ..envs import Plant
 from ..lagrangian import AbstractLagrangianSystem
 from ..measured import estimate_velocities
@@ -140,17 +148,6 @@ class EffectEvidence:
         }
 
 
-def _spring_rests(effects) -> dict[str, float]:
-    """{joint: rest position τ0/k} where ``effects`` hold a positive spring and a constant torque
-    on one joint: −k·q + τ0 is one spring whose rest position is not zero (a cable's neutral)."""
-    constant = {e.joint: e for e in effects if e.kind.is_constant_force}
-    return {
-        e.joint: float(constant[e.joint].coefficient) / float(e.coefficient)
-        for e in effects
-        if e.kind.absorbs_constant_force and e.joint in constant and e.coefficient is not None and e.coefficient > 0
-    }
-
-
 def _f(x):
     return None if x is None or not np.isfinite(x) else float(x)
 
@@ -175,6 +172,12 @@ class ErrorSummary:
             "window_seconds": self.window_seconds,
             "n_windows": self.n_windows,
         }
+
+
+def _as_effects(evidence: Sequence[EffectEvidence]) -> list[Effect]:
+    """Fitted effects in :mod:`furuta_gym.effects` vocabulary, a spring's rest merged in."""
+    assert all(e.coefficient is not None for e in evidence)  # only fitted effects come here
+    return merge_spring_rests([Effect(e.name, e.joint, float(e.coefficient or 0.0)) for e in evidence])
 
 
 @dataclasses.dataclass
@@ -218,15 +221,13 @@ class DiagnosisResult:
     def found(self) -> list[Effect]:
         """The significant effects in :mod:`furuta_gym.effects` vocabulary. A spring and a constant
         torque on one joint are one spring with a rest position (−k·q + τ0 = −k·(q − τ0/k))."""
-        rests = _spring_rests(self.significant)
-        out = []
-        for e in self.significant:
-            assert e.coefficient is not None  # a significant effect was fitted
-            if e.joint in rests and e.kind.absorbs_constant_force:
-                out.append(Effect(e.name, e.joint, float(e.coefficient), reference=rests[e.joint]))
-            elif not (e.joint in rests and e.kind.is_constant_force):
-                out.append(Effect(e.name, e.joint, float(e.coefficient)))
-        return out
+        return _as_effects(self.significant)
+
+    @property
+    def inconsistent(self) -> list[EffectEvidence]:
+        """Effects that lower the held-out error overall but not consistently across the held-out
+        groups (status ``inconsistent``): not claimed as found, and not in :attr:`found`."""
+        return [e for e in self.effects if e.status == "inconsistent" and e.coefficient is not None]
 
     @property
     def model_before(self):
@@ -241,21 +242,28 @@ class DiagnosisResult:
         effects = [e for e in self.found if not e.kind.input_dynamics]
         return WithEffects(self.layout.model(base_theta), effects)
 
-    def plant(self) -> Plant:
+    def plant(self, include_inconsistent: bool = False) -> Plant:
         """The diagnosed rig as a simulator: the fitted lumped parameters and the found effects
         (input delay or lag included) as a :class:`~furuta_gym.envs.Plant`, for
         ``gym.make(..., plant=res)``, ``MujocoBackend(plant=...)`` and
         :func:`~furuta_gym.envs.save_mjcf`. A diagnosis of a given (learned) model has none: use
-        :attr:`model_after` as ``dynamics=``."""
+        :attr:`model_after` as ``dynamics=``.
+
+        ``include_inconsistent``: the :attr:`inconsistent` effects too, at their tested
+        coefficients (no refit) — a plant chosen for prediction, not a claim about the rig: such
+        an effect helped the held-out data as a whole but not most of its groups (a cable spring
+        that acts only in the runs whose rotor wanders far). docs/diagnose.md measures both plants
+        on real runs never fitted."""
         if self.layout.learned is not None:
             raise ValueError(
                 "a diagnosis of a given model has no MuJoCo plant (its M and V are a "
                 "network's); pass res.model_after as dynamics= instead"
             )
-        found = ", ".join(f"{e.name}:{e.joint}" for e in self.found) or "no effect"
-        return Plant(
-            effects=self.found, lumped=self.parameters_after, system=self.system, source=f"diagnosis ({found})"
-        )
+        effects = _as_effects(self.significant + (self.inconsistent if include_inconsistent else []))
+        names = ", ".join(f"{e.name}:{e.joint}" for e in self.found) or "no effect"
+        extra = [f"{e.name}:{e.joint}" for e in self.inconsistent] if include_inconsistent else []
+        source = f"diagnosis ({names}" + (f"; inconsistent, included: {', '.join(extra)}" if extra else "") + ")"
+        return Plant(effects=effects, lumped=self.parameters_after, system=self.system, source=source)
 
     def to_json(self) -> dict:
         return {
@@ -1082,7 +1090,7 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
         th, d = fit_equation_error(fx.fit_prob, fx.layout, free, fx.theta_fixed, fx.weights, with_delay)
         ev.coefficient = d if c == DELAY else float(th[fx.layout.index(c.key)])
     chosen = [evidence[c.key] for c in accepted]
-    rests = _spring_rests(chosen)
+    rests = spring_rests(chosen)
     for ev in (e for e in chosen if e.kind.is_constant_force and e.joint in rests):
         joint, rest = ev.joint, rests[ev.joint]
         ev.note = "; ".join(x for x in (ev.note, f"with spring:{joint}: its rest position is {rest:.3g} (tau0/k)") if x)
