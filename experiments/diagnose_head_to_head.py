@@ -30,7 +30,8 @@ together (the diagnosis' ``trajectory_rmse``). Wall times are each fit's own, on
 
 Two what-ifs on the fits, no refit (``--rescore-only`` recomputes them from the committed
 files): the sysid fit with each term beyond the declared model's set to zero, and the diagnosed
-plant with the effects its diagnosis reported ``inconsistent`` added at their tested coefficients.
+plant with the effects its diagnosis reported ``inconsistent`` added at their tested coefficients
+(``res.plant(include_inconsistent=True)``; a row of its own, ``diagnosed_inconsistent``).
 
 Writes ``results/head_to_head/<row>.json`` and ``summary.json`` (machine, date, settings);
 ``experiments/head_to_head_table.py`` puts the table into docs/diagnose.md.
@@ -59,7 +60,7 @@ import jax.numpy as jnp  # noqa: E402
 import head_to_head_sysid as hsysid  # noqa: E402
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
 from furuta_gym.diagnose import InputDynamics  # noqa: E402
-from furuta_gym.effects import Effect, WithEffects  # noqa: E402
+from furuta_gym.effects import Effect, WithEffects, merge_spring_rests  # noqa: E402
 from furuta_gym.envs import Plant  # noqa: E402
 from furuta_gym.lagrangian import forward_dynamics_with_dry_friction  # noqa: E402
 from furuta_gym.measured import prediction_windows, prepare_log  # noqa: E402
@@ -264,31 +265,49 @@ def add_sysid_ablation(path: Path, test) -> None:
     path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
 
 
-def add_inconsistent_effects(path: Path, test) -> None:
-    """Score the diagnosed plant with the effects its diagnosis reported ``inconsistent`` added at
-    their tested coefficients (no refit): what the evidence rule left out, as a prediction."""
-    doc = json.loads(path.read_text())
-    extra = [
-        Effect(e["name"], e["joint"], e["coefficient"])
-        for e in doc["diagnosis"]["effects"]
-        if e["status"] == "inconsistent" and e["coefficient"] is not None
+PREDICTIVE_LABEL = "furuta-gym diagnosed, with its inconsistent effects"
+
+
+def predictive_row(diagnosed: dict, test) -> dict | None:
+    """The diagnosed plant with the effects its diagnosis reported ``inconsistent`` added at their
+    tested coefficients, no refit: ``res.plant(include_inconsistent=True)``, rebuilt here from the
+    committed diagnosis (its fit and wall time are the diagnosed row's). None without any."""
+    evidence = diagnosed["diagnosis"]["effects"]
+    chosen = [
+        e for e in evidence if e["significant"] or (e["status"] == "inconsistent" and e["coefficient"] is not None)
     ]
-    plant = Plant.from_json(doc["diagnosis"]["plant"])
-    plant = dataclasses.replace(plant, effects=(*plant.effects, *extra))
-    doc["with_inconsistent"] = {
-        "added": [f"{e.name}:{e.joint}" for e in extra],
-        "position_rmse": score_plant(plant, test)["position_rmse"],
-    }
-    path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+    added = [f"{e['name']}:{e['joint']}" for e in chosen if not e["significant"]]
+    if not added:
+        return None
+    effects = merge_spring_rests([Effect(e["name"], e["joint"], e["coefficient"]) for e in chosen])
+    plant = dataclasses.replace(Plant.from_json(diagnosed["diagnosis"]["plant"]), effects=tuple(effects))
+    return row_doc(
+        "diagnosed_inconsistent",
+        PREDICTIVE_LABEL,
+        score_plant(plant, test),
+        diagnosed["wall_seconds"],
+        added=added,
+        effects=[
+            {"name": e.name, "joint": e.joint, "coefficient": e.coefficient, "reference": e.reference} for e in effects
+        ],
+    )
 
 
 def rescore(out: Path, test) -> None:
-    """The what-ifs on committed fits: sysid without each extra term, the diagnosis with its
-    inconsistent effects."""
+    """The what-ifs on committed fits: sysid without each extra term, the diagnosed plant with its
+    inconsistent effects (a row of its own)."""
     if (out / "sysid.json").is_file():
         add_sysid_ablation(out / "sysid.json", test)
     if (out / "diagnosed.json").is_file():
-        add_inconsistent_effects(out / "diagnosed.json", test)
+        diagnosed = json.loads((out / "diagnosed.json").read_text())
+        if diagnosed.pop("with_inconsistent", None) is not None:  # the sentence the row replaced
+            (out / "diagnosed.json").write_text(json.dumps(diagnosed, indent=1, default=float) + "\n")
+        row = predictive_row(diagnosed, test)
+        if row is not None:
+            stamp = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+            (out / "diagnosed_inconsistent.json").write_text(
+                json.dumps({**row, **stamp}, indent=1, default=float) + "\n"
+            )
 
 
 def machine() -> str:

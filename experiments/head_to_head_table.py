@@ -18,7 +18,17 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "head_to_head"
 DOC = ROOT / "docs" / "diagnose.md"
 NAME = "diagnose-head-to-head"
-ORDER = ("nominal", "gym_brt", "quanser_robots", "armandpl", "fitted", "diagnosed", "sysid_rigid", "sysid")
+ORDER = (
+    "nominal",
+    "gym_brt",
+    "quanser_robots",
+    "armandpl",
+    "fitted",
+    "diagnosed",
+    "diagnosed_inconsistent",
+    "sysid_rigid",
+    "sysid",
+)
 COMMAND = "python experiments/diagnose_head_to_head.py && python experiments/head_to_head_table.py"
 SYSID_UNITS = {
     "rotor_inertia": "kg m²",
@@ -135,12 +145,13 @@ def findings(docs: list[dict]) -> str:
                 f"(cap {f['iterations_cap']}; within 0.1 % of its final objective after {settled}), RMS "
                 f"angle residual on its fit windows {1e3 * f['rms_angle_residual']:.2f} mrad."
             )
-    extra = by.get("diagnosed", {}).get("with_inconsistent")
-    if extra and extra["added"]:
+    extra = by.get("diagnosed_inconsistent")
+    if extra:
         parts.append(
-            f"The diagnosed plant with the effects its diagnosis reported `inconsistent` added at their "
-            f"tested coefficients ({', '.join(extra['added'])}; no refit): "
-            f"{_mrad(extra['position_rmse'])} mrad on the unseen runs."
+            f"{extra['label']}: the diagnosed plant with the effects its diagnosis reported "
+            f"`inconsistent` added at their tested coefficients ({', '.join(extra['added'])}; no refit), "
+            "`res.plant(include_inconsistent=True)` or `diagnose --mjcf OUT.xml --with-inconsistent`; "
+            "its fit is the diagnosed row's."
         )
     return " ".join(parts)
 
