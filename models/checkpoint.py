@@ -23,13 +23,11 @@ models so that envs and the diagnosis load a checkpoint without depending on tra
 from __future__ import annotations
 
 import datetime
-import functools
 import hashlib
 import io
 import json
 import os
 import tempfile
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +35,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._versions import installed_versions
 from ..systems import get_spec
 from ._factory import MODEL_KINDS, make_model
 from ._learned import AbstractLearnedSystem
@@ -60,20 +59,7 @@ class CheckpointError(ValueError):
 
 def package_versions() -> dict[str, str]:
     """Versions of the packages a checkpoint depends on (recorded in every header)."""
-    return dict(_package_versions())
-
-
-@functools.lru_cache(maxsize=1)
-def _package_versions() -> dict[str, str]:
-    # installed versions do not change in a running process; reading them is slow, and a
-    # training run writes a header after every epoch
-    out = {}
-    for name in ("furuta-gym", "jax", "jaxlib", "equinox", "diffrax", "optax", "numpy"):
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "unknown"
-    return out
+    return installed_versions(("furuta-gym", "jax", "jaxlib", "equinox", "diffrax", "optax", "numpy"))
 
 
 def _jsonable(value):

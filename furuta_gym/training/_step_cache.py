@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import hashlib
 import importlib
-import importlib.metadata
 import importlib.util
 import json
 import os
@@ -43,6 +42,7 @@ import jax
 import jax.core
 import numpy as np
 from jax import export
+from .._versions import installed_versions
 
 __all__ = ["step_cache_dir", "ExportedStep"]
 
@@ -109,13 +109,7 @@ def _source_digest() -> str:
 
 
 def _versions() -> dict[str, str]:
-    out = {}
-    for dist in ("jax", "jaxlib", "equinox", "diffrax", "optax"):
-        try:
-            out[dist] = importlib.metadata.version(dist)
-        except importlib.metadata.PackageNotFoundError:
-            out[dist] = "?"
-    return out
+    return installed_versions(("jax", "jaxlib", "equinox", "diffrax", "optax"), missing="?")
 
 
 def array_digest(tree: Any) -> str:

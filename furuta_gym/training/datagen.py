@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import importlib.metadata
 import json
 import time
 from pathlib import Path
@@ -55,6 +54,7 @@ import numpy as np
 from scipy.spatial import KDTree
 
 from .. import __version__, ensure_x64
+from .._versions import installed_versions
 from ..data import Trajectory, save_trajectories
 from ..envs import MujocoBackend
 from ..lagrangian import vector_field
@@ -492,13 +492,7 @@ def data_package_versions() -> dict[str, str]:
     """Versions of the packages whose arithmetic makes generated data's bytes: MuJoCo's (its
     integrator and contact solver change between releases), numpy's, jax's and scipy's. A
     manifest records them so that data that no longer regenerate byte for byte say why."""
-    out = {}
-    for name in ("mujoco", "numpy", "jax", "jaxlib", "scipy"):
-        try:
-            out[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            out[name] = "unknown"
-    return out
+    return installed_versions(("mujoco", "numpy", "jax", "jaxlib", "scipy"))
 
 
 def _json_default(o):
