@@ -6,33 +6,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from furuta_gym.data import Trajectory
 from furuta_gym.lagrangian import interval_difference, interval_integral
-from furuta_gym.models import NMSD, make_model
-from furuta_gym.signals import chirp
-from furuta_gym.simulate import simulate
+from furuta_gym.models import make_model
+from _simulated import nmsd_chirp_segments
 from furuta_gym.training.losses import integral_loss, integral_loss_terms, make_windows, proposed_loss
 from furuta_gym.training.train import TrainConfig, train
-
-DT = 0.01
 
 
 @pytest.fixture(scope="module")
 def segments():
-    t = np.arange(0.0, 8.0 + DT / 2, DT)
-    u = 3.0 * chirp(t, 0.1, 1.1, 8.0)[:, None]
-    xs = np.asarray(simulate(NMSD(), np.array([0.5, -1.0]), t, u, rtol=1e-10, atol=1e-12))
-    n = 100
-    return [
-        Trajectory(
-            t[k * n : k * n + n + 1] - t[k * n],
-            xs[k * n : k * n + n + 1, :1],
-            u[k * n : k * n + n + 1],
-            xs[k * n : k * n + n + 1, 1:],
-            name=str(k),
-        )
-        for k in range(8)
-    ]
+    return nmsd_chirp_segments(3.0)
 
 
 def test_share_is_the_augmentation_velocity_change_relative_to_the_data_and_scale_free(segments):

@@ -6,31 +6,13 @@ import jax
 import numpy as np
 import pytest
 
-from furuta_gym.data import Trajectory
-from furuta_gym.models import NMSD
-from furuta_gym.signals import chirp
-from furuta_gym.simulate import simulate
+from _simulated import nmsd_chirp_segments
 from furuta_gym.training.train import TrainConfig, train
-
-DT = 0.01
 
 
 @pytest.fixture(scope="module")
 def segments():
-    t = np.arange(0.0, 8.0 + DT / 2, DT)
-    u = chirp(t, 0.1, 1.1, 8.0)[:, None]
-    xs = np.asarray(simulate(NMSD(), np.array([0.5, -1.0]), t, u, rtol=1e-10, atol=1e-12))
-    n = 100
-    return [
-        Trajectory(
-            t[k * n : k * n + n + 1] - t[k * n],
-            xs[k * n : k * n + n + 1, :1],
-            u[k * n : k * n + n + 1],
-            xs[k * n : k * n + n + 1, 1:],
-            name=str(k),
-        )
-        for k in range(8)
-    ]
+    return nmsd_chirp_segments(1.0)
 
 
 def test_an_itau_stage_then_prop_stages(segments, tmp_path):
