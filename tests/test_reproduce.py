@@ -530,7 +530,14 @@ def test_quick_runs_compile_their_steps_fast_and_full_runs_do_not():
 @pytest.mark.parametrize(
     "system, files, labels",
     [
-        ("furuta", ["train.csv", "val_forced.csv", "val_free.csv", "val_scale_fit.csv"], {"Free", "Forced"}),
+        # the Furuta's run takes a minute more: what only it adds, the scale fit's set, is checked
+        # by the next test; its datasets by tests/test_validation_data.py
+        pytest.param(
+            "furuta",
+            ["train.csv", "val_forced.csv", "val_free.csv", "val_scale_fit.csv"],
+            {"Free", "Forced"},
+            marks=pytest.mark.slow,
+        ),
         # the N-MSD's validation labels are not its test labels: its tables are written from them
         ("nmsd", ["train.csv", "val_multisine.csv", "val_steps.csv"], {"Multisine", "Steps"}),
     ],
@@ -565,6 +572,23 @@ def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path, system, fi
         reproduce(tmp_path, dataclasses.replace(config, split="test"), log=lambda msg: None)
     with pytest.raises(ValueError, match="split must be one of"):
         ReproduceConfig(split="train")
+
+
+def test_a_validation_run_fits_the_furuta_scale_on_its_own_forced_set_and_a_test_run_on_the_test_one():
+    """The scale-fit set each split's run takes (the Furuta's; the N-MSD fits none): a name that
+    the generated data do not have would leave the scale unfitted."""
+    from furuta_gym.training.datagen import DATASET_NAMES, VALIDATION_NAMES
+    from furuta_gym.training.reproduce import _training_data
+
+    data = {name: [name] for name in (*DATASET_NAMES["furuta"], *VALIDATION_NAMES["furuta"])}
+    for split, expected in (("test", "scale_fit"), ("validation", "val_scale_fit")):
+        config = ReproduceConfig(systems=("furuta",), split=split)
+        assert _training_data("furuta", data, config)[1] == [expected]
+    del data["val_scale_fit"]
+    with pytest.raises(ValueError, match="furuta validation data: no 'val_scale_fit' set to fit the scale on"):
+        _training_data("furuta", data, ReproduceConfig(systems=("furuta",), split="validation"))
+    nmsd = {name: [name] for name in (*DATASET_NAMES["nmsd"], *VALIDATION_NAMES["nmsd"])}
+    assert _training_data("nmsd", nmsd, ReproduceConfig(systems=("nmsd",), split="validation"))[1] is None
 
 
 def _decision_log_rows() -> list[str]:

@@ -524,7 +524,12 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
 
 def _training_data(system: str, data: dict, config: ReproduceConfig):
     """``(training trajectories, scale-fit trajectories or None)`` as the run trains on them."""
-    forced = data.get(SCALE_FIT_SET[config.split]) if system_definition(system).scale_fit_on_forced_data else None
+    forced = None
+    if system_definition(system).scale_fit_on_forced_data:
+        name = SCALE_FIT_SET[config.split]
+        if name not in data:  # never a run whose scale is silently left unfitted
+            raise ValueError(f"{system} {config.split} data: no {name!r} set to fit the scale on (have {sorted(data)})")
+        forced = data[name]
     if config.training_velocities == "recorded":
         return data["train"], forced
 
