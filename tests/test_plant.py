@@ -176,6 +176,10 @@ def test_a_diagnosis_gives_its_plant(tmp_path):
         ("coulomb_friction", 3e-4)
     ]
     assert "inconsistent, included: coulomb_friction:alpha" in predictive.source
+    # one of the wrong physical sign is no plant's effect: left out
+    negative = dataclasses.replace(marked, coefficient=-3e-4)
+    res_negative = dataclasses.replace(res, effects=[negative if e is tested else e for e in res.effects])
+    assert res_negative.plant(include_inconsistent=True) == plant
     (tmp_path / "res.json").write_text(json.dumps(res.to_json()))
     assert Plant.load(tmp_path / "res.json") == plant
     # the plant predicts the log it came from about as the diagnosed model does

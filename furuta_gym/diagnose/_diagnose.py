@@ -180,6 +180,16 @@ def _as_effects(evidence: Sequence[EffectEvidence]) -> list[Effect]:
     return merge_spring_rests([Effect(e.name, e.joint, float(e.coefficient or 0.0)) for e in evidence])
 
 
+def _simulable(effect: EffectEvidence, found: Sequence[EffectEvidence]) -> bool:
+    """Whether an effect not claimed can join the found ones in a plant: of its physical sign,
+    and a breakaway only above a dry friction found on its joint."""
+    assert effect.coefficient is not None
+    if effect.kind.physically_positive and effect.coefficient <= 0:
+        return False
+    below = effect.kind.breakaway_above
+    return not below or any((e.name, e.joint) == (below, effect.joint) for e in found)
+
+
 @dataclasses.dataclass
 class DiagnosisResult:
     """What :func:`diagnose` found. ``effects`` are ordered by evidence, strongest first."""
@@ -250,7 +260,8 @@ class DiagnosisResult:
         :attr:`model_after` as ``dynamics=``.
 
         ``include_inconsistent``: the :attr:`inconsistent` effects too, at their tested
-        coefficients (no refit) — a plant chosen for prediction, not a claim about the rig: such
+        coefficients (no refit; one of the wrong physical sign, or a stiction without its
+        Coulomb friction, is left out) — a plant chosen for prediction, not a claim about the rig: such
         an effect helped the held-out data as a whole but not most of its groups (a cable spring
         that acts only in the runs whose rotor wanders far). docs/diagnose.md measures both plants
         on real runs never fitted."""
@@ -259,10 +270,11 @@ class DiagnosisResult:
                 "a diagnosis of a given model has no MuJoCo plant (its M and V are a "
                 "network's); pass res.model_after as dynamics= instead"
             )
-        effects = _as_effects(self.significant + (self.inconsistent if include_inconsistent else []))
+        added = [e for e in self.inconsistent if _simulable(e, self.significant)] if include_inconsistent else []
+        effects = _as_effects(self.significant + added)
         names = ", ".join(f"{e.name}:{e.joint}" for e in self.found) or "no effect"
-        extra = [f"{e.name}:{e.joint}" for e in self.inconsistent] if include_inconsistent else []
-        source = f"diagnosis ({names}" + (f"; inconsistent, included: {', '.join(extra)}" if extra else "") + ")"
+        extra = ", ".join(f"{e.name}:{e.joint}" for e in added)
+        source = f"diagnosis ({names}" + (f"; inconsistent, included: {extra}" if extra else "") + ")"
         return Plant(effects=effects, lumped=self.parameters_after, system=self.system, source=source)
 
     def to_json(self) -> dict:
