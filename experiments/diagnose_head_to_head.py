@@ -60,7 +60,7 @@ import jax.numpy as jnp  # noqa: E402
 import head_to_head_sysid as hsysid  # noqa: E402
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
 from furuta_gym.diagnose import InputDynamics  # noqa: E402
-from furuta_gym.effects import Effect, WithEffects, merge_spring_rests  # noqa: E402
+from furuta_gym.effects import Effect, WithEffects, can_join, merge_spring_rests  # noqa: E402
 from furuta_gym.envs import Plant  # noqa: E402
 from furuta_gym.lagrangian import forward_dynamics_with_dry_friction  # noqa: E402
 from furuta_gym.measured import prediction_windows, prepare_log  # noqa: E402
@@ -273,13 +273,17 @@ def predictive_row(diagnosed: dict, test) -> dict | None:
     tested coefficients, no refit: ``res.plant(include_inconsistent=True)``, rebuilt here from the
     committed diagnosis (its fit and wall time are the diagnosed row's). None without any."""
     evidence = diagnosed["diagnosis"]["effects"]
-    chosen = [
-        e for e in evidence if e["significant"] or (e["status"] == "inconsistent" and e["coefficient"] is not None)
+    found = [Effect(e["name"], e["joint"], e["coefficient"]) for e in evidence if e["significant"]]
+    candidates = [
+        Effect(e["name"], e["joint"], e["coefficient"])
+        for e in evidence
+        if e["status"] == "inconsistent" and e["coefficient"] is not None
     ]
-    added = [f"{e['name']}:{e['joint']}" for e in chosen if not e["significant"]]
+    extra = [e for e in candidates if can_join(e, found)]
+    added = [f"{e.name}:{e.joint}" for e in extra]
     if not added:
         return None
-    effects = merge_spring_rests([Effect(e["name"], e["joint"], e["coefficient"]) for e in chosen])
+    effects = merge_spring_rests(found + extra)
     plant = dataclasses.replace(Plant.from_json(diagnosed["diagnosis"]["plant"]), effects=tuple(effects))
     return row_doc(
         "diagnosed_inconsistent",

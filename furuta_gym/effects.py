@@ -74,6 +74,7 @@ __all__ = [
     "WithEffects",
     "spring_rests",
     "merge_spring_rests",
+    "can_join",
     "ActuatorLag",
     "CableNeutral",
     "actuator_lag_time",
@@ -558,6 +559,16 @@ def spring_rests(effects) -> dict[str, float]:
         for e in effects
         if e.kind.absorbs_constant_force and e.joint in constant and e.coefficient is not None and e.coefficient > 0
     }
+
+
+def can_join(effect, found) -> bool:
+    """Whether ``effect`` (anything with ``name``, ``kind``, ``joint`` and ``coefficient``) can
+    join the effects ``found`` in a plant: of its physical sign, and a breakaway only above a dry
+    friction found on its joint."""
+    if effect.coefficient is None or (effect.kind.physically_positive and effect.coefficient <= 0):
+        return False
+    below = effect.kind.breakaway_above
+    return not below or any((e.name, e.joint) == (below, effect.joint) for e in found)
 
 
 def merge_spring_rests(effects: Sequence[Effect]) -> list[Effect]:

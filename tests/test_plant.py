@@ -15,7 +15,7 @@ from furuta_gym.cli import main
 from furuta_gym.data import save_trajectories
 from furuta_gym.diagnose import diagnose, measured_like
 from furuta_gym.diagnose._library import layout_for
-from furuta_gym.effects import Effect, merge_spring_rests
+from furuta_gym.effects import Effect, can_join, merge_spring_rests
 from furuta_gym.envs import MujocoBackend, Plant, plant_mjcf, save_mjcf
 from furuta_gym.models import analytic_model
 
@@ -221,6 +221,19 @@ def test_a_spring_and_a_constant_torque_on_one_joint_are_one_spring_with_its_res
     other = [Effect("constant_torque", "beta", 1e-4), Effect("spring", "alpha", 8.7e-4)]
     assert merge_spring_rests(other) == other
     assert merge_spring_rests([torque, Effect("spring", "alpha", -1e-4)])[0] == torque
+
+
+def test_an_effect_joins_a_plant_only_of_its_physical_sign_and_a_breakaway_only_above_its_friction():
+    """The one rule for which effects a plant may carry beyond the found ones (the library's
+    ``plant(include_inconsistent=True)`` and the head-to-head script's row alike)."""
+    coulomb = Effect("coulomb_friction", "beta", 8e-5)
+    assert can_join(Effect("spring", "alpha", 8.7e-4), [])
+    assert not can_join(Effect("spring", "alpha", -8.7e-4), [])
+    assert not can_join(Effect("coulomb_friction", "beta", -1e-5), [])
+    assert can_join(Effect("constant_torque", "alpha", -1.3e-4), [])  # either sign is physical
+    stiction = Effect("stiction", "beta", 1e-4)
+    assert can_join(stiction, [coulomb])
+    assert not can_join(stiction, []) and not can_join(stiction, [Effect("coulomb_friction", "alpha", 4e-4)])
 
 
 def test_the_lumped_model_backend_steps_as_the_plant():

@@ -21,6 +21,7 @@ from ..effects import (
     Effect,
     EffectKind,
     WithEffects,
+    can_join,
     merge_spring_rests,
     spring_rests,
 )
@@ -180,16 +181,6 @@ def _as_effects(evidence: Sequence[EffectEvidence]) -> list[Effect]:
     return merge_spring_rests([Effect(e.name, e.joint, float(e.coefficient or 0.0)) for e in evidence])
 
 
-def _simulable(effect: EffectEvidence, found: Sequence[EffectEvidence]) -> bool:
-    """Whether an effect not claimed can join the found ones in a plant: of its physical sign,
-    and a breakaway only above a dry friction found on its joint."""
-    assert effect.coefficient is not None
-    if effect.kind.physically_positive and effect.coefficient <= 0:
-        return False
-    below = effect.kind.breakaway_above
-    return not below or any((e.name, e.joint) == (below, effect.joint) for e in found)
-
-
 @dataclasses.dataclass
 class DiagnosisResult:
     """What :func:`diagnose` found. ``effects`` are ordered by evidence, strongest first."""
@@ -270,7 +261,7 @@ class DiagnosisResult:
                 "a diagnosis of a given model has no MuJoCo plant (its M and V are a "
                 "network's); pass res.model_after as dynamics= instead"
             )
-        added = [e for e in self.inconsistent if _simulable(e, self.significant)] if include_inconsistent else []
+        added = [e for e in self.inconsistent if can_join(e, self.significant)] if include_inconsistent else []
         effects = _as_effects(self.significant + added)
         names = ", ".join(f"{e.name}:{e.joint}" for e in self.found) or "no effect"
         extra = ", ".join(f"{e.name}:{e.joint}" for e in added)
