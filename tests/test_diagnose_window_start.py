@@ -55,3 +55,22 @@ def test_bad_start_iterations_is_named():
     data = measured_like("furuta", [], seed=0, n_trajectories=2, duration=3.0)
     with pytest.raises(ValueError, match="start_iterations"):
         diagnose(data, "furuta", start_iterations=-1)
+
+
+def test_windows_under_several_parameter_sets_are_predicted_as_one_by_one(monkeypatch):
+    """The output-error fit's Jacobian predicts every (θ, window) pair in shared batches: each
+    pair as if predicted alone, whatever batch it lands in (5 pairs per batch here, so batches
+    mix parameter sets and the last one is padded)."""
+    layout = layout_for("furuta")
+    theta = layout.nominal()
+    win = _windows(layout, theta, velocity_error=np.array([0.3, -0.4]))
+    heavier, rubbing = theta.copy(), theta.copy()
+    heavier[: len(layout.base)] *= 1.05
+    rubbing[layout.index("coulomb_friction:alpha")] = 3e-4
+    thetas = np.stack([theta, heavier, rubbing])
+    monkeypatch.setattr(_fit, "_BATCH", 5)
+    together = _fit.predict_windows_at(layout, thetas, win, 2, start_iterations=1)
+    alone = np.stack([_fit.predict_windows(layout, th, win, 2, start_iterations=1) for th in thetas])
+    assert together.shape == (3, *win.q.shape)
+    np.testing.assert_allclose(together, alone, rtol=1e-12, atol=1e-15)
+    assert np.abs(together[2] - together[0]).max() > 1e-4  # the parameter sets do differ

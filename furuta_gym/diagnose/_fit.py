@@ -308,7 +308,7 @@ def make_windows(
     return w
 
 
-_BATCH = 16  # windows per compiled call: every window set reuses one compiled shape
+_BATCH = 64  # (θ, window) pairs per compiled call: every window set reuses one compiled shape
 
 
 def _refined_positions(positions, v, x, u, q_measured, iterations: int):
@@ -336,10 +336,11 @@ def _refined_positions(positions, v, x, u, q_measured, iterations: int):
 
 
 def _predictor(layout: ParameterLayout, dt: float, length: int, substeps: int, start_iterations: int = 0):
+    """The compiled open-loop predictor of a batch of windows, each under its own θ."""
     n = get_spec(layout.system).n_dof
     h = dt / substeps
 
-    def predict(theta, x0, us, q_measured):
+    def one(theta, x, u, q_measured):
         model = layout.model(theta, dry_friction=False)
 
         def field(x, u):  # dry friction that holds a joint at rest, as a real one does
@@ -350,29 +351,32 @@ def _predictor(layout: ParameterLayout, dt: float, length: int, substeps: int, s
         def positions(v, x, u):
             return rollout_zoh(model, jnp.concatenate([x[:n], v]), u, dt, substeps, field)[1:, :n]
 
-        def one(x, u, qm):
-            return _refined_positions(positions, x[n:], x, u, qm, start_iterations)
+        return _refined_positions(positions, x[n:], x, u, q_measured, start_iterations)
 
-        return jax.vmap(one)(x0, us, q_measured)
-
-    return _compiled("predict", layout, dt, length, substeps, start_iterations, build=lambda: jax.jit(predict))
-
-
-def _batches(win: "Windows"):
-    """Windows in padded batches of ``_BATCH`` (padding repeats the last window; masked out)."""
-    W = win.x0.shape[0]
-    for s in range(0, W, _BATCH):
-        idx = np.arange(s, min(s + _BATCH, W))
-        pad = np.concatenate([idx, np.full(_BATCH - idx.size, idx[-1])])
-        yield idx.size, jnp.asarray(win.x0[pad]), jnp.asarray(win.us[pad]), jnp.asarray(win.q[pad])
+    return _compiled("predict", layout, dt, length, substeps, start_iterations, build=lambda: jax.jit(jax.vmap(one)))
 
 
 def predict_windows(layout, theta, win: Windows, substeps: int = 1, start_iterations: int = 0) -> np.ndarray:
     """Open-loop position predictions of each window; with ``start_iterations`` > 0 each window's
     start velocity is first re-estimated from its own positions (Gauss-Newton steps)."""
+    return predict_windows_at(layout, np.asarray(theta, dtype=float)[None], win, substeps, start_iterations)[0]
+
+
+def predict_windows_at(layout, thetas, win: Windows, substeps: int = 1, start_iterations: int = 0) -> np.ndarray:
+    """:func:`predict_windows` under each of ``thetas`` (K, P) at once: (K, W, L, n). The (θ,
+    window) pairs share padded batches of one compiled shape: a finite-difference Jacobian's
+    columns run together, and a wide batch costs far less per window than a narrow one."""
     predict = _predictor(layout, win.dt, win.length, substeps, start_iterations)
-    out = [np.asarray(predict(jnp.asarray(theta), x0, us, q))[:k] for k, x0, us, q in _batches(win)]
-    return np.concatenate(out)
+    thetas = np.asarray(thetas, dtype=float)
+    W = win.x0.shape[0]
+    which, window = np.divmod(np.arange(len(thetas) * W), W)
+    out = []
+    for s in range(0, which.size, _BATCH):
+        real = np.arange(s, min(s + _BATCH, which.size))
+        pad = np.concatenate([real, np.full(_BATCH - real.size, real[-1])])  # repeats; masked out
+        k, w = which[pad], window[pad]
+        out.append(np.asarray(predict(*map(jnp.asarray, (thetas[k], win.x0[w], win.us[w], win.q[w]))))[: real.size])
+    return np.concatenate(out).reshape(len(thetas), *win.q.shape)
 
 
 def window_residuals(layout, theta, win: Windows, substeps: int = 1, start_iterations: int = 0) -> np.ndarray:
@@ -423,26 +427,22 @@ def oe_fit(
         th[free] = z * scale[free]
         return th
 
-    last: dict[bytes, np.ndarray] = {}
+    latest: list = [None, None]  # the point last evaluated (its bytes) and its residual
 
     def f(z):
         r = (predict_windows(layout, full(z), win, substeps, start_iterations) - win.q).reshape(-1)
-        last.clear()
-        last[z.tobytes()] = r = np.where(np.isfinite(r), r, 1e3)
-        return r.copy()  # the cached one stays as computed whatever the solver does with its copy
+        latest[:] = [z.tobytes(), np.where(np.isfinite(r), r, 1e3)]
+        return latest[1].copy()  # the kept one stays as computed whatever the solver does with its copy
 
     def J(z):
-        # forward differences: one compiled predictor serves the fit and the evaluation (an
-        # autodiff Jacobian through the RK4 scan costs far more to compile than it saves here);
-        # the trust region asks for the Jacobian where it has just evaluated the residual
-        r0 = last[z.tobytes()] if z.tobytes() in last else f(z)
-        cols = []
-        for i in range(z.size):
-            h = 1e-6 * max(1.0, abs(z[i]))
-            zi = z.copy()
-            zi[i] += h
-            cols.append((f(zi) - r0) / h)
-        return np.stack(cols, axis=1)
+        # forward differences, every column in one batched prediction (an autodiff Jacobian
+        # through the RK4 scan costs far more to compile than it saves here); the trust region
+        # asks for the Jacobian where it has just evaluated the residual
+        r0 = latest[1] if latest[0] == z.tobytes() else f(z)
+        h = 1e-6 * np.maximum(1.0, np.abs(z))
+        stepped = np.stack([full(z + h[i] * np.eye(z.size)[i]) for i in range(z.size)])
+        r = (predict_windows_at(layout, stepped, win, substeps, start_iterations) - win.q).reshape(z.size, -1)
+        return (np.where(np.isfinite(r), r, 1e3) - r0).T / h
 
     z0 = theta_start[free] / scale[free]
     r0 = f(z0)
