@@ -25,12 +25,11 @@ per cell (:data:`CELLS`):
 * ``physical_start``: the baseline started from a potential with the physical curvature
   (:func:`physical_start`): do the data pull the curvature to a minimum, or only fail to fix it?
 
-Two of these reach inside the simulator, which has no argument for them: the feed-forward scale
-wraps ``_excitation`` and the exact velocities record ``_Plant``'s state after each step (both
-private to ``furuta_gym.diagnose._synthetic``; patched only inside :func:`simulate`, restored
-after). Each run (cell × seed; data seed and model seed both vary) writes
-``results/lprop_ablation/<cell>_s<seed>.json``; ``experiments/lprop_ablation_table.py`` writes the
-table into docs/learning.md.
+The feed-forward scale and the exact velocities are the simulator's own options
+(``excitation=ClosedLoopBalancing(feedforward=...)``, ``true_velocities=True``); a subclass of
+the experiment keeps each run's feed-forward for its share of u. Each run (cell × seed; data
+seed and model seed both vary) writes ``results/lprop_ablation/<cell>_s<seed>.json``;
+``experiments/lprop_ablation_table.py`` writes the table into docs/learning.md.
 
     python experiments/lprop_closed_loop_ablation.py [--cells baseline,...] [--seeds 0,1,2]
 """
@@ -38,7 +37,6 @@ table into docs/learning.md.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import json
 import platform
@@ -53,7 +51,7 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 from furuta_gym.data import Trajectory  # noqa: E402
-from furuta_gym.diagnose import measured_like  # noqa: E402
+from furuta_gym.diagnose import ClosedLoopBalancing, measured_like  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
 from furuta_gym.measured import prepare_log, window_errors  # noqa: E402
 
@@ -134,59 +132,37 @@ def start_model(cell: Cell, seed: int):
     return physical_start(seed) if cell.physical_start else make_model("furuta", "dln", jax.random.PRNGKey(seed))
 
 
-@contextlib.contextmanager
-def _patched_simulator(feedforward: float, feeds: list, states: list | None):
-    """Scale the balancing loop's feed-forward and append it to ``feeds`` (one array per run);
-    append the plant's true state per sample to ``states`` (one list per run). Restored on exit."""
-    from furuta_gym.diagnose import _synthetic as syn
+@dataclasses.dataclass(frozen=True)
+class _FeedRecorded(ClosedLoopBalancing):
+    """The balancing experiment, keeping each run's feed-forward (for its share of u)."""
 
-    excitation, reset, step = syn._excitation, syn._Plant.reset, syn._Plant.step
+    feeds: list = dataclasses.field(default_factory=list, compare=False)
 
-    def scaled(n, dt, rng):
-        rotor, pendulum, feed = excitation(n, dt, rng)
-        feeds.append(feedforward * feed)
-        return rotor, pendulum, feeds[-1]
-
-    def rec_reset(self, x0):
-        reset(self, x0)
-        if states is not None:
-            states.append([np.array(self.x)])
-
-    def rec_step(self, u):
-        x = step(self, u)
-        if states is not None:
-            states[-1].append(np.array(x))
-        return x
-
-    syn._excitation, syn._Plant.reset, syn._Plant.step = scaled, rec_reset, rec_step
-    try:
-        yield
-    finally:
-        syn._excitation, syn._Plant.reset, syn._Plant.step = excitation, reset, step
+    def signals(self, n, dt, rng):
+        rotor, pendulum, feed = super().signals(n, dt, rng)
+        self.feeds.append(feed)
+        return rotor, pendulum, feed
 
 
 def simulate(cell: Cell, n: int, duration: float, seed: int) -> tuple[list[Trajectory], float]:
     """``n`` closed-loop balancing runs of the cell's experiment, as logged (exact velocities
     attached when the cell says so), and the rms of the independent feed-forward over the rms of
     u (the rest of u is the feedback's function of the measured state), after the skipped start."""
-    feeds: list = []
-    states: list | None = [] if cell.exact_velocity else None
-    with _patched_simulator(cell.feedforward, feeds, states):
-        runs = measured_like(
-            "furuta",
-            REAL_EFFECTS if cell.effects else (),
-            excitation="closed_loop_prbs",
-            n_trajectories=n,
-            duration=duration,
-            seed=seed,
-            quantize=cell.quantize,
-        )
+    experiment = _FeedRecorded(feedforward=ClosedLoopBalancing().feedforward * cell.feedforward)
+    runs = measured_like(
+        "furuta",
+        REAL_EFFECTS if cell.effects else (),
+        excitation=experiment,
+        n_trajectories=n,
+        duration=duration,
+        seed=seed,
+        quantize=cell.quantize,
+        true_velocities=cell.exact_velocity,
+    )
     start = int(round(SKIP / runs[0].dt))
     u = np.concatenate([np.asarray(tr.u)[start:, 0] for tr in runs])
-    feed = np.concatenate([f[start:] for f in feeds])
+    feed = np.concatenate([f[start:] for f in experiment.feeds])
     share = float(np.sqrt(np.mean(feed**2) / np.mean(u**2)))
-    if states is not None:
-        runs = [dataclasses.replace(tr, qd=np.asarray(xs)[: len(tr.t), 2:]) for tr, xs in zip(runs, states)]
     return runs, share
 
 

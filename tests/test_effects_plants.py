@@ -10,6 +10,7 @@ the lag itself changes (O(dt/τ): 0.7 % at τ = 2 ms, 0.08 % at 20 ms); MuJoCo i
 6e-7 rad of a 200-substep reference of the continuous lag.
 """
 
+import dataclasses
 import math
 import pickle
 
@@ -284,6 +285,52 @@ def test_closed_loop_prbs_balances_with_the_rig_effects():
         measured_like("nmsd", excitation="sine_sweep")
     with pytest.raises(ValueError, match="excitation must be one of"):
         measured_like("furuta", excitation="square")
+
+
+def test_the_closed_loop_experiment_is_an_object_whose_knobs_act():
+    """``excitation=ClosedLoopBalancing(...)``: its defaults are ``"closed_loop_prbs"`` bit for
+    bit; a lower voltage limit clips the command; a subclass sees every run's signals (how a
+    study records its feed-forward); bad gains are one clear error."""
+    from furuta_gym.diagnose import ClosedLoopBalancing
+
+    short = dict(n_trajectories=2, duration=0.6, seed=4)
+    named = measured_like("furuta", excitation="closed_loop_prbs", **short)
+    default = measured_like("furuta", excitation=ClosedLoopBalancing(), **short)
+    assert all(np.array_equal(a.u, b.u) and np.array_equal(a.q, b.q) for a, b in zip(named, default))
+    clipped = measured_like("furuta", excitation=ClosedLoopBalancing(voltage_limit=0.3), **short)
+    assert np.abs(np.concatenate([tr.u for tr in clipped])).max() == pytest.approx(0.3)
+
+    @dataclasses.dataclass(frozen=True)
+    class Recorded(ClosedLoopBalancing):
+        feeds: list = dataclasses.field(default_factory=list, compare=False)
+
+        def signals(self, n, dt, rng):
+            rotor, pendulum, feed = super().signals(n, dt, rng)
+            self.feeds.append(feed)
+            return rotor, pendulum, feed
+
+    recorded = Recorded(feedforward=1.0)  # twice the rig's: the same draws, the feed doubled
+    louder = measured_like("furuta", excitation=recorded, **short)
+    assert len(recorded.feeds) == 2 and np.abs(recorded.feeds[0]).max() <= 1.0 + 1e-12
+    assert not np.array_equal(louder[0].u, default[0].u)
+    with pytest.raises(ValueError, match="gains needs exactly"):
+        ClosedLoopBalancing(gains={"kp_theta": 6.0})
+    with pytest.raises(ValueError, match="velocity_cutoff must be > 0"):
+        ClosedLoopBalancing(velocity_cutoff=0.0)
+
+
+@pytest.mark.parametrize("excitation", ["sine_sweep", "closed_loop_prbs"])
+def test_true_velocities_are_the_simulators_and_only_on_request(excitation):
+    """``true_velocities=True`` attaches the simulated velocities: the derivative of the exact
+    angles (central differences at 2 ms agree to a small fraction of the motion)."""
+    short = dict(n_trajectories=1, duration=0.6, seed=3, excitation=excitation, quantize=False)
+    (plain,) = measured_like("furuta", **short)
+    (tr,) = measured_like("furuta", true_velocities=True, **short)
+    assert plain.qd is None and tr.qd is not None and tr.qd.shape == tr.q.shape
+    assert np.array_equal(plain.q, tr.q) and np.array_equal(plain.u, tr.u)  # the same run
+    central = (tr.q[2:] - tr.q[:-2]) / (2 * tr.dt)
+    scale = np.abs(tr.qd).max(axis=0)
+    assert np.all(np.abs(central - tr.qd[1:-1]).max(axis=0) < 0.05 * scale), scale
 
 
 # ----------------------------------------------------------------------------- a cable whose neutral moves

@@ -12,7 +12,7 @@ from ._library import Candidate, LumpedModel, layout_for, nominal_base
 from ._rests import RestBound, held_at_rest
 from ._report import write_figures as write_report_figures
 from ._report import write_json as write_report_json
-from ._synthetic import measured_like, sticky_rig
+from ._synthetic import ClosedLoopBalancing, measured_like, sticky_rig
 
 __all__ = [
     "diagnose",
@@ -27,6 +27,7 @@ __all__ = [
     "nominal_base",
     "measured_like",
     "sticky_rig",
+    "ClosedLoopBalancing",
     "held_at_rest",
     "RestBound",
     "write_report_figures",

@@ -30,8 +30,9 @@ Experiments (``excitation=``):
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import jax
 import numpy as np
@@ -45,7 +46,7 @@ from ..models import SYSTEM_DEFINITIONS, analytic_model, system_definition
 from ..signals import chirp, quantize_encoder
 from ..simulate import rk4_zoh_step, rollout_zoh
 
-__all__ = ["measured_like", "sticky_rig", "EXCITATIONS", "BALANCE_GAINS"]
+__all__ = ["measured_like", "sticky_rig", "ClosedLoopBalancing", "EXCITATIONS", "BALANCE_GAINS"]
 
 EXCITATIONS = ("chirp", "sine_sweep", "sticky_sweep", "closed_loop_prbs")
 
@@ -126,16 +127,43 @@ def _smoothed(x: np.ndarray, keep: float = 5.0 / 7.0) -> np.ndarray:
     return np.asarray(lfilter([1.0 - keep], [1.0, -keep], x))
 
 
-def _excitation(n: int, dt: float, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """What the MIT rig logs add to the balancing loop (read off the logs): a rotor reference
-    ramping at ±0.25 rad/s (direction held 0.25–1 s), a pendulum reference of ±0.01 rad and a
-    ±0.5 V feed-forward (each held 0.1–0.8 s / 0.1–0.6 s), all smoothed. Returns
-    (rotor reference, pendulum reference, feed-forward) per sample."""
-    ramp = _smoothed(_telegraph(n, dt, rng, 0.25, 0.25, 4))
-    rotor = np.cumsum(ramp) * dt
-    pendulum = _smoothed(_telegraph(n, dt, rng, 0.01, 0.1, 8))
-    feed = _smoothed(_telegraph(n, dt, rng, 0.5, 0.1, 6))
-    return rotor, pendulum, feed
+@dataclasses.dataclass(frozen=True)
+class ClosedLoopBalancing:
+    """The ``"closed_loop_prbs"`` experiment as an object, for ``measured_like(excitation=...)``:
+    the string is this object with its defaults, which are the MIT rig logs' (read off the logs).
+
+    Upright balancing by PD on the encoder angles, u = kp_theta·(α − r_α) + kd_theta·α̇ −
+    kp_alpha·(β − π − r_β) − kd_alpha·β̇ + feed-forward, saturated at ``voltage_limit``; the
+    velocities are a first-order filtered difference of the quantised angles (cut-off
+    ``velocity_cutoff`` rad/s; a raw difference turns one count into 1.5 rad/s). :meth:`signals`
+    draws one run's references and feed-forward; a subclass may override it to change or record
+    them.
+    """
+
+    gains: Mapping[str, float] = dataclasses.field(default_factory=lambda: dict(BALANCE_GAINS))
+    velocity_cutoff: float = 100.0  # rad/s
+    rotor_rate: float = 0.25  # rad/s, the rotor reference's ramp, direction held 0.25–1 s
+    pendulum_reference: float = 0.01  # rad, ±, held 0.1–0.8 s
+    feedforward: float = 0.5  # V, ±, held 0.1–0.6 s
+    voltage_limit: float = 10.0  # V
+
+    def __post_init__(self):
+        if set(self.gains) != set(BALANCE_GAINS):
+            raise ValueError(
+                f"ClosedLoopBalancing: gains needs exactly {sorted(BALANCE_GAINS)}, got {sorted(self.gains)}"
+            )
+        for name in ("velocity_cutoff", "voltage_limit", "rotor_rate", "pendulum_reference", "feedforward"):
+            value, strict = getattr(self, name), name in ("velocity_cutoff", "voltage_limit")
+            if not (math.isfinite(value) and (value > 0 if strict else value >= 0)):
+                raise ValueError(f"ClosedLoopBalancing: {name} must be {'> 0' if strict else '>= 0'}, got {value!r}")
+
+    def signals(self, n: int, dt: float, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One run's (rotor reference, pendulum reference, feed-forward) per sample, all smoothed."""
+        ramp = _smoothed(_telegraph(n, dt, rng, self.rotor_rate, 0.25, 4))
+        rotor = np.cumsum(ramp) * dt
+        pendulum = _smoothed(_telegraph(n, dt, rng, self.pendulum_reference, 0.1, 8))
+        feed = _smoothed(_telegraph(n, dt, rng, self.feedforward, 0.1, 6))
+        return rotor, pendulum, feed
 
 
 class _Plant:
@@ -200,22 +228,19 @@ class _Plant:
         return self.x
 
 
-def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, cutoff: float = 100.0, sense=quantize_encoder):
-    """One closed-loop upright run: (``sense``d angles (T, 2), plant input (T,)).
-
-    The controller sees only the encoders, as on the rig: velocities are a first-order filtered
-    difference of the quantised angles (cut-off ``cutoff`` rad/s; a raw difference turns one
-    count into 1.5 rad/s). u = PD + PRBS, saturated at ±10 V and held until the next sample.
-    """
-    dt, g = t[1] - t[0], BALANCE_GAINS
+def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, experiment: ClosedLoopBalancing, sense):
+    """One closed-loop upright run of ``experiment``: (``sense``d angles (T, 2), plant input (T,),
+    true velocities (T, 2)). The command is held until the next sample."""
+    dt, g = t[1] - t[0], experiment.gains
     x = np.array(
         [rng.uniform(-0.1, 0.1), np.pi + rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05)]
     )
-    rotor_ref, pendulum_ref, feed = _excitation(len(t), dt, rng)
+    rotor_ref, pendulum_ref, feed = experiment.signals(len(t), dt, rng)
     sim.reset(x)
-    smooth = 1.0 - math.exp(-cutoff * dt)
+    smooth = 1.0 - math.exp(-experiment.velocity_cutoff * dt)
     q_prev, v = sense(x[:2]), np.zeros(2)
-    qs, us = np.empty((len(t), 2)), np.empty(len(t))
+    qs, us, qds = np.empty((len(t), 2)), np.empty(len(t)), np.empty((len(t), 2))
+    limit = experiment.voltage_limit
     for k in range(len(t)):
         q = sense(x[:2])
         v += smooth * ((q - q_prev) / dt - v)
@@ -227,10 +252,10 @@ def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, cutoff: float
             - g["kp_alpha"] * (tilt - pendulum_ref[k])
             - g["kd_alpha"] * v[1]
         )
-        qs[k], us[k] = q, np.clip(pd + feed[k], -10.0, 10.0)
+        qs[k], us[k], qds[k] = q, np.clip(pd + feed[k], -limit, limit), x[2:]
         if k + 1 < len(t):
             x = sim.step(us[k : k + 1])
-    return qs, us
+    return qs, us, qds
 
 
 def measured_like(
@@ -244,8 +269,9 @@ def measured_like(
     noise: float | None = None,
     plant: str = "mujoco",
     substeps: int = 10,
-    excitation: str = "chirp",
+    excitation: str | ClosedLoopBalancing = "chirp",
     quantize: bool = True,
+    true_velocities: bool = False,
 ) -> list[Trajectory]:
     """Trajectories of the pinned model with ``effects`` added, as a sensor would log them.
 
@@ -258,20 +284,25 @@ def measured_like(
       (switched at zero crossings), 0 V in between.
     * ``"closed_loop_prbs"``: upright balancing from β0 = π ± 0.05, α0 = ±0.1, velocities ±0.05;
       PD on the encoder angles (:data:`BALANCE_GAINS`, filtered-difference velocities) tracking
-      references plus a ±0.5 V feed-forward as the MIT logs do (:func:`_excitation`), saturated
-      at ±10 V; u is the saturated command.
+      references plus a ±0.5 V feed-forward as the MIT logs do, saturated at ±10 V; u is the
+      saturated command. ``excitation=ClosedLoopBalancing(...)`` is the same experiment with
+      other gains, filter, references, feed-forward or voltage limit.
 
     ``quantize=False`` logs the Furuta's exact angles (and the balancing controller sees them):
     the same experiment without the encoder's resolution, to tell the sensor's limits from the
-    method's.
+    method's. ``true_velocities=True`` attaches the simulator's velocities as ``qd`` (no sensor
+    measures them: to tell what velocity estimation costs).
 
     ``input_delay`` is applied as the plant seeing the command ``round(d/dt)`` samples late,
     ``actuator_lag`` after it. The plant takes one MJCF step per sample for ``"chirp"`` (as it
     always did) and ``substeps`` RK4 steps per sample otherwise (the analytic plant always).
     """
     ensure_x64()
+    experiment = excitation if isinstance(excitation, ClosedLoopBalancing) else ClosedLoopBalancing()
+    if isinstance(excitation, ClosedLoopBalancing):
+        excitation = "closed_loop_prbs"
     if excitation not in EXCITATIONS:
-        raise ValueError(f"excitation must be one of {list(EXCITATIONS)}, got {excitation!r}")
+        raise ValueError(f"excitation must be one of {list(EXCITATIONS)} or a ClosedLoopBalancing, got {excitation!r}")
     definition = system_definition(system)
     if excitation not in definition.excitations:
         owners = [d.title for d in SYSTEM_DEFINITIONS.values() if excitation in d.excitations]
@@ -291,7 +322,7 @@ def measured_like(
     out = []
     for k in range(n_trajectories):
         if excitation == "closed_loop_prbs":
-            q, u = _balance(sim, t, rng, sense=sense)
+            q, u, qd = _balance(sim, t, rng, experiment, sense)
         else:
             if excitation in ("sine_sweep", "sticky_sweep"):
                 q0 = [rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05)]
@@ -301,10 +332,11 @@ def measured_like(
                 x0 = np.array([rng.uniform(lo, hi) for lo, hi in definition.chirp_initial_ranges])
                 u = _inputs(system, t, rng, forced)
             xs = sim.roll(x0, u)
-            q = xs[:, : definition.spec.n_dof]
+            q, qd = xs[:, : definition.spec.n_dof], xs[:, definition.spec.n_dof :]
             if definition.encoders:
                 q = sense(q)
             else:
                 q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)
-        out.append(Trajectory(t=t.copy(), q=np.asarray(q), u=u[:, None], qd=None, name=str(k)))
+        qd = np.array(qd) if true_velocities else None
+        out.append(Trajectory(t=t.copy(), q=np.asarray(q), u=u[:, None], qd=qd, name=str(k)))
     return out
