@@ -258,6 +258,15 @@ def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, experiment: C
     return qs, us, qds
 
 
+def _named_experiment(excitation) -> tuple[str, ClosedLoopBalancing]:
+    """(the experiment's name, the closed loop's settings) of ``measured_like``'s ``excitation``."""
+    if isinstance(excitation, ClosedLoopBalancing):
+        return "closed_loop_prbs", excitation
+    if excitation not in EXCITATIONS:
+        raise ValueError(f"excitation must be one of {list(EXCITATIONS)} or a ClosedLoopBalancing, got {excitation!r}")
+    return excitation, ClosedLoopBalancing()
+
+
 def measured_like(
     system: str,
     effects: Sequence[Effect] = (),
@@ -298,11 +307,7 @@ def measured_like(
     always did) and ``substeps`` RK4 steps per sample otherwise (the analytic plant always).
     """
     ensure_x64()
-    experiment = excitation if isinstance(excitation, ClosedLoopBalancing) else ClosedLoopBalancing()
-    if isinstance(excitation, ClosedLoopBalancing):
-        excitation = "closed_loop_prbs"
-    if excitation not in EXCITATIONS:
-        raise ValueError(f"excitation must be one of {list(EXCITATIONS)} or a ClosedLoopBalancing, got {excitation!r}")
+    excitation, experiment = _named_experiment(excitation)
     definition = system_definition(system)
     if excitation not in definition.excitations:
         owners = [d.title for d in SYSTEM_DEFINITIONS.values() if excitation in d.excitations]
