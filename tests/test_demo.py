@@ -62,16 +62,13 @@ def test_demo_summary_numbers_are_finite_and_sensible(demo_dir):
     assert "furuta-gym demo summary" in stdout and "spring:alpha" in stdout
 
 
-def test_demo_refuses_to_overwrite_a_previous_run(demo_dir):
+def test_demo_refuses_to_overwrite_a_previous_run(demo_dir, capsys):
+    from furuta_gym.cli import main  # in process: the refusal comes before any work
+
     out, _ = demo_dir
     before = (out / "summary.json").read_bytes()
-    proc = subprocess.run(
-        [sys.executable, "-m", "furuta_gym", "demo", "--tiny", "--no-progress", "--out", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 2 and "previous demo" in proc.stderr
+    assert main(["demo", "--tiny", "--no-progress", "--out", str(out)]) == 2
+    assert "previous demo" in capsys.readouterr().err
     assert (out / "summary.json").read_bytes() == before
 
 
