@@ -30,6 +30,7 @@ EXACT = ROOT / "results" / "diagnose_sim_exact_angles"  # the closed-loop logs w
 UNIFORM = ROOT / "results" / "diagnose_sim_uniform_blocks"  # the sticky sweeps, every block weighted alike
 RESTS = ROOT / "results" / "diagnose_rest_bound" / "calibration.json"  # experiments/rest_bound_calibration.py
 DRIFT = ROOT / "results" / "cable_centre_drift" / "drift.json"  # experiments/cable_centre_drift.py
+MATCH = ROOT / "results" / "closed_loop_match" / "match.json"  # experiments/closed_loop_match.py
 
 
 def _load(folder: Path) -> dict[str, dict]:
@@ -398,6 +399,44 @@ def readme_line(docs: dict[str, dict]) -> str:
     return text.rstrip(";") + "."
 
 
+def match_table(doc: dict, real: dict) -> str:
+    """The simulated closed loop beside the shipped runs, and the planted pendulum friction."""
+    stats, cols = doc["statistics"], ["real runs 1–10", "default", "matched"]
+    head = "| | shipped runs 1–10 | simulated, as it is | simulated, matched |\n|---|---|---|---|"
+    rows = [
+        ("u std (V)", lambda s: f"{s['u_std']:.2f}"),
+        ("u power above 30 Hz", lambda s: f"{s['u_power_above_30hz']:.1%}"),
+        ("u power 5–30 Hz", lambda s: f"{s['u_power_5_30hz']:.1%}"),
+        ("pendulum count repeated", lambda s: f"{s['beta_repeats']:.0%}"),
+        ("pendulum steps of ≥ 2 counts", lambda s: f"{s['beta_steps_of_2_or_more']:.1%}"),
+        ("u on α, α̇, β − π, β̇ (V/rad, V·s/rad)", lambda s: ", ".join(f"{v:.2f}" for v in s["regression"].values())),
+        ("that regression's R²", lambda s: f"{s['regression_r2']:.2f}"),
+    ]
+    lines = [head] + [f"| {label} | " + " | ".join(fmt(stats[c]) for c in cols) + " |" for label, fmt in rows]
+    planted = doc["planted"]
+    found = []
+    for name, label in (("default", "as it is"), ("matched", "matched")):
+        probes = [p for p in doc["probes"] if p["experiment"] == name]
+        hits = [p for p in probes if p["status"] == "selected"]
+        sizes = ", ".join(f"{p['coefficient']:.3g} (t {p['t']:.1f})" for p in probes)
+        found.append(f"{label}: found on {len(hits)} of {len(probes)} logs ({sizes})")
+    fit = real.get("growing_runs01-10")
+    on_real = ""
+    if fit:
+        ev = next(e for e in fit["effects"] if (e["name"], e["joint"]) == (planted["name"], planted["joint"]))
+        on_real = f" On the shipped runs 1–10 the same test fits {ev['coefficient']:.2g} N m ({ev['status']})."
+    return (
+        "\n".join(lines)
+        + f"\n\nA pendulum Coulomb friction of {planted['coefficient']:g} N m planted, diagnosed with the real"
+        + " runs' recipe: "
+        + "; ".join(found)
+        + "."
+        + on_real
+        + f" Experiments: `{doc['experiments']['matched']}` (matched); made by `python experiments/closed_loop_match.py`"
+        + f" ({doc['date']})."
+    )
+
+
 def blocks() -> dict[str, str]:
     sim, real = _load(SIM), _load(REAL)
     out = {}
@@ -415,6 +454,8 @@ def blocks() -> dict[str, str]:
         out["diagnose-real-reference"] = reference_table(real["split_runs01-05"], refs)
     if DRIFT.exists():
         out["diagnose-cable-drift"] = drift_table(json.loads(DRIFT.read_text()))
+    if MATCH.exists():
+        out["diagnose-closed-loop-match"] = match_table(json.loads(MATCH.read_text()), real)
     if RESTS.exists():
         out["diagnose-rest-bound"] = rest_bound_table(json.loads(RESTS.read_text()))
     uniform = _load(UNIFORM)
