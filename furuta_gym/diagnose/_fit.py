@@ -440,7 +440,7 @@ def oe_fit(
         # asks for the Jacobian where it has just evaluated the residual
         r0 = latest[1] if latest[0] == z.tobytes() else f(z)
         h = 1e-6 * np.maximum(1.0, np.abs(z))
-        stepped = np.stack([full(z + h[i] * np.eye(z.size)[i]) for i in range(z.size)])
+        stepped = np.stack([full(z + step) for step in np.diag(h)])
         r = (predict_windows_at(layout, stepped, win, substeps, start_iterations) - win.q).reshape(z.size, -1)
         return (np.where(np.isfinite(r), r, 1e3) - r0).T / h
 
