@@ -15,11 +15,13 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
+from furuta_gym.training import checkpoint as ckpt  # noqa: E402
 from furuta_gym.training.reproduce import ReproduceConfig, reproduce  # noqa: E402
 
 # Only L_Iτ epochs (no trajectory stage to compile), enough of them that a worker can be killed
-# while it trains; two seeds, so both workers train at once.
-EPOCHS = 60
+# while it trains (they run in compiled blocks of about two seconds after a first short one);
+# two seeds, so both workers train at once.
+EPOCHS = 400
 CONFIG = ReproduceConfig(
     quick=True,
     systems=("nmsd",),
@@ -100,13 +102,20 @@ def _worker_pid(task_name: str) -> int | None:
     return None
 
 
+def _saved_epoch(state: Path) -> int:
+    try:
+        return int(ckpt.read_header(state)["state"]["epoch"])
+    except (OSError, ValueError, KeyError):  # not written yet, or being replaced
+        return 0
+
+
 def _kill_mid_run(history: Path, task_name: str, after_epochs: int, timeout: float = 300.0) -> list[str]:
-    """SIGKILL the worker training ``task_name`` once its history holds ``after_epochs`` epochs;
-    returns the history lines written before the kill."""
+    """SIGKILL the worker training ``task_name`` once its history holds ``after_epochs`` epochs,
+    all of them in its saved state too; returns those history lines."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         lines = history.read_text().splitlines() if history.exists() else []
-        if len(lines) >= after_epochs:
+        if len(lines) >= after_epochs and _saved_epoch(history.parent / "train_state.eqx") >= len(lines):
             pid = _worker_pid(task_name)
             assert pid is not None, f"no worker runs {task_name}"
             os.kill(pid, signal.SIGKILL)
@@ -128,10 +137,9 @@ def test_a_killed_worker_is_retried_and_resumes_its_training(workspace):
     assert 5 <= len(before) < EPOCHS
     assert _statuses(done["paths"]) == ["resumed", "trained"]
     lines = (out / RUN / "seed0" / "history.jsonl").read_text().splitlines()
-    # the epochs before the kill were kept as written (each line carries its own timing: a
+    # the epochs saved before the kill were kept as written (each line carries its own timing: a
     # restart would have rewritten them), and training went on from there, each epoch once
-    kept = len(before) - 1  # the kill may have come between an epoch's history line and its state
-    assert lines[:kept] == before[:kept]
+    assert lines[: len(before)] == before
     assert [json.loads(line)["epoch"] for line in lines] == list(range(1, EPOCHS + 1))
     # and the resumed model is the one an uninterrupted run trains
     assert _metrics(out, 0) == _metrics(workspace / "local", 0)

@@ -1,13 +1,18 @@
 """Per-stage losses in the training curriculum: a stage without a horizon trains on L_Iτ alone
 (the cheap warm start the reproduction gives L_prop), the next stages on the full L_prop."""
 
+import dataclasses
+import sys
+
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from _simulated import nmsd_chirp_segments
-from furuta_gym.training.train import TrainConfig, train
+from furuta_gym.models import make_model
+from furuta_gym.training.train import TrainConfig, _integral_windows, train, training_step
 
 
 @pytest.fixture(scope="module")
@@ -191,14 +196,18 @@ def test_resuming_mid_stage_keeps_the_best_iterate(segments, tmp_path, monkeypat
     def save_then_stop(*args, **kwargs):
         out = original(*args, **kwargs)
         saves["n"] += 1
-        if saves["n"] == 7:
+        if saves["n"] == 2:
             os.kill(os.getpid(), signal.SIGTERM)
         return out
 
+    # blocks of at most 3 epochs here (the run above had its own lengths): saved after epochs 3, 6, …
+    # (the module by name: furuta_gym.training.train is also the function's name in the package)
+    monkeypatch.setattr(sys.modules["furuta_gym.training.train"], "BLOCK_CAPACITY", 3)
     monkeypatch.setattr(ckpt, "save_training_state", save_then_stop)
-    with pytest.raises(KeyboardInterrupt, match="after epoch 7"):
+    with pytest.raises(KeyboardInterrupt, match="after epoch 6"):
         train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "b", hparams=hp)
     monkeypatch.setattr(ckpt, "save_training_state", original)
+    monkeypatch.undo()
     assert ckpt.read_header(tmp_path / "b" / "train_state.eqx")["has_best_model"]
     resumed, h_resumed = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "b", resume=True, hparams=hp)
     assert [h["total"] for h in h_resumed] == [h["total"] for h in h_straight]
@@ -229,3 +238,34 @@ def test_a_one_epoch_itau_stage_keeps_its_step_when_it_lowered_the_loss(segments
     )
     assert history[-1]["best_after_epoch"] == 1 and history[-1]["best_total"] < history[-1]["total"]
     np.testing.assert_array_equal(_weights(kept), _weights(plain))
+
+
+def test_itau_epochs_in_compiled_blocks_are_the_per_epoch_steps(segments, tmp_path):
+    """A full-batch L_Iτ stage runs its epochs as compiled loops (``_itau_block``); each epoch is
+    still one step of the public training step on every window in that epoch's order, so the
+    run equals those steps taken one by one (to rounding), and a run stopped between two blocks
+    and resumed equals a run never stopped bit for bit, whatever lengths its blocks had."""
+    hp = dict(hidden=(8, 8))
+    cfg = TrainConfig.for_system("nmsd", epochs=(11,), keep_best_itau=False, **{**SPIKY, "learning_rate": 1e-2})
+    blocked, history = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "a", hparams=hp)
+    assert [h["steps"] for h in history] == [1] * 11 and len({h["total"] for h in history}) == 11
+
+    model = make_model("nmsd", "dln", jax.random.PRNGKey(cfg.seed), **hp)
+    windows, normalization = _integral_windows(segments, cfg, "prop", min(len(tr) for tr in segments))
+    step, params, opt_state = training_step(model, cfg, "itau", normalization)
+    totals = []
+    for epoch in range(11):
+        order = np.random.default_rng([cfg.seed, epoch]).permutation(windows.n_windows)
+        lr = jnp.asarray(cfg.epoch_learning_rate(epoch))
+        params, opt_state, terms, ok = step(params, opt_state, None, windows.take(order), jnp.asarray(1.0), lr)
+        assert bool(ok)
+        totals.append(float(terms["total"]))
+    # XLA may fuse the step inside the loop differently: the same arithmetic up to rounding
+    np.testing.assert_allclose([h["total"] for h in history], totals, rtol=1e-12, atol=0)
+    one_by_one = eqx.combine(params, eqx.partition(model, model.trainable())[1])
+    np.testing.assert_allclose(_weights(blocked), _weights(one_by_one), rtol=0, atol=1e-12)
+
+    train("dln", "nmsd", "prop", segments, dataclasses.replace(cfg, epochs=(4,)), out_dir=tmp_path / "b", hparams=hp)
+    resumed, h_resumed = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "b", resume=True, hparams=hp)
+    assert [h["total"] for h in h_resumed] == [h["total"] for h in history]
+    np.testing.assert_array_equal(_weights(resumed), _weights(blocked))

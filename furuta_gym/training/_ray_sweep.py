@@ -7,8 +7,8 @@ finished run, refusing one trained with other settings and resuming an unfinishe
 same as with the local pool: its run folder's recorded settings and training state decide.
 
 A worker lost mid-run (killed, out of memory, its node gone) is retried up to
-:data:`MAX_RETRIES` times by Ray; training writes its state after every epoch, so the retry
-resumes from the last finished epoch instead of starting over. An exception raised by the
+:data:`MAX_RETRIES` times by Ray; training writes its state after every epoch (or block of
+L_Iτ-alone epochs), so the retry resumes from the last one saved instead of starting over. An exception raised by the
 model's own code is not retried: it would fail the same way again.
 
 On a cluster of several machines, ``out`` must be a folder every node sees at the same path

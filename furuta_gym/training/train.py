@@ -3,7 +3,9 @@
 :func:`train` runs stages of epochs over trajectory windows — 2-step predictions first, then the
 long horizon (1 s Furuta, 2 s N-MSD) — with optax Adam + weight decay (``adamw``), minibatches of
 trajectory windows, a tqdm bar showing the loss terms, a resumable training state written
-atomically after every finished epoch (so a kill loses no finished epoch), model snapshots every
+atomically after every finished epoch (so a kill loses no finished epoch; the epochs of an
+L_Iτ-alone stage run in compiled blocks of about :data:`BLOCK_SECONDS`, and the state is
+written after each block), model snapshots every
 ``checkpoint_every`` epochs and a NaN guard (a step whose loss or gradient is not finite is
 skipped and counted; a NaN model is never saved).
 
@@ -46,6 +48,8 @@ from ..systems import get_spec
 from . import _step_cache
 from . import checkpoint as ckpt
 from .consistency import check_potential_shape, warn_data_coverage, warn_potential_shape
+from ._itau_block import CAPACITY as BLOCK_CAPACITY
+from ._itau_block import ItauBlock
 from .losses import (
     AUGMENTATION_PARTS,
     Normalization,
@@ -62,6 +66,8 @@ from .recipe import PAPER_SCHEDULE, RECIPE
 __all__ = ["TrainConfig", "train", "training_step", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
 
 LOSSES = ("traj", "aph", "prop", "itau")
+#: wall time aimed at per block of L_Iτ-alone epochs (between two writes of the training state)
+BLOCK_SECONDS = 2.0
 #: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
 #: TrainConfig.augmentation_weight is None: the recipe's (furuta_gym.training.recipe).
 AUGMENTATION_WEIGHT = {
@@ -357,9 +363,11 @@ def _build_optimizer(model, config: TrainConfig):
     return opt, trainable, params
 
 
-def _make_step(
+def _step_function(
     static, optimizer, loss: str, config: TrainConfig, normalization: Normalization, augmentation_weight: float = 0.0
 ):
+    """The optimiser step of ``loss``, not yet compiled: ``step(params, opt_state, traj_windows,
+    integral_windows, lam, learning_rate) -> (params, opt_state, terms, ok)``."""
     traj_kw: dict[str, Any] = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
     use_traj = loss in ("traj", "aph", "prop")
     use_int = loss in ("prop", "itau")
@@ -408,6 +416,15 @@ def _make_step(
         opt_state = _tree_where(ok, new_opt, opt_state)
         return params, opt_state, terms, ok
 
+    return step
+
+
+def _make_step(
+    static, optimizer, loss: str, config: TrainConfig, normalization: Normalization, augmentation_weight: float = 0.0
+):
+    """:func:`_step_function` compiled (and, with JAX's persistent cache on, stored traced)."""
+    step = _step_function(static, optimizer, loss, config, normalization, augmentation_weight)
+    use_traj = loss in ("traj", "aph", "prop")
     # level 0 skips LLVM's optimisations: a third less compile time for a slower step. Only
     # the steps with an ODE solve: an L_Iτ step compiles in seconds and runs many epochs
     fast = config.fast_compile and use_traj
@@ -480,13 +497,17 @@ class _Stages:
     solve, an epoch costs milliseconds), its trajectory windows and its compiled step, each
     built once when first needed."""
 
-    def __init__(self, config, loss, trajs, dt, shortest, int_windows, make_step):
+    def __init__(self, config, loss, trajs, dt, shortest, int_windows, make_step, step_function):
         self.config, self.trajs, self.dt, self.shortest = config, trajs, dt, shortest
         self.int_windows, self._loss, self._make_step = int_windows, loss, make_step
+        self._step_function = step_function
         self.bounds = np.cumsum(config.epochs)
         self.lam_step = config.lambda_step if config.lambda_step is not None else (1000.0 if loss == "aph" else 0.0)
         self._windows: dict[int, Windows] = {}
         self._steps: dict[str, Any] = {}
+        self._block: ItauBlock | None = None
+        self.block_epochs = 8  # the next block's length; set from the last block's time
+        self.blocks_run = 0
 
     def of_epoch(self, epoch: int) -> int:
         return int(np.searchsorted(self.bounds, epoch, side="right"))
@@ -506,6 +527,25 @@ class _Stages:
             self._steps[name] = self._make_step(name)
         return self._steps[name]
 
+    def in_blocks(self, stage: int) -> bool:
+        """Whether the stage's epochs run as compiled blocks: L_Iτ alone on all windows per step."""
+        ib = self.config.integral_batch_size
+        return self.loss(stage) == "itau" and (ib is None or ib >= self.int_windows.n_windows)
+
+    def block(self) -> ItauBlock:
+        if self._block is None:
+            self._block = ItauBlock(
+                self._step_function("itau"), self.int_windows, self.config.seed, self.config.keep_best_itau
+            )
+        return self._block
+
+    def block_length(self, epoch: int, stage: int) -> int:
+        """Epochs of the block starting at ``epoch``: up to the stage's end or the next snapshot."""
+        end = int(self.bounds[stage])
+        if self.config.checkpoint_every:
+            end = min(end, (epoch // self.config.checkpoint_every + 1) * self.config.checkpoint_every)
+        return max(1, min(end - epoch, self.block_epochs, BLOCK_CAPACITY))
+
 
 def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict]:
     """One epoch's steps; returns its history record and its mean loss terms."""
@@ -519,22 +559,7 @@ def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict]
         stages.int_windows,
         config,
     )
-    params_before = run.params
     means, skipped = _run_steps(stages.step(stage), run, traj_batches, int_batches, config.epoch_learning_rate(epoch))
-    record_best = {}
-    # one full-batch step: its loss is exactly the loss of the parameters it started from
-    if config.keep_best_itau and loss_now == "itau" and len(int_batches) == 1:
-        record_best = _keep_best_itau(
-            run,
-            stages.step(stage),
-            stage,
-            epoch,
-            stages.bounds,
-            means,
-            params_before,
-            int_batches[0],
-            ok=len(traj_batches) > skipped,
-        )
     if stages.lam_step and "traj" in means:
         run.lam = run.lam + stages.lam_step * means["traj"]
     record = {
@@ -545,10 +570,49 @@ def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict]
         "lambda": run.lam,
         "steps": len(traj_batches),
         "skipped": skipped,
-        **record_best,
         "seconds": time.perf_counter() - t0,
     }
     return record, means
+
+
+def _run_block(stages: _Stages, run: _RunState, epoch: int) -> list[tuple[dict, dict]]:
+    """A block of full-batch L_Iτ-alone epochs in one compiled loop (:mod:`._itau_block`);
+    returns each epoch's history record and loss terms, as :func:`_run_epoch` does."""
+    config, stage, block = stages.config, stages.of_epoch(epoch), stages.block()
+    n = stages.block_length(epoch, stage)
+    best = run.best if run.best is not None and run.best["stage"] == stage else None
+    t0 = time.perf_counter()
+    result = block(
+        run.params,
+        run.opt_state,
+        run.lam,
+        epoch,
+        [config.epoch_learning_rate(e) for e in range(epoch, epoch + n)],
+        best=None if best is None else (best["total"], best["after"], best["params"]),
+    )
+    seconds = time.perf_counter() - t0
+    run.params, run.opt_state = result.params, result.opt_state
+    if config.keep_best_itau and result.best_after >= 0:
+        # "after": how many epochs (counted over all stages) had run on these parameters
+        run.best = {
+            "stage": stage,
+            "after": result.best_after,
+            "total": result.best_total,
+            "params": result.best_params,
+        }
+    if stages.blocks_run:  # the first block's time is mostly its compiling
+        stages.block_epochs = int(np.clip(BLOCK_SECONDS / max(seconds / n, 1e-9), 1, BLOCK_CAPACITY))
+    stages.blocks_run += 1
+    done = []
+    for i in range(n):
+        ok = bool(result.ok[i])
+        means = {k: float(v[i]) for k, v in result.terms.items()} if ok else {}
+        record = {"epoch": epoch + i + 1, "stage": stage, "horizon": None, **means, "lambda": run.lam}
+        record |= {"steps": 1, "skipped": int(not ok), "seconds": seconds / n}
+        done.append((record, means))
+    if config.keep_best_itau and epoch + n == stages.bounds[stage]:
+        done[-1][0].update(_hand_over_best(run, stage, block, epoch + n - 1))
+    return done
 
 
 def train(
@@ -571,7 +635,7 @@ def train(
     ``config`` a :class:`TrainConfig` (default :meth:`TrainConfig.for_system`). ``hparams``
     override the model's defaults (``make_model``); ``model`` starts from a given model instead.
 
-    With ``out_dir``: writes ``train_state.eqx`` (resumable, after every epoch),
+    With ``out_dir``: writes ``train_state.eqx`` (resumable, after every epoch or block of epochs),
     ``model_epoch<N>.eqx`` every ``checkpoint_every`` epochs, ``model.eqx`` (final, loadable with
     :func:`furuta_gym.training.checkpoint.load_model`), ``history.jsonl`` (one line per epoch) and ``history.json``. An ``out_dir`` that
     already holds a run is refused unless ``resume=True``, which continues it (same model,
@@ -611,13 +675,18 @@ def train(
         shortest,
         int_windows,
         lambda name: _make_step(static, optimizer, name, config, normalization, augmentation_weight),
+        lambda name: _step_function(static, optimizer, name, config, normalization, augmentation_weight),
     )
     with _polite_stop(out, run) as stop, _progress_bar(config, run.start_epoch, f"{model_kind}/{loss}") as bar:
-        for epoch in range(run.start_epoch, config.total_epochs):
-            record, means = _run_epoch(stages, run, epoch)
-            run.history.append(record)
-            _save_epoch(out, record, run, static, run_info, config, loss)
-            _show_epoch(bar, means, loss, run.lam, record["skipped"], epoch, record["steps"])
+        epoch = run.start_epoch
+        while epoch < config.total_epochs:
+            in_blocks = stages.in_blocks(stages.of_epoch(epoch))
+            done = _run_block(stages, run, epoch) if in_blocks else [_run_epoch(stages, run, epoch)]
+            run.history.extend(record for record, _ in done)
+            _save_epochs(out, [record for record, _ in done], run, static, run_info, config, loss)
+            for record, means in done:
+                _show_epoch(bar, means, loss, run.lam, record["skipped"], record["epoch"] - 1, record["steps"])
+            epoch += len(done)
             if stop["flag"]:
                 raise _StopRequested
     return _finish(eqx.combine(run.params, static), run.history, config, loss, dhash, trajs, forced_trajs, out)
@@ -760,37 +829,31 @@ def _run_steps(step, run: _RunState, traj_batches, int_batches, learning_rate: f
     return ({k: v / n_ok for k, v in sums.items()} if n_ok else {}), skipped
 
 
-def _keep_best_itau(
-    run: _RunState, step, stage: int, epoch: int, bounds, means, params_before, int_batch, ok: bool
-) -> dict:
-    """keep_best_itau: track the lowest-loss iterate of a full-batch L_Iτ stage and hand it on
-    when the stage ends; returns the history fields of that hand-over (or {})."""
+def _hand_over_best(run: _RunState, stage: int, block: ItauBlock, last_epoch: int) -> dict:
+    """keep_best_itau at a full-batch L_Iτ stage's end: the stage hands on whichever iterate had
+    the lowest loss; returns the history fields of that hand-over (or {})."""
     best = run.best
-    if ok and (best is None or best["stage"] != stage or means["total"] < best["total"]):
-        # "after": how many epochs (counted over all stages) had run on these parameters
-        best = run.best = {"stage": stage, "after": epoch, "total": means["total"], "params": params_before}
-    if epoch + 1 != bounds[stage] or best is None or best["stage"] != stage:
+    if best is None or best["stage"] != stage:
         return {}
-    # the stage ends: its last step's result is evaluated too (a step at rate 0 is just the loss;
-    # the step is pure, so its other outputs are dropped), then the stage hands on whichever
-    # iterate had the lowest loss
-    _, _, final_terms, final_ok = step(
-        run.params, run.opt_state, None, int_batch, jnp.asarray(run.lam), jnp.asarray(0.0)
-    )
-    if bool(final_ok) and float(final_terms["total"]) < best["total"]:
-        best = {"stage": stage, "after": epoch + 1, "total": float(final_terms["total"]), "params": run.params}
+    # its last step's result is evaluated too: an epoch at rate 0 is just the loss (the block's
+    # other outputs are dropped), on the last epoch's window order
+    final = block(run.params, run.opt_state, run.lam, last_epoch, [0.0])
+    if bool(final.ok[0]) and float(final.terms["total"][0]) < best["total"]:
+        best = {"stage": stage, "after": last_epoch + 1, "total": float(final.terms["total"][0]), "params": run.params}
     run.params = best["params"]
     run.best = None  # handed on: later epochs' training states need not carry it
     return {"best_after_epoch": best["after"], "best_total": best["total"]}
 
 
-def _save_epoch(
-    out: Path | None, record: dict, run: _RunState, static, run_info: dict, config: TrainConfig, loss: str
+def _save_epochs(
+    out: Path | None, records: list[dict], run: _RunState, static, run_info: dict, config: TrainConfig, loss: str
 ) -> None:
-    """The epoch's history line, the resumable state and (every ``checkpoint_every``) a snapshot."""
+    """The epochs' history lines, the resumable state after the last of them and (every
+    ``checkpoint_every``; a block ends at one) a snapshot."""
     if out is None:
         return
     model_now = eqx.combine(run.params, static)
+    record = records[-1]
     epoch = record["epoch"]
     snapshot = bool(config.checkpoint_every and epoch % config.checkpoint_every == 0)
     if snapshot:  # cheap (two second derivatives of V): the shape's course through training
@@ -798,7 +861,7 @@ def _save_epoch(
     # the history is appended line by line (the state file stays small); written before the
     # state so a resumed run always finds every finished epoch's line
     with (out / HISTORY_FILE).open("a") as fh:
-        fh.write(json.dumps(record, default=float) + "\n")
+        fh.write("".join(json.dumps(r, default=float) + "\n" for r in records))
     meta = {"data_hash": run_info["data_hash"], "epoch": epoch, "loss": loss}
     extra = {"epoch": epoch, "lambda": run.lam, "run": run_info, "seed": config.seed, "meta": meta}
     best_model = None
@@ -834,8 +897,8 @@ def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: in
 
 @contextlib.contextmanager
 def _polite_stop(out: Path | None, run: _RunState):
-    """A polite kill (Ctrl-C / SIGTERM) finishes the running epoch and saves; SIGKILL loses at
-    most the unfinished epoch because the state is written after every epoch."""
+    """A polite kill (Ctrl-C / SIGTERM) finishes the running epoch (or block) and saves; SIGKILL
+    loses at most the unfinished one because the state is written after each."""
     stop = {"flag": False}
     old_handler = None
     if out is not None:
