@@ -4,14 +4,14 @@ markers in a Markdown file, with a check mode that only compares.
 Two marker styles, one mechanism:
 
 * the tables in README.md and docs/: ``<!-- generated:NAME -->`` ... ``<!-- /generated:NAME -->``
-  (:func:`fill_block`, :func:`update`, :func:`block_main`; written by experiments/*.py);
+  (:func:`fill_block`, :func:`update`, :func:`block_main`; written by studies/*.py);
 * the sections of BENCHMARKS.md (and a few of docs/): ``<!-- NAME:start -->`` ...
   ``<!-- NAME:end -->``, markers included in the section (:func:`write_section`; written by
   bench/*.py).
 
 In check mode nothing is written: the exit status is 1, with a message saying how to refresh the
 file, when its committed text differs from what the results generate. The tests run each
-script's ``--check``. experiments/ scripts import this module from bench/ (bench/ stays where it is).
+script's ``--check``. studies/ scripts import this module from bench/ (bench/ stays where it is).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 
 Design models: the analytic model fitted by ``diagnose`` on the real QUBE runs 1–5 plus the
 effects it found (``model_after``), and the learned models trained on the same runs by
-``experiments/real_models.py`` (``results/real_models/runs/*/selected.eqx``, the snapshot each
+``studies/real_models.py`` (``results/real_models/runs/*/selected.eqx``, the snapshot each
 run kept on validation and the docs/learning.md table scores). Plant: the MuJoCo
 ground truth with the effects ``diagnose`` found written into it — the closest stand-in for the
 rig this package has (its masses and lengths stay nominal: MuJoCo takes physical parameters,

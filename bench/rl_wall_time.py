@@ -3,7 +3,7 @@
     python bench/rl_wall_time.py [--check]
 
 Reads what the runs wrote, trains nothing: ``results/rl_learned/*_nominal_seed0.json``
-(``experiments/rl_from_learned_models.py``: PPO on the functional ``FurutaSwingUp-v0`` of a model,
+(``studies/rl_from_learned_models.py``: PPO on the functional ``FurutaSwingUp-v0`` of a model,
 deployed on the MuJoCo env) and ``results/sac_preset/results.json`` (``bench/sac_preset.py``: SB3
 SAC stepping the MuJoCo preset itself), and writes their BENCHMARKS.md section. SAC is not run at
 PPO's env-step budget: at its measured rate that budget would take days on this machine; its
@@ -73,7 +73,7 @@ def section() -> str:
             "`FurutaSwingUp-v0` (return of 500; success: within 0.1 rad of upright for 2 s, as the control "
             "benchmarks score it, from `near_rest_starts(30, seed=0)`). PPO rows: one seed each, pinned to one "
             "core with a one-thread XLA pool on the 2-core machine shared with other jobs "
-            "(`experiments/rl_from_learned_models.py`, results/rl_learned/; docs/rl.md has every row). SAC is "
+            "(`studies/rl_from_learned_models.py`, results/rl_learned/; docs/rl.md has every row). SAC is "
             "not run at PPO's budget: at its rate the same env steps would take days here.",
             "",
             head,

@@ -109,9 +109,9 @@ def test_the_calibrated_protocol_docs_match_their_results():
 
     root = Path(__file__).resolve().parents[1]
     proc = subprocess.run(
-        [sys.executable, str(root / "experiments" / "calibrated_protocol_table.py"), "--check"],
+        [sys.executable, str(root / "studies" / "calibrated_protocol_table.py"), "--check"],
         capture_output=True,
         text=True,
-        cwd=root / "experiments",
+        cwd=root / "studies",
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr

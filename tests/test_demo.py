@@ -77,7 +77,7 @@ def test_demo_seeds_docs_block_matches_its_results():
 
     root = Path(__file__).resolve().parents[1]
     proc = subprocess.run(
-        [sys.executable, str(root / "experiments" / "demo_seeds.py"), "--check"], capture_output=True, text=True
+        [sys.executable, str(root / "studies" / "demo_seeds.py"), "--check"], capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
 

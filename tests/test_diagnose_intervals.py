@@ -6,7 +6,7 @@
 * A near-null direction: unbounded, with a note naming the combination.
 * mujoco.sysid's eigen handling and our own copy of it agree (mujoco.sysid is optional).
 * On simulated logs the truth lies inside the 95 % interval: a few logs here; ≥ 20 logs per
-  scenario in the slow test, as ``experiments/diagnose_intervals.py`` records them.
+  scenario in the slow test, as ``studies/diagnose_intervals.py`` records them.
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ _CACHE: dict = {}
 
 
 def _experiment():
-    """experiments/diagnose_intervals.py as a module: the scenarios and truths are defined once."""
-    spec = importlib.util.spec_from_file_location("diagnose_intervals", ROOT / "experiments" / "diagnose_intervals.py")
+    """studies/diagnose_intervals.py as a module: the scenarios and truths are defined once."""
+    spec = importlib.util.spec_from_file_location("diagnose_intervals", ROOT / "studies" / "diagnose_intervals.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod

@@ -9,7 +9,7 @@ Simulated (MuJoCo plant variants, encoder-quantised angles, velocities estimated
   friction, a pendulum centre-of-mass offset and an actuator lag;
 * no-effect logs of both experiments: nothing reported.
 Real: the vendored MIT runs, fitted on some, judged on runs never fitted. The full grid over
-seeds is ``experiments/diagnose_simulated.py`` (results in results/diagnose_sim, docs table
+seeds is ``studies/diagnose_simulated.py`` (results in results/diagnose_sim, docs table
 generated from them); ``-m slow`` runs more seeds here.
 """
 
@@ -202,6 +202,6 @@ def test_qube_shorthand_rejects_bad_runs_and_other_systems():
 
 def test_published_diagnosis_numbers_match_their_result_files():
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "experiments" / "diagnose_tables.py"), "--check"], capture_output=True, text=True
+        [sys.executable, str(ROOT / "studies" / "diagnose_tables.py"), "--check"], capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr

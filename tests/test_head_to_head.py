@@ -1,4 +1,4 @@
-"""The head-to-head benchmark on real runs (experiments/diagnose_head_to_head.py): the public
+"""The head-to-head benchmark on real runs (studies/diagnose_head_to_head.py): the public
 simulators' equations mapped onto our convention, one scoring path for every row, a tiny
 mujoco.sysid fit, and the docs table generated from the committed results."""
 
@@ -19,10 +19,10 @@ from furuta_gym.lagrangian import vector_field  # noqa: E402
 from furuta_gym.models import Furuta  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "experiments"))
+sys.path.insert(0, str(ROOT / "studies"))
 import qube_baselines as qb  # noqa: E402
 
-sys.path.remove(str(ROOT / "experiments"))
+sys.path.remove(str(ROOT / "studies"))
 
 BACK_EMF = 0.042**2 / 8.4  # km²/Rm, N m s/rad
 NOMINAL_DAMPING = {
@@ -80,12 +80,12 @@ def test_gym_brts_back_emf_is_negative_damping_as_published():
 
 
 def _experiment():
-    sys.path.insert(0, str(ROOT / "experiments"))
+    sys.path.insert(0, str(ROOT / "studies"))
     try:
         import diagnose_head_to_head as h2h
         import head_to_head_sysid as hsysid
     finally:
-        sys.path.remove(str(ROOT / "experiments"))
+        sys.path.remove(str(ROOT / "studies"))
     return h2h, hsysid
 
 
@@ -138,6 +138,6 @@ def test_head_to_head_docs_table_matches_its_results():
     if not (ROOT / "results" / "head_to_head" / "summary.json").is_file():
         pytest.skip("results/head_to_head not generated")
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "experiments" / "head_to_head_table.py"), "--check"], capture_output=True, text=True
+        [sys.executable, str(ROOT / "studies" / "head_to_head_table.py"), "--check"], capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr

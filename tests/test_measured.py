@@ -187,6 +187,6 @@ def test_real_models_docs_table_matches_its_results():
     if not (ROOT / "results" / "real_models" / "summary.json").is_file():
         pytest.skip("results/real_models not generated")
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "experiments" / "real_models_table.py"), "--check"], capture_output=True, text=True
+        [sys.executable, str(ROOT / "studies" / "real_models_table.py"), "--check"], capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -176,7 +176,7 @@ def test_lprop_ablation_docs_table_matches_its_results():
     if not any((root / "results" / "lprop_ablation").glob("*_s*.json")):
         pytest.skip("results/lprop_ablation not generated")
     proc = subprocess.run(
-        [sys.executable, str(root / "experiments" / "lprop_ablation_table.py"), "--check"],
+        [sys.executable, str(root / "studies" / "lprop_ablation_table.py"), "--check"],
         capture_output=True,
         text=True,
     )

@@ -36,7 +36,7 @@ def test_readme_results_table_matches_the_reproduction_tables():
     import subprocess
     import sys
 
-    script = README.parent / "experiments" / "readme_results.py"
+    script = README.parent / "studies" / "readme_results.py"
     out = subprocess.run([sys.executable, str(script), "--check"], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
 

@@ -668,6 +668,6 @@ def test_docs_reproduce_tables_match_their_sources(script):
     import sys
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "experiments" / script
+    path = Path(__file__).resolve().parents[1] / "studies" / script
     out = subprocess.run([sys.executable, str(path), "--check"], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr

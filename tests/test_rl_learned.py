@@ -1,4 +1,4 @@
-"""experiments/rl_from_learned_models.py: its randomised learned-model env, its docs table and
+"""studies/rl_from_learned_models.py: its randomised learned-model env, its docs table and
 bench/rl_wall_time.py's BENCHMARKS.md section."""
 
 import subprocess
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-EXPERIMENTS = ROOT / "experiments"
+EXPERIMENTS = ROOT / "studies"
 CHECKPOINT = ROOT / "results" / "reproduce" / "runs" / "furuta" / "dln_prop" / "seed0" / "model.eqx"
 
 

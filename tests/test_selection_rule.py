@@ -1,11 +1,11 @@
-"""The rule selection/select_option.py applies to choose a recipe option over several model seeds."""
+"""The rule studies/select_option.py applies to choose a recipe option over several model seeds."""
 
 import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "selection"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
 from select_option import choose  # noqa: E402
 
 

@@ -85,6 +85,6 @@ def test_published_overlap_table_matches_its_result_file():
 
     root = Path(__file__).resolve().parents[1]
     out = subprocess.run(
-        [sys.executable, str(root / "experiments" / "validation_overlap.py"), "--check"], capture_output=True, text=True
+        [sys.executable, str(root / "studies" / "validation_overlap.py"), "--check"], capture_output=True, text=True
     )
     assert out.returncode == 0, out.stdout + out.stderr

@@ -374,7 +374,7 @@ def generate_validation(
     phases per trajectory) and ``val_scale_fit`` (20 s of random ±2 V steps held 0.25–1 s);
     N-MSD: ``val_multisine`` (3 × 25 s, 8 tones over 0.1–1.1 Hz) and ``val_steps`` (3 × 15 s of
     random ±5 N steps held 1–3 s), from x0 inside the training trajectory's range. Their overlap
-    with the test sets is measured by ``experiments/validation_overlap.py`` (docs/reproduce.md)."""
+    with the test sets is measured by ``studies/validation_overlap.py`` (docs/reproduce.md)."""
     return _generate(
         system, "validation", seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=ground_truth
     )

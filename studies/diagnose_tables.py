@@ -2,13 +2,13 @@
 
 Reads ``results/diagnose_sim/*.json``, ``results/diagnose_sim_exact_angles/*.json`` and
 ``results/diagnose_sim_uniform_blocks/*.json``
-(``experiments/diagnose_simulated.py``) and ``results/diagnose_real/`` (its JSON files and
-``reference/``, ``runs/``; ``experiments/diagnose_real_data.py``) and rewrites the blocks between
+(``studies/diagnose_simulated.py``) and ``results/diagnose_real/`` (its JSON files and
+``reference/``, ``runs/``; ``studies/diagnose_real_data.py``) and rewrites the blocks between
 ``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->`` in docs/diagnose.md and README.md.
 ``--check`` only compares (the test suite runs it: a quoted number that disagrees with its
 results file fails).
 
-    python experiments/diagnose_tables.py [--check]
+    python studies/diagnose_tables.py [--check]
 """
 
 from __future__ import annotations
@@ -28,9 +28,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SIM, REAL = ROOT / "results" / "diagnose_sim", ROOT / "results" / "diagnose_real"
 EXACT = ROOT / "results" / "diagnose_sim_exact_angles"  # the closed-loop logs without quantisation
 UNIFORM = ROOT / "results" / "diagnose_sim_uniform_blocks"  # the sticky sweeps, every block weighted alike
-RESTS = ROOT / "results" / "diagnose_rest_bound" / "calibration.json"  # experiments/rest_bound_calibration.py
-DRIFT = ROOT / "results" / "cable_centre_drift" / "drift.json"  # experiments/cable_centre_drift.py
-MATCH = ROOT / "results" / "closed_loop_match" / "match.json"  # experiments/closed_loop_match.py
+RESTS = ROOT / "results" / "diagnose_rest_bound" / "calibration.json"  # studies/rest_bound_calibration.py
+DRIFT = ROOT / "results" / "cable_centre_drift" / "drift.json"  # studies/cable_centre_drift.py
+MATCH = ROOT / "results" / "closed_loop_match" / "match.json"  # studies/closed_loop_match.py
 
 
 def _load(folder: Path) -> dict[str, dict]:
@@ -432,7 +432,7 @@ def match_table(doc: dict, real: dict) -> str:
         + "; ".join(found)
         + "."
         + on_real
-        + f" Experiments: `{doc['experiments']['matched']}` (matched); made by `python experiments/closed_loop_match.py`"
+        + f" Experiments: `{doc['experiments']['matched']}` (matched); made by `python studies/closed_loop_match.py`"
         + f" ({doc['date']})."
     )
 
@@ -489,7 +489,7 @@ def main() -> int:
             if not args.check:
                 path.write_text(new)
     if args.check and stale:
-        print(f"out of date with results/: {stale}; run python experiments/diagnose_tables.py")
+        print(f"out of date with results/: {stale}; run python studies/diagnose_tables.py")
         return 1
     return 0
 

@@ -1,7 +1,7 @@
 """docs/reproduce.md's table of the training recipe, written from the recipe itself.
 
-    python experiments/recipe_table.py           # rewrite the docs block
-    python experiments/recipe_table.py --check   # exit 1 if the docs block is stale
+    python studies/recipe_table.py           # rewrite the docs block
+    python studies/recipe_table.py --check   # exit 1 if the docs block is stale
 
 One row per (system, model kind, loss) of :data:`furuta_gym.training.recipe.RECIPE`: the stages'
 epochs, L_Iτ's quadrature, Adam's step in the L_Iτ stage and in the stages after it, λ, μ, the

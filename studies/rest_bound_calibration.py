@@ -6,10 +6,10 @@ level (``sticky_rig``), the largest force the rests held the rotor against, comp
 model (so that only the bound itself is judged), over the Coulomb level and over the breakaway.
 The diagnosis adds a stiction from rests when the bound exceeds ``min_breakaway_ratio`` × the
 fitted Coulomb level: the no-stiction logs set that ratio. Writes
-``results/diagnose_rest_bound/calibration.json``; ``experiments/diagnose_tables.py`` makes the
+``results/diagnose_rest_bound/calibration.json``; ``studies/diagnose_tables.py`` makes the
 docs table.
 
-    python experiments/rest_bound_calibration.py
+    python studies/rest_bound_calibration.py
 """
 
 from __future__ import annotations

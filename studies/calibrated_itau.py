@@ -1,6 +1,6 @@
 """Why DeLaN L_prop does not train on the calibrated rig's experimental data: its L_Iτ stage alone.
 
-The calibrated-rig protocol (``experiments/calibrated_protocol.py``) left DeLaN L_prop with a mass
+The calibrated-rig protocol (``studies/calibrated_protocol.py``) left DeLaN L_prop with a mass
 matrix ~3000x too small and free dynamics ~3000x stiffer than the plant's after its L_Iτ stage.
 This script separates the candidate causes on the same plant, the same 64 free releases and the
 same seed, training the L_Iτ stage of the frozen recipe alone:
@@ -20,8 +20,8 @@ the learned model, so more training cannot help). The recipe's own run (experime
 is read from the calibrated protocol's training state. Writes
 ``results/calibrated_protocol/itau_causes.json``.
 
-    python experiments/calibrated_itau.py [--epochs 12000] [--cell experiment:10:zero_phase ...]
-    python experiments/calibrated_itau.py --scale-fit-only
+    python studies/calibrated_itau.py [--epochs 12000] [--cell experiment:10:zero_phase ...]
+    python studies/calibrated_itau.py --scale-fit-only
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The README's headline results table, written from the committed reproduction tables.
 
-    python experiments/readme_results.py           # rewrite the README block
-    python experiments/readme_results.py --check   # exit 1 if the README block is stale
+    python studies/readme_results.py           # rewrite the README block
+    python studies/readme_results.py --check   # exit 1 if the README block is stale
 
 Reads the reproduction of the frozen recipe (``results/reproduce/tables.csv``). Per system and model, with L_prop
 against the model's baseline loss (L_traj for DeLaN, L_aph for APHYNITY and augmented DeLaN):
@@ -72,7 +72,7 @@ def table() -> str:
     note = (
         f"{' / '.join(sorted(seeds))} model seed(s) per row, the frozen recipe, one run from scratch; "
         "generated from [results/reproduce](results/reproduce/tables.md) by "
-        "`experiments/readme_results.py`."
+        "`studies/readme_results.py`."
     )
     return "\n".join(lines) + "\n\n" + note
 

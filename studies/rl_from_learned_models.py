@@ -19,8 +19,8 @@ model has no physical parameters, so its overall scale (the factor on L and τ_N
 leave open, and the post-training scale fit sets) is drawn within ±spread — the same as an input
 gain error of that size, the model's least certain number.
 
-    python experiments/rl_from_learned_models.py --model dln_prop [--randomize] [--seed 0]
-    python experiments/rl_from_learned_models_table.py      # the docs/rl.md block
+    python studies/rl_from_learned_models.py --model dln_prop [--randomize] [--seed 0]
+    python studies/rl_from_learned_models_table.py      # the docs/rl.md block
 
 Writes ``results/rl_learned/<model>_<nominal|randomized>_seed<k>.json`` and the policy beside it
 (``.eqx``); an existing result is kept unless ``--force``.

@@ -1,4 +1,4 @@
-"""The docs table of ``experiments/lprop_closed_loop_ablation.py``, generated from its result files.
+"""The docs table of ``studies/lprop_closed_loop_ablation.py``, generated from its result files.
 
 Reads ``results/lprop_ablation/<cell>_s<seed>.json`` and rewrites the block between
 ``<!-- generated:lprop-ablation -->`` and ``<!-- /generated:lprop-ablation -->`` in
@@ -7,7 +7,7 @@ and spread over seeds, and how many seeds learned upright as a minimum), the pre
 held-out runs of the same experiment and the nominal analytic model's on the same windows.
 ``--check`` only compares (exit 1 when the docs disagree with the results).
 
-    python experiments/lprop_ablation_table.py [--check]
+    python studies/lprop_ablation_table.py [--check]
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ ORDER = (
     "span_5",
     "span_25",
 )
-COMMAND = "python experiments/lprop_closed_loop_ablation.py && python experiments/lprop_ablation_table.py"
+COMMAND = "python studies/lprop_closed_loop_ablation.py && python studies/lprop_ablation_table.py"
 
 
 def load(folder: Path = RESULTS) -> dict[str, list[dict]]:

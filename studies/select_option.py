@@ -7,7 +7,7 @@ data, model seed 0, epochs and μ as ``furuta-gym reproduce``; only that option 
 *validation* run (``split="validation"``: scale fitted on ``val_scale_fit``, scored on the
 validation datasets, which share no excitation with the test sets; no test set is generated,
 scored or stored), and the mean open-loop prediction log10 RMSE over sets and state variables is
-the criterion, as for μ (selection/select_augmentation_weight.py). ``--seeds N`` trains model seeds 0 … N−1
+the criterion, as for μ (studies/select_augmentation_weight.py). ``--seeds N`` trains model seeds 0 … N−1
 of every candidate and takes the mean over them: one run each cannot tell options apart whose
 difference is smaller than the seeds' spread (the Furuta augmented DeLaN's validation means of
 three seeds, fine-tuned at 1e-3: −0.79, −0.79, −0.91).
@@ -23,9 +23,9 @@ recipe has: that is how the Furuta's DeLaN and APHYNITY kept Simpson's
 rule when the Hermite rule's means were lower by 0.05 and 0.03 (results/quadrature_seeds). The
 choice goes into the code by hand.
 
-    python selection/select_option.py --system furuta --kinds dln aph adln \
+    python studies/select_option.py --system furuta --kinds dln aph adln \
         --train quadrature simpson hermite --seeds 3 --out results/selection/quadrature
-    python selection/select_option.py --system nmsd --kinds adln --model odd_in_velocity false true \
+    python studies/select_option.py --system nmsd --kinds adln --model odd_in_velocity false true \
         --seeds 3 --out results/selection/force_parity
 
 Values are JSON where they parse (false, 0.1) and strings otherwise. ``--reuse DIR …``: a run of
@@ -85,7 +85,7 @@ def _train(system: str, kind: str, where: str, name: str, value, out: Path, seed
     reproduce(
         out,
         _config(system, kind, where, name, value, seeds),
-        command=f"selection/select_option.py {system} {kind} {where} {name}={value!r}",
+        command=f"studies/select_option.py {system} {kind} {where} {name}={value!r}",
         log=lambda msg: None,
     )
 
@@ -281,7 +281,7 @@ def _header(args, machine: dict, sets: list, names: list) -> list[str]:
     return [
         f"# {args.name} for the {args.system} L_prop runs, chosen on validation data",
         "",
-        f"`python selection/select_option.py --system {args.system} --kinds {' '.join(args.kinds)} "
+        f"`python studies/select_option.py --system {args.system} --kinds {' '.join(args.kinds)} "
         f"--{args.where} {args.name} {' '.join(args.values)}"
         + (f" --seeds {args.seeds}" if several else "")
         + (f" --reuse {' '.join(map(str, args.reuse))}" if args.reuse else "")

@@ -13,7 +13,7 @@ estimate, the interval, whether it holds the truth, and the same for mujoco.sysi
 s²(JᵀJ)⁻¹ for comparison; an effect the diagnosis did not add counts as a miss. Writes
 ``results/diagnose_intervals/coverage.json`` (per log and per scenario and parameter).
 
-    python experiments/diagnose_intervals.py [--logs 25] [--scenario NAME ...]
+    python studies/diagnose_intervals.py [--logs 25] [--scenario NAME ...]
 
 The slow test (tests/test_diagnose_intervals.py) runs the same logs and asserts what this
 records: each added effect's interval holds the truth on ≥ 90 % of the logs, and so do the

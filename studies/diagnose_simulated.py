@@ -9,17 +9,17 @@
   closed-loop balancing with Coulomb friction, a pendulum centre-of-mass offset and an actuator lag.
 
 Every threshold of the diagnosis is chosen on these logs, never on the real ones. Writes one JSON
-per log into ``results/diagnose_sim/``; ``experiments/diagnose_tables.py`` makes the docs tables.
+per log into ``results/diagnose_sim/``; ``studies/diagnose_tables.py`` makes the docs tables.
 
-    python experiments/diagnose_simulated.py [--seeds 10] [--out results/diagnose_sim]
+    python studies/diagnose_simulated.py [--seeds 10] [--out results/diagnose_sim]
     # the calibration that left start-velocity estimation off for every output-error fit:
-    python experiments/diagnose_simulated.py --excitations closed_loop_prbs --start-iterations 1 \
+    python studies/diagnose_simulated.py --excitations closed_loop_prbs --start-iterations 1 \
         --out results/diagnose_sim_start_velocity
     # the same closed-loop logs with exact angles: what the encoder's resolution costs
-    python experiments/diagnose_simulated.py --excitations closed_loop_prbs --no-quantize \
+    python studies/diagnose_simulated.py --excitations closed_loop_prbs --no-quantize \
         --only coulomb_com_lag coulomb_com_lag5 --out results/diagnose_sim_exact_angles
     # the sticky sweeps with every block weighted alike (the evidence before its weighting)
-    python experiments/diagnose_simulated.py --only sticky_cable --evidence-weighting uniform \
+    python studies/diagnose_simulated.py --only sticky_cable --evidence-weighting uniform \
         --out results/diagnose_sim_uniform_blocks
 """
 

@@ -1,8 +1,8 @@
 """How much of the validation and scale-fit data repeats the test sets (issue 25, item 1).
 
-    python experiments/validation_overlap.py            # writes results/validation_overlap/
-    python experiments/validation_overlap.py --table    # rewrite the docs table from the file
-    python experiments/validation_overlap.py --check    # exit 1 if the docs table and file differ
+    python studies/validation_overlap.py            # writes results/validation_overlap/
+    python studies/validation_overlap.py --table    # rewrite the docs table from the file
+    python studies/validation_overlap.py --check    # exit 1 if the docs table and file differ
 
 A sample "repeats" a test set when a test trajectory, at the same time, has a state within
 (``same time``, the measure that shows a validation trajectory following a test trajectory under
@@ -120,7 +120,7 @@ def main(argv=None) -> int:
             DOCS,
             documented(json.loads(RESULT.read_text())["rows"]),
             True,
-            "run python experiments/validation_overlap.py --table",
+            "run python studies/validation_overlap.py --table",
         )
     if not args.table:
         import furuta_gym

@@ -1,9 +1,9 @@
 """The calibrated-rig block of docs/learning.md, from ``results/calibrated_protocol``: the six
 models' prediction columns beside the paper's experimental ones (``reproduce --plant ... --sensor
 experiment``'s tables.csv), each model's energy shape and its swing-up on the rig
-(``experiments/calibrated_protocol.py``'s control.json).
+(``studies/calibrated_protocol.py``'s control.json).
 
-    python experiments/calibrated_protocol_table.py [--check]
+    python studies/calibrated_protocol_table.py [--check]
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ def _hanging_hz(mass: list, curvature: float) -> str:
 
 
 def itau_causes_lines(plant_curvature: float) -> list[str]:
-    """``experiments/calibrated_itau.py``'s cells: the plant's own L_Iτ per velocity estimate, and
+    """``studies/calibrated_itau.py``'s cells: the plant's own L_Iτ per velocity estimate, and
     what DeLaN's L_Iτ stage leaves per sensor, velocity estimate and span."""
     path = OUT / "itau_causes.json"
     if not path.exists():

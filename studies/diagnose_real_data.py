@@ -10,9 +10,9 @@ run alone shows (``runs/per_run.json``): a cable spring's torque is only as larg
 excursion. Settings are the documented recipe for these logs (0.5 s start transient dropped,
 0.1 s open-loop windows for an inverted pendulum, 64 output-error windows); no threshold is chosen
 here. Writes one JSON per run of ``diagnose`` into ``results/diagnose_real/`` (the figures and
-docs tables are generated from them by ``experiments/diagnose_tables.py``).
+docs tables are generated from them by ``studies/diagnose_tables.py``).
 
-    python experiments/diagnose_real_data.py [--out results/diagnose_real]
+    python studies/diagnose_real_data.py [--out results/diagnose_real]
 """
 
 from __future__ import annotations

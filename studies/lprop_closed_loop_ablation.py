@@ -4,7 +4,7 @@ simulated closed-loop data, where the true potential is known (issue 44).
 The shipped QUBE runs are upright balancing under a PD controller. This script simulates that
 experiment (:func:`furuta_gym.diagnose.measured_like`, ``excitation="closed_loop_prbs"``, 5 runs
 of 20 s) on the MuJoCo plant with the effects the diagnosis finds on all 15 real runs, prepares
-it as ``experiments/real_models.py`` prepares the real runs (0.5 s skipped, 1 s elementary
+it as ``studies/real_models.py`` prepares the real runs (0.5 s skipped, 1 s elementary
 trajectories, zero-phase velocity estimates on the whole log), trains DeLaN on the L_Iτ stage of
 L_prop (the stage the real run's kept snapshot came from; the trajectory stages are left out to
 keep each run to minutes), and measures the learned potential's curvature at β = π and its rise
@@ -29,9 +29,9 @@ The feed-forward scale and the exact velocities are the simulator's own options
 (``excitation=ClosedLoopBalancing(feedforward=...)``, ``true_velocities=True``); a subclass of
 the experiment keeps each run's feed-forward for its share of u. Each run (cell × seed; data
 seed and model seed both vary) writes ``results/lprop_ablation/<cell>_s<seed>.json``;
-``experiments/lprop_ablation_table.py`` writes the table into docs/learning.md.
+``studies/lprop_ablation_table.py`` writes the table into docs/learning.md.
 
-    python experiments/lprop_closed_loop_ablation.py [--cells baseline,...] [--seeds 0,1,2]
+    python studies/lprop_closed_loop_ablation.py [--cells baseline,...] [--seeds 0,1,2]
 """
 
 from __future__ import annotations

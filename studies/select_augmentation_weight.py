@@ -10,7 +10,7 @@ generated, scored or stored. The criterion is what a user could measure on held-
 mean over validation sets and state variables of the open-loop prediction log10 RMSE (a diverged
 prediction counts as +2). The smallest wins; the choice goes into the recipe by hand.
 
-    python selection/select_augmentation_weight.py --system furuta --kind adln --weights 0.01 0.1 1 10
+    python studies/select_augmentation_weight.py --system furuta --kind adln --weights 0.01 0.1 1 10
 
 Writes ``OUT/<system>_<kind>.md`` (and ``.json``) with one row per μ; trained runs live under
 ``OUT/<system>_<kind>/mu_<μ>`` and are reused when the script runs again.
@@ -51,7 +51,7 @@ def _train(system: str, kind: str, weight: float, out: Path) -> None:
     reproduce(
         out,
         _config(system, kind, weight),
-        command=f"selection/select_augmentation_weight.py μ={weight!r}",
+        command=f"studies/select_augmentation_weight.py μ={weight!r}",
         log=lambda msg: None,
     )
 
@@ -133,7 +133,7 @@ def main(argv=None) -> None:
     lines = [
         f"# μ for {args.kind} on {args.system}, chosen on validation data",
         "",
-        f"`python selection/select_augmentation_weight.py --system {args.system} --kind {args.kind} "
+        f"`python studies/select_augmentation_weight.py --system {args.system} --kind {args.kind} "
         f"--weights {' '.join(f'{w:g}' for w in args.weights)}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', platform.machine())}, "
         f"{machine['cpu_count']} cores; training {round(sum(seconds.values()))} s summed over the candidates "

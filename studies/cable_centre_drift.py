@@ -11,9 +11,9 @@ simulated rigs, the same dry friction (Coulomb 5e-4 N m, breakaway 1e-3 N m) and
   leaves the neutral off zero and the oscillation stays around it.
 
 Writes ``results/cable_centre_drift/drift.json``: the oscillation's centre (mean rotor angle over
-each 5 s) for each rig; ``experiments/diagnose_tables.py`` makes the docs table.
+each 5 s) for each rig; ``studies/diagnose_tables.py`` makes the docs table.
 
-    python experiments/cable_centre_drift.py
+    python studies/cable_centre_drift.py
 """
 
 from __future__ import annotations

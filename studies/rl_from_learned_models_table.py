@@ -1,4 +1,4 @@
-"""The docs/rl.md table of ``experiments/rl_from_learned_models.py``, generated from its results.
+"""The docs/rl.md table of ``studies/rl_from_learned_models.py``, generated from its results.
 
 Reads ``results/rl_learned/*.json`` and rewrites the block between ``<!-- generated:rl-learned -->``
 and ``<!-- /generated:rl-learned -->`` in docs/rl.md: per model PPO trained on (with and without
@@ -6,7 +6,7 @@ domain randomisation), its MuJoCo success from x0 = 0 and over the 30 seeded sta
 the nominal plant and the ``cable_spring`` and ``coulomb`` variants. A row without a result says
 so. ``--check`` only compares (exit 1 when the docs disagree with the results).
 
-    python experiments/rl_from_learned_models_table.py [--check]
+    python studies/rl_from_learned_models_table.py [--check]
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ MODELS = {
 }
 PLANTS = ("nominal", "cable_spring", "coulomb")
 COMMAND = (
-    "python experiments/rl_from_learned_models.py --model MODEL [--randomize] && "
-    "python experiments/rl_from_learned_models_table.py"
+    "python studies/rl_from_learned_models.py --model MODEL [--randomize] && "
+    "python studies/rl_from_learned_models_table.py"
 )
 
 

@@ -3,7 +3,7 @@ budget for each seed (unless ``results/demo_seeds/seed<k>.json`` exists) and wri
 ``demo-seeds`` of docs/learning.md: per seed, the held-out prediction error and the energy and
 force-decomposition errors of DeLaN L_prop and DeLaN L_traj against the truth.
 
-    python experiments/demo_seeds.py [--seeds 0,1,2] [--check]
+    python studies/demo_seeds.py [--seeds 0,1,2] [--check]
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def block(docs: list[dict]) -> str:
             f"L_prop's log10: {', '.join(f'{m:+.2f}' for m in margins)}; small margins at this budget); its energy on "
             f"{sum(d['physics']['prop']['energy'] < d['physics']['traj']['energy'] for d in docs)} of {len(docs)}.",
             "",
-            "Made by `python experiments/demo_seeds.py` (results/demo_seeds/).",
+            "Made by `python studies/demo_seeds.py` (results/demo_seeds/).",
         ]
     )
 
@@ -94,7 +94,7 @@ def main() -> int:
             run_seed(seed)
     docs = [json.loads((RESULTS / f"seed{s}.json").read_text()) for s in seeds]
     text = fill_block(DOC.read_text(), NAME, block(docs), where=DOC)
-    return update(DOC, text, args.check, "run python experiments/demo_seeds.py")
+    return update(DOC, text, args.check, "run python studies/demo_seeds.py")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """docs/reproduce.md's summary of the frozen recipe's reproduction, written from its files.
 
-    python experiments/reproduce_summary.py           # rewrite the docs block
-    python experiments/reproduce_summary.py --check   # exit 1 if the docs block is stale
+    python studies/reproduce_summary.py           # rewrite the docs block
+    python studies/reproduce_summary.py --check   # exit 1 if the docs block is stale
 
 Reads ``results/reproduce/tables.csv`` (our cells beside the paper's) and ``run.json`` (command,
 machine, seconds per model; a model the last invocation reused keeps the seconds of the run that

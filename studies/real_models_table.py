@@ -1,4 +1,4 @@
-"""The docs table of ``experiments/real_models.py``, generated from its result files (never typed).
+"""The docs table of ``studies/real_models.py``, generated from its result files (never typed).
 
 Reads ``results/real_models/*.json`` and rewrites the block between
 ``<!-- generated:real-models -->`` and ``<!-- /generated:real-models -->`` in docs/learning.md:
@@ -6,7 +6,7 @@ per-state log10 RMSE and RMSE on the test runs, the winner (lowest mean log10 RM
 states), what each learned model was trained with, and the command that makes it all. ``--check``
 only compares (exit 1 when the docs disagree with the results).
 
-    python experiments/real_models_table.py [--check]
+    python studies/real_models_table.py [--check]
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ ORDER = (
     "adln_aph",
 )
 STATES = (("alpha", "α"), ("beta", "β"), ("alpha_dot", "α̇"), ("beta_dot", "β̇"))
-COMMAND = "python experiments/real_models.py && python experiments/real_models_table.py"
+COMMAND = "python studies/real_models.py && python studies/real_models_table.py"
 
 
 def load(folder: Path = RESULTS) -> tuple[dict, list[dict]]:
@@ -191,7 +191,7 @@ def main() -> int:
     args = ap.parse_args()
     summary, docs = load(args.results)
     text = fill_block(DOC.read_text(), NAME, block(summary, docs), where=DOC)
-    return update(DOC, text, args.check, "run python experiments/real_models_table.py")
+    return update(DOC, text, args.check, "run python studies/real_models_table.py")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
-"""The head-to-head table of ``experiments/diagnose_head_to_head.py``, generated from its result
+"""The head-to-head table of ``studies/diagnose_head_to_head.py``, generated from its result
 files (never typed): rewrites the block ``<!-- generated:diagnose-head-to-head -->`` in
 docs/diagnose.md. ``--check`` only compares (exit 1 when the docs disagree with the results).
 
-    python experiments/head_to_head_table.py [--check]
+    python studies/head_to_head_table.py [--check]
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ ORDER = (
     "sysid_rigid",
     "sysid",
 )
-COMMAND = "python experiments/diagnose_head_to_head.py && python experiments/head_to_head_table.py"
+COMMAND = "python studies/diagnose_head_to_head.py && python studies/head_to_head_table.py"
 SYSID_UNITS = {
     "rotor_inertia": "kg m²",
     "pendulum_com": "m",
@@ -212,7 +212,7 @@ def block() -> str:
     ]
     lines += [
         "",
-        "The public simulators as implemented here (`experiments/qube_baselines.py`; SI units):",
+        "The public simulators as implemented here (`studies/qube_baselines.py`; SI units):",
         "",
         baseline_table(docs),
     ]

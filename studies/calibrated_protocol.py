@@ -18,7 +18,7 @@ filter for the velocities):
 
 and the two L_prop models again with the residual summed over 10 quadrature intervals (0.2 s of
 Simpson intervals for DeLaN, 0.1 s of Hermite ones for augmented DeLaN), then also trained on velocities
-re-estimated offline from the encoder angles (``experiments/calibrated_itau.py`` says why):
+re-estimated offline from the encoder angles (``studies/calibrated_itau.py`` says why):
 
     furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
         --sensor experiment --integral-span 10 --pair dln:prop --pair adln:prop \\
@@ -33,9 +33,9 @@ it (:class:`~furuta_gym.controllers.SwingUpLQR`, 5 V, 500 Hz, 8 s) on the plant,
 sensors (2048 counts, derivative-filter velocities), from x0 = 0 and 30 seeded starts near the
 hanging rest, as the paper's control figure does. The plant's own model and the nominal analytic
 model are designed on beside them. Writes ``results/calibrated_protocol/control.json``;
-``experiments/calibrated_protocol_table.py`` writes the tables into docs/learning.md.
+``studies/calibrated_protocol_table.py`` writes the tables into docs/learning.md.
 
-    python experiments/calibrated_protocol.py [--episodes 30] [--seed 0]
+    python studies/calibrated_protocol.py [--episodes 30] [--seed 0]
 """
 
 from __future__ import annotations

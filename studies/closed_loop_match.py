@@ -13,10 +13,10 @@ difference of the angles, the same estimator on both (the references and feed-fo
 out bias both alike). Then the diagnosis with the real runs' recipe (0.1 s windows, 64
 output-error windows) on each experiment with a pendulum Coulomb friction of 1e-4 N·m planted.
 
-Writes ``results/closed_loop_match/match.json``; ``experiments/diagnose_tables.py`` makes the docs
+Writes ``results/closed_loop_match/match.json``; ``studies/diagnose_tables.py`` makes the docs
 table.
 
-    python experiments/closed_loop_match.py [--seeds 100 101 102] [--jobs 2]
+    python studies/closed_loop_match.py [--seeds 100 101 102] [--jobs 2]
 """
 
 from __future__ import annotations

@@ -21,9 +21,9 @@ Scored on runs 6–15 in back-to-back 0.1 s open-loop windows started from the m
 state log10 RMSE (the paper's metric) and RMSE in rad, rad/s. The energy figure shows E(t) along
 a test run as each model sees it, and the potential each model believes in (the paper shows only
 the energy's shape for its experimental system). Writes ``results/real_models/*.json`` and
-``energy.png``; ``experiments/real_models_table.py`` puts the table into docs/learning.md.
+``energy.png``; ``studies/real_models_table.py`` puts the table into docs/learning.md.
 
-    python experiments/real_models.py [--out results/real_models] [--budget 1.0]
+    python studies/real_models.py [--out results/real_models] [--budget 1.0]
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ SCHEDULES = {
     ("adln", "aph"): (10, 8),
 }
 #: L_Iτ over 0.1 s (25 Simpson intervals at 500 Hz) instead of the paper's one interval, chosen on
-#: the simulated ablation (experiments/lprop_closed_loop_ablation.py, cells g/h): per interval the
+#: the simulated ablation (studies/lprop_closed_loop_ablation.py, cells g/h): per interval the
 #: encoder's counts, through the estimated velocities, all but hide gravity from the loss
 SPAN = 25
 #: learned models: name -> (kind, loss, TrainConfig changes to the recipe)

@@ -34,9 +34,9 @@ plant with the effects its diagnosis reported ``inconsistent`` added at their te
 (``res.plant(include_inconsistent=True)``; a row of its own, ``diagnosed_inconsistent``).
 
 Writes ``results/head_to_head/<row>.json`` and ``summary.json`` (machine, date, settings);
-``experiments/head_to_head_table.py`` puts the table into docs/diagnose.md.
+``studies/head_to_head_table.py`` puts the table into docs/diagnose.md.
 
-    python experiments/diagnose_head_to_head.py [--out results/head_to_head] [--rows a,b]
+    python studies/diagnose_head_to_head.py [--out results/head_to_head] [--rows a,b]
 """
 
 from __future__ import annotations
