@@ -5,6 +5,13 @@ and writes ``<out>/run.json``; this script tabulates one or more such records si
 
     python bench/reproduce_timing.py results/reproduce/run.json [more run.json ...]
 
+and, with ``--before BEFORE.json --after AFTER.json`` (two full runs of the same command by two
+versions of the code, one after the other on one machine), every model's time in both and
+their ratio, in a section of its own:
+
+    python bench/reproduce_timing.py --before results/training_speed/before/run.json \
+        --after results/training_speed/after/run.json
+
 It never runs a reproduction itself (a full run takes most of an hour on a shared 2-core CPU).
 """
 
@@ -16,6 +23,7 @@ import sys
 from pathlib import Path
 
 START, END = "<!-- reproduce_timing:start -->", "<!-- reproduce_timing:end -->"
+SIDE_START, SIDE_END = "<!-- reproduce_speedup:start -->", "<!-- reproduce_speedup:end -->"
 
 
 def section(records: list[tuple[Path, dict]]) -> str:
@@ -77,20 +85,84 @@ def section(records: list[tuple[Path, dict]]) -> str:
     return "\n".join(lines)
 
 
+def _model_seconds(rec: dict) -> dict[str, float]:
+    """Training + evaluation seconds of every model the run trained itself."""
+    return {
+        k: v["seconds"]
+        for k, v in rec.get("seconds", {}).items()
+        if isinstance(v, dict) and v.get("status") == "trained"
+    }
+
+
+def _label(path: Path, rec: dict) -> str:
+    """The code version a run record was made by (``label.txt`` beside it, else the package's)."""
+    label = path.parent / "label.txt"
+    text = label.read_text().strip() if label.exists() else rec.get("furuta_gym_version", "?")
+    return f"{text}; run.json of {rec.get('date_utc', '?')}"
+
+
+def _command(rec: dict) -> str:
+    """The command without its output folder (the two runs wrote to two folders)."""
+    words = (rec.get("command") or "(API)").split()
+    if "--out" in words:
+        i = words.index("--out")
+        words = words[:i] + words[i + 2 :]
+    return " ".join(words)
+
+
+def side_by_side(before: tuple[Path, dict], after: tuple[Path, dict]) -> str:
+    """Every model's seconds in two runs of one command and the ratio before / after."""
+    (pb, rb), (pa, ra) = before, after
+    if _command(rb) != _command(ra) or rb.get("prop_epochs_by_model") != ra.get("prop_epochs_by_model"):
+        raise SystemExit(f"{pb} and {pa} ran other schedules: not a side-by-side comparison")
+    tb, ta = _model_seconds(rb), _model_seconds(ra)
+    lines = [
+        SIDE_START,
+        "### Every model before and after (`bench/reproduce_timing.py --before … --after …`)",
+        "",
+        f"Two full runs from scratch (empty caches) of `{_command(ra)}` on one machine, one after the other: "
+        f"before `{pb}` ({_label(pb, rb)}), after `{pa}` ({_label(pa, ra)}). Seconds per model: training, "
+        "JAX compiles included, and evaluation on every test set; both runs train two models at a time.",
+        "",
+        "| model | before s | after s | before / after |",
+        "|---|---:|---:|---:|",
+    ]
+    for model in sorted(tb.keys() & ta.keys()):
+        lines.append(f"| {model} | {tb[model]:.0f} | {ta[model]:.0f} | {tb[model] / ta[model]:.2f}× |")
+    sb, sa = rb.get("seconds", {}).get("total", 0.0), ra.get("seconds", {}).get("total", 0.0)
+    lines.append(f"| **whole run (wall)** | {sb:.0f} | {sa:.0f} | {sb / sa:.2f}× |" if sa else "")
+    lines.append(SIDE_END)
+    return "\n".join(line for line in lines if line is not None)
+
+
+def _replace(text: str, start: str, end: str, new: str) -> str:
+    if start in text and end in text:
+        return re.sub(re.escape(start) + ".*?" + re.escape(end), lambda _: new, text, flags=re.S)
+    return text.rstrip("\n") + "\n\n" + new + "\n"
+
+
 def main(argv: list[str]) -> int:
-    if not argv:
+    pair = {}
+    for flag in ("--before", "--after"):
+        if flag in argv:
+            i = argv.index(flag)
+            pair[flag] = Path(argv[i + 1])
+            argv = argv[:i] + argv[i + 2 :]
+    if not argv and len(pair) != 2:
         print(__doc__)
         return 2
-    records = [(Path(a), json.loads(Path(a).read_text())) for a in argv]
     bench = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
     text = bench.read_text() if bench.exists() else "# Benchmarks\n"
-    new = section(records)
-    if START in text and END in text:
-        text = re.sub(re.escape(START) + ".*?" + re.escape(END), lambda _: new, text, flags=re.S)
-    else:
-        text = text.rstrip("\n") + "\n\n" + new + "\n"
+    if argv:
+        new = section([(Path(a), json.loads(Path(a).read_text())) for a in argv])
+        text = _replace(text, START, END, new)
+        print(new)
+    if len(pair) == 2:
+        before, after = ((p, json.loads(p.read_text())) for p in (pair["--before"], pair["--after"]))
+        new = side_by_side(before, after)
+        text = _replace(text, SIDE_START, SIDE_END, new)
+        print(new)
     bench.write_text(text)
-    print(new)
     return 0
 
 
