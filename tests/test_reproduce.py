@@ -660,7 +660,7 @@ def test_decision_log_quotes_match_their_evidence():
     assert checked >= 8
 
 
-@pytest.mark.parametrize("script", ["reproduce_summary.py", "recipe_table.py"])
+@pytest.mark.parametrize("script", ["reproduce_summary.py", "recipe_table.py", "reproduce_seeds_table.py"])
 def test_docs_reproduce_tables_match_their_sources(script):
     """docs/reproduce.md's recipe table is the recipe (training/recipe.py) and its results summary
     is results/reproduce: a quoted number that disagrees with its source fails here."""
