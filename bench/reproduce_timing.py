@@ -18,9 +18,10 @@ It never runs a reproduction itself (a full run takes most of an hour on a share
 from __future__ import annotations
 
 import json
-import re
 import sys
 from pathlib import Path
+
+from _generated import fill_section  # bench/'s one writer of generated sections
 
 START, END = "<!-- reproduce_timing:start -->", "<!-- reproduce_timing:end -->"
 SIDE_START, SIDE_END = "<!-- reproduce_speedup:start -->", "<!-- reproduce_speedup:end -->"
@@ -130,15 +131,10 @@ def side_by_side(before: tuple[Path, dict], after: tuple[Path, dict]) -> str:
     for model in sorted(tb.keys() & ta.keys()):
         lines.append(f"| {model} | {tb[model]:.0f} | {ta[model]:.0f} | {tb[model] / ta[model]:.2f}× |")
     sb, sa = rb.get("seconds", {}).get("total", 0.0), ra.get("seconds", {}).get("total", 0.0)
-    lines.append(f"| **whole run (wall)** | {sb:.0f} | {sa:.0f} | {sb / sa:.2f}× |" if sa else "")
+    if sa:
+        lines.append(f"| **whole run (wall)** | {sb:.0f} | {sa:.0f} | {sb / sa:.2f}× |")
     lines.append(SIDE_END)
-    return "\n".join(line for line in lines if line is not None)
-
-
-def _replace(text: str, start: str, end: str, new: str) -> str:
-    if start in text and end in text:
-        return re.sub(re.escape(start) + ".*?" + re.escape(end), lambda _: new, text, flags=re.S)
-    return text.rstrip("\n") + "\n\n" + new + "\n"
+    return "\n".join(lines)
 
 
 def main(argv: list[str]) -> int:
@@ -155,12 +151,12 @@ def main(argv: list[str]) -> int:
     text = bench.read_text() if bench.exists() else "# Benchmarks\n"
     if argv:
         new = section([(Path(a), json.loads(Path(a).read_text())) for a in argv])
-        text = _replace(text, START, END, new)
+        text = fill_section(text, new, START, END)
         print(new)
     if len(pair) == 2:
         before, after = ((p, json.loads(p.read_text())) for p in (pair["--before"], pair["--after"]))
         new = side_by_side(before, after)
-        text = _replace(text, SIDE_START, SIDE_END, new)
+        text = fill_section(text, new, SIDE_START, SIDE_END)
         print(new)
     bench.write_text(text)
     return 0
