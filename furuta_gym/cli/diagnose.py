@@ -54,6 +54,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="--mjcf: include the effects reported inconsistent too, at their tested coefficients "
         "(a plant for prediction; see docs/diagnose.md, head to head)",
     )
+    parser.add_argument(
+        "--prediction-first",
+        action="store_true",
+        help="after the diagnosis, refit its model with the inconsistent effects and every joint's "
+        "Coulomb friction by output error on every fit window, and keep that plant (--mjcf, the JSON's "
+        "prediction_finish) if it predicts the held-out windows better; the report is unchanged",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace existing --json/--report outputs")
     parser.add_argument(
         "--column-map",
@@ -97,6 +104,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.with_inconsistent and not args.mjcf:
         raise ValueError("--with-inconsistent: shapes the --mjcf plant; give --mjcf OUT.xml too")
+    if args.prediction_first and (args.with_inconsistent or args.model):
+        raise ValueError(
+            "--prediction-first: its plant refits the inconsistent effects (not with --with-inconsistent) "
+            "and is a plant of lumped parameters (not with --model)"
+        )
     for out in (args.json, args.mjcf):
         if out and Path(out).exists() and not args.overwrite:
             raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
@@ -119,9 +131,12 @@ def run(args: argparse.Namespace) -> int:
         model=args.model,
         fixed=_pairs(args.fix, "--fix", float) or None,
         candidates=args.candidates.split(",") if args.candidates else None,
+        finish="prediction" if args.prediction_first else None,
         **overrides,
     )
     print(res.table())
+    if res.prediction is not None:
+        print(res.prediction.summary())
     if args.json:
         print(f"wrote {write_json(res, args.json, overwrite=args.overwrite)}")
     if args.report:
@@ -130,6 +145,6 @@ def run(args: argparse.Namespace) -> int:
     if args.mjcf:
         from ..envs import save_mjcf
 
-        plant = res.plant(include_inconsistent=args.with_inconsistent)
+        plant = res.plant(include_inconsistent=args.with_inconsistent, prediction_first=args.prediction_first)
         print(f"wrote {save_mjcf(plant, args.mjcf, overwrite=args.overwrite)}")
     return 0

@@ -3,10 +3,12 @@
 ``diagnose(data, system)`` fits the declared analytic model's lumped parameters (equation error on
 the integral inverse residual, refined by output error), tests a library of candidate effects
 (:mod:`furuta_gym.effects`) against the residual on held-out data, adds the significant ones,
-refits and reports the held-out errors before and after. See ``docs/diagnose.md``.
+refits and reports the held-out errors before and after; ``finish="prediction"`` also refits the
+final model for prediction beside the report. See ``docs/diagnose.md``.
 """
 
 from ._diagnose import DiagnosisResult, DiagnosisSettings, EffectEvidence, ErrorSummary, diagnose
+from ._finish import PredictionFinish
 from ._fit import InputDynamics
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
 from ._rests import RestBound, held_at_rest
@@ -21,6 +23,7 @@ __all__ = [
     "EffectEvidence",
     "ErrorSummary",
     "InputDynamics",
+    "PredictionFinish",
     "LumpedModel",
     "Candidate",
     "layout_for",

@@ -32,14 +32,16 @@ from ..models import system_definition
 from ..models.checkpoint import load_model
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
-from . import _fit, _intervals, _rests
+from . import _finish, _fit, _intervals, _rests
 from . import _trace as _trace_mod
 from ._intervals import FitOrigin, Interval
 from ._library import (
     Candidate,
     ParameterLayout,
     check_input_linear,
+    is_physical,
     layout_for,
+    non_physical,
 )
 from ._problem import Problem, fit_equation_error, free_columns
 from ._report import format_table
@@ -205,9 +207,14 @@ class DiagnosisResult:
     # they were made; the effects' own are on each EffectEvidence
     intervals: dict[str, Interval | None] = dataclasses.field(default_factory=dict)
     interval_method: dict | None = None
+    # ``diagnose(..., finish="prediction")``: the plant refitted for prediction and whether it was
+    # kept, beside the report (which it does not change)
+    prediction: _finish.PredictionFinish | None = None
     # kept for figures
     _segments: list = dataclasses.field(default_factory=list, repr=False)
     _test_segments: list = dataclasses.field(default_factory=list, repr=False)
+    # the fitting context, kept only until a prediction-first finish has used it
+    _fitter: object = dataclasses.field(default=None, repr=False, compare=False)
 
     @property
     def delay_after(self) -> float:
@@ -243,7 +250,7 @@ class DiagnosisResult:
         effects = [e for e in self.found if not e.kind.input_dynamics]
         return WithEffects(self.layout.model(base_theta), effects)
 
-    def plant(self, include_inconsistent: bool = False) -> Plant:
+    def plant(self, include_inconsistent: bool = False, prediction_first: bool = False) -> Plant:
         """The diagnosed rig as a simulator: the fitted lumped parameters and the found effects
         (input delay or lag included) as a :class:`~furuta_gym.envs.Plant`, for
         ``gym.make(..., plant=res)``, ``MujocoBackend(plant=...)`` and
@@ -255,12 +262,25 @@ class DiagnosisResult:
         Coulomb friction, is left out) — a plant chosen for prediction, not a claim about the rig: such
         an effect helped the held-out data as a whole but not most of its groups (a cable spring
         that acts only in the runs whose rotor wanders far). docs/diagnose.md measures both plants
-        on real runs never fitted."""
+        on real runs never fitted.
+
+        ``prediction_first``: the plant of the prediction-first finish (:attr:`prediction`; needs
+        ``diagnose(..., finish="prediction")``): the refit when it predicted the held-out windows
+        better, else this default plant. It already holds the inconsistent effects, refitted."""
         if self.layout.learned is not None:
             raise ValueError(
                 "a diagnosis of a given model has no MuJoCo plant (its M and V are a "
                 "network's); pass res.model_after as dynamics= instead"
             )
+        if prediction_first:
+            if include_inconsistent:
+                raise ValueError(
+                    "plant: prediction_first and include_inconsistent are alternatives (the "
+                    "prediction-first plant refits the inconsistent effects); pass one"
+                )
+            if self.prediction is None:
+                raise ValueError("plant(prediction_first=True): run diagnose(..., finish='prediction') first")
+            return self.prediction.plant
         added = [e for e in self.inconsistent if can_join(e, self.significant)] if include_inconsistent else []
         effects = _as_effects(self.significant + added)
         names = ", ".join(f"{e.name}:{e.joint}" for e in self.found) or "no effect"
@@ -288,6 +308,7 @@ class DiagnosisResult:
             "notes": self.notes,
             "settings": dataclasses.asdict(self.settings),
             "plant": None if self.layout.learned is not None else self.plant().to_json(),
+            "prediction_finish": None if self.prediction is None else self.prediction.to_json(),
         }
 
     def table(self) -> str:
@@ -568,7 +589,7 @@ class _Fitter:
         nominal = theta0.copy()
         nominal[:nb] = np.where(free[:nb], self.layout.nominal()[:nb], theta0[:nb])
         start, label, start_origin = theta0, "equation-error", ee
-        if not _physical(self.layout, theta0) or self.window_rmse(nominal, win) < self.window_rmse(theta0, win):
+        if not is_physical(self.layout, theta0) or self.window_rmse(nominal, win) < self.window_rmse(theta0, win):
             start, label = nominal, "nominal"
             start_origin = ee.holding(
                 np.flatnonzero(free[:nb]),
@@ -591,7 +612,9 @@ class _Fitter:
         if not ok:
             self.notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
             return self.record(th, start_origin)
-        if _physical(self.layout, start) and self.validation_rmse(start, dynamics) < self.validation_rmse(th, dynamics):
+        if is_physical(self.layout, start) and self.validation_rmse(start, dynamics) < self.validation_rmse(
+            th, dynamics
+        ):
             self.notes.append(
                 f"the {label} estimate predicts better on validation windows than the "
                 f"output-error refinement; kept ({tag})"
@@ -618,15 +641,6 @@ class _Fitter:
         if not self.test_segs:
             return None
         return self.errors(theta, self.test_segs, Problem(self.test_segs, self.c_input))
-
-
-def _physical(layout, theta) -> bool:
-    """Positive-definite mass matrix for every angle and non-negative declared damping (a given
-    model's own physics is taken as it is: only its scale, held at 1, is a base parameter)."""
-    if layout.learned is not None:
-        return bool(theta[0] > 0)
-    p = {b: theta[i] for i, b in enumerate(layout.base)}
-    return system_definition(layout.system).lumped.is_physical(p)
 
 
 def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputDynamics:
@@ -727,7 +741,7 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
         vetoed = []
         for step in todo:
             ev, th, trial_dyn, trial_sums = _try_step(fx, accepted, dyn, sums, step)
-            flipped = _non_physical(fx.layout, th, step.members)
+            flipped = non_physical(fx.layout, th, step.members)
             if ev.z > -fx.settings.veto_t and not flipped:
                 accepted, theta, dyn, sums = accepted + list(step.members), th, trial_dyn, trial_sums
             else:
@@ -764,7 +778,7 @@ def _drop_non_physical(fx: _Fitter, accepted, theta, dyn, evidence):
     dropped and the rest refitted (the later, physical steps stay); the regressors are those of
     ``dyn``, built already. Returns (accepted, θ)."""
     for _ in range(len(accepted)):
-        flipped = _non_physical(fx.layout, theta, accepted)
+        flipped = non_physical(fx.layout, theta, accepted)
         if not flipped:
             break
         for key in flipped:
@@ -773,11 +787,6 @@ def _drop_non_physical(fx: _Fitter, accepted, theta, dyn, evidence):
         th_ee, free = fx.fit_ee(accepted)
         theta = fx.refine(th_ee, free, dyn, "with " + ", ".join(c.key for c in accepted))
     return accepted, theta
-
-
-def _non_physical(layout, theta, effects) -> list[str]:
-    """Keys of ``effects`` whose coefficient in ``theta`` has the non-physical sign."""
-    return [c.key for c in effects if c.kind.physically_positive and theta[layout.index(c.key)] <= 0]
 
 
 def _stiction_start(fx: _Fitter, theta, c: Candidate, held: float) -> np.ndarray:
@@ -840,7 +849,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
         ev = _stiction_evidence(pred, trial_pred, measured)
         coef = float(th[fx.layout.index(c.key)])
         how = "found by prediction, given the joint's Coulomb friction: gain and t on the fit-set validation windows"
-        if coef > 0 and _physical(fx.layout, th) and ev.passes(s.min_improvement, s.z_threshold):
+        if coef > 0 and is_physical(fx.layout, th) and ev.passes(s.min_improvement, s.z_threshold):
             th = _breakaway_at_least(fx, th, c, bound)
         else:
             fx.notes.append(
@@ -876,7 +885,7 @@ def _sized(fx: _Fitter, from_rests, fitted, c: Candidate, bound: _rests.RestBoun
     dyn, start, measured = where
     (th_rests, how, pred_rests), (th_fit, pred_fit) = from_rests, fitted
     i = fx.layout.index(c.key)
-    if not (th_fit[i] > 0 and _physical(fx.layout, th_fit)):
+    if not (th_fit[i] > 0 and is_physical(fx.layout, th_fit)):
         return th_rests, how, pred_rests
     raised = _raised_breakaway(fx, th_fit, c, bound)
     if raised is not th_fit:
@@ -957,7 +966,7 @@ def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBoun
     fitted = th.copy()
     th[i] = _rest_bound(fx, th, dyn, c.joint).held - th[j]
     _held_from(fx, th, fitted, i, "set from the force the rests held, not fitted")
-    if not (th[i] > 0 and _physical(fx.layout, th)):
+    if not (th[i] > 0 and is_physical(fx.layout, th)):
         fx.notes.append(f"{c.key}: {seen}; refitted, ΔF {th[i]:.3g} is not physical: not added")
         return None
     return th, f"found from rests: {seen}; breakaway at least {th[i] + th[j]:.3g}"
@@ -1231,6 +1240,7 @@ def diagnose(
     candidates: Sequence[str] | None = None,
     model=None,
     settings: DiagnosisSettings | None = None,
+    finish: str | None = None,
     **overrides,
 ) -> DiagnosisResult:
     """Fit the declared model, trace its residual to missing effects, add them, refit, report.
@@ -1244,12 +1254,17 @@ def diagnose(
     input gain for the N-MSD; with free data the mass/gain is fixed too). ``candidates``: restrict
     the library (keys ``"effect:joint"``). ``model``: diagnose this Lagrangian model (e.g. a trained
     DeLaN, or a checkpoint path) instead of the analytic one: it is kept as it is and the
-    library's effects are fitted around it. Other keyword arguments override
+    library's effects are fitted around it. ``finish``: ``"report"`` (None, the default) or
+    ``"prediction"``: after the diagnosis, its final model, ``inconsistent`` effects and every
+    joint's Coulomb friction are refitted by output error on every fit-set window, kept if they
+    predict the held-out windows better (``res.prediction``, ``res.plant(prediction_first=True)``);
+    the report is the same either way. Other keyword arguments override
     :class:`DiagnosisSettings` fields.
 
     Returns a :class:`DiagnosisResult`: effects ordered by held-out evidence (those marked
     ``significant`` were added), held-out (and test) errors before/after, fitted parameters, notes.
     """
+    prediction = _check_finish(finish, model, settings, overrides)
     once = functools.partial(
         _diagnose_once,
         data,
@@ -1261,12 +1276,32 @@ def diagnose(
         candidates=candidates,
         model=model,
         settings=settings,
+        keep_fitter=prediction,
         **overrides,
     )
     result = once(fixed=fixed)
     if model is not None:  # a learned model is kept as it is: no lumped bodies to check
         return result
-    return _with_rigid_bodies(result, lambda held: once(fixed={**result.fixed, **held}))
+    result = _with_rigid_bodies(result, lambda held: once(fixed={**result.fixed, **held}))
+    if prediction:
+        result.prediction = _finish.prediction_finish(result._fitter, result)
+        result._fitter = None
+    return result
+
+
+def _check_finish(finish, model, settings, overrides) -> bool:
+    """Whether a prediction-first finish was asked for; one error for what cannot have one."""
+    if finish is None or finish == "report":
+        return False
+    if finish != "prediction":
+        raise ValueError(f"finish: expected one of {list(_finish.FINISHES)} or None, got {finish!r}")
+    if model is not None:
+        raise ValueError(
+            "finish='prediction' refits a plant of lumped parameters; a diagnosis of a given model has none"
+        )
+    if not overrides.get("oe", (settings or DiagnosisSettings()).oe):
+        raise ValueError("finish='prediction' refits by output error, which oe=False turns off")
+    return True
 
 
 #: A refit with one lumped parameter held at its declared value replaces a fit whose values no
@@ -1331,9 +1366,11 @@ def _diagnose_once(
     candidates: Sequence[str] | None = None,
     model=None,
     settings: DiagnosisSettings | None = None,
+    keep_fitter: bool = False,
     **overrides,
 ) -> DiagnosisResult:
-    """One diagnosis with ``fixed`` as given (see :func:`diagnose`)."""
+    """One diagnosis with ``fixed`` as given (see :func:`diagnose`); ``keep_fitter``: its fitting
+    context stays on the result, for a finish."""
     ensure_x64()
     spec = get_spec(system)
     layout = layout_for(spec.name, _given_model(model, spec))
@@ -1393,4 +1430,5 @@ def _diagnose_once(
         interval_method=interval_method,
         _segments=segs,
         _test_segments=test_segs,
+        _fitter=fx if keep_fitter else None,
     )

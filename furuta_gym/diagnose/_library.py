@@ -48,6 +48,8 @@ __all__ = [
     "layout_for",
     "nominal_base",
     "check_input_linear",
+    "is_physical",
+    "non_physical",
 ]
 
 
@@ -289,3 +291,17 @@ def check_input_linear(model: AbstractLagrangianSystem, seed: int = 0) -> None:
                 "model: its input force is not B·u + f(q, q̇) with a constant B; the "
                 "diagnosis of a given model needs that form"
             )
+
+
+def is_physical(layout: ParameterLayout, theta) -> bool:
+    """Positive-definite mass matrix for every angle and non-negative declared damping (a given
+    model's own physics is taken as it is: only its scale, held at 1, is a base parameter)."""
+    if layout.learned is not None:
+        return bool(theta[0] > 0)
+    p = {b: theta[i] for i, b in enumerate(layout.base)}
+    return system_definition(layout.system).lumped.is_physical(p)
+
+
+def non_physical(layout: ParameterLayout, theta, effects) -> list[str]:
+    """Keys of ``effects`` whose coefficient in ``theta`` has the non-physical sign."""
+    return [c.key for c in effects if c.kind.physically_positive and theta[layout.index(c.key)] <= 0]

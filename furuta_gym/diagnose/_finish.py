@@ -1,0 +1,215 @@
+"""A prediction-first finish: the diagnosed model refitted for prediction, beside the diagnosis.
+
+The diagnosis adds an effect only on consistent cross-validated evidence (docs/diagnose.md,
+Method). A user who wants the best simulator of the rig rather than a claim about it can ask for
+more (``diagnose(..., finish="prediction")``): the final model, its ``inconsistent`` effects and
+every joint's Coulomb friction refitted together by output error on every fit-set window, kept
+only if it predicts the held-out windows of the fit logs better than the diagnosis' own plants,
+by the diagnosis' rule for a gain (``min_improvement`` of the sum of squares, per-window log
+ratios' t ≥ ``z_threshold``).
+The diagnosis' report (effects, evidence, intervals, errors) is not touched: the finish is
+recorded beside it (:class:`PredictionFinish`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..effects import Effect, can_join, merge_spring_rests
+from ..envs import Plant
+from ..models import system_definition
+from . import _fit
+from . import _trace as _trace_mod
+from ._library import Candidate, is_physical
+from ._problem import free_columns
+
+__all__ = ["FINISHES", "PredictionFinish", "prediction_finish"]
+
+#: ``diagnose(finish=...)``: the report alone, or the report and a plant refitted for prediction
+FINISHES = ("report", "prediction")
+
+
+@dataclasses.dataclass(frozen=True)
+class PredictionFinish:
+    """What the prediction-first finish did. ``plant`` is the plant to simulate with: the refit's
+    when ``kept``, else the diagnosis' own (``res.plant()``); ``refit`` is the refit's either way
+    (None when it did not simulate). ``heldout_rmse``: position RMSE (rad or m) on the held-out
+    windows of the fit logs of the diagnosed plant, of it with its inconsistent effects, and of the
+    refit; ``improvement`` and ``z_score``: the refit's drop of the held-out sum of squares
+    against ``baseline`` (the better of the first two) and the t of its per-window log ratios."""
+
+    kept: bool
+    reason: str
+    plant: Plant
+    refit: Plant | None
+    added: tuple[str, ...]  # effects beyond the found ones in the refit
+    left_out: tuple[str, ...]  # of the wrong physical sign after the refit
+    heldout_rmse: dict[str, float]
+    baseline: str
+    improvement: float
+    z_score: float
+    fit_windows: int
+    heldout_windows: int
+    window_seconds: float
+
+    def to_json(self) -> dict:
+        finite = lambda x: float(x) if np.isfinite(x) else None  # noqa: E731
+        return {
+            "kept": self.kept,
+            "reason": self.reason,
+            "added": list(self.added),
+            "left_out": list(self.left_out),
+            "heldout_trajectory_rmse": {k: finite(v) for k, v in self.heldout_rmse.items()},
+            "baseline": self.baseline,
+            "heldout_improvement": finite(self.improvement),
+            "z_score": finite(self.z_score),
+            "fit_windows": self.fit_windows,
+            "heldout_windows": self.heldout_windows,
+            "window_seconds": self.window_seconds,
+            "plant": self.plant.to_json(),
+            "refit_plant": None if self.refit is None else self.refit.to_json(),
+        }
+
+    def summary(self) -> str:
+        """Lines for the terminal: the decision and the held-out comparison."""
+        rmse = ", ".join(f"{k.replace('_', ' ')} {v:.4g}" for k, v in self.heldout_rmse.items())
+        return "\n".join(
+            (
+                f"prediction-first finish: {'kept' if self.kept else 'not kept'} — {self.reason}",
+                f"  held-out windows of the fit logs ({self.heldout_windows} × {self.window_seconds:g} s), "
+                f"position RMSE: {rmse}",
+                f"  refitted by output error on {self.fit_windows} fit-set windows; added: "
+                f"{', '.join(self.added) or 'nothing'}; left out (wrong sign): {', '.join(self.left_out) or 'nothing'}",
+            )
+        )
+
+
+def _extra_candidates(layout, result) -> list[tuple[Candidate, float]]:
+    """What the refit adds to the found effects, with its start coefficient: the joinable
+    ``inconsistent`` effects at their tested coefficients, and each joint's Coulomb friction not
+    already in (at its tested coefficient when that is positive, else 0)."""
+    found = result.significant
+    have = {(e.name, e.joint) for e in found}
+    out = [(Candidate(e.name, e.joint), float(e.coefficient)) for e in result.inconsistent if can_join(e, found)]
+    have |= {(c.name, c.joint) for c, _ in out}
+    tested = {(e.name, e.joint): e.coefficient for e in result.effects}
+    for c in layout.candidates:
+        if c.kind.is_dry_friction and c.kind.breakaway_above is None and (c.name, c.joint) not in have:
+            out.append((c, max(0.0, float(tested.get((c.name, c.joint)) or 0.0))))
+    return out
+
+
+def _effects(layout, theta, chosen, dyn) -> list[Effect]:
+    """``chosen`` candidates at their coefficients in ``theta`` (the input dynamics' at ``dyn``)."""
+    return [
+        Effect(c.name, c.joint, dyn.seconds if c.kind.input_dynamics else float(theta[layout.index(c.key)]))
+        for c in chosen
+    ]
+
+
+def _refit(fx, theta, chosen, dyn, win):
+    """Output error on ``win`` with ``chosen`` free; effects the refit leaves of the wrong physical
+    sign (:func:`~furuta_gym.effects.can_join`) are left out and the rest refitted. Returns (θ,
+    kept candidates, left-out keys, whether any refit lowered the fit windows' error)."""
+    s, chosen, left_out, improved = fx.settings, list(chosen), [], False
+    for _ in range(len(chosen) + 1):
+        free = free_columns(fx.layout, chosen, fx.fixed_idx)
+        theta, ok = _fit.oe_fit(fx.layout, theta, free, win, fx.substeps, s.oe_max_nfev, s.start_iterations)
+        improved |= ok
+        effects = _effects(fx.layout, theta, chosen, dyn)
+        bad = [c for c, e in zip(chosen, effects) if not can_join(e, effects)]
+        if not bad:
+            break
+        theta = np.array(theta, dtype=float)
+        for c in bad:
+            theta[fx.layout.index(c.key)] = 0.0
+        left_out += [c.key for c in bad]
+        chosen = [c for c in chosen if c not in bad]
+    return theta, chosen, left_out, improved
+
+
+def _heldout_sums(fx, thetas: dict, win) -> dict[str, np.ndarray]:
+    """Per-window squared position errors on the held-out windows, as ``error_after`` scores them."""
+    return {k: _fit.window_square_sums(fx.layout, th, win, fx.substeps) for k, th in thetas.items()}
+
+
+def _rigid_failure(system: str, theta, layout) -> str | None:
+    """Why the refit's lumped values have no rigid bodies (MuJoCo refuses them), or None."""
+    conditions = system_definition(system).body_conditions
+    if conditions is None:
+        return None
+    failed = [c for c in conditions({b: float(theta[i]) for i, b in enumerate(layout.base)}) if not c.holds]
+    return None if not failed else f"{failed[0].expression} = {failed[0].value:.3g} ≤ 0, which no rigid bodies have"
+
+
+def _decide(fx, result, theta, improved, ev) -> str | None:
+    """Why the refit is not kept, or None when it is."""
+    s = fx.settings
+    if not improved:
+        return "the output-error refit did not lower the fit windows' error"
+    if not is_physical(fx.layout, theta):
+        return "the refit's declared parameters are non-physical"
+    rigid = _rigid_failure(result.system, theta, fx.layout)
+    if rigid:
+        return f"the refit's values fail a body condition: {rigid}"
+    if not ev.passes(s.min_improvement, s.z_threshold):
+        return (
+            f"it predicts the held-out windows {ev.improvement:+.1%} better (sum of squares, t {ev.z:.1f}); "
+            f"the diagnosis' rule for a gain asks ≥ {s.min_improvement:.0%} and t ≥ {s.z_threshold:g}"
+        )
+    return None
+
+
+def prediction_finish(fx, result) -> PredictionFinish:
+    """Refit ``result``'s final model for prediction on its fitting context ``fx`` (the
+    diagnosis' ``_Fitter``) and decide whether to keep it (module docstring)."""
+    layout, dyn = fx.layout, result.input_dynamics
+    if fx.dynamics != dyn:
+        fx.build(dyn)
+    found = [Candidate(e.name, e.joint) for e in result.significant]
+    extra = _extra_candidates(layout, result)
+    start = np.array(result.theta_after, dtype=float)
+    with_inconsistent = start.copy()
+    for c, coefficient in extra:
+        start[layout.index(c.key)] = coefficient
+        if any(c == Candidate(e.name, e.joint) for e in result.inconsistent):
+            with_inconsistent[layout.index(c.key)] = coefficient
+    fit_win = _fit.make_windows(fx.fit_segs, fx.L, dyn)
+    held_win = _fit.make_windows(fx.held_segs, fx.L, dyn)
+    theta, chosen, left_out, improved = _refit(fx, start, found + [c for c, _ in extra], dyn, fit_win)
+    sums = _heldout_sums(fx, {"diagnosed": result.theta_after, "with_inconsistent": with_inconsistent}, held_win)
+    sums.update(_heldout_sums(fx, {"refit": theta}, held_win))
+    baseline = min(("diagnosed", "with_inconsistent"), key=lambda k: sums[k].sum())
+    ev = _trace_mod.Evidence.of_sums(sums[baseline], sums["refit"])
+    if not np.all(np.isfinite(sums["refit"])):
+        ev = _trace_mod.Evidence(-np.inf, -np.inf, int(sums["refit"].size))
+    why_not = _decide(fx, result, theta, improved, ev)
+    names = [c.key for c in chosen]
+    refit = Plant(
+        effects=merge_spring_rests(_effects(layout, theta, chosen, dyn)),
+        lumped={b: float(theta[i]) for i, b in enumerate(layout.base)},
+        system=result.system,
+        source=f"diagnosis, prediction-first refit ({', '.join(names) or 'no effect'})",
+    )
+    reason = why_not or (
+        f"predicts the held-out windows {ev.improvement:.1%} better (sum of squares, t {ev.z:.1f}) "
+        f"than the diagnosed plant{' with its inconsistent effects' if baseline == 'with_inconsistent' else ''}"
+    )
+    n_points = held_win.q[0].size
+    return PredictionFinish(
+        kept=why_not is None,
+        reason=reason,
+        plant=refit if why_not is None else result.plant(),
+        refit=refit if np.all(np.isfinite(sums["refit"])) else None,
+        added=tuple(k for k in names if k not in {c.key for c in found}),
+        left_out=tuple(left_out),
+        heldout_rmse={k: float(np.sqrt(v.sum() / (v.size * n_points))) for k, v in sums.items()},
+        baseline=baseline,
+        improvement=float(ev.improvement),
+        z_score=float(ev.z),
+        fit_windows=int(fit_win.x0.shape[0]),
+        heldout_windows=int(held_win.x0.shape[0]),
+        window_seconds=float(fx.settings.window),
+    )
