@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..systems import SYSTEMS
 
-__all__ = ["add_arguments", "config_from_args", "run"]
+__all__ = ["add_arguments", "add_executor_arguments", "config_from_args", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -128,6 +128,12 @@ def _add_execution_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="train N models at once in separate processes (default: the number of CPU cores, at most 8)",
     )
+    add_executor_arguments(parser)
+
+
+def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--executor``, ``--address`` and ``--cpus-per-task``: the local pool or Ray tasks (also the
+    options of studies/select_option.py, which trains its candidates the same way)."""
     parser.add_argument(
         "--executor",
         choices=["local", "ray"],

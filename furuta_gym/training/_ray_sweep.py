@@ -71,7 +71,8 @@ def worker_env(cpus: int, environ=None) -> dict[str, str]:
 
 class RayExecutor:
     """Submits functions as Ray tasks and collects them: the interface of the reproduction's
-    local process pool (``submit`` → handle, ``first_done`` → finished handles, ``result``)."""
+    local process pool (``submit`` → handle, ``first_done`` → finished handles, ``result``,
+    ``folder``: a run folder as the workers see it)."""
 
     def __init__(self, ray, cpus_per_task: int):
         self._ray = ray
@@ -94,6 +95,9 @@ class RayExecutor:
 
     def result(self, handle):
         return self._ray.get(handle)
+
+    def folder(self, out: Path) -> Path:
+        return absolute(out)
 
 
 @contextlib.contextmanager

@@ -25,6 +25,7 @@ an unfinished one continues from its training state. The experimental columns of
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import csv
 import dataclasses
 import datetime as _dt
@@ -81,6 +82,7 @@ __all__ = [
     "run_settings",
     "same_settings",
     "machine_info",
+    "worker_pool",
 ]
 
 PAPER_PAIRS: tuple[tuple[str, str], ...] = (
@@ -646,13 +648,8 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log) -> It
         return
     # Progress bars of parallel workers would overwrite each other: the log lines stay.
     worker_config = dataclasses.replace(config, progress=False)
-    if config.executor == "ray":
-        with _ray_sweep.ray_executor(config.address, config.jobs, config.cpus_per_task) as executor:
-            yield from _drain(executor, tasks, _ray_sweep.absolute(out), worker_config, report)
-        return
-    # "spawn": a forked copy of a process that already runs JAX's thread pools can deadlock.
-    with cf.ProcessPoolExecutor(max_workers=config.jobs, mp_context=mp.get_context("spawn")) as pool:
-        yield from _drain(_PoolExecutor(pool), tasks, out, worker_config, report)
+    with worker_pool(config) as executor:
+        yield from _drain(executor, tasks, executor.folder(out), worker_config, report)
 
 
 def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, report):
@@ -667,11 +664,33 @@ def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, rep
             yield "figures", system, _figures_task(system, out, config, loaded[system]["data"], loaded[system]["truth"])
 
 
+@contextlib.contextmanager
+def worker_pool(config: ReproduceConfig) -> Iterator[Any]:
+    """The workers that train ``config``'s models, behind one interface: ``submit(fn, args,
+    name)`` → a handle, ``first_done(handles)`` → the finished ones, ``result(handle)``, and
+    ``folder(out)``: ``out`` as the workers must see it. A local pool of ``config.jobs`` processes,
+    or with ``executor="ray"`` Ray tasks of ``cpus_per_task`` CPUs each (retried when their worker
+    is lost; :mod:`~furuta_gym.training._ray_sweep`), on the cluster at ``address`` or a local
+    instance running ``jobs`` at once; without Ray installed, one ImportError naming the extra.
+    A study that trains runs of its own (studies/select_option.py) takes its workers from here."""
+    if config.executor == "ray":
+        with _ray_sweep.ray_executor(config.address, config.jobs, config.cpus_per_task) as executor:
+            yield executor
+        return
+    # "spawn": a forked copy of a process that already runs JAX's thread pools can deadlock.
+    with cf.ProcessPoolExecutor(max_workers=config.jobs, mp_context=mp.get_context("spawn")) as pool:
+        yield _PoolExecutor(pool)
+
+
 class _PoolExecutor:
     """A local process pool behind the interface :func:`_drain` uses (Ray's is in _ray_sweep)."""
 
     def __init__(self, pool: cf.Executor):
         self._pool = pool
+
+    def folder(self, out: Path) -> Path:
+        """``out`` as it is: the workers share this process's working folder."""
+        return out
 
     def submit(self, fn, args, name: str):
         return self._pool.submit(fn, *args)
