@@ -28,6 +28,9 @@ choice goes into the code by hand.
     python studies/select_option.py --system nmsd --kinds adln --model odd_in_velocity false true \
         --seeds 3 --out results/selection/force_parity
 
+``--quick`` trains the candidates as ``reproduce --quick`` does (scaled-down data, a few epochs):
+a check of the pipeline, never evidence for the recipe.
+
 Values are JSON where they parse (false, 0.1) and strings otherwise. ``--reuse DIR …``: a run of
 a DIR (a folder holding ``runs/``: one candidate of another selection,
 ``OUT/<system>_<kind>/<value>``, or a validation reproduction; the first that has one) whose
@@ -39,6 +42,7 @@ trained again. Writes
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import multiprocessing
 import shutil
@@ -57,14 +61,17 @@ def _parse(text: str):
         return text
 
 
-def _config(system: str, kind: str, where: str, name: str, value, seeds: int | tuple[int, ...] = 1):
+def _config(
+    system: str, kind: str, where: str, name: str, value, seeds: int | tuple[int, ...] = 1, quick: bool = False
+):
     """The reproduction config of one candidate: ``where`` is "train" or "model"; model seeds
-    0 … ``seeds`` − 1, or the tuple given."""
+    0 … ``seeds`` − 1, or the tuple given; ``quick``: as ``furuta-gym reproduce --quick`` trains."""
     from furuta_gym.training.reproduce import ReproduceConfig
 
     override = {name: value}
     seeds = tuple(range(seeds)) if isinstance(seeds, int) else tuple(seeds)
     return ReproduceConfig(
+        quick=quick,
         systems=(system,),
         pairs=((kind, "prop"),),
         seeds=seeds,
@@ -77,17 +84,13 @@ def _config(system: str, kind: str, where: str, name: str, value, seeds: int | t
     )
 
 
-def _train(system: str, kind: str, where: str, name: str, value, out: Path, seeds: int | tuple[int, ...] = 1) -> None:
+def _train(out: Path, config, command: str) -> None:
+    """One candidate's runs (a worker's task): the reproduction of ``config`` into ``out``."""
     import furuta_gym
     from furuta_gym.training.reproduce import reproduce
 
     furuta_gym.enable_x64()
-    reproduce(
-        out,
-        _config(system, kind, where, name, value, seeds),
-        command=f"studies/select_option.py {system} {kind} {where} {name}={value!r}",
-        log=lambda msg: None,
-    )
+    reproduce(out, config, command=command, log=lambda msg: None)
 
 
 def _copy_matching_run(source: Path, system: str, kind: str, config, out: Path, seed: int = 0) -> bool:
@@ -201,6 +204,12 @@ def _arguments(argv) -> argparse.Namespace:
     parser.add_argument(
         "--seeds", type=int, default=1, help="model seeds per candidate (0 … N-1); the criterion is their mean"
     )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="candidates trained as `furuta-gym reproduce --quick` trains (scaled-down data, a few "
+        "epochs): a check of the pipeline in minutes, never a choice for the recipe",
+    )
     args = parse_selection_args(parser, argv, "results/selection")
     args.where = "train" if args.train else "model"
     args.name, *args.values = args.train or args.model
@@ -220,7 +229,7 @@ def _train_candidates(args) -> tuple[list, dict, dict]:
         (
             kind,
             text,
-            _config(args.system, kind, args.where, args.name, _parse(text), args.seeds),
+            _config(args.system, kind, args.where, args.name, _parse(text), args.seeds, args.quick),
             args.out / f"{args.system}_{kind}" / text,
         )
         for kind in args.kinds
@@ -235,6 +244,7 @@ def _train_candidates(args) -> tuple[list, dict, dict]:
         }
         for k, t, cfg, out in candidates
     }
+    configs = {(k, t): cfg for k, t, cfg, _ in candidates}
     # spawn, not fork: comparing settings above already ran JAX, whose threads a forked child
     # would inherit mid-flight (it deadlocked)
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -243,7 +253,16 @@ def _train_candidates(args) -> tuple[list, dict, dict]:
             list(
                 pool.map(
                     _train,
-                    *zip(*[(args.system, k, args.where, args.name, _parse(t), out, (seed,)) for k, t, out in live]),
+                    *zip(
+                        *[
+                            (
+                                out,
+                                dataclasses.replace(configs[(k, t)], seeds=(seed,)),
+                                f"studies/select_option.py {args.system} {k} {args.where} {args.name}={_parse(t)!r}",
+                            )
+                            for k, t, out in live
+                        ]
+                    ),
                 )
             )
 
@@ -284,6 +303,7 @@ def _header(args, machine: dict, sets: list, names: list) -> list[str]:
         f"`python studies/select_option.py --system {args.system} --kinds {' '.join(args.kinds)} "
         f"--{args.where} {args.name} {' '.join(args.values)}"
         + (f" --seeds {args.seeds}" if several else "")
+        + (" --quick" if args.quick else "")
         + (f" --reuse {' '.join(map(str, args.reuse))}" if args.reuse else "")
         + f" --out {args.out}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', 'cpu')}, "
@@ -366,6 +386,7 @@ def main(argv=None) -> None:
                 "system": args.system,
                 "option": {args.where: args.name},
                 "split": "validation",
+                **({"quick": True} if args.quick else {}),
                 "lower": lowest,
                 "chosen": chosen,
                 "scores": rows,
