@@ -28,8 +28,13 @@ choice goes into the code by hand.
     python studies/select_option.py --system nmsd --kinds adln --model odd_in_velocity false true \
         --seeds 3 --out results/selection/force_parity
 
-``--quick`` trains the candidates as ``reproduce --quick`` does (scaled-down data, a few epochs):
-a check of the pipeline, never evidence for the recipe.
+The candidates train in a local pool of ``--jobs`` processes or, with ``--executor ray
+[--address ADDR] [--cpus-per-task N]``, each candidate × seed as a Ray task, exactly as
+``furuta-gym reproduce`` trains its models (its workers,
+:func:`furuta_gym.training.reproduce.worker_pool`): a run already finished is reused by its
+recorded settings, one whose worker was lost is retried and resumes from its saved state, and
+the folders and the decision are the same. ``--quick`` trains them as ``reproduce --quick`` does
+(scaled-down data, a few epochs): a check of the pipeline, never evidence for the recipe.
 
 Values are JSON where they parse (false, 0.1) and strings otherwise. ``--reuse DIR …``: a run of
 a DIR (a folder holding ``runs/``: one candidate of another selection,
@@ -42,12 +47,11 @@ trained again. Writes
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
-import multiprocessing
 import shutil
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -187,6 +191,9 @@ def _seed_columns(score: dict, pair: dict | None, seeds: int) -> str:
 
 
 def _arguments(argv) -> argparse.Namespace:
+    from furuta_gym.cli.reproduce import add_executor_arguments
+    from furuta_gym.training.reproduce import ReproduceConfig
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--system", required=True, choices=("furuta", "nmsd"))
     parser.add_argument("--kinds", nargs="+", default=["dln", "aph", "adln"], choices=("dln", "aph", "adln"))
@@ -210,6 +217,7 @@ def _arguments(argv) -> argparse.Namespace:
         help="candidates trained as `furuta-gym reproduce --quick` trains (scaled-down data, a few "
         "epochs): a check of the pipeline in minutes, never a choice for the recipe",
     )
+    add_executor_arguments(parser)
     args = parse_selection_args(parser, argv, "results/selection")
     args.where = "train" if args.train else "model"
     args.name, *args.values = args.train or args.model
@@ -217,13 +225,37 @@ def _arguments(argv) -> argparse.Namespace:
         parser.error(f"--{args.where} {args.name}: give at least two values to choose between")
     if args.seeds < 1:
         parser.error(f"--seeds must be at least 1, got {args.seeds}")
+    try:  # where the candidates train, checked as the reproduction checks its own
+        args.workers = ReproduceConfig(
+            systems=(args.system,),
+            jobs=args.jobs,
+            executor=args.executor,
+            address=args.address,
+            cpus_per_task=args.cpus_per_task,
+        )
+    except ValueError as exc:
+        parser.error(str(exc))
     return args
 
 
+@contextlib.contextmanager
+def _workers(args):
+    """The workers ``--executor`` names (the reproduction's own, :func:`worker_pool`); with
+    ``--executor ray`` and no Ray installed, one line naming the extra before any work."""
+    from furuta_gym.training.reproduce import worker_pool
+
+    with contextlib.ExitStack() as stack:
+        try:
+            pool = stack.enter_context(worker_pool(args.workers))
+        except ImportError as exc:
+            raise SystemExit(f"studies/select_option.py: error: {exc}") from None
+        yield pool
+
+
 def _train_candidates(args) -> tuple[list, dict, dict]:
-    """Copy the runs ``--reuse`` holds, train the others seed by seed. Returns the candidates
-    (kind, value, config, out), {(kind, value): seeds trained} and {(kind, value): {seed: the
-    folder its run was copied from}}."""
+    """Copy the runs ``--reuse`` holds, train the others seed by seed, each candidate × seed one
+    task of the workers. Returns the candidates (kind, value, config, out), {(kind, value): seeds
+    trained} and {(kind, value): {seed: the folder its run was copied from}}."""
     seeds = tuple(range(args.seeds))
     candidates = [
         (
@@ -235,36 +267,35 @@ def _train_candidates(args) -> tuple[list, dict, dict]:
         for kind in args.kinds
         for text in args.values
     ]
-    copied = {
-        (k, t): {
-            seed: str(src)
-            for seed in seeds
-            for src in [next((r for r in args.reuse if _copy_matching_run(r, args.system, k, cfg, out, seed)), None)]
-            if src is not None
-        }
-        for k, t, cfg, out in candidates
-    }
     configs = {(k, t): cfg for k, t, cfg, _ in candidates}
-    # spawn, not fork: comparing settings above already ran JAX, whose threads a forked child
-    # would inherit mid-flight (it deadlocked)
-    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+    with _workers(args) as pool:
+        copied = {
+            (k, t): {
+                seed: str(src)
+                for seed in seeds
+                for src in [
+                    next((r for r in args.reuse if _copy_matching_run(r, args.system, k, cfg, out, seed)), None)
+                ]
+                if src is not None
+            }
+            for k, t, cfg, out in candidates
+        }
 
         def train(live, seed):
-            list(
-                pool.map(
+            tasks = [
+                pool.submit(
                     _train,
-                    *zip(
-                        *[
-                            (
-                                out,
-                                dataclasses.replace(configs[(k, t)], seeds=(seed,)),
-                                f"studies/select_option.py {args.system} {k} {args.where} {args.name}={_parse(t)!r}",
-                            )
-                            for k, t, out in live
-                        ]
+                    (
+                        pool.folder(out),
+                        dataclasses.replace(configs[(k, t)], seeds=(seed,)),
+                        f"studies/select_option.py {args.system} {k} {args.where} {args.name}={_parse(t)!r}",
                     ),
+                    f"{args.system}_{k}/{t}/seed{seed}",  # the task's name: its run's folder
                 )
-            )
+                for k, t, out in live
+            ]
+            for task in tasks:  # in order, the first failure raised, as pool.map did
+                pool.result(task)
 
         trained = _train_in_turn(
             args.values[0],
@@ -305,6 +336,7 @@ def _header(args, machine: dict, sets: list, names: list) -> list[str]:
         + (f" --seeds {args.seeds}" if several else "")
         + (" --quick" if args.quick else "")
         + (f" --reuse {' '.join(map(str, args.reuse))}" if args.reuse else "")
+        + (" --executor ray" if args.executor == "ray" else "")
         + f" --out {args.out}`, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {machine.get('cpu', 'cpu')}, "
         f"{machine['cpu_count']} cores. Training seconds from each run's metrics.json (runs trained "

@@ -1,12 +1,15 @@
 """``reproduce --executor ray``: on a local Ray instance with two workers, a tiny reproduction
 gives the local pool's tables, a second call reuses the finished runs, and a worker killed in
 the middle of training is retried and resumes from its last epoch instead of starting over.
+``studies/select_option.py --executor ray`` makes the local pool's choice from the same runs.
 Skipped when Ray (the ``[cluster]`` extra) is not installed."""
 
 import dataclasses
 import json
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -37,10 +40,10 @@ RUN = Path("runs") / "nmsd" / "dln_prop"
 
 
 @pytest.fixture(scope="module")
-def workspace(tmp_path_factory):
+def cluster(tmp_path_factory):
     """A shared compilation cache (the local pool's workers compile, Ray's reuse it: same
     executables, and the tests take seconds instead of minutes), the same single-thread XLA
-    flags for both kinds of worker, the local pool's reference run, and a 2-CPU Ray instance."""
+    flags for both kinds of worker, and a 2-CPU Ray instance; yields the module's folder."""
     root = tmp_path_factory.mktemp("cluster")
     env = {
         "JAX_COMPILATION_CACHE_DIR": str(root / "jax"),
@@ -50,7 +53,6 @@ def workspace(tmp_path_factory):
     saved = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
     try:
-        reproduce(root / "local", CONFIG, log=lambda msg: None)
         ray.init(num_cpus=2, include_dashboard=False, object_store_memory=100 * 2**20)
         yield root
     finally:
@@ -61,6 +63,13 @@ def workspace(tmp_path_factory):
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+@pytest.fixture(scope="module")
+def workspace(cluster):
+    """The module's folder with the local pool's reference run of CONFIG (``local/``)."""
+    reproduce(cluster / "local", CONFIG, log=lambda msg: None)
+    return cluster
 
 
 def _metrics(out: Path, seed: int) -> dict:
@@ -143,3 +152,51 @@ def test_a_killed_worker_is_retried_and_resumes_its_training(workspace):
     assert [json.loads(line)["epoch"] for line in lines] == list(range(1, EPOCHS + 1))
     # and the resumed model is the one an uninterrupted run trains
     assert _metrics(out, 0) == _metrics(workspace / "local", 0)
+
+
+STUDIES = Path(__file__).resolve().parents[1] / "studies"
+# The smallest selection the script runs: candidates trained as `reproduce --quick` trains, the
+# N-MSD DeLaN's L_Iτ stage alone, two lengths of it to choose between, two model seeds (so the
+# seed-by-seed rule and its table columns are compared too).
+SELECTION = ("--system", "nmsd", "--kinds", "dln", "--quick", "--train", "epochs", "[20,0,0]", "[40,0,0]")
+SELECTION += ("--seeds", "2")
+
+
+def _select(out: Path, *extra: str, env=None) -> dict:
+    """Run studies/select_option.py as a user does; its JSON record without the training seconds
+    (how long a run took depends on what trained beside it)."""
+    command = [sys.executable, str(STUDIES / "select_option.py"), *SELECTION, "--out", str(out), *extra]
+    done = subprocess.run(command, capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr[-4000:]
+    record = json.loads((out / "nmsd.json").read_text())
+    for scores in record["scores"].values():
+        for score in scores.values():
+            score.pop("train_seconds")
+    return record
+
+
+def _files(out: Path) -> set[Path]:
+    return {p.relative_to(out) for p in out.rglob("*") if p.is_file()}
+
+
+def test_select_option_on_ray_makes_the_local_pools_choice_from_the_same_runs(cluster, tmp_path):
+    # the local pool first, with Ray hidden from its whole process tree: it needs no [cluster] extra
+    hidden = tmp_path / "hidden"
+    (hidden / "ray").mkdir(parents=True)
+    (hidden / "ray" / "__init__.py").write_text("raise ImportError('Ray is hidden from this process')\n")
+    no_ray = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(hidden), os.environ.get("PYTHONPATH")])))
+    local = _select(cluster / "select_local", env=no_ray)
+    # each candidate × seed a task on the module's Ray instance, which the script joins
+    address = ray.get_runtime_context().gcs_address
+    on_ray = _select(cluster / "select_ray", "--executor", "ray", "--address", address)
+    assert on_ray == local  # the same scores, seed by seed, the same decision
+    # both values were trained on both seeds: four tasks, and the seed-by-seed rule decided
+    assert [score["seeds"] for score in local["scores"]["dln"].values()] == [[0, 1], [0, 1]]
+    assert set(local["chosen"]) == {"dln"} and "vs_first" in local["scores"]["dln"]["[40,0,0]"]
+    assert _files(cluster / "select_ray") == _files(cluster / "select_local")
+    # Ray's tasks find the runs the local pool trained by their recorded settings and reuse them
+    again = _select(cluster / "select_local", "--executor", "ray", "--address", address)
+    assert again == local
+    for candidate in (cluster / "select_local" / "nmsd_dln").iterdir():
+        seconds = json.loads((candidate / "run.json").read_text())["seconds"]
+        assert [v["status"] for k, v in seconds.items() if k.startswith("nmsd/dln_prop/")] == ["reused"]

@@ -82,3 +82,24 @@ def test_selection_candidates_are_validation_runs():
     assert config.split == "validation" and config.seeds == (0, 1, 2) and not config.figures
     config = select_augmentation_weight._config("nmsd", "adln", 0.1)
     assert config.split == "validation" and config.train_overrides == {"augmentation_weight": 0.1}
+
+
+def test_the_candidates_train_where_executor_says_and_ray_without_ray_is_one_error(tmp_path, monkeypatch):
+    """--executor / --address / --cpus-per-task as `furuta-gym reproduce` takes them; the local pool
+    stays the default; without Ray installed, --executor ray stops before any work with the
+    package's one line naming the extra (tests/test_cluster.py runs the script on Ray)."""
+    import select_option
+
+    argv = ["--system", "nmsd", "--kinds", "dln", "--train", "epochs", "[1,0,0]", "[2,0,0]", "--out", str(tmp_path)]
+    workers = select_option._arguments(argv).workers
+    assert (workers.executor, workers.address, workers.jobs, workers.cpus_per_task) == ("local", None, 2, 1)
+    workers = select_option._arguments(
+        [*argv, "--executor", "ray", "--address", "auto", "--cpus-per-task", "2"]
+    ).workers
+    assert (workers.executor, workers.address, workers.cpus_per_task) == ("ray", "auto", 2)
+    with pytest.raises(SystemExit):  # argparse's error: address names a Ray cluster: it needs executor='ray'
+        select_option._arguments([*argv, "--address", "auto"])
+    monkeypatch.setitem(sys.modules, "ray", None)  # as without the [cluster] extra
+    with pytest.raises(SystemExit, match=r"error: --executor ray needs Ray: pip install 'furuta-gym\[cluster\]'$"):
+        select_option.main([*argv, "--executor", "ray"])
+    assert list(tmp_path.iterdir()) == []
