@@ -7,6 +7,7 @@ import dataclasses
 import importlib.metadata
 import json
 import math
+import sys
 
 import pytest
 
@@ -464,6 +465,17 @@ def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
     assert training_config("nmsd", default, 0, "prop", "dln").quadrature == REPRODUCE_QUADRATURE
     with pytest.raises(SystemExit):
         parser.parse_args(["reproduce", "--quadrature", "boole"])
+
+
+def test_cli_executor_ray_without_ray_is_one_line_before_any_work(tmp_path, monkeypatch, capsys):
+    from furuta_gym.cli import main
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # as without the [cluster] extra
+    out = tmp_path / "repro"
+    assert main(["reproduce", "--quick", "--executor", "ray", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["furuta-gym reproduce: error: --executor ray needs Ray: pip install 'furuta-gym[cluster]'"]
+    assert not out.exists()  # no data generated, no folder made
 
 
 def test_cli_executor_options_and_what_a_ray_worker_is_told():

@@ -210,6 +210,13 @@ def run(args: argparse.Namespace) -> int:
     from ..training.reproduce import reproduce
 
     out, config = config_from_args(args)
+    if config.executor == "ray":  # before any data is generated: one line naming the extra
+        from ..training._ray_sweep import _import_ray
+
+        try:
+            _import_ray()
+        except ImportError as exc:
+            raise ValueError(str(exc)) from None
     # a persistent compilation cache makes a resumed or repeated run skip most JAX compiles
     from ._cache import enable_compilation_cache
 
