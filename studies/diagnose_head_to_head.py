@@ -18,6 +18,12 @@ score covers both. Rows:
   parameters, equation error refined by output error).
 * **furuta-gym diagnosed**: ``diagnose`` with the library, its found effects and input delay —
   the README's recipe (0.5 s start dropped, 0.1 s windows, 64 output-error windows).
+* **furuta-gym diagnosed, prediction-first**: the same diagnosis with ``finish="prediction"``
+  (``diagnose --prediction-first``): its final model, inconsistent effects and every joint's
+  Coulomb friction refitted by output error on every fit-set window, kept if it predicts the
+  held-out windows of the fit runs better; the plant it returns is scored. The diagnosis is run
+  again (the finish needs its fitting context), compared with the committed one, and its own
+  plants are scored too; its wall time is the diagnosis' and the finish's.
 
 Scored identically: back-to-back 0.1 s open-loop windows of runs 11–15 (0.5 s start dropped,
 zero-phase velocities estimated on the whole log), each started from the measured state with the
@@ -88,7 +94,8 @@ SYSID_ROWS = {
         ),
     ),
 }
-ROWS = ("nominal", *BASELINES, *SYSID_ROWS, "fitted", "diagnosed")
+ROWS = ("nominal", *BASELINES, *SYSID_ROWS, "fitted", "diagnosed", "diagnosed_prediction")
+PREDICTION_FIRST_LABEL = "furuta-gym diagnosed, prediction-first"
 
 
 def load_runs(runs: list[int]):
@@ -194,8 +201,8 @@ def score_plant(plant, test) -> dict:
     return score_field(lagrangian_field(base, joint_effects), test, input_dynamics(plant.effects))
 
 
-def diagnose_row(name: str, candidates, test) -> dict:
-    """``diagnose`` on the fit runs (the README's recipe), timed, and its plant scored."""
+def run_diagnosis(candidates, finish=None):
+    """``diagnose`` on the fit runs with the README's recipe; (result, wall seconds)."""
     from furuta_gym.diagnose import diagnose
 
     t0 = time.perf_counter()
@@ -205,8 +212,14 @@ def diagnose_row(name: str, candidates, test) -> dict:
         candidates=candidates,
         window=WINDOW,
         oe_max_windows=OE_WINDOWS,
+        finish=finish,
     )
-    wall = time.perf_counter() - t0
+    return res, time.perf_counter() - t0
+
+
+def diagnose_row(name: str, candidates, test) -> dict:
+    """``diagnose`` on the fit runs (the README's recipe), timed, and its plant scored."""
+    res, wall = run_diagnosis(candidates)
     plant = res.plant()
     label = "furuta-gym fitted (no effects)" if name == "fitted" else "furuta-gym diagnosed"
     found = [f"{e.name}:{e.joint}" for e in plant.effects]
@@ -219,6 +232,60 @@ def diagnose_row(name: str, candidates, test) -> dict:
         parameters=dict(plant.lumped),
         effects=[{"name": e.name, "joint": e.joint, "coefficient": e.coefficient} for e in plant.effects],
         diagnosis=res.to_json(),
+    )
+
+
+def plant_effects(plant) -> list[dict]:
+    return [
+        {"name": e.name, "joint": e.joint, "coefficient": e.coefficient, "reference": e.reference}
+        for e in plant.effects
+    ]
+
+
+def against_committed(doc: dict, before: dict) -> dict:
+    """How a rerun diagnosis compares with the committed one: the same effects with the same
+    statuses (the order of those tested alike may differ), and the largest relative difference of a found effect's coefficient or a fitted
+    parameter (reruns on other library versions move the fits' stopping points a little)."""
+    key = lambda e: (e["name"], e["joint"], e["status"])  # noqa: E731
+    committed = {(e["name"], e["joint"]): e["coefficient"] for e in before["effects"]}
+    pairs = [(e["coefficient"], committed.get((e["name"], e["joint"]))) for e in doc["effects"] if e["significant"]]
+    pairs += [(v, before["parameters_after"][k]) for k, v in doc["parameters_after"].items()]
+    return {
+        "same_effects": sorted(map(key, doc["effects"])) == sorted(map(key, before["effects"])),
+        "largest_relative_difference": max(abs(a - b) / max(abs(a), abs(b), 1e-300) for a, b in pairs),
+    }
+
+
+def prediction_first_row(test, committed: Path) -> dict:
+    """The diagnosis with its prediction-first finish, timed; the plant it returns scored (and the
+    refit's too when it was not kept), beside the same run's diagnosed plant with and without its
+    inconsistent effects. Its report is compared with the committed diagnosis."""
+    res, wall = run_diagnosis(None, finish="prediction")
+    finish = res.prediction
+    assert finish is not None
+    doc = res.to_json()
+    doc.pop("prediction_finish")
+    versus = against_committed(doc, json.loads(committed.read_text())["diagnosis"]) if committed.is_file() else None
+    extra = {} if finish.kept or finish.refit is None else {"refit_score": score_plant(finish.refit, test)}
+    # the same rerun's own plants, so that the finish is judged against the diagnosis it refitted
+    same_run = {
+        "diagnosed": score_plant(res.plant(), test)["position_rmse"],
+        "with_inconsistent": score_plant(res.plant(include_inconsistent=True), test)["position_rmse"],
+    }
+    return row_doc(
+        "diagnosed_prediction",
+        PREDICTION_FIRST_LABEL,
+        score_plant(finish.plant, test),
+        wall,
+        kept=finish.kept,
+        diagnosis_vs_committed=versus,
+        same_run_position_rmse=same_run,
+        found=[f"{e.name}:{e.joint}" for e in res.found],
+        parameters=dict(finish.plant.lumped),
+        effects=plant_effects(finish.plant),
+        prediction_finish=finish.to_json(),
+        **extra,
+        diagnosis=doc,
     )
 
 
@@ -291,9 +358,7 @@ def predictive_row(diagnosed: dict, test) -> dict | None:
         score_plant(plant, test),
         diagnosed["wall_seconds"],
         added=added,
-        effects=[
-            {"name": e.name, "joint": e.joint, "coefficient": e.coefficient, "reference": e.reference} for e in effects
-        ],
+        effects=plant_effects(plant),
     )
 
 
@@ -346,6 +411,8 @@ def main() -> None:
     for name, candidates in (("fitted", []), ("diagnosed", None)):
         if name in rows:
             docs.append(diagnose_row(name, candidates, test))
+    if "diagnosed_prediction" in rows:
+        docs.append(prediction_first_row(test, out / "diagnosed.json"))
     stamp = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     for d in docs:
         (out / f"{d['name']}.json").write_text(json.dumps({**d, **stamp}, indent=1, default=float) + "\n")

@@ -26,6 +26,7 @@ ORDER = (
     "fitted",
     "diagnosed",
     "diagnosed_inconsistent",
+    "diagnosed_prediction",
     "sysid_rigid",
     "sysid",
 )
@@ -153,7 +154,46 @@ def findings(docs: list[dict]) -> str:
             "`res.plant(include_inconsistent=True)` or `diagnose --mjcf OUT.xml --with-inconsistent`; "
             "its fit is the diagnosed row's."
         )
+    if "diagnosed_prediction" in by:
+        parts.append(prediction_first(by["diagnosed_prediction"]))
     return " ".join(parts)
+
+
+def _rerun(doc: dict) -> str:
+    """How the prediction-first row's diagnosis, run again, compares with the diagnosed row's."""
+    versus, own = doc.get("diagnosis_vs_committed"), doc["same_run_position_rmse"]
+    scores = (
+        f"on these unseen runs its own plant scores {_mrad(own['diagnosed'])} mrad, "
+        f"{_mrad(own['with_inconsistent'])} with its inconsistent effects"
+    )
+    if versus is None:
+        return f"its diagnosis: {scores}."
+    same = "the same effects as" if versus["same_effects"] else "other effects than"
+    return (
+        f"its diagnosis, run again (the finish needs its fitting context), finds {same} the diagnosed row's, "
+        f"coefficients and parameters within {versus['largest_relative_difference']:.1%}; {scores}."
+    )
+
+
+def prediction_first(doc: dict) -> str:
+    """What the prediction-first finish did on the fit runs and what its plant is."""
+    f = doc["prediction_finish"]
+    held = f["heldout_trajectory_rmse"]
+    refit = {(e["name"], e["joint"]): e["coefficient"] for e in f["refit_plant"]["effects"]} if f["refit_plant"] else {}
+    coefs = ", ".join(f"{k[0]}:{k[1]} {v:.2g}" for k, v in refit.items() if k[1] != "u")
+    not_kept = (
+        "" if doc["kept"] else f"; the refit, not kept, scores {_mrad(doc['refit_score']['position_rmse'])} mrad here"
+    )
+    return (
+        f'{doc["label"]} (`diagnose(..., finish="prediction")`, `--prediction-first`): {_rerun(doc)} '
+        f"Refitted by output error on {f['fit_windows']} fit-set windows with {', '.join(f['added']) or 'nothing'} "
+        f"added ({', '.join(f['left_out']) or 'nothing'} left out for its sign): {coefs}. On the "
+        f"{f['heldout_windows']} held-out {f['window_seconds']:g} s windows of the fit runs it predicts "
+        f"{_mrad(held['refit'])} mrad against {_mrad(held['diagnosed'])} (diagnosed) and "
+        f"{_mrad(held['with_inconsistent'])} (with its inconsistent effects): "
+        f"{'kept' if doc['kept'] else 'not kept'} ({f['reason']}){not_kept}. Its wall time is the diagnosis' "
+        "and the finish's."
+    )
 
 
 #: each extra MJCF term of the sysid fit and the library effect that is the same physics
