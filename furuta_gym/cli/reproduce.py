@@ -211,10 +211,10 @@ def run(args: argparse.Namespace) -> int:
 
     out, config = config_from_args(args)
     if config.executor == "ray":  # before any data is generated: one line naming the extra
-        from ..training._ray_sweep import _import_ray
+        from ..training.reproduce import require_executor
 
         try:
-            _import_ray()
+            require_executor(config)
         except ImportError as exc:
             raise ValueError(str(exc)) from None
     # a persistent compilation cache makes a resumed or repeated run skip most JAX compiles

@@ -83,6 +83,7 @@ __all__ = [
     "same_settings",
     "machine_info",
     "worker_pool",
+    "require_executor",
 ]
 
 PAPER_PAIRS: tuple[tuple[str, str], ...] = (
@@ -662,6 +663,13 @@ def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, rep
     if config.figures:
         for system in dict.fromkeys(t[0] for t in tasks):
             yield "figures", system, _figures_task(system, out, config, loaded[system]["data"], loaded[system]["truth"])
+
+
+def require_executor(config: ReproduceConfig) -> None:
+    """Raise the ImportError :func:`worker_pool` would, before any work: ``executor="ray"`` without
+    Ray installed (one line naming the ``[cluster]`` extra)."""
+    if config.executor == "ray":
+        _ray_sweep._import_ray()
 
 
 @contextlib.contextmanager
