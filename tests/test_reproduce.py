@@ -8,6 +8,7 @@ import importlib.metadata
 import json
 import math
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -54,6 +55,8 @@ def test_tiny_run_writes_tables_beside_the_paper(tiny_run):
         assert paths[name].stat().st_size > 10_000
     record = json.loads(paths["run.json"].read_text())
     assert record["command"] == "pytest tiny" and record["machine"]["cpu_count"] >= 1
+    if Path("/proc/cpuinfo").is_file():  # the host's CPU beyond its model name: numerics depend on it
+        assert record["machine"]["cpu_id"].startswith("family ") and len(record["machine"]["cpu_flags_sha256"]) == 16
     assert record["seconds"]["nmsd/dln_prop/seed0"]["status"] == "trained"
     assert (out / "data" / "nmsd" / "manifest.json").exists()
 

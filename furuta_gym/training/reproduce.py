@@ -1041,20 +1041,31 @@ def _is_number(text: str) -> bool:
 
 
 def machine_info() -> dict[str, Any]:
-    """The platform, Python, core count and CPU model, as a run record notes them."""
-    info = {
+    """The platform, Python, core count and CPU, as a run record notes them. Beside the CPU's model
+    name, its family / model / stepping and a digest of its feature flags: XLA:CPU compiles for the
+    host's features, and two hosts of one model name can round differently, which training
+    amplifies into other models (docs/reproduce.md, "Same code, another host")."""
+    info: dict[str, Any] = {
         "platform": platform.platform(),
         "python": platform.python_version(),
         "cpu_count": os.cpu_count(),
     }
+    fields = {}
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
-                if line.startswith("model name"):
-                    info["cpu"] = line.split(":", 1)[1].strip()
-                    break
+                if not line.strip():
+                    break  # the first processor's block is enough
+                key, _, value = line.partition(":")
+                fields[key.strip()] = value.strip()
     except OSError:
         pass
+    if "model name" in fields:
+        info["cpu"] = fields["model name"]
+    if "cpu family" in fields:
+        info["cpu_id"] = f"family {fields['cpu family']} model {fields.get('model')} stepping {fields.get('stepping')}"
+    if "flags" in fields:
+        info["cpu_flags_sha256"] = hashlib.sha256(" ".join(sorted(fields["flags"].split())).encode()).hexdigest()[:16]
     return info
 
 
