@@ -33,6 +33,7 @@ import dataclasses
 import json
 import platform
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -73,6 +74,14 @@ LEARNED = {
     "dln_prop_span": ("dln", "prop", {"integral_span": SPAN}),
     "adln_prop_span": ("adln", "prop", {"integral_span": SPAN}),
 }
+#: L_prop's trajectory stages at its baseline's budget and learning rate (10 2-step epochs, 8 of
+#: 0.1 s, lr 1e-3), continued from the "L_Iτ over 0.1 s" model of the same kind: that run had one
+#: epoch per trajectory stage at the recipe's fine-tuning rate, so the snapshot it kept was from its
+#: L_Iτ stage. λ of L_traj in L_prop = L_Iτ + λ·L_traj from :data:`FINETUNE_LAMBDAS` (the recipe's
+#: first), chosen with the snapshot on the validation fifth. name -> (model it continues, epochs)
+FINETUNE = {"dln_prop_span_traj": ("dln_prop_span", (10, 8))}
+FINETUNE_LAMBDAS = (1e-3, 0.1, 1.0)
+FINETUNE_RATE = 1e-3  # the baselines' (the reproduction's L_traj / L_aph recipe)
 LABELS = {
     "nominal": "nominal analytic",
     "fitted": "fitted analytic (diagnose, no effect)",
@@ -83,8 +92,9 @@ LABELS = {
     "adln_aph": "augmented DeLaN L_aph",
     "dln_prop_span": "DeLaN L_prop, L_Iτ over 0.1 s",
     "adln_prop_span": "augmented DeLaN L_prop, L_Iτ over 0.1 s",
+    "dln_prop_span_traj": "DeLaN L_prop, L_Iτ over 0.1 s + trajectory stages",
 }
-ENERGY_RUN = 6
+ENERGY_RUN = 6  # the energy figure's test run (with --test-runs: the first of them)
 
 
 def load_data():
@@ -139,8 +149,7 @@ def train_learned(name: str, train, val, out: Path, budget: float):
     # resume: a finished run with these settings is reused; other settings are refused by name
     _, history = train_model(kind, "furuta", loss, train, config, out, resume=True)
     seconds = sum(r["seconds"] for r in history)
-    snaps = sorted(out.glob("model_epoch*.eqx")) + [out / "model.eqx"]
-    scores = {p.name: _validation_score(load_model(p, expected_system="furuta"), val) for p in snaps}
+    scores = _snapshot_scores(out, val)
     best = min(scores, key=scores.get)
     # the scored model is committed as selected.eqx (the snapshots are not)
     shutil.copyfile(out / best, out / SELECTED)
@@ -153,6 +162,54 @@ def train_learned(name: str, train, val, out: Path, budget: float):
         "final": {k: history[-1].get(k) for k in ("itau", "traj", "penalty", "lambda")},
     }
     return load_model(out / best, expected_system="furuta"), info
+
+
+def _snapshot_scores(run: Path, val) -> dict[str, float]:
+    """Validation score of every snapshot a run kept, and of its final model."""
+    from furuta_gym.training.checkpoint import load_model
+
+    snaps = sorted(run.glob("model_epoch*.eqx")) + [run / "model.eqx"]
+    return {p.name: _validation_score(load_model(p, expected_system="furuta"), val) for p in snaps}
+
+
+def finetune_learned(name: str, train, val, out: Path, budget: float):
+    """:data:`FINETUNE` ``name``: L_prop's trajectory stages from the selected model of the run it
+    continues, once per λ (finished runs reused); keeps the (λ, snapshot) best on validation."""
+    from furuta_gym.training.checkpoint import load_model
+    from furuta_gym.training.train import train as train_model
+
+    start_name, epochs = FINETUNE[name]
+    kind, loss, changes = LEARNED[start_name]
+    start = load_model(out.parent / start_name / SELECTED, expected_system="furuta")
+    base = recipe_config(kind, loss, budget, **changes)
+    runs, seconds = {}, 0.0
+    for lam in FINETUNE_LAMBDAS:
+        config = dataclasses.replace(
+            base,
+            epochs=tuple(max(1, round(e * budget)) for e in epochs),
+            horizons=(2, WINDOW),
+            learning_rate=FINETUNE_RATE,
+            lambda_traj=lam,
+            checkpoint_every=1,
+        )
+        run = out / f"lambda_{lam:g}"
+        _, history = train_model(kind, "furuta", loss, train, config, run, resume=True, model=start)
+        seconds += sum(r["seconds"] for r in history)
+        runs[f"lambda_{lam:g}"] = {"config": config.to_json(), "validation": _snapshot_scores(run, val)}
+    scores = {f"{r}/{snap}": v for r in runs for snap, v in runs[r]["validation"].items()}
+    best = min(scores, key=scores.get)
+    best_run = best.split("/")[0]
+    shutil.copyfile(out / best, out / SELECTED)
+    info = {
+        "continues": start_name,
+        "config": runs[best_run]["config"],
+        "training_seconds": round(seconds, 1),
+        "validation": scores,
+        "selected": best,
+        "last": f"{best_run}/model.eqx",
+        "lambda_candidates": list(FINETUNE_LAMBDAS),
+    }
+    return load_model(out / SELECTED, expected_system="furuta"), info
 
 
 def diagnosed_models(out: Path):
@@ -238,19 +295,38 @@ def score(name: str, model, val, test, out: Path, extra: dict) -> dict:
     return doc
 
 
+def _run_range(text: str) -> list[int]:
+    """'1-10' -> [1, ..., 10]; '2,7' -> [2, 7]."""
+    first, _, last = text.partition("-")
+    return list(range(int(first), int(last) + 1)) if last else [int(r) for r in text.split(",")]
+
+
+def _use_runs(ap, fit: list[int], test: list[int]) -> None:
+    """Fit and test on these runs (another split than the default 1–5 / 6–15)."""
+    global FIT_RUNS, TEST_RUNS, ENERGY_RUN
+    if set(fit) & set(test):
+        ap.error(
+            f"--fit-runs and --test-runs share runs {sorted(set(fit) & set(test))}: the test runs are never fitted"
+        )
+    FIT_RUNS, TEST_RUNS, ENERGY_RUN = fit, test, test[0]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="results/real_models")
     ap.add_argument("--budget", type=float, default=1.0, help="scale of every schedule's epochs")
     ap.add_argument(
         "--learned",
-        default=",".join(LEARNED),
+        default=",".join([*LEARNED, *FINETUNE]),
         help="comma list of learned models to train and score (the others' result files are kept)",
     )
+    ap.add_argument("--fit-runs", type=_run_range, default=FIT_RUNS, help="runs to fit on, e.g. 1-10 (default 1-5)")
+    ap.add_argument("--test-runs", type=_run_range, default=TEST_RUNS, help="runs to score on (default 6-15)")
     args = ap.parse_args()
+    _use_runs(ap, args.fit_runs, args.test_runs)
     names = args.learned.split(",")
-    if unknown := [n for n in names if n not in LEARNED]:
-        ap.error(f"--learned: unknown {unknown}; expected some of {list(LEARNED)}")
+    if unknown := [n for n in names if n not in LEARNED and n not in FINETUNE]:
+        ap.error(f"--learned: unknown {unknown}; expected some of {[*LEARNED, *FINETUNE]}")
     from furuta_gym.models import Furuta
 
     out = Path(args.out)
@@ -264,9 +340,10 @@ def main() -> None:
     extra.update({"fitted": {"diagnose": dinfo}, "diagnosed": {"diagnose": dinfo}})
     for name in ("nominal", "fitted", "diagnosed"):
         score(name, models[name], val, test, out, extra[name])
-    for name in LEARNED:
+    for name in [*LEARNED, *FINETUNE]:
         if name in names:
-            models[name], info = train_learned(name, train, val, out / "runs" / name, args.budget)
+            learn = finetune_learned if name in FINETUNE else train_learned
+            models[name], info = learn(name, train, val, out / "runs" / name, args.budget)
             score(name, models[name], val, test, out, {"training": info})
         elif (out / "runs" / name / SELECTED).is_file():  # kept from an earlier call, for the figure
             from furuta_gym.training.checkpoint import load_model
@@ -274,6 +351,7 @@ def main() -> None:
             models[name] = load_model(out / "runs" / name / SELECTED, expected_system="furuta")
     energy_figure(models, test, out / "energy.png")
     summary = {
+        "command": " ".join(["python studies/real_models.py", *sys.argv[1:]]),
         "fit_runs": FIT_RUNS,
         "test_runs": TEST_RUNS,
         "skip_seconds": SKIP,

@@ -29,6 +29,7 @@ ORDER = (
     "diagnosed",
     "dln_prop",
     "dln_prop_span",
+    "dln_prop_span_traj",
     "dln_traj",
     "adln_prop",
     "adln_prop_span",
@@ -92,6 +93,7 @@ def shape_table(docs: list[dict]) -> str:
 
 
 def training_table(docs: list[dict]) -> str:
+    labels = {d["name"]: d["label"] for d in docs}
     rows = [
         "| model | epochs per stage | horizons | L_Iτ quadrature | learning rate | training s "
         "| snapshot kept | its / the last one's validation mean log10 |",
@@ -111,39 +113,49 @@ def training_table(docs: list[dict]) -> str:
         if "_prop" in d["name"]:
             span = c.get("integral_span", 1)
             quad = c["quadrature"] + (f", {span} intervals per residual" if span > 1 else "")
+        epochs = ", ".join(map(str, c["epochs"]))
+        if "continues" in tr:  # trajectory stages continued from another row's selected model
+            after = labels.get(tr["continues"], tr["continues"])
+            epochs += f" (from {after}, its kept snapshot; λ {c['lambda_traj']:g} of {tr['lambda_candidates']})"
         rows.append(
-            f"| {d['label']} | {', '.join(map(str, c['epochs']))} | {hz} | {quad} | {lr} "
+            f"| {d['label']} | {epochs} | {hz} | {quad} | {lr} "
             f"| {tr['training_seconds']:.0f} | {tr['selected']} "
-            f"| {tr['validation'][tr['selected']]:.3f} / {tr['validation']['model.eqx']:.3f} |"
+            f"| {tr['validation'][tr['selected']]:.3f} / {tr['validation'][tr.get('last', 'model.eqx')]:.3f} |"
         )
     return "\n".join(rows)
 
 
-#: each L_prop variant with L_Iτ over a longer interval, beside the paper's L_Iτ and its baseline loss
-SPAN_PAIRS = (("dln_prop_span", "dln_prop", "dln_traj"), ("adln_prop_span", "adln_prop", "adln_aph"))
+#: each L_prop variant, the row it improves on (and how it differs from it), and its baseline loss
+SPAN_PAIRS = (
+    ("dln_prop_span", "dln_prop", "than with the paper's L_Iτ", "dln_traj"),
+    ("adln_prop_span", "adln_prop", "than with the paper's L_Iτ", "adln_aph"),
+)
+TRAJECTORY_PAIRS = (("dln_prop_span_traj", "dln_prop_span", "than without the trajectory stages", "dln_traj"),)
 
 
-def span_sentence(docs: list[dict]) -> str:
-    """The span models against the paper's L_Iτ and against their baselines, and their potential
-    against the physics' (the nominal model's), in one generated sentence."""
+def span_sentence(docs: list[dict], pairs=SPAN_PAIRS, title: str = "L_Iτ over 0.1 s") -> str:
+    """L_prop variants against the row they improve on and against their baselines, and their
+    potential against the physics' (the nominal model's), in one generated sentence."""
     by = {d["name"]: d for d in docs}
     physics = by["nominal"]["potential"] if "nominal" in by else None
     parts = []
-    for span, paper, base in SPAN_PAIRS:
-        if not (physics and all(n in by for n in (span, paper, base))):
+    for name, before, how, base in pairs:
+        if not (physics and all(n in by for n in (name, before, base))):
             continue
-        p = by[span]["potential"]
+        p = by[name]["potential"]
         curv = p["curvature_at_top_Nm_per_rad"] / physics["curvature_at_top_Nm_per_rad"]
         rise = p["rise_to_top_J"] / physics["rise_to_top_J"]
+        gap, gain = mean_log10(by[name]) - mean_log10(by[base]), mean_log10(by[before]) - mean_log10(by[name])
         parts.append(
-            f"{by[span]['label']}: curvature at β = π {curv:.0%} and rise to the top {rise:.0%} of the "
-            f"physics'; mean log10 {mean_log10(by[paper]) - mean_log10(by[span]):+.2f} better than with the "
-            f"paper's L_Iτ and {mean_log10(by[span]) - mean_log10(by[base]):.2f} behind {by[base]['label']}"
+            f"{by[name]['label']}: curvature at β = π {curv:.0%} and rise to the top {rise:.0%} of the "
+            f"physics'; mean log10 {abs(gain):.2f} {'better' if gain >= 0 else 'worse'} {how} and "
+            + (f"{gap:.2f} behind" if gap > 0 else f"{-gap:.2f} ahead of")
+            + f" {by[base]['label']}"
         )
-    return ("L_Iτ over 0.1 s — " + "; ".join(parts) + ".") if parts else ""
+    return (f"{title} — " + "; ".join(parts) + ".") if parts else ""
 
 
-def block(summary: dict, docs: list[dict]) -> str:
+def block(summary: dict, docs: list[dict], folder: Path = RESULTS, name: str = NAME) -> str:
     ranked = sorted(docs, key=mean_log10)
     winner, second = ranked[0], ranked[1]
     test = docs[0]["test"]
@@ -172,14 +184,22 @@ def block(summary: dict, docs: list[dict]) -> str:
         "",
         span_sentence(docs),
         "",
+        *[
+            line
+            for sentence in [span_sentence(docs, TRAJECTORY_PAIRS, "With trajectory stages at the baselines' budget")]
+            if sentence
+            for line in (sentence, "")
+        ],
         f"Learned models: {summary['n_train']} training and {summary['n_validation']} validation "
         f"elementary trajectories of {summary['split_seconds']} s (every {summary['validation_every']}th "
         f"held out), the script's schedules × {summary['budget']}:",
         "",
         training_table(docs),
         "",
-        f"Made by `{COMMAND}` ({train_min:.0f} min of training in all, {summary['date']}); figure: "
-        "[results/real_models/energy.png](../results/real_models/energy.png).",
+        f"Made by `{summary.get('command', COMMAND.split(' && ')[0])} && python studies/real_models_table.py"
+        + ("" if folder == RESULTS else f" --results {folder.relative_to(ROOT)} --block {name}")
+        + f"` ({train_min:.0f} min of training in all, {summary['date']}); figure: "
+        f"[{folder.relative_to(ROOT)}/energy.png](../{folder.relative_to(ROOT)}/energy.png).",
     ]
     return "\n".join(lines)
 
@@ -188,9 +208,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="compare only; exit 1 on a difference")
     ap.add_argument("--results", type=Path, default=RESULTS, help="result folder (default results/real_models)")
+    ap.add_argument("--block", default=NAME, help=f"the docs block to fill (default {NAME})")
     args = ap.parse_args()
-    summary, docs = load(args.results)
-    text = fill_block(DOC.read_text(), NAME, block(summary, docs), where=DOC)
+    folder = args.results.resolve()
+    summary, docs = load(folder)
+    text = fill_block(DOC.read_text(), args.block, block(summary, docs, folder, args.block), where=DOC)
     return update(DOC, text, args.check, "run python studies/real_models_table.py")
 
 
