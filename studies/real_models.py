@@ -23,7 +23,11 @@ a test run as each model sees it, and the potential each model believes in (the 
 the energy's shape for its experimental system). Writes ``results/real_models/*.json`` and
 ``energy.png``; ``studies/real_models_table.py`` puts the table into docs/learning.md.
 
-    python studies/real_models.py [--out results/real_models] [--budget 1.0]
+One more L_prop row continues DeLaN's "L_Iτ over 0.1 s" run with L_prop's trajectory stages at
+its baseline's budget and learning rate (:data:`FINETUNE`), λ chosen on the same validation fifth.
+``--fit-runs``/``--test-runs`` take another split (runs 1–10 / 11–15: results/real_models_1to10).
+
+    python studies/real_models.py [--out results/real_models] [--budget 1.0] [--fit-runs 1-5 --test-runs 6-15]
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from furuta_gym.models import load_model, analytic_model
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 REPRODUCTION = sorted(RESULTS.glob("reproduce/runs/*/*/seed0/model.eqx"))
-REAL = sorted(RESULTS.glob("real_models/runs/*/*.eqx"))
+REAL = sorted(RESULTS.glob("real_models*/runs/*/*.eqx"))
 
 
 def _states(system: str, rng, count: int = 200):

@@ -183,10 +183,11 @@ def test_diagnose_reads_logs_through_the_shared_helper():
     assert _logs.qube_runs("qube:2,7,9-11") == [2, 7, 9, 10, 11] and _logs.qube_runs("qube") is None
 
 
-def test_real_models_docs_table_matches_its_results():
-    if not (ROOT / "results" / "real_models" / "summary.json").is_file():
-        pytest.skip("results/real_models not generated")
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "studies" / "real_models_table.py"), "--check"], capture_output=True, text=True
-    )
+@pytest.mark.parametrize("folder,block", [("real_models", "real-models"), ("real_models_1to10", "real-models-1to10")])
+def test_real_models_docs_table_matches_its_results(folder, block):
+    if not (ROOT / "results" / folder / "summary.json").is_file():
+        pytest.skip(f"results/{folder} not generated")
+    script = ROOT / "studies" / "real_models_table.py"
+    args = ["--check", "--results", str(ROOT / "results" / folder), "--block", block]
+    proc = subprocess.run([sys.executable, str(script), *args], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
