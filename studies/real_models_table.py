@@ -36,7 +36,7 @@ ORDER = (
     "adln_aph",
 )
 STATES = (("alpha", "α"), ("beta", "β"), ("alpha_dot", "α̇"), ("beta_dot", "β̇"))
-COMMAND = "python studies/real_models.py && python studies/real_models_table.py"
+STUDY = "python studies/real_models.py"  # the command a summary without its own record ran
 
 
 def load(folder: Path = RESULTS) -> tuple[dict, list[dict]]:
@@ -200,7 +200,7 @@ def block(summary: dict, docs: list[dict], folder: Path = RESULTS, name: str = N
         "",
         training_table(docs),
         "",
-        f"Made by `{summary.get('command', COMMAND.split(' && ')[0])} && python studies/real_models_table.py"
+        f"Made by `{summary.get('command', STUDY)} && python studies/real_models_table.py"
         + ("" if folder == RESULTS else f" --results {folder.relative_to(ROOT)} --block {name}")
         + f"` ({train_min:.0f} min of training in all, {summary['date']}); figure: "
         f"[{folder.relative_to(ROOT)}/energy.png](../{folder.relative_to(ROOT)}/energy.png).",

@@ -179,8 +179,8 @@ def prediction_finish(fx, result) -> PredictionFinish:
     fit_win = _fit.make_windows(fx.fit_segs, fx.L, dyn)
     held_win = _fit.make_windows(fx.held_segs, fx.L, dyn)
     theta, chosen, left_out, improved = _refit(fx, start, found + [c for c, _ in extra], dyn, fit_win)
-    sums = _heldout_sums(fx, {"diagnosed": result.theta_after, "with_inconsistent": with_inconsistent}, held_win)
-    sums.update(_heldout_sums(fx, {"refit": theta}, held_win))
+    thetas = {"diagnosed": result.theta_after, "with_inconsistent": with_inconsistent, "refit": theta}
+    sums = _heldout_sums(fx, thetas, held_win)
     baseline = min(("diagnosed", "with_inconsistent"), key=lambda k: sums[k].sum())
     ev = _trace_mod.Evidence.of_sums(sums[baseline], sums["refit"])
     if not np.all(np.isfinite(sums["refit"])):
