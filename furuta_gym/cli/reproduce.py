@@ -110,6 +110,14 @@ def _add_data_arguments(parser: argparse.ArgumentParser) -> None:
         "sets are scored as recorded",
     )
     parser.add_argument(
+        "--itau-normalization",
+        choices=["momentum", "joint_momentum"],
+        default=None,
+        help="L_Iτ's normaliser in every run (default: the recipe's, by the data: momentum on free "
+        "data); joint_momentum divides each joint's residual by its own momentum changes, so a "
+        "model cannot lighten a joint whose forces it cannot express",
+    )
+    parser.add_argument(
         "--quadrature",
         choices=["trapezoid", "simpson", "hermite"],
         default=None,
@@ -157,6 +165,12 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _train_overrides(args) -> dict | None:
+    """The TrainConfig fields the command line sets for every run (None: the recipe's)."""
+    chosen = {"quadrature": args.quadrature, "normalize": args.itau_normalization}
+    return {k: v for k, v in chosen.items() if v} or None
+
+
 def config_from_args(args: argparse.Namespace):
     """``(output folder, ReproduceConfig)`` of parsed ``furuta-gym reproduce`` arguments."""
     from ..training.reproduce import PAPER_PAIRS, ReproduceConfig
@@ -195,7 +209,7 @@ def config_from_args(args: argparse.Namespace):
         sensor=args.sensor,
         integral_span=args.integral_span,
         training_velocities=args.training_velocities,
-        train_overrides={"quadrature": args.quadrature} if args.quadrature else None,
+        train_overrides=_train_overrides(args),
         figures=not args.no_figures,
         progress=not args.no_progress,
         jobs=jobs,

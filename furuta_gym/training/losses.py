@@ -26,6 +26,11 @@ input pins the scale; ``"momentum_fixed"`` divides by the same quantity with its
 i.e. only fixes the units (raw impulses of the Furuta are ~1e-5 N·m·s, below Adam's ε).
 ``"auto"`` (default) picks ``"momentum"`` when the batch has no input and ``"momentum_fixed"``
 otherwise; ``"none"`` is the paper's plain sum of squares divided by the number of intervals.
+``"joint_momentum"`` divides each joint's sum by that joint's own Σ‖Δp̂_j‖² and adds the joints:
+scale-free like ``"momentum"``, but a model cannot lower the weight of a joint whose equation it
+cannot satisfy (forces it cannot express, such as a rotor's cable spring and dry friction under a
+periodic potential and viscous damping) by shrinking that joint's row of M and its damping, which
+on free releases, where the rotor's momentum hardly changes, costs the other joint's equation little.
 """
 
 from __future__ import annotations
@@ -65,9 +70,11 @@ __all__ = [
     "resolution_weights",
     "span_sum",
     "Normalization",
+    "NORMALIZATIONS",
 ]
 
-Normalization = Literal["auto", "momentum", "momentum_fixed", "none"]
+Normalization = Literal["auto", "momentum", "momentum_fixed", "joint_momentum", "none"]
+NORMALIZATIONS = ("auto", "momentum", "momentum_fixed", "joint_momentum", "none")
 
 
 class Windows(NamedTuple):
@@ -278,14 +285,19 @@ def _integral_parts(
     return jax.vmap(one)(windows.t, windows.x, windows.u)
 
 
-def _normalised(sq, dp, normalize: str, size):
+def _normalised(r2, dp, normalize: str, size):
+    """L_Iτ from the (…, n) squared residuals ``r2`` and momentum changes ``dp``."""
+    if normalize == "joint_momentum":
+        per_joint = tuple(range(r2.ndim - 1))
+        return jnp.sum(jnp.sum(r2, axis=per_joint) / jnp.sum(dp**2, axis=per_joint))
+    sq = jnp.sum(r2)
     if normalize == "momentum":
         return sq / jnp.sum(dp**2)
     if normalize == "momentum_fixed":
         return sq / jax.lax.stop_gradient(jnp.sum(dp**2))
     if normalize == "none":
         return sq / size
-    raise ValueError(f"normalize must be 'auto', 'momentum', 'momentum_fixed' or 'none', got {normalize!r}")
+    raise ValueError(f"normalize must be one of {NORMALIZATIONS[1:]} or 'auto', got {normalize!r}")
 
 
 def integral_loss(
@@ -361,10 +373,10 @@ def integral_loss_terms(
         raise ValueError(f"resolution_tolerance must be positive or None, got {resolution_tolerance!r}")
     r, dp, acc, dqd = _integral_parts(model, windows, rule, with_augmentation, augmentation_part, int(span))
     if resolution_tolerance is None:
-        itau = _normalised(jnp.sum(r**2), dp, normalize, r.size)
+        itau = _normalised(r**2, dp, normalize, r.size)
     else:
         w = resolution_weights(windows, model.spec.n_dof, rule, resolution_tolerance)[..., None]
-        itau = _normalised(jnp.sum(w * r**2), jnp.sqrt(w) * dp, normalize, jnp.sum(w) * r.shape[-1])
+        itau = _normalised(w * r**2, jnp.sqrt(w) * dp, normalize, jnp.sum(w) * r.shape[-1])
     share = None if acc is None else jnp.sum(acc**2) / jnp.sum(dqd**2)
     return itau, share
 

@@ -57,6 +57,7 @@ from .losses import (
     augmentation_penalty,
     integral_loss_terms,
     make_windows,
+    NORMALIZATIONS,
     resolve_normalization,
     span_sum,
     trajectory_loss,
@@ -177,8 +178,8 @@ class TrainConfig:
             raise ValueError(f"epochs must be non-negative, got {self.epochs}")
         if self.quadrature not in QUADRATURE_RULES:
             raise ValueError(f"quadrature must be one of {QUADRATURE_RULES}, got {self.quadrature!r}")
-        if self.normalize not in ("auto", "momentum", "momentum_fixed", "none"):
-            raise ValueError(f"normalize must be auto|momentum|momentum_fixed|none, got {self.normalize!r}")
+        if self.normalize not in NORMALIZATIONS:
+            raise ValueError(f"normalize must be one of {NORMALIZATIONS}, got {self.normalize!r}")
         if self.augmentation_part not in AUGMENTATION_PARTS:
             raise ValueError(f"augmentation_part must be one of {AUGMENTATION_PARTS}, got {self.augmentation_part!r}")
         if self.augmentation_weight is not None and not self.augmentation_weight >= 0:
