@@ -404,19 +404,23 @@ def main() -> None:
     fit, test = load_runs(FIT_RUNS), load_runs(TEST_RUNS)
     if args.rescore_only:
         return rescore(out, test)
-    docs = [d for d in fixed_rows(test) if d["name"] in rows]
-    for name in SYSID_ROWS:
-        if name in rows:
-            docs.append(sysid_row(name, fit, test, args.sysid_every, args.sysid_iterations))
-    for name, candidates in (("fitted", []), ("diagnosed", None)):
-        if name in rows:
-            docs.append(diagnose_row(name, candidates, test))
-    if "diagnosed_prediction" in rows:
-        docs.append(prediction_first_row(test, out / "diagnosed.json"))
     stamp = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
-    for d in docs:
+
+    def write(d: dict) -> None:  # as each row is made: the prediction-first row reads the diagnosed one
         (out / f"{d['name']}.json").write_text(json.dumps({**d, **stamp}, indent=1, default=float) + "\n")
         print(f"{d['label']:55s} position RMSE {d['position_rmse']:.5f} rad  wall {d['wall_seconds']} s", flush=True)
+
+    for d in fixed_rows(test):
+        if d["name"] in rows:
+            write(d)
+    for name in SYSID_ROWS:
+        if name in rows:
+            write(sysid_row(name, fit, test, args.sysid_every, args.sysid_iterations))
+    for name, candidates in (("fitted", []), ("diagnosed", None)):
+        if name in rows:
+            write(diagnose_row(name, candidates, test))
+    if "diagnosed_prediction" in rows:
+        write(prediction_first_row(test, out / "diagnosed.json"))
     summary = {
         "fit_runs": FIT_RUNS,
         "test_runs": TEST_RUNS,

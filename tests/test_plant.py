@@ -400,3 +400,34 @@ def test_the_shipped_real_data_plant():
             obs, *_ = env.step(np.array([1.0]))
         states.append(obs)
     assert np.all(np.isfinite(states[0])) and np.max(np.abs(states[0] - states[1])) < 1e-6
+
+
+def test_prediction_first_refit_holds_an_inconsistent_input_delay_at_its_tested_value():
+    """The refit's θ has no column for an input delay: an inconsistent one (seen on real runs 1–10)
+    is not among the effects it frees, where it used to stop the finish with a ValueError; when the
+    diagnosis found no input dynamics, the refit's windows are built on that delay and its plant
+    holds it. An inconsistent spring is freed as before."""
+    from types import SimpleNamespace
+
+    from furuta_gym.diagnose import layout_for
+    from furuta_gym.diagnose._diagnose import EffectEvidence
+    from furuta_gym.diagnose._finish import _extra_candidates, _refit_dynamics
+    from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, InputDynamics
+
+    def evidence(name, joint, coefficient, status):
+        return EffectEvidence(name, joint, coefficient, "", status == "selected", 0.2, 2.0, status)
+
+    found = [evidence("coulomb_friction", "alpha", 5e-4, "selected")]
+    inconsistent = [
+        evidence("input_delay", "u", 1.3e-3, "inconsistent"),
+        evidence("spring", "alpha", 7e-4, "inconsistent"),
+    ]
+    result = SimpleNamespace(
+        significant=found, inconsistent=inconsistent, effects=found + inconsistent, input_dynamics=NO_INPUT_DYNAMICS
+    )
+    added = {c.key: coefficient for c, coefficient in _extra_candidates(layout_for("furuta"), result)}
+    assert added == {"spring:alpha": 7e-4, "coulomb_friction:beta": 0.0}
+    dyn, held = _refit_dynamics(result)
+    assert dyn == InputDynamics("delay", 1.3e-3) and [c.key for c in held] == ["input_delay:u"]
+    lagged = SimpleNamespace(**{**vars(result), "input_dynamics": InputDynamics("lag", 4e-3)})
+    assert _refit_dynamics(lagged) == (InputDynamics("lag", 4e-3), [])  # the diagnosis' own come first

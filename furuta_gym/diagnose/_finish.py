@@ -89,16 +89,33 @@ class PredictionFinish:
 def _extra_candidates(layout, result) -> list[tuple[Candidate, float]]:
     """What the refit adds to the found effects, with its start coefficient: the joinable
     ``inconsistent`` effects at their tested coefficients, and each joint's Coulomb friction not
-    already in (at its tested coefficient when that is positive, else 0)."""
+    already in (at its tested coefficient when that is positive, else 0). An inconsistent input
+    delay or lag is not among them: it has no column in θ (:func:`_refit_dynamics` holds it)."""
     found = result.significant
     have = {(e.name, e.joint) for e in found}
-    out = [(Candidate(e.name, e.joint), float(e.coefficient)) for e in result.inconsistent if can_join(e, found)]
+    out = [
+        (Candidate(e.name, e.joint), float(e.coefficient))
+        for e in result.inconsistent
+        if can_join(e, found) and not e.kind.input_dynamics
+    ]
     have |= {(c.name, c.joint) for c, _ in out}
     tested = {(e.name, e.joint): e.coefficient for e in result.effects}
     for c in layout.candidates:
         if c.kind.is_dry_friction and c.kind.breakaway_above is None and (c.name, c.joint) not in have:
             out.append((c, max(0.0, float(tested.get((c.name, c.joint)) or 0.0))))
     return out
+
+
+def _refit_dynamics(result) -> tuple[_fit.InputDynamics, list[Candidate]]:
+    """The refit's input dynamics: the diagnosis' own, or, when it found none, an ``inconsistent``
+    input delay or lag at its tested value (held there: the refit has no column for it, and the
+    windows are built on it), with its candidate for the refit's plant."""
+    if result.input_dynamics.kind != "none":
+        return result.input_dynamics, []
+    for e in result.inconsistent:
+        if e.kind.input_dynamics and e.coefficient is not None and e.coefficient > 0:
+            return _fit.InputDynamics(e.kind.input_dynamics, float(e.coefficient)), [Candidate(e.name, e.joint)]
+    return result.input_dynamics, []
 
 
 def _effects(layout, theta, chosen, dyn) -> list[Effect]:
@@ -165,10 +182,10 @@ def _decide(fx, result, theta, improved, ev) -> str | None:
 def prediction_finish(fx, result) -> PredictionFinish:
     """Refit ``result``'s final model for prediction on its fitting context ``fx`` (the
     diagnosis' ``_Fitter``) and decide whether to keep it (module docstring)."""
-    layout, dyn = fx.layout, result.input_dynamics
-    if fx.dynamics != dyn:
-        fx.build(dyn)
-    found = [Candidate(e.name, e.joint) for e in result.significant]
+    layout, (dyn, extra_dynamics) = fx.layout, _refit_dynamics(result)
+    if fx.dynamics != result.input_dynamics:
+        fx.build(result.input_dynamics)
+    found = [Candidate(e.name, e.joint) for e in result.significant] + extra_dynamics
     extra = _extra_candidates(layout, result)
     start = np.array(result.theta_after, dtype=float)
     with_inconsistent = start.copy()
@@ -179,8 +196,10 @@ def prediction_finish(fx, result) -> PredictionFinish:
     fit_win = _fit.make_windows(fx.fit_segs, fx.L, dyn)
     held_win = _fit.make_windows(fx.held_segs, fx.L, dyn)
     theta, chosen, left_out, improved = _refit(fx, start, found + [c for c, _ in extra], dyn, fit_win)
-    thetas = {"diagnosed": result.theta_after, "with_inconsistent": with_inconsistent, "refit": theta}
-    sums = _heldout_sums(fx, thetas, held_win)
+    # the diagnosed plant is scored with its own input dynamics, the other two with the refit's
+    sums = _heldout_sums(fx, {"with_inconsistent": with_inconsistent, "refit": theta}, held_win)
+    diagnosed_win = _fit.make_windows(fx.held_segs, fx.L, result.input_dynamics)
+    sums = {**_heldout_sums(fx, {"diagnosed": result.theta_after}, diagnosed_win), **sums}
     baseline = min(("diagnosed", "with_inconsistent"), key=lambda k: sums[k].sum())
     ev = _trace_mod.Evidence.of_sums(sums[baseline], sums["refit"])
     if not np.all(np.isfinite(sums["refit"])):
@@ -203,7 +222,7 @@ def prediction_finish(fx, result) -> PredictionFinish:
         reason=reason,
         plant=refit if why_not is None else result.plant(),
         refit=refit if np.all(np.isfinite(sums["refit"])) else None,
-        added=tuple(k for k in names if k not in {c.key for c in found}),
+        added=tuple(k for k in names if k not in {f"{e.name}:{e.joint}" for e in result.significant}),
         left_out=tuple(left_out),
         heldout_rmse={k: float(np.sqrt(v.sum() / (v.size * n_points))) for k, v in sums.items()},
         baseline=baseline,
