@@ -12,8 +12,9 @@ import pytest
 
 import furuta_gym
 from furuta_gym.data import Trajectory
-from furuta_gym.diagnose import held_at_rest, layout_for
+from furuta_gym.diagnose import DiagnosisSettings, held_at_rest, layout_for, measured_like, sticky_rig
 from furuta_gym.diagnose._diagnose import EffectEvidence, _mark_unresolved, sensor_resolution
+from furuta_gym.diagnose import _diagnose, _fit
 from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment
 from furuta_gym.diagnose._rests import rest_bound
 from furuta_gym.systems import get_spec
@@ -85,3 +86,50 @@ def test_effects_below_one_count_or_one_sample_are_kept_but_reported_not_resolve
     assert "under one encoder count" in effects[0].note and "under one sample period" in effects[2].note
     assert len(notes) == 2
     assert effects[0].to_json()["resolved"] is False
+
+
+def test_an_interval_in_which_the_joint_stops_is_left_out_of_its_equations():
+    """A joint that stays on one count for a period of the velocity estimate's bandwidth (40 ms at
+    25 Hz) stopped there, and its dry friction then held it with an unknown force: that interval
+    is left out of its equation error, like one at rest throughout. Moving a count every few
+    samples, it is kept."""
+    layout = layout_for("furuta")
+    moving = np.arange(50) // 3  # a count every 3 samples (6 ms)
+    dwells = np.concatenate([np.full(25, 50.0), 50.0 + np.arange(25)])  # 50 ms on one count, then moving
+    counts = np.concatenate([moving, dwells, np.full(51, 75.0)])  # moving; a stop; at rest throughout
+    for stop_dwell, expected in ((0.04, [False, True, True]), (None, [False, False, True])):
+        seg = _segment(counts.astype(float), np.zeros(counts.size))
+        _fit.build_regressors([seg], layout, layout.nominal(), 50, "zoh", stop_dwell=stop_dwell)
+        assert seg.rest[:, 0].tolist() == expected
+
+
+def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:
+    """The equation-error fit of the declared model with ``keys`` added, as the search fits it."""
+    spec, notes = get_spec("furuta"), []
+    layout = layout_for("furuta")
+    trajs, qds, resolved = _diagnose._prepare(data, spec, DiagnosisSettings(**settings), None, None, None)
+    fixed = _diagnose._anchor(spec, layout, None, True, notes)
+    theta_fixed = layout.nominal()
+    for k, v in fixed.items():
+        theta_fixed[layout.index(k)] = v
+    segs = _diagnose._segments(trajs, qds, resolved)
+    fx = _diagnose._Fitter(spec, layout, segs, [], theta_fixed, {layout.index(k) for k in fixed}, resolved, notes)
+    theta, _ = fx.fit_ee([c for c in layout.candidates if c.key in keys])
+    return {k: float(theta[layout.index(k)]) for k in ["J1", *keys]}
+
+
+def test_stops_left_out_keep_the_equation_error_spring_of_a_sticky_sweep_unbiased():
+    """On a sticky sweep whose rotor stops at most reversals (issue 43's grid, seed 106), the
+    intervals with a stop are where the estimated velocities, and with them the momentum and
+    sgn(q̇), are wrong: fitted with them, the rotor's inertia comes out low and the spring, which
+    trades against it at low frequency, far too weak. Left out, both come out right."""
+    rig = sticky_rig(106)
+    data = measured_like("furuta", rig, excitation="sticky_sweep", seed=106, n_trajectories=6, duration=10.0)
+    keys = ["spring:alpha", "constant_torque:alpha", "coulomb_friction:alpha", "stiction:alpha"]
+    planted_j1 = layout_for("furuta").nominal()[layout_for("furuta").index("J1")]
+    stops_out = _equation_error_coefficients(data, keys)
+    whole_rests_only = _equation_error_coefficients(data, keys, stop_dwell=1.0)
+    assert stops_out["spring:alpha"] == pytest.approx(rig[0].coefficient, rel=0.1)
+    assert stops_out["J1"] == pytest.approx(planted_j1, rel=0.02)
+    assert whole_rests_only["spring:alpha"] < 0.7 * rig[0].coefficient
+    assert whole_rests_only["J1"] < 0.97 * planted_j1

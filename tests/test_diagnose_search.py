@@ -226,7 +226,8 @@ class _FakeFitter:
 def _confirm_with(monkeypatch, predicts_worse_unless, refit_coefficient=None):
     """Run the confirmation of steps SPRING, COM, COULOMB where a step predicts worse (t −5)
     unless every candidate in ``predicts_worse_unless[step]`` has been accepted already; a step's
-    refit gives the coefficients ``refit_coefficient.get(step, {})`` (the others 1)."""
+    refit gives the coefficients ``refit_coefficient.get(step, {})`` (the others 1). Returns
+    (accepted keys, evidence, the steps tried in order, the steps vetoed for predicting worse)."""
     from types import SimpleNamespace
 
     from furuta_gym.diagnose import _diagnose
@@ -246,30 +247,32 @@ def _confirm_with(monkeypatch, predicts_worse_unless, refit_coefficient=None):
     monkeypatch.setattr(_diagnose, "_try_step", fake_try)
     steps = [_Step(SPRING), _Step(COM), _Step(COULOMB)]
     evidence = {c.key: SimpleNamespace(significant=True, status="selected", note="") for c in (SPRING, COM, COULOMB)}
-    accepted, _, _ = _diagnose._confirm(_FakeFitter(), steps, np.zeros(1), evidence)
-    return [c.key for c in accepted], evidence, tried
+    accepted, _, _, vetoed = _diagnose._confirm(_FakeFitter(), steps, np.zeros(1), evidence)
+    return [c.key for c in accepted], evidence, tried, [[c.key for c in step.members] for step in vetoed]
 
 
 def test_a_step_vetoed_while_another_effect_is_missing_is_tried_again(monkeypatch):
     # the centre-of-mass offset predicts worse until the rotor's friction is in (seen on a
     # closed-loop log: it came first in the search and was dropped for good)
-    accepted, evidence, tried = _confirm_with(monkeypatch, {COM.key: {COULOMB.key}})
+    accepted, evidence, tried, vetoed = _confirm_with(monkeypatch, {COM.key: {COULOMB.key}})
     assert accepted == [SPRING.key, COULOMB.key, COM.key]
     assert tried == [SPRING.key, COM.key, COULOMB.key, COM.key]
     assert evidence[COM.key].status == "selected"
 
 
 def test_a_step_that_predicts_worse_given_everything_stays_dropped(monkeypatch):
-    accepted, evidence, tried = _confirm_with(monkeypatch, {COM.key: {"never"}})
+    accepted, evidence, tried, vetoed = _confirm_with(monkeypatch, {COM.key: {"never"}})
     assert accepted == [SPRING.key, COULOMB.key]
     assert tried == [SPRING.key, COM.key, COULOMB.key, COM.key]
     assert evidence[COM.key].status == "not confirmed" and not evidence[COM.key].significant
+    assert vetoed == [[COM.key]]  # handed on: tried once more with its joint's stiction
 
 
 def test_a_step_whose_refit_turns_its_sign_non_physical_is_dropped(monkeypatch):
     # the search checks a spring's sign on the equation-error fit; the refit may flip it
     refits = {SPRING.key: {SPRING.key: -1e-4}, COM.key: {COM.key: -1e-3}}
-    accepted, evidence, _ = _confirm_with(monkeypatch, {}, refits)
+    accepted, evidence, _, vetoed = _confirm_with(monkeypatch, {}, refits)
+    assert vetoed == []  # a wrong sign is not retried
     assert accepted == [COM.key, COULOMB.key]  # a centre-of-mass offset may have either sign
     assert evidence[SPRING.key].status == "not confirmed"
     assert "non-physical sign" in evidence[SPRING.key].note
@@ -278,7 +281,7 @@ def test_a_step_whose_refit_turns_its_sign_non_physical_is_dropped(monkeypatch):
 def test_an_effect_a_later_refit_turns_non_physical_is_dropped_not_the_later_one(monkeypatch):
     # seen with exact angles: a spurious stiction, then the true centre-of-mass offset whose refit
     # turned the stiction negative
-    accepted, evidence, tried = _confirm_with(monkeypatch, {}, {COULOMB.key: {SPRING.key: -1e-4}})
+    accepted, evidence, tried, vetoed = _confirm_with(monkeypatch, {}, {COULOMB.key: {SPRING.key: -1e-4}})
     assert accepted == [COM.key, COULOMB.key]
     assert tried == [SPRING.key, COM.key, COULOMB.key]
     assert evidence[SPRING.key].status == "not confirmed" and evidence[COULOMB.key].status == "selected"
@@ -287,6 +290,6 @@ def test_an_effect_a_later_refit_turns_non_physical_is_dropped_not_the_later_one
 
 def test_nothing_is_refitted_again_when_every_step_is_vetoed(monkeypatch):
     never = {"never"}
-    accepted, evidence, tried = _confirm_with(monkeypatch, {k.key: never for k in (SPRING, COM, COULOMB)})
+    accepted, evidence, tried, vetoed = _confirm_with(monkeypatch, {k.key: never for k in (SPRING, COM, COULOMB)})
     assert accepted == [] and tried == [SPRING.key, COM.key, COULOMB.key]
     assert all(e.status == "not confirmed" for e in evidence.values())

@@ -27,7 +27,7 @@ from ..effects import (
 )
 from ..envs import Plant
 from ..lagrangian import AbstractLagrangianSystem
-from ..measured import estimate_velocities
+from ..measured import estimate_velocities, velocity_bandwidth_hz
 from ..models import system_definition
 from ..models.checkpoint import load_model
 from ..signals import ENCODER_COUNTS_PER_REV
@@ -84,6 +84,10 @@ class DiagnosisSettings:
     rest_window: float = 0.2
     min_breakaway_ratio: float = 1.25
     exclude_rest: bool = True  # leave a joint's equations out where its encoder does not move
+    # ... for this long, s, within an interval (None: one period of the velocity estimate's
+    # bandwidth, 40 ms at 25 Hz): slower than a count per period the estimate cannot tell motion
+    # from rest, and the joint's dry friction is unknown there
+    stop_dwell: float | None = None
     identify_t: float = 3.0  # a base parameter whose nominal size moves the residual less is held
     veto_t: float = 2.0  # an added effect is dropped if its refit predicts significantly worse
     max_delay: float = 0.05
@@ -110,6 +114,7 @@ class DiagnosisSettings:
             interval=self.interval or 0.1,
             window=self.window or definition.diagnosis_window,
             segment_seconds=self.segment_seconds or definition.diagnosis_segment_seconds,
+            stop_dwell=self.stop_dwell or 1.0 / velocity_bandwidth_hz(self.velocity, dt, self.velocity_cutoff_hz),
         )
 
 
@@ -501,6 +506,7 @@ class _Fitter:
             self.settings.block_seconds,
             dynamics,
             self.settings.exclude_rest,
+            self.settings.stop_dwell,
         )
         if segs is None:
             self.fit_prob = Problem(self.fit_segs, self.c_input)
@@ -732,7 +738,10 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
     rotor's friction and the input lag). A step is vetoed too if its refit gives one of its own
     coefficients the non-physical sign (a spring, friction or drag ≤ 0: the search tested signs on
     the equation-error fit alone); an effect that a later step's refit turns non-physical is
-    dropped at the end. Returns (accepted candidates, θ, input dynamics)."""
+    dropped at the end. Returns (accepted candidates, θ, input dynamics, the steps vetoed for
+    predicting worse)."""
+    if not steps:
+        return [], theta_before, fx.dynamics, []
     accepted: list[Candidate] = []
     theta, dyn = theta_before, _fit.NO_INPUT_DYNAMICS
     sums = fx.validation_sums(theta, dyn)
@@ -762,7 +771,7 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
             )
     fx.build(dyn)
     accepted, theta = _drop_non_physical(fx, accepted, theta, dyn, evidence)
-    return accepted, theta, dyn
+    return accepted, theta, dyn, [step for step, _, flipped in vetoed if not flipped]
 
 
 def _not_confirmed(fx: _Fitter, evidence, key: str, why: str) -> None:
@@ -874,6 +883,68 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
             c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z, "selected", how
         )
     return accepted, theta
+
+
+def _vetoed_with_stiction(fx: _Fitter, library, vetoed, accepted, theta, dyn, evidence):
+    """A step vetoed for predicting worse is tried once more with its joint's stiction, fitted free
+    by output error, where that joint's Coulomb friction is in the model: the equation error leaves
+    out where a joint stops, so it never sees the stiction, and a cable spring that the stiction
+    holds off its neutral predicts worse without it (the modelled rotor slides back where the real
+    one sticks). Kept, both, if the model with them predicts the fit-set validation windows better
+    in total and not significantly worse by t (the veto's rule), with ΔF > 0 and the step's
+    coefficients physical. Returns (accepted, θ)."""
+    start = max(1, fx.settings.start_iterations)
+    win, measured = fx.fit_windows(dyn, fx.oe_idx), fx.fit_windows(dyn, fx.val_idx).q
+    for step in vetoed:
+        c = _stiction_partner(library, accepted, step)
+        if c is None:
+            continue
+        trial = accepted + list(step.members) + [c]
+        free, bound = free_columns(fx.layout, trial, fx.fixed_idx), _rest_bound(fx, theta, dyn, c.joint)
+        th0 = _stiction_start(fx, fx.fit_ee(accepted + list(step.members))[0], c, bound.held)
+        th, ok = _fit.oe_fit(fx.layout, th0, free, win, fx.substeps, fx.settings.oe_max_nfev, start)
+        before = _square_sums(fx.validation_predictions(theta, dyn, start), measured)
+        ev = _prediction_evidence(before, _square_sums(fx.validation_predictions(th, dyn, start), measured))
+        coef, members = float(th[fx.layout.index(c.key)]), ", ".join(m.key for m in step.members)
+        if not (ok and coef > 0 and is_physical(fx.layout, th) and not non_physical(fx.layout, th, step.members)):
+            fx.notes.append(f"{members}: tried again with {c.key} (ΔF {coef:.3g}): not physical; dropped")
+            continue
+        if not (ev.improvement > 0 and ev.z > -fx.settings.veto_t):
+            fx.notes.append(
+                f"{members}: tried again with {c.key} free: validation gain {ev.improvement:.1%}, t {ev.z:.1f}; dropped"
+            )
+            continue
+        fx.record(th, FitOrigin("output_error", th, free, dyn, start))
+        accepted, theta = trial, _breakaway_at_least(fx, th, c, bound)
+        _selected_with_stiction(fx, step, c, ev, evidence)
+    return accepted, theta
+
+
+def _stiction_partner(library, accepted, step) -> Candidate | None:
+    """The stiction of a joint of ``step`` whose Coulomb friction is accepted and stiction is not."""
+    keys, joints = {a.key for a in accepted}, {m.joint for m in step.members}
+    for c in library:
+        if c.kind.breakaway_above and c.joint in joints and c.key not in keys:
+            if f"{c.kind.breakaway_above}:{c.joint}" in keys:
+                return c
+    return None
+
+
+def _selected_with_stiction(fx: _Fitter, step, c: Candidate, ev, evidence) -> None:
+    """Record a vetoed step's members (their search evidence) and the stiction ``c`` they came
+    back with (its prediction evidence ``ev``) as selected."""
+    members = ", ".join(m.key for m in step.members)
+    how = f"with {c.key}, fitted with it by prediction: validation gain {ev.improvement:.1%}, t {ev.z:.1f}"
+    for m in step.members:
+        e = step.evidence[m.key]
+        evidence[m.key] = EffectEvidence(
+            m.name, m.joint, None, m.unit(fx.spec), True, e.improvement, e.z, "selected", how
+        )
+    why = f"found with {members}, which predicts worse without it: fitted with it by prediction"
+    evidence[c.key] = EffectEvidence(
+        c.name, c.joint, None, c.unit(fx.spec), True, ev.improvement, ev.z, "selected", why
+    )
+    fx.notes.append(f"{members}: {how}; added with it")
 
 
 def _sized(fx: _Fitter, from_rests, fitted, c: Candidate, bound: _rests.RestBound, where):
@@ -1398,8 +1469,9 @@ def _diagnose_once(
     library = _select(list(layout.candidates) + [DELAY], candidates)
     evidence = _untestable(fx, library, forced)
     steps = _trace(fx, [c for c in library if c.key not in evidence], evidence)
-    accepted, th_after, dyn = _confirm(fx, steps, th_before, evidence) if steps else ([], th_before, fx.dynamics)
+    accepted, th_after, dyn, vetoed = _confirm(fx, steps, th_before, evidence)
     accepted, th_after = _stiction_by_prediction(fx, library, accepted, th_after, dyn, evidence)
+    accepted, th_after = _vetoed_with_stiction(fx, library, vetoed, accepted, th_after, dyn, evidence)
     after = fx.errors(th_after, fx.held_segs, fx.held_prob) if accepted else before
     test_after = fx.test_errors(th_after) if accepted else test_before
     ordered = _finish_evidence(fx, library, accepted, th_after, dyn, evidence)

@@ -183,13 +183,18 @@ def _group(x: np.ndarray, stride: int) -> np.ndarray:
     return x[:n].reshape((n // stride, stride) + x.shape[1:]).sum(axis=1)
 
 
-def _at_rest(q: np.ndarray, stride: int, n_intervals: int) -> np.ndarray:
-    """(N, n): the joint's logged position is identical at every sample of the interval (a
-    quantised encoder that did not move: the joint is at rest to within one count)."""
+def _at_rest(q: np.ndarray, stride: int, n_intervals: int, dwell: int) -> np.ndarray:
+    """(N, n): the joint stops within the interval: its logged position stays on one value for
+    at least ``dwell`` consecutive samples (the whole interval if ``dwell`` > ``stride``). A
+    quantised encoder that does not move for that long leaves the joint at rest to within one
+    count, its velocity below what the estimate resolves: while it stops, dry friction holds it
+    with any force up to breakaway, and sgn(q̇) of the estimate is a guess."""
     n = q.shape[1]
     idx = np.arange(n_intervals)[:, None] * stride + np.arange(stride + 1)[None, :]
     window = q[np.minimum(idx, q.shape[0] - 1)]  # (N, stride + 1, n)
-    return np.all(window == window[:, :1, :], axis=1).reshape(n_intervals, n)
+    run = min(max(dwell, 2), stride + 1) - 1  # equal neighbours in a run of that many samples
+    same = np.concatenate([np.zeros((n_intervals, 1, n)), np.cumsum(window[:, 1:] == window[:, :-1], axis=1)], 1)
+    return np.any(same[:, run:] - same[:, :-run] == run, axis=1).reshape(n_intervals, n)
 
 
 def build_regressors(
@@ -201,8 +206,11 @@ def build_regressors(
     block_seconds: float = 1.0,
     dynamics: InputDynamics = NO_INPUT_DYNAMICS,
     exclude_rest: bool = True,
+    stop_dwell: float | None = None,
 ) -> None:
-    """Fill each segment's Ā Jacobian, ∫u and delay regressor over intervals of ``stride``."""
+    """Fill each segment's Ā Jacobian, ∫u and delay regressor over intervals of ``stride``, and
+    which joints stop in each (``exclude_rest``: on one logged value for ``stop_dwell`` s; None: the
+    whole interval)."""
     for seg in segments:
         jp, jf = _per_sample(layout, theta0, seg.q, seg.qd)
         a = np.asarray(interval_difference(jp)) - np.asarray(interval_integral(jf, seg.dt))
@@ -214,7 +222,8 @@ def build_regressors(
         seg.D = _group(np.asarray(interval_difference(jp)), stride)
         seg.Uint = _group(ui, stride)
         seg.dU = _group(du, stride)
-        seg.rest = _at_rest(seg.q, stride, seg.A.shape[0]) if exclude_rest else np.zeros(seg.A.shape[:2], bool)
+        dwell = stride + 1 if stop_dwell is None else int(round(stop_dwell / seg.dt))
+        seg.rest = _at_rest(seg.q, stride, seg.A.shape[0], dwell) if exclude_rest else np.zeros(seg.A.shape[:2], bool)
         per_block = max(1, int(round(block_seconds / (stride * seg.dt))))
         seg.block = np.arange(seg.A.shape[0]) // per_block
 

@@ -198,6 +198,7 @@ def _problem(res, segments, dynamics):
         st.block_seconds,
         dynamics,
         st.exclude_rest,
+        st.stop_dwell,
     )
     return Problem(copies, _fit.input_direction(res.layout, theta0))
 
