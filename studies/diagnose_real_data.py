@@ -13,6 +13,8 @@ here. Writes one JSON per run of ``diagnose`` into ``results/diagnose_real/`` (t
 docs tables are generated from them by ``studies/diagnose_tables.py``).
 
     python studies/diagnose_real_data.py [--out results/diagnose_real]
+    # the same with stops left out of the equation error
+    python studies/diagnose_real_data.py --stop-dwell 0.04 --out results/diagnose_real_stop_dwell
 """
 
 from __future__ import annotations
@@ -111,7 +113,14 @@ def references(split: dict, out: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="results/diagnose_real")
+    ap.add_argument(
+        "--stop-dwell",
+        type=float,
+        help="DiagnosisSettings.stop_dwell, s (default off; results/diagnose_real_stop_dwell: 0.04)",
+    )
     args = ap.parse_args()
+    if args.stop_dwell is not None:
+        SETTINGS["stop_dwell"] = args.stop_dwell
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     splits = {

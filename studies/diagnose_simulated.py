@@ -21,6 +21,8 @@ per log into ``results/diagnose_sim/``; ``studies/diagnose_tables.py`` makes the
     # the sticky sweeps with every block weighted alike (the evidence before its weighting)
     python studies/diagnose_simulated.py --only sticky_cable --evidence-weighting uniform \
         --out results/diagnose_sim_uniform_blocks
+    # every log with stops left out of the equation error
+    python studies/diagnose_simulated.py --stop-dwell 0.04 --out results/diagnose_sim_stop_dwell
 """
 
 from __future__ import annotations
@@ -150,8 +152,11 @@ def main() -> None:
         choices=("regressor", "uniform"),
         help="DiagnosisSettings.evidence_weighting (default: its default)",
     )
+    ap.add_argument("--stop-dwell", type=float, help="DiagnosisSettings.stop_dwell, s (default off)")
     args = ap.parse_args()
     overrides = {} if args.start_iterations is None else {"start_iterations": args.start_iterations}
+    if args.stop_dwell is not None:
+        overrides["stop_dwell"] = args.stop_dwell
     if args.evidence_weighting:
         overrides["evidence_weighting"] = args.evidence_weighting
     out = Path(args.out)

@@ -1,7 +1,7 @@
 """Docs tables of the diagnosis, generated from the committed result files (never typed by hand).
 
-Reads ``results/diagnose_sim/*.json``, ``results/diagnose_sim_exact_angles/*.json`` and
-``results/diagnose_sim_uniform_blocks/*.json``
+Reads ``results/diagnose_sim/*.json``, ``results/diagnose_sim_exact_angles/*.json``,
+``results/diagnose_sim_uniform_blocks/*.json`` and ``results/diagnose_sim_stop_dwell/*.json``
 (``studies/diagnose_simulated.py``) and ``results/diagnose_real/`` (its JSON files and
 ``reference/``, ``runs/``; ``studies/diagnose_real_data.py``) and rewrites the blocks between
 ``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->`` in docs/diagnose.md and README.md.
@@ -31,6 +31,8 @@ UNIFORM = ROOT / "results" / "diagnose_sim_uniform_blocks"  # the sticky sweeps,
 RESTS = ROOT / "results" / "diagnose_rest_bound" / "calibration.json"  # studies/rest_bound_calibration.py
 DRIFT = ROOT / "results" / "cable_centre_drift" / "drift.json"  # studies/cable_centre_drift.py
 MATCH = ROOT / "results" / "closed_loop_match" / "match.json"  # studies/closed_loop_match.py
+# the same logs and runs with stops left out of the equation error (--stop-dwell 0.04)
+STOP, REAL_STOP = ROOT / "results" / "diagnose_sim_stop_dwell", ROOT / "results" / "diagnose_real_stop_dwell"
 
 
 def _load(folder: Path) -> dict[str, dict]:
@@ -464,6 +466,11 @@ def blocks() -> dict[str, str]:
     exact = _load(EXACT)
     if exact:
         out["diagnose-sim-exact-angles"] = sim_table(exact)
+    stop, real_stop = _load(STOP), _load(REAL_STOP)
+    if stop:
+        out["diagnose-sim-stop-dwell"] = sim_table(stop) + "\n\nThe sticky sweeps:\n\n" + sticky_table(stop)
+    if real_stop:
+        out["diagnose-real-stop-dwell"] = readme_line(real_stop)
     runs = REAL / "runs" / "per_run.json"
     if runs.exists():
         out["diagnose-real-runs"] = per_run_table(json.loads(runs.read_text()), real)

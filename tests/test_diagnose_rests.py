@@ -121,15 +121,26 @@ def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:
 def test_stops_left_out_keep_the_equation_error_spring_of_a_sticky_sweep_unbiased():
     """On a sticky sweep whose rotor stops at most reversals (issue 43's grid, seed 106), the
     intervals with a stop are where the estimated velocities, and with them the momentum and
-    sgn(q̇), are wrong: fitted with them, the rotor's inertia comes out low and the spring, which
-    trades against it at low frequency, far too weak. Left out, both come out right."""
+    sgn(q̇), are wrong: fitted with them (the default leaves out only whole intervals at rest),
+    the rotor's inertia comes out low and the spring, which trades against it at low frequency,
+    far too weak. Left out (``stop_dwell``), both come out right."""
     rig = sticky_rig(106)
     data = measured_like("furuta", rig, excitation="sticky_sweep", seed=106, n_trajectories=6, duration=10.0)
     keys = ["spring:alpha", "constant_torque:alpha", "coulomb_friction:alpha", "stiction:alpha"]
     planted_j1 = layout_for("furuta").nominal()[layout_for("furuta").index("J1")]
-    stops_out = _equation_error_coefficients(data, keys)
-    whole_rests_only = _equation_error_coefficients(data, keys, stop_dwell=1.0)
+    stops_out = _equation_error_coefficients(data, keys, stop_dwell=0.04)
+    whole_rests_only = _equation_error_coefficients(data, keys)  # the default
     assert stops_out["spring:alpha"] == pytest.approx(rig[0].coefficient, rel=0.1)
     assert stops_out["J1"] == pytest.approx(planted_j1, rel=0.02)
     assert whole_rests_only["spring:alpha"] < 0.7 * rig[0].coefficient
     assert whole_rests_only["J1"] < 0.97 * planted_j1
+
+
+def test_stop_dwell_is_off_by_default_and_checked():
+    assert DiagnosisSettings().stop_dwell is None
+    with pytest.raises(ValueError, match="stop_dwell: expected a positive time in s or None, got -0.04"):
+        DiagnosisSettings(stop_dwell=-0.04).resolved("furuta", DT)
+    from furuta_gym.cli import build_parser
+
+    args = build_parser().parse_args(["diagnose", "log.csv", "--system", "furuta", "--stop-dwell", "0.04"])
+    assert args.stop_dwell == 0.04

@@ -88,6 +88,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--interval", type=float, help="equation-error interval, s (default 0.1)")
     parser.add_argument("--oe-windows", type=int, help="open-loop windows used by the output-error fit (default 24)")
     parser.add_argument(
+        "--stop-dwell",
+        type=float,
+        metavar="S",
+        help="also leave out of a joint's equations the intervals where it stays on one encoder count "
+        "this long (a stop its dry friction held; 0.04 on open-loop sweeps whose rotor sticks; default off)",
+    )
+    parser.add_argument(
         "--skip",
         type=float,
         default=0.0,
@@ -121,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
         ("window", args.window),
         ("interval", args.interval),
         ("oe_max_windows", args.oe_windows),
+        ("stop_dwell", args.stop_dwell),
     ):
         if val is not None:
             overrides[key] = val

@@ -27,7 +27,7 @@ from ..effects import (
 )
 from ..envs import Plant
 from ..lagrangian import AbstractLagrangianSystem
-from ..measured import estimate_velocities, velocity_bandwidth_hz
+from ..measured import estimate_velocities
 from ..models import system_definition
 from ..models.checkpoint import load_model
 from ..signals import ENCODER_COUNTS_PER_REV
@@ -84,9 +84,10 @@ class DiagnosisSettings:
     rest_window: float = 0.2
     min_breakaway_ratio: float = 1.25
     exclude_rest: bool = True  # leave a joint's equations out where its encoder does not move
-    # ... for this long, s, within an interval (None: one period of the velocity estimate's
-    # bandwidth, 40 ms at 25 Hz): slower than a count per period the estimate cannot tell motion
-    # from rest, and the joint's dry friction is unknown there
+    # ... and, given a time in s, also where it stays on one count that long within an interval
+    # (a stop: dry friction holds it with an unknown force, and the estimated momentum and sgn(q̇)
+    # are guesses); one period of the velocity estimate's bandwidth, 40 ms at 25 Hz, on sticky
+    # sweeps. Off (None) by default: on closed-loop logs it costs the input lag's evidence
     stop_dwell: float | None = None
     identify_t: float = 3.0  # a base parameter whose nominal size moves the residual less is held
     veto_t: float = 2.0  # an added effect is dropped if its refit predicts significantly worse
@@ -101,6 +102,8 @@ class DiagnosisSettings:
 
     def resolved(self, system: str, dt: float) -> "DiagnosisSettings":
         definition = system_definition(system)
+        if self.stop_dwell is not None and not self.stop_dwell > 0:
+            raise ValueError(f"stop_dwell: expected a positive time in s or None, got {self.stop_dwell!r}")
         if self.evidence_weighting not in ("regressor", "uniform"):
             raise ValueError(f"evidence_weighting: expected 'regressor' or 'uniform', got {self.evidence_weighting!r}")
         if (
@@ -114,7 +117,6 @@ class DiagnosisSettings:
             interval=self.interval or 0.1,
             window=self.window or definition.diagnosis_window,
             segment_seconds=self.segment_seconds or definition.diagnosis_segment_seconds,
-            stop_dwell=self.stop_dwell or 1.0 / velocity_bandwidth_hz(self.velocity, dt, self.velocity_cutoff_hz),
         )
 
 
