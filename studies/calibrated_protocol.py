@@ -26,6 +26,10 @@ re-estimated offline from the encoder angles (``studies/calibrated_itau.py`` say
     furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
         --sensor experiment --integral-span 10 --training-velocities zero_phase \\
         --pair dln:prop --pair adln:prop --out results/calibrated_protocol/reproduce_offline --jobs 2
+    furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
+        --sensor experiment --integral-span 10 --training-velocities zero_phase \\
+        --itau-normalization joint_momentum --pair dln:prop \\
+        --out results/calibrated_protocol/reproduce_joint
 
 This script then measures, per model, the learned potential's shape (hanging a minimum, upright a
 maximum; :func:`real_models.potential_shape` at both ends) and runs the swing-up + LQR designed on
@@ -62,10 +66,12 @@ OUT = ROOT / "results" / "calibrated_protocol"
 PLANT = OUT / "diagnosis.json"
 RUNS = OUT / "reproduce" / "runs" / "furuta"
 #: the L_prop runs again, by name suffix: the residual summed over 10 intervals (``--integral-span 10``),
-#: and that with velocities re-estimated offline (``--training-velocities zero_phase``)
+#: that with velocities re-estimated offline (``--training-velocities zero_phase``), and that with
+#: L_Iτ normalised per joint (``--itau-normalization joint_momentum``; DeLaN only)
 VARIANT_RUNS = {
     "_span": OUT / "reproduce_span" / "runs" / "furuta",
     "_offline": OUT / "reproduce_offline" / "runs" / "furuta",
+    "_joint": OUT / "reproduce_joint" / "runs" / "furuta",
 }
 PAIRS = (("dln", "traj"), ("dln", "prop"), ("aph", "aph"), ("aph", "prop"), ("adln", "aph"), ("adln", "prop"))
 SECONDS = 8.0

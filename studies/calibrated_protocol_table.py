@@ -30,6 +30,7 @@ LABELS = {
     "adln_prop_span": "augmented DeLaN L_prop, span 0.1 s",
     "dln_prop_offline": "DeLaN L_prop, span 0.2 s, offline velocities",
     "adln_prop_offline": "augmented DeLaN L_prop, span 0.1 s, offline velocities",
+    "dln_prop_joint": "DeLaN L_prop, span 0.2 s, offline velocities, L_Iτ per joint",
     "plant model": "the plant's own model (reference)",
     "nominal analytic": "nominal analytic (reference)",
 }
@@ -52,6 +53,7 @@ def prediction_table() -> list[str]:
         _table_rows("reproduce", "")
         + _table_rows("reproduce_span", "_span")
         + _table_rows("reproduce_offline", "_offline")
+        + _table_rows("reproduce_joint", "_joint")
     )
     lines = ["| test set | model | α | β | α̇ | β̇ |", "|---|---|---:|---:|---:|---:|"]
     for test_set in dict.fromkeys(r["test_set"] for r in rows):
@@ -89,9 +91,9 @@ def verdict(doc: dict) -> str:
     """Whether both L_prop models meet the protocol's bar: upright a maximum, swing-up from rest
     and from at least 90 % of the seeded starts."""
     parts = []
-    for name in (f"{kind}_prop{suffix}" for suffix in ("", "_span", "_offline") for kind in ("dln", "adln")):
+    for name in (f"{kind}_prop{suffix}" for suffix in ("", "_span", "_offline", "_joint") for kind in ("dln", "adln")):
         row = doc["models"].get(name)
-        if row is None and name.endswith(("_span", "_offline")):
+        if row is None and name.endswith(("_span", "_offline", "_joint")):
             continue  # a variant not run
         if row is None:
             parts.append(f"{LABELS[name]}: not trained")
