@@ -5,7 +5,7 @@ Analytic: :class:`Furuta`, :class:`NMSD`. Learned: DeLaN, APHYNITY, augmented De
 
 from ..lagrangian import AbstractLagrangianSystem
 from ._definitions import SYSTEM_DEFINITIONS, system_definition
-from ._furuta import Furuta, FurutaParameters, furuta_lumped, furuta_mass_matrix, furuta_potential
+from ._furuta import Furuta, FurutaParameters, FurutaSharedTrig, furuta_lumped, furuta_mass_matrix, furuta_potential
 from ._nmsd import NMSD, NMSDParameters, nmsd_potential
 from ._aphynity import Aphynity
 from ._augmented import AbstractAugmentedSystem, AugmentedDeLaN
@@ -19,6 +19,7 @@ from .checkpoint import CheckpointError, load_model, read_header, save_model
 __all__ = [
     "Furuta",
     "FurutaParameters",
+    "FurutaSharedTrig",
     "NMSD",
     "NMSDParameters",
     "analytic_model",

@@ -79,6 +79,19 @@ def test_a_learned_checkpoint_backend_matches_the_gymnasium_env_on_it():
     _assert_parity(env, params, gym.make(SWINGUP, dynamics=str(DELAN)), *_states_and_actions(5, 2))
 
 
+@pytest.mark.parametrize("plant", [None, "coulomb"])
+def test_the_analytic_model_steps_with_its_trig_shared(plant):
+    """The step integrates the analytic Furuta as FurutaSharedTrig (the parity tests above check
+    its numbers): compiled and vmapped, one sin β per RK4 stage plus the observation's sin α and
+    sin β, where Furuta's own graph has XLA:CPU evaluate each in several kernels."""
+    env, params = functional.make(SWINGUP, **({} if plant is None else {"plant": plant}))
+    states = jax.vmap(lambda x: env.state_at(x, params))(jnp.zeros((8, 4)))
+    step = jax.jit(jax.vmap(env.step_env, in_axes=(None, 0, 0, None)))
+    text = step.lower(jax.random.PRNGKey(0), states, jnp.zeros((8, 1)), params).compile().as_text()
+    if jax.default_backend() == "cpu":
+        assert text.count(" sine(") <= 4 + 2
+
+
 def test_nmsd_with_a_fixed_target_matches_its_gymnasium_env():
     env, params = functional.make("furuta_gym/NMSD-v0")
     gym_env = gym.make("furuta_gym/NMSD-v0", dynamics="analytic")

@@ -1,6 +1,7 @@
 """The spine: autodiff-derived dynamics against hand-derived Euler–Lagrange, residual properties."""
 
 import functools
+import re
 import subprocess
 import sys
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from furuta_gym import lagrangian as lg
-from furuta_gym.models import NMSD, Furuta, FurutaParameters
+from furuta_gym.models import NMSD, Furuta, FurutaParameters, FurutaSharedTrig
 from furuta_gym.simulate import rk4_zoh_step, simulate
 
 
@@ -89,6 +90,43 @@ def test_vmap_batches_every_derived_quantity():
     batched = jax.vmap(lambda a, b, c: lg.forward_dynamics(model, a, b, c))(q, qd, u)
     single = np.stack([lg.forward_dynamics(model, q[i], qd[i], u[i]) for i in range(7)])
     np.testing.assert_allclose(batched, single, rtol=1e-13)
+
+
+def test_shared_trig_furuta_is_furutas_physics_with_one_sin_and_cos_per_rk4_stage():
+    """FurutaSharedTrig (what the functional env steps) agrees with Furuta to round-off — the
+    vector field, an RK4 control period, the linearisation and a parameter gradient through an RK4
+    step, at other parameters too — and under jit + vmap XLA:CPU evaluates sin β and cos β once
+    per RK4 stage (Furuta's own graph: in several fused kernels each)."""
+    rng = np.random.default_rng(5)
+    xs = jnp.asarray(rng.uniform([-4, -7, -30, -60], [4, 7, 30, 60], (300, 4)))
+    us = jnp.asarray(rng.uniform(-6, 6, (300, 1)))
+    heavier = FurutaParameters(mp=0.03, Lp=0.14, c_r=5e-4)
+
+    def batched(fn):
+        """fn(model, x, u) over the states, compiled once per model class (the parameters traced)."""
+        return lambda cls: jax.jit(jax.vmap(lambda p, x, u: fn(cls(params=p), x, u), in_axes=(None, 0, 0)))
+
+    field = batched(lg.vector_field)
+    period = batched(lambda m, x, u: rk4_zoh_step(m, x, u, 0.02, 10))
+    jacobian = batched(lambda m, x, u: lg.linearize(m, x, u)[0])
+    gradient = batched(
+        lambda m, x, u: jnp.stack(
+            jax.tree_util.tree_leaves(jax.grad(lambda mm: jnp.sum(rk4_zoh_step(mm, x, u, 0.002) ** 2))(m).params)
+        )
+    )
+    for quantity in (field, period, jacobian, gradient):
+        ours, theirs = quantity(FurutaSharedTrig), quantity(Furuta)
+        for p in (FurutaParameters(), heavier):
+            np.testing.assert_allclose(ours(p, xs, us), theirs(p, xs, us), rtol=1e-12, atol=1e-12)
+
+    def sines(cls):
+        step = jax.jit(jax.vmap(lambda x, u: rk4_zoh_step(cls(), x, u, 0.002)))
+        text = step.lower(xs, us).compile().as_text()
+        return len(re.findall(r" sine\(", text)), len(re.findall(r" cosine\(", text))
+
+    if jax.default_backend() == "cpu":
+        assert sines(FurutaSharedTrig) == (4, 4)  # one of each per stage
+        assert min(sines(Furuta)) > 4  # what the shared values save (if XLA stops duplicating, drop this)
 
 
 def _true_trajectory(model, x0, dt, T, u_fn):

@@ -12,7 +12,10 @@ The env is the Gymnasium env's own specification: :func:`make` builds the regist
 settings objects, task, spaces, horizon) and reads it; each step is the batched env's
 :func:`~furuta_gym.envs._jax_rollout.controlled_step` (fixed-step RK4, input held, divergence
 frozen) scored by the same task functions, and the observation is the same quantisation and
-presentation (:func:`~furuta_gym.envs._observation.present_components`). Any JAX backend works:
+presentation (:func:`~furuta_gym.envs._observation.present_components`). The analytic Furuta
+(also under a plant's effects) is integrated as :class:`~furuta_gym.models.FurutaSharedTrig`, the
+same physics with sin β and cos β evaluated once per RK4 stage (XLA:CPU would otherwise recompute
+them in every fused kernel that reads them, most of a step's time). Any JAX backend works:
 ``"analytic"``, a checkpoint path, a Lagrangian model, and the ``Plant`` variants that a model
 backend runs with :class:`~furuta_gym.effects.WithEffects`.
 
@@ -36,6 +39,7 @@ from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from .._x64 import ensure_x64
 from ..effects import WithEffects
+from ..models import Furuta, FurutaSharedTrig
 from ..signals import quantize_joints
 from ._backends import ModelBackend
 from ._base import LagrangianEnv
@@ -81,6 +85,17 @@ def _physical_of(model: Any):
 def _has_physical(model, system: str) -> bool:
     base = model.base if isinstance(model, WithEffects) else model
     return isinstance(getattr(base, "params", None), PARAMETER_CLASSES[system])
+
+
+def _stepping_model(model):
+    """The model the step integrates: the analytic Furuta (also under a ``WithEffects`` plant) as
+    :class:`~furuta_gym.models.FurutaSharedTrig`, the same physics with its trig evaluated once
+    per RK4 stage (equal to round-off, faster under XLA:CPU); other models as given."""
+    base = model.base if isinstance(model, WithEffects) else model
+    if type(base) is not Furuta:  # a subclass may redefine the physics: leave it alone
+        return model
+    shared = FurutaSharedTrig(params=base.params)
+    return eqx.tree_at(lambda m: m.base, model, shared) if isinstance(model, WithEffects) else shared
 
 
 def _unsupported(template: LagrangianEnv) -> list[str]:
@@ -179,7 +194,7 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         action = jnp.reshape(jnp.asarray(action, float), (1,))
         volts = jnp.clip(action, -self.action_high, self.action_high) * (self.max_action / self.action_high)
         out = controlled_step(
-            self.plant(params, state),
+            _stepping_model(self.plant(params, state)),
             state.x,
             volts,
             dt=self.dt,
