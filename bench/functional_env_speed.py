@@ -9,9 +9,13 @@ random actions drawn in the loop, for
   control period = 10 RK4 steps of the model);
 * gymnax's ``Pendulum-v1`` (one explicit Euler step per env step), the reference,
 
-at N = 1 … 4096, and the ratio analytic ÷ Pendulum-v1 at each N. Best of ``--repeats`` after a
-compiling warm-up. Writes ``results/functional_env_speed/results.json`` and its BENCHMARKS.md
-section from it (``--no-write``: neither).
+at N = 1 … 4096, the ratio analytic ÷ Pendulum-v1 at each N, and the swing-up's rates per
+physics step (env steps/s × the env's RK4 substeps; a Pendulum-v1 env step is its one physics
+step). Best of ``--repeats`` after a compiling warm-up. The results record the cores the process
+may run on and ``XLA_FLAGS`` (run it pinned, e.g. ``taskset -c 1`` with
+``XLA_FLAGS="--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"``, to time one
+core). Writes ``results/functional_env_speed/results.json`` and its BENCHMARKS.md section from it
+(``--no-write``: neither).
 
     python bench/functional_env_speed.py           # a few minutes on 2 cores
     python bench/functional_env_speed.py --quick   # N = 1, 64, 4096 with fewer steps
@@ -23,6 +27,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import os
 import time
 from pathlib import Path
 
@@ -85,6 +90,8 @@ def measure(sizes, repeats: int, budget: int) -> dict:
         "delan": functional.make(dynamics=str(DELAN)),
         "gymnax Pendulum-v1": gymnax.make("Pendulum-v1"),
     }
+    # physics steps per env step: the swing-up's RK4 substeps; Pendulum-v1 integrates once per step
+    substeps = {name: getattr(env, "substeps", 1) for name, (env, _) in envs.items()}
     rates = {name: {} for name in envs}
     for n in sizes:
         for name, (env, params) in envs.items():
@@ -92,20 +99,30 @@ def measure(sizes, repeats: int, budget: int) -> dict:
             print(f"N = {n:5d}  {name:20s} {rates[name][n]:14,.0f} steps/s", flush=True)
     return {
         "machine": machine(),
+        "cpu": cpu_conditions(),
         "date": datetime.date.today().isoformat(),
         "sizes": list(sizes),
         "repeats": repeats,
         "budget": budget,
         "steps_per_second": rates,
+        "substeps": substeps,
     }
 
 
+def cpu_conditions() -> str:
+    """The cores this process may run on and the XLA thread flags: what the rates are per."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    flags = os.environ.get("XLA_FLAGS", "")
+    return f"{cores} of {os.cpu_count()} cores, XLA_FLAGS={flags!r}" if flags else f"{cores} of {os.cpu_count()} cores"
+
+
 def section(results: dict) -> str:
-    rates, sizes = results["steps_per_second"], results["sizes"]
+    rates, sizes, substeps = results["steps_per_second"], results["sizes"], results["substeps"]
     pendulum = rates["gymnax Pendulum-v1"]
+    rk4 = {name: {n: rates[name][n] * substeps[name] for n in sizes} for name in ("analytic", "delan")}
     rows = [
         f"| {n:,} | {rates['analytic'][n]:,.0f} | {rates['delan'][n]:,.0f} | {pendulum[n]:,.0f} | "
-        f"{rates['analytic'][n] / pendulum[n]:.2f} |"
+        f"{rates['analytic'][n] / pendulum[n]:.2f} | {rk4['analytic'][n]:,.0f} | {rk4['delan'][n]:,.0f} |"
         for n in sizes
     ]
     return "\n".join(
@@ -117,11 +134,15 @@ def section(results: dict) -> str:
             "over N copies and scanned inside one `jit`, uniform random actions, best of "
             f"{results['repeats']}. `FurutaSwingUp-v0` as a functional env (one step: a 20 ms control period, "
             "10 RK4 steps of the model; analytic model and the reproduction's DeLaN L_prop) beside gymnax's "
-            f"Pendulum-v1 (one Euler step) in the same run. Generated from "
-            f"`results/functional_env_speed/results.json` ({results['machine']}, {results['date']}).",
+            f"Pendulum-v1 (one Euler step) in the same run. The last two columns are the swing-up's "
+            f"rates per physics step (env steps/s × {substeps['analytic']} RK4 steps per env step), beside Pendulum-v1's "
+            f"env steps/s, which are its Euler steps/s. Generated from "
+            f"`results/functional_env_speed/results.json` ({results['machine']}; run on {results['cpu']}; "
+            f"{results['date']}).",
             "",
-            "| N | analytic | DeLaN | gymnax Pendulum-v1 | analytic ÷ Pendulum-v1 |",
-            "|---|---|---|---|---|",
+            "| N | analytic | DeLaN | gymnax Pendulum-v1 | analytic ÷ Pendulum-v1 | analytic, RK4 steps/s "
+            "| DeLaN, RK4 steps/s |",
+            "|---|---|---|---|---|---|---|",
             *rows,
             END,
         ]
