@@ -62,6 +62,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "prediction_finish) if it predicts the held-out windows better; the report is unchanged",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace existing --json/--report outputs")
+    _add_fit_arguments(parser)
+
+
+def _add_fit_arguments(parser: argparse.ArgumentParser) -> None:
+    """How the data are read and fitted."""
     parser.add_argument(
         "--column-map",
         metavar="CANON=FILECOL,...",
