@@ -102,29 +102,15 @@ def test_a_rig_run_refuses_data_of_another_sensor_and_compares_physics_with_the_
     )
 
 
-def test_the_calibrated_protocol_docs_match_their_results():
+@pytest.mark.parametrize("script", ["calibrated_protocol_table.py", "calibrated_row_shrink_table.py"])
+def test_the_calibrated_rig_docs_match_their_results(script):
     import subprocess
     import sys
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
     proc = subprocess.run(
-        [sys.executable, str(root / "studies" / "calibrated_protocol_table.py"), "--check"],
-        capture_output=True,
-        text=True,
-        cwd=root / "studies",
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-
-
-def test_the_calibrated_row_shrink_docs_match_their_results():
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[1]
-    proc = subprocess.run(
-        [sys.executable, str(root / "studies" / "calibrated_row_shrink_table.py"), "--check"],
+        [sys.executable, str(root / "studies" / script), "--check"],
         capture_output=True,
         text=True,
         cwd=root / "studies",
