@@ -40,7 +40,6 @@ __all__ = [
     "VELOCITY_METHODS",
     "MIN_MOTION",
     "estimate_velocities",
-    "velocity_bandwidth_hz",
     "skip_start",
     "split_elementary",
     "check_log",
@@ -59,17 +58,6 @@ VELOCITY_METHODS = ("zero_phase", "derivative_filter")
 MIN_MOTION = 5 * 2.0 * math.pi / ENCODER_COUNTS_PER_REV
 
 
-def velocity_bandwidth_hz(method: str, dt: float, cutoff_hz: float | None = None) -> float:
-    """The bandwidth of :func:`estimate_velocities`' ``method``: the zero-phase low-pass's cutoff
-    (min(25 Hz, 0.08·fs) unless given), or the derivative filter's ω0 = 100 rad/s. Motion slower
-    than about one count per period of it is below what the estimate resolves."""
-    if method == "zero_phase":
-        return float(cutoff_hz or min(25.0, 0.08 / dt))
-    if method == "derivative_filter":
-        return 100.0 / (2.0 * math.pi)
-    raise ValueError(f"velocity: expected one of {VELOCITY_METHODS}, got {method!r}")
-
-
 def estimate_velocities(tr: Trajectory, method: str = "zero_phase", cutoff_hz: float | None = None) -> Trajectory:
     """``tr`` with velocities; measured ones are kept, absent ones estimated by ``method``.
 
@@ -81,7 +69,8 @@ def estimate_velocities(tr: Trajectory, method: str = "zero_phase", cutoff_hz: f
     if tr.qd is not None:
         return tr
     if method == "zero_phase":
-        qd = zero_phase_velocity(tr.q, tr.dt, cutoff_hz=velocity_bandwidth_hz(method, tr.dt, cutoff_hz))
+        cutoff = cutoff_hz or min(25.0, 0.08 / tr.dt)
+        qd = zero_phase_velocity(tr.q, tr.dt, cutoff_hz=cutoff)
     elif method == "derivative_filter":
         qd = derivative_filter(tr.q, tr.dt)
     else:

@@ -895,6 +895,8 @@ def _vetoed_with_stiction(fx: _Fitter, library, vetoed, accepted, theta, dyn, ev
     one sticks). Kept, both, if the model with them predicts the fit-set validation windows better
     in total and not significantly worse by t (the veto's rule), with ΔF > 0 and the step's
     coefficients physical. Returns (accepted, θ)."""
+    if not vetoed:  # nearly every diagnosis: no windows to build
+        return accepted, theta
     start = max(1, fx.settings.start_iterations)
     win, measured = fx.fit_windows(dyn, fx.oe_idx), fx.fit_windows(dyn, fx.val_idx).q
     for step in vetoed:
