@@ -20,7 +20,15 @@ from ..systems import get_spec
 from ._definitions import SYSTEM_DEFINITIONS
 from ._delan import LagrangianNetworks
 from ._system import first_joint_input
-from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
+from ._learned import (
+    LEARNED_EXTRAS,
+    MLP,
+    AbstractLearnedSystem,
+    coordinate_features,
+    feature_size,
+    freeze_hparams,
+    system_defaults,
+)
 
 __all__ = ["AugmentedDeLaN", "AbstractAugmentedSystem", "ForceNetwork", "FORCE_DEFAULTS"]
 
@@ -179,10 +187,10 @@ class AugmentedDeLaN(AbstractAugmentedSystem):
         hp.pop("damping_init")
         hp["force_hidden"] = hp["hidden"]
         hp.update(force_hparams(spec, "adln"))
-        unknown = set(hparams) - set(hp) - {"eps", "activation"}
+        unknown = set(hparams) - set(hp) - set(LEARNED_EXTRAS)
         if unknown:
             raise ValueError(
-                f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}"
+                f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + sorted(LEARNED_EXTRAS)}"
             )
         hp.update(hparams)
         kl, kf = jax.random.split(key)
@@ -196,6 +204,7 @@ class AugmentedDeLaN(AbstractAugmentedSystem):
             position_scale=hp["position_scale"],
             eps=hp.get("eps", 1e-3),
             activation=act,
+            springs=tuple(hp.get("springs", ())),
         )
         self.force_net = ForceNetwork.from_hparams(spec, hp, hidden=hp["force_hidden"], key=kf)
         self.scale = jnp.asarray(1.0)

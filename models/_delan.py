@@ -28,17 +28,32 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ..effects import EFFECT_KINDS, Effect, effects_potential
 from ..lagrangian import SystemSpec
 from ..systems import get_spec
 from ._definitions import system_definition
-from ._learned import MLP, AbstractLearnedSystem, coordinate_features, feature_size, freeze_hparams, system_defaults
+from ._learned import (
+    LEARNED_EXTRAS,
+    MLP,
+    AbstractLearnedSystem,
+    coordinate_features,
+    feature_size,
+    freeze_hparams,
+    system_defaults,
+)
 from ._system import first_joint_input
 
 __all__ = ["LagrangianNetworks", "DeLaN", "known_damping_force"]
 
 
 class LagrangianNetworks(eqx.Module):
-    """The conservative part shared by DeLaN and augmented DeLaN: Cholesky-factor and potential nets."""
+    """The conservative part shared by DeLaN and augmented DeLaN: Cholesky-factor and potential nets.
+
+    ``springs`` (joint names, default none) adds a learned spring ½k(q_j − q_ref)² per joint to V,
+    the registry's ``spring`` law with k = k_typical·e^z > 0 and q_ref learned. On an angle the
+    potential network sees (cos, sin) and is periodic, so it cannot hold a cable that winds up
+    over several turns of the rotor; the diagnosis says which joints have one.
+    """
 
     mass_net: MLP
     potential_net: MLP
@@ -47,6 +62,10 @@ class LagrangianNetworks(eqx.Module):
     potential_scale: float = eqx.field(static=True)
     position_scale: float = eqx.field(static=True)
     eps: float = eqx.field(static=True)
+    # after the fields above, and None without springs: saved checkpoints' leaves keep their order
+    spring_log_stiffness: Float[Array, " s"] | None = None
+    spring_reference: Float[Array, " s"] | None = None
+    springs: tuple[str, ...] = eqx.field(static=True, default=())
 
     def __init__(
         self,
@@ -59,6 +78,7 @@ class LagrangianNetworks(eqx.Module):
         position_scale: float,
         eps: float = 1e-3,
         activation: str = "tanh",
+        springs: tuple[str, ...] = (),
     ):
         n = spec.n_dof
         km, kv = jax.random.split(key)
@@ -70,6 +90,15 @@ class LagrangianNetworks(eqx.Module):
         self.potential_scale = float(potential_scale)
         self.position_scale = float(position_scale)
         self.eps = float(eps)
+        self.springs = tuple(springs)
+        for joint in self.springs:
+            if joint not in spec.joint_names:
+                raise ValueError(f"springs: {joint!r} is not a joint of {spec.name} (joints: {list(spec.joint_names)})")
+        if len(set(self.springs)) != len(self.springs):
+            raise ValueError(f"springs: each joint at most once, got {list(self.springs)}")
+        if self.springs:
+            self.spring_log_stiffness = jnp.zeros(len(self.springs))
+            self.spring_reference = jnp.zeros(len(self.springs))
 
     def cholesky_factor(self, q: Float[Array, " n"]) -> Float[Array, "n n"]:
         """Lower-triangular L(q) with diagonal softplus(·) + ε (> 0)."""
@@ -93,10 +122,27 @@ class LagrangianNetworks(eqx.Module):
         return self.mass_scale * jnp.sum(L[:, None, :] * L[None, :, :], axis=-1)
 
     def potential(self, q):
+        return effects_potential(self.network_potential, self.spring_effects(), q, self.spec)
+
+    def network_potential(self, q):
         zero = jnp.zeros_like(q)
         feats = coordinate_features(self.spec, q, self.position_scale)
         feats0 = coordinate_features(self.spec, zero, self.position_scale)
         return self.potential_scale * (self.potential_net(feats)[0] - self.potential_net(feats0)[0])
+
+    def spring_effects(self) -> tuple[Effect, ...]:
+        """The learned springs as effects of the registry (coefficients are arrays)."""
+        if not self.springs:
+            return ()
+        assert self.spring_log_stiffness is not None and self.spring_reference is not None
+        typical = EFFECT_KINDS["spring"].typical
+        assert typical is not None
+        unit = np.array([typical[0 if self.spec.angular[self.spec.joint_names.index(j)] else 1] for j in self.springs])
+        stiffness = unit * jnp.exp(self.spring_log_stiffness)
+        return tuple(
+            Effect("spring", joint, stiffness[i], reference=self.spring_reference[i])  # type: ignore[arg-type]
+            for i, joint in enumerate(self.springs)
+        )
 
 
 def known_damping_force(spec: SystemSpec, coefficients, qd):
@@ -123,10 +169,10 @@ class DeLaN(AbstractLearnedSystem):
 
         spec = get_spec(system)
         hp = system_defaults(spec.name)
-        unknown = set(hparams) - set(hp) - {"eps", "activation"}
+        unknown = set(hparams) - set(hp) - set(LEARNED_EXTRAS)
         if unknown:
             raise ValueError(
-                f"unknown DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + ['activation', 'eps']}"
+                f"unknown DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + sorted(LEARNED_EXTRAS)}"
             )
         hp.update(hparams)
         self.lagrangian_nets = LagrangianNetworks(
@@ -138,6 +184,7 @@ class DeLaN(AbstractLearnedSystem):
             position_scale=hp["position_scale"],
             eps=hp.get("eps", 1e-3),
             activation=hp.get("activation", "tanh"),
+            springs=tuple(hp.get("springs", ())),
         )
         self.damping_ref = tuple(float(c) for c in hp["damping_init"])
         if len(self.damping_ref) != 2 or min(self.damping_ref) <= 0:

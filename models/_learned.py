@@ -45,6 +45,11 @@ _ACTIVATIONS: dict[str, Callable] = {
 SYSTEM_DEFAULTS: dict[str, dict[str, Any]] = {name: d.learned_defaults for name, d in SYSTEM_DEFINITIONS.items()}
 
 
+#: optional hyper-parameters of the models with DeLaN's networks, outside the system defaults (a
+#: model saved before one existed rebuilds without it): eps, activation, springs (joint names)
+LEARNED_EXTRAS = ("activation", "eps", "springs")
+
+
 def system_defaults(system: str) -> dict[str, Any]:
     """A copy of the default hyper-parameters of ``system`` ("furuta" or "nmsd")."""
     return dict(SYSTEM_DEFAULTS[get_spec(system).name])

@@ -118,6 +118,15 @@ def _add_data_arguments(parser: argparse.ArgumentParser) -> None:
         "model cannot lighten a joint whose forces it cannot express",
     )
     parser.add_argument(
+        "--learned-spring",
+        action="append",
+        default=None,
+        metavar="JOINT",
+        help="give the DeLaN and augmented-DeLaN potentials a learned spring ½k(q − q_ref)² on "
+        "JOINT (repeatable; e.g. alpha, a rotor cable the diagnosis found: their periodic "
+        "potential cannot hold one that winds up over turns); name only dln / adln pairs",
+    )
+    parser.add_argument(
         "--quadrature",
         choices=["trapezoid", "simpson", "hermite"],
         default=None,
@@ -210,6 +219,7 @@ def config_from_args(args: argparse.Namespace):
         integral_span=args.integral_span,
         training_velocities=args.training_velocities,
         train_overrides=_train_overrides(args),
+        model_overrides={"springs": tuple(args.learned_spring)} if args.learned_spring else None,
         figures=not args.no_figures,
         progress=not args.no_progress,
         jobs=jobs,
