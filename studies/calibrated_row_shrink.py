@@ -7,7 +7,9 @@ dry (Coulomb) friction, which a DeLaN cannot express (its potential is periodic,
 viscous). This script asks what L_Iτ then rewards, for two rigid-body models:
 
 * (a) the plant's own model without the spring and the Coulomb friction (what a DeLaN can be);
-* (b) the plant's full model (both included).
+* (b) the plant's full model (both included);
+* (c) with the spring and without the Coulomb friction, and (d) the other way round: which of the
+  two the loss needs to find the plant's mass matrix.
 
 Per model: the rotor's and the pendulum's shares of Σ‖r‖² and of Σ‖Δp̂‖² at the plant's
 parameters; L_Iτ with both normalisers, ``"momentum"`` (Σ‖r‖² / Σ‖Δp̂‖² over both joints together)
@@ -59,6 +61,15 @@ NORMALIZERS = ("momentum", "joint_momentum")
 MODELS = {
     "no_spring_coulomb": "the plant's model without the cable spring and the rotor's Coulomb friction",
     "full": "the plant's full model",
+    "spring_only": "the plant's model with the cable spring, without the rotor's Coulomb friction",
+    "coulomb_only": "the plant's model with the rotor's Coulomb friction, without the cable spring",
+}
+#: which of ``MISSING`` each model keeps
+MODEL_EFFECTS = {
+    "no_spring_coulomb": (),
+    "full": MISSING,
+    "spring_only": ("spring",),
+    "coulomb_only": ("coulomb_friction",),
 }
 
 
@@ -270,12 +281,12 @@ def best_fit(rig: Rig, A, B, theta0, normalize: str) -> dict:
     }
 
 
-def study_model(rig: Rig, full: bool, windows, tcfg) -> dict:
-    """Shares at s = 1, the scan and both best fits for model (a) (``full`` False) or (b)."""
+def study_model(rig: Rig, kept: tuple, windows, tcfg) -> dict:
+    """Shares at s = 1, the scan and both best fits for the model that keeps the effects ``kept``."""
     from furuta_gym.training import integral_loss
 
     rule, span = tcfg.quadrature, tcfg.integral_span
-    names = rig.names if full else LINEAR
+    names = LINEAR + tuple(m for m in MISSING if m in kept and m in rig.effects)
     sub = Rig(rig.lumped, rig.effects, names)
     A, B = quadratic_forms(sub, windows, rule, span)
     theta = sub.theta()
@@ -325,7 +336,7 @@ def main(argv=None) -> int:
         "models": {key: {"description": text} for key, text in MODELS.items()},
     }
     for key in MODELS:
-        doc["models"][key].update(study_model(rig, key == "full", windows, tcfg))
+        doc["models"][key].update(study_model(rig, MODEL_EFFECTS[key], windows, tcfg))
         print(key, json.dumps(doc["models"][key]["at_plant"]), flush=True)
     doc["seconds"] = round(time.perf_counter() - t0, 1)
     path = args.out / RESULT_NAME

@@ -1,6 +1,7 @@
 """The row-shrink block of docs/learning.md, from ``results/calibrated_protocol/row_shrink.json``
 (``studies/calibrated_row_shrink.py``): what L_Iτ's two normalisers reward on the calibrated rig's
-training releases, for the plant's model without and with the cable spring and Coulomb friction.
+training releases, for the plant's model without and with the cable spring and Coulomb friction,
+and with each of the two alone.
 
     python studies/calibrated_row_shrink_table.py [--check]
 """
@@ -17,8 +18,13 @@ from _generated import block_main  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 RESULT = ROOT / "results" / "calibrated_protocol" / "row_shrink.json"
 NORMALIZERS = ("momentum", "joint_momentum")
-SHORT = {"no_spring_coulomb": "(a)", "full": "(b)"}
-LABELS = {"no_spring_coulomb": "(a) without spring and Coulomb friction", "full": "(b) full model"}
+SHORT = {"no_spring_coulomb": "(a)", "full": "(b)"}  # the scan's models
+LABELS = {
+    "no_spring_coulomb": "(a) without spring and Coulomb friction",
+    "full": "(b) full model",
+    "spring_only": "(c) spring, no Coulomb friction",
+    "coulomb_only": "(d) Coulomb friction, no spring",
+}
 
 
 def _pct(x: float) -> str:
@@ -43,7 +49,7 @@ def shares_table(doc: dict) -> list[str]:
 
 def scan_table(doc: dict) -> list[str]:
     """L_Iτ per s, per model and normaliser; each column's least value in bold."""
-    columns = [(key, n) for key in doc["models"] for n in NORMALIZERS]
+    columns = [(key, n) for key in doc["models"] if key in SHORT for n in NORMALIZERS]
     scans = {c: [row[c[1]] for row in doc["models"][c[0]]["scan"]] for c in columns}
     lines = [
         "| s | " + " | ".join(f"{SHORT[k]} `{n}`" for k, n in columns) + " |",
