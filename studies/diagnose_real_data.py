@@ -15,6 +15,8 @@ docs tables are generated from them by ``studies/diagnose_tables.py``).
     python studies/diagnose_real_data.py [--out results/diagnose_real]
     # the same with stops left out of the equation error
     python studies/diagnose_real_data.py --stop-dwell 0.04 --out results/diagnose_real_stop_dwell
+    # ... or only the stops that dry friction held
+    python studies/diagnose_real_data.py --held-stop 2 --out results/diagnose_real_held_stop
 """
 
 from __future__ import annotations
@@ -118,9 +120,16 @@ def main() -> None:
         type=float,
         help="DiagnosisSettings.stop_dwell, s (default off; results/diagnose_real_stop_dwell: 0.04)",
     )
+    ap.add_argument(
+        "--held-stop",
+        type=float,
+        help="DiagnosisSettings.held_stop, counts (default off; results/diagnose_real_held_stop: 2)",
+    )
     args = ap.parse_args()
     if args.stop_dwell is not None:
         SETTINGS["stop_dwell"] = args.stop_dwell
+    if args.held_stop is not None:
+        SETTINGS["held_stop"] = args.held_stop
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     splits = {

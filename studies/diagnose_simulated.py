@@ -23,6 +23,8 @@ per log into ``results/diagnose_sim/``; ``studies/diagnose_tables.py`` makes the
         --out results/diagnose_sim_uniform_blocks
     # every log with stops left out of the equation error
     python studies/diagnose_simulated.py --stop-dwell 0.04 --out results/diagnose_sim_stop_dwell
+    # ... or only the stops that dry friction held (the free motion would have left the count)
+    python studies/diagnose_simulated.py --held-stop 2 --out results/diagnose_sim_held_stop
 """
 
 from __future__ import annotations
@@ -93,13 +95,16 @@ def repeat_share(data) -> float:
     return float(np.mean(np.concatenate([np.diff(tr.q[:, 0]) == 0 for tr in data])))
 
 
-def simulate(excitation: str, case: str, seed: int, quantize: bool = True):
+def simulate(excitation: str, case: str, seed: int, quantize: bool = True, true_velocities: bool = False):
     """(effects, data, draws) of one log; a drawn case is drawn again (from seed + 1000·k) until
-    it meets its share of repeated rotor counts."""
+    it meets its share of repeated rotor counts. ``true_velocities``: the simulator's velocities
+    ride along as ``qd`` (the same log otherwise)."""
     for draw in range(20):
         s = seed + 1000 * draw
         effects = DRAWN[case](s) if case in DRAWN else CASES[case]
-        data = measured_like("furuta", effects, seed=s, excitation=excitation, quantize=quantize, **LOG)
+        data = measured_like(
+            "furuta", effects, seed=s, excitation=excitation, quantize=quantize, true_velocities=true_velocities, **LOG
+        )
         if repeat_share(data) >= MIN_REPEATS.get(case, 0.0):
             return effects, data, draw + 1
     raise RuntimeError(f"{case} seed {seed}: no draw in 20 met the share of repeated rotor counts")
@@ -153,10 +158,13 @@ def main() -> None:
         help="DiagnosisSettings.evidence_weighting (default: its default)",
     )
     ap.add_argument("--stop-dwell", type=float, help="DiagnosisSettings.stop_dwell, s (default off)")
+    ap.add_argument("--held-stop", type=float, help="DiagnosisSettings.held_stop, counts (default off)")
     args = ap.parse_args()
     overrides = {} if args.start_iterations is None else {"start_iterations": args.start_iterations}
     if args.stop_dwell is not None:
         overrides["stop_dwell"] = args.stop_dwell
+    if args.held_stop is not None:
+        overrides["held_stop"] = args.held_stop
     if args.evidence_weighting:
         overrides["evidence_weighting"] = args.evidence_weighting
     out = Path(args.out)

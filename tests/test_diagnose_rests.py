@@ -103,6 +103,44 @@ def test_an_interval_in_which_the_joint_stops_is_left_out_of_its_equations():
         assert seg.rest[:, 0].tolist() == expected
 
 
+def _reversal_counts(a: float, samples: int = 200) -> np.ndarray:
+    """Encoder counts of a free rotor under a constant acceleration ``a`` (rad/s²) through a
+    reversal whose apex sits just inside a count's edge: the longest a free joint stays on it."""
+    t = (np.arange(samples) - samples // 2) * DT
+    return np.round(0.5 * a * t**2 / COUNT - 0.49)
+
+
+def test_a_free_parabola_through_a_reversal_stays_within_one_count_of_its_free_excursion():
+    # constant acceleration over T: the parabola through a reversal in its middle spans a·T²/8
+    assert _fit.free_excursion(np.full(101, 3.0), DT) == pytest.approx(3.0 * (100 * DT) ** 2 / 8, rel=1e-9)
+    # a fast force oscillation leaves a free joint within a fraction of a count (f = 20 Hz)
+    t = np.arange(100) * DT
+    assert _fit.free_excursion(10.0 * np.sin(2 * np.pi * 20 * t), DT) < 0.5 * COUNT
+
+
+def test_a_stop_is_left_out_when_the_force_on_it_would_have_moved_a_free_joint_but_not_in_a_slow_pass():
+    """The rotor's counts of a free reversal at 0.2 V (a = K·u/J1 = 4.3 rad/s²): 74 ms on the
+    apex's count, as long as a free joint can stay on one count at that force, and kept. The
+    same counts at 2 V: the free joint would have moved nine counts in that time, so its dry
+    friction held it, and the intervals the stop touches are left out (``held_stop`` = 2)."""
+    layout = layout_for("furuta")
+    theta = layout.nominal()
+    K, J1 = theta[layout.index("K")], theta[layout.index("J1")]
+    counts = _reversal_counts(K * 0.2 / J1)
+    apex = np.flatnonzero(counts == counts.min())
+    assert apex.size == 37 and (apex[0], apex[-1]) == (82, 118)
+    kept, held = (_fit.held_samples(counts * COUNT, np.full(counts.size, K * u / J1), DT, 2.0) for u in (0.2, 2.0))
+    assert not kept.any()
+    assert np.flatnonzero(held).tolist() == apex.tolist()
+    assert _fit.free_excursion(np.full(apex.size, K * 2.0 / J1), DT) / COUNT == pytest.approx(9.2, abs=0.1)
+    for u, expected in ((0.2, [False] * 3), (2.0, [False, True, True])):
+        seg = _segment(counts, np.full(counts.size, u))
+        _fit.build_regressors([seg], layout, theta, 50, "zoh", held_stop=2.0)
+        assert seg.rest[:, 0].tolist() == expected
+        _fit.build_regressors([seg], layout, theta, 50, "zoh")  # off by default
+        assert not seg.rest[:, 0].any()
+
+
 def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:
     """The equation-error fit of the declared model with ``keys`` added, as the search fits it."""
     spec, notes = get_spec("furuta"), []
@@ -144,3 +182,13 @@ def test_stop_dwell_is_off_by_default_and_checked():
 
     args = build_parser().parse_args(["diagnose", "log.csv", "--system", "furuta", "--stop-dwell", "0.04"])
     assert args.stop_dwell == 0.04
+
+
+def test_held_stop_is_off_by_default_and_checked():
+    assert DiagnosisSettings().held_stop is None
+    with pytest.raises(ValueError, match="held_stop: expected a number of counts >= 1 or None, got 0.5"):
+        DiagnosisSettings(held_stop=0.5).resolved("furuta", DT)
+    from furuta_gym.cli import build_parser
+
+    args = build_parser().parse_args(["diagnose", "log.csv", "--system", "furuta", "--held-stop", "2"])
+    assert args.held_stop == 2.0

@@ -100,6 +100,13 @@ def _add_fit_arguments(parser: argparse.ArgumentParser) -> None:
         "this long (a stop its dry friction held; 0.04 on open-loop sweeps whose rotor sticks; default off)",
     )
     parser.add_argument(
+        "--held-stop",
+        type=float,
+        metavar="COUNTS",
+        help="also leave out the intervals where a joint stays on one count while the model's other forces "
+        "would have moved it, free, by more than this many counts (its dry friction held it; default off)",
+    )
+    parser.add_argument(
         "--skip",
         type=float,
         default=0.0,
@@ -134,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
         ("interval", args.interval),
         ("oe_max_windows", args.oe_windows),
         ("stop_dwell", args.stop_dwell),
+        ("held_stop", args.held_stop),
     ):
         if val is not None:
             overrides[key] = val

@@ -11,7 +11,7 @@ from ._diagnose import DiagnosisResult, DiagnosisSettings, EffectEvidence, Error
 from ._finish import PredictionFinish
 from ._fit import InputDynamics
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
-from ._rests import RestBound, held_at_rest
+from ._rests import RestBound, Stop, held_at_rest, stop_excursions
 from ._report import write_figures as write_report_figures
 from ._report import write_json as write_report_json
 from ._synthetic import ClosedLoopBalancing, measured_like, sticky_rig
@@ -33,6 +33,8 @@ __all__ = [
     "ClosedLoopBalancing",
     "held_at_rest",
     "RestBound",
+    "Stop",
+    "stop_excursions",
     "write_report_figures",
     "write_report_json",
 ]

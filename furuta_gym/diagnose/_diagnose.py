@@ -89,6 +89,11 @@ class DiagnosisSettings:
     # are guesses); one period of the velocity estimate's bandwidth, 40 ms at 25 Hz, on sticky
     # sweeps. Off (None) by default: on closed-loop logs it costs the input lag's evidence
     stop_dwell: float | None = None
+    # ... or, given a number of counts, where it stops for longer than a free joint could: over the
+    # stop, the model's forces other than dry friction would have moved it by more than that many
+    # counts (through a reversal or a slow pass a free joint stays within one), so friction held it.
+    # Stops that are motion keep their equations (under feedback nearly all are)
+    held_stop: float | None = None
     identify_t: float = 3.0  # a base parameter whose nominal size moves the residual less is held
     veto_t: float = 2.0  # an added effect is dropped if its refit predicts significantly worse
     max_delay: float = 0.05
@@ -104,6 +109,8 @@ class DiagnosisSettings:
         definition = system_definition(system)
         if self.stop_dwell is not None and not self.stop_dwell > 0:
             raise ValueError(f"stop_dwell: expected a positive time in s or None, got {self.stop_dwell!r}")
+        if self.held_stop is not None and not self.held_stop >= 1:
+            raise ValueError(f"held_stop: expected a number of counts >= 1 or None, got {self.held_stop!r}")
         if self.evidence_weighting not in ("regressor", "uniform"):
             raise ValueError(f"evidence_weighting: expected 'regressor' or 'uniform', got {self.evidence_weighting!r}")
         if (
@@ -509,6 +516,7 @@ class _Fitter:
             dynamics,
             self.settings.exclude_rest,
             self.settings.stop_dwell,
+            self.settings.held_stop,
         )
         if segs is None:
             self.fit_prob = Problem(self.fit_segs, self.c_input)

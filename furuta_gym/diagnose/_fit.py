@@ -25,6 +25,7 @@ from scipy.signal import lfilter
 from ..lagrangian import (
     forward_dynamics_with_dry_friction,
     interval_difference,
+    inverse_dynamics,
     interval_integral,
     momentum,
     potential_derived_force,
@@ -197,6 +198,88 @@ def _at_rest(q: np.ndarray, stride: int, n_intervals: int, dwell: int) -> np.nda
     return np.any(same[:, run:] - same[:, :-run] == run, axis=1).reshape(n_intervals, n)
 
 
+def _free_acceleration(layout: ParameterLayout, j: int):
+    """Batched acceleration of joint ``j`` from rest under every force but its dry friction: the
+    model without dry friction at (q, q̇ with q̇_j = 0, q̈ with q̈_j = 0), what the input and the
+    other forces leave unbalanced on joint ``j``, over its inertia."""
+
+    def build():
+        def one(theta, q, qd, qdd, u):
+            model = layout.model(theta, dry_friction=False)
+            qd, qdd = qd.at[j].set(0.0), qdd.at[j].set(0.0)
+            unbalanced = model.input_force(q, qd, u) - inverse_dynamics(model, q, qd, qdd)
+            return unbalanced[j] / model.mass_matrix(q)[j, j]
+
+        return jax.jit(jax.vmap(one, in_axes=(None, 0, 0, 0, 0)))
+
+    return _compiled("free_acceleration", layout, j, build=build)
+
+
+def _lower_hull(t: np.ndarray, x: np.ndarray) -> list[int]:
+    hull: list[int] = []
+    for k in range(t.size):
+        while len(hull) >= 2:
+            a, b = hull[-2], hull[-1]
+            if (t[b] - t[a]) * (x[k] - x[a]) - (x[b] - x[a]) * (t[k] - t[a]) > 0:
+                break
+            hull.pop()
+        hull.append(k)
+    return hull
+
+
+def free_excursion(a: np.ndarray, dt: float) -> float:
+    """The least range of positions that a joint free of friction, under the acceleration ``a``
+    (one value per sample), covers over the stretch, over every start velocity. Under a constant
+    ``a`` over a time T it is |a|·T²/8: the parabola through a reversal in its middle, one count
+    δ wide for at most T = 2·sqrt(2δ/|a|)."""
+    if a.size < 3:
+        return 0.0
+    v = np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * dt)])
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+    t = np.arange(a.size) * dt
+    # the least vertical width of the points (t, x) is taken along an edge of their convex hull
+    slopes = []
+    for sign in (1.0, -1.0):
+        h = _lower_hull(t, sign * x)
+        slopes += [(x[b] - x[a]) / (t[b] - t[a]) for a, b in zip(h[:-1], h[1:])]
+    y = x[None, :] - np.asarray(slopes)[:, None] * t[None, :]
+    return float((y.max(axis=1) - y.min(axis=1)).min())
+
+
+def held_samples(q_j: np.ndarray, a_j: np.ndarray, dt: float, counts: float) -> np.ndarray:
+    """(T,) True in each run on one logged value of ``q_j`` over which a free joint under ``a_j``
+    would have moved by more than ``counts`` of the position quantum (the smallest logged step):
+    dry friction held it there. Through a reversal or a slow pass a free joint stays within one
+    count (the excursion is at most one quantum), so shorter stops are motion and keep their
+    equations."""
+    held = np.zeros(q_j.size, bool)
+    steps = np.abs(np.diff(q_j))
+    steps = steps[steps > 0]
+    if steps.size == 0:
+        return held
+    change = np.flatnonzero(np.diff(q_j) != 0) + 1
+    bounds = np.concatenate([[0], change, [q_j.size]])
+    for s, e in zip(bounds[:-1], bounds[1:]):
+        if e - s >= 3 and free_excursion(a_j[s:e], dt) > counts * steps.min():
+            held[s:e] = True
+    return held
+
+
+def _held_stops(layout, theta0, seg: Segment, stride: int, n_intervals: int, counts: float) -> np.ndarray:
+    """(N, n): the joint was held within the interval (:func:`held_samples`). The measured input
+    drives it, not one through a trial delay or lag: which equations are left out must not change
+    between the input dynamics the search compares."""
+    qdd = np.gradient(seg.qd, seg.dt, axis=0)
+    args = [jnp.asarray(x) for x in (seg.q, seg.qd, qdd, seg.u)]
+    out = np.zeros((n_intervals, seg.q.shape[1]), bool)
+    idx = np.arange(n_intervals)[:, None] * stride + np.arange(stride + 1)[None, :]
+    for j in range(seg.q.shape[1]):
+        a = np.asarray(_free_acceleration(layout, j)(jnp.asarray(theta0), *args))
+        held = held_samples(seg.q[:, j], a, seg.dt, counts)
+        out[:, j] = held[np.minimum(idx, seg.q.shape[0] - 1)].any(axis=1)
+    return out
+
+
 def build_regressors(
     segments: list[Segment],
     layout: ParameterLayout,
@@ -207,10 +290,12 @@ def build_regressors(
     dynamics: InputDynamics = NO_INPUT_DYNAMICS,
     exclude_rest: bool = True,
     stop_dwell: float | None = None,
+    held_stop: float | None = None,
 ) -> None:
     """Fill each segment's Ā Jacobian, ∫u and delay regressor over intervals of ``stride``, and
-    which joints stop in each (``exclude_rest``: on one logged value for ``stop_dwell`` s; None: the
-    whole interval)."""
+    which joints stop in each (``exclude_rest``: on one logged value for ``stop_dwell`` s, None: the
+    whole interval; or, given ``held_stop``, held by dry friction there: :func:`held_samples`
+    with ``counts = held_stop``, the model at ``theta0``)."""
     for seg in segments:
         jp, jf = _per_sample(layout, theta0, seg.q, seg.qd)
         a = np.asarray(interval_difference(jp)) - np.asarray(interval_integral(jf, seg.dt))
@@ -224,6 +309,8 @@ def build_regressors(
         seg.dU = _group(du, stride)
         dwell = stride + 1 if stop_dwell is None else int(round(stop_dwell / seg.dt))
         seg.rest = _at_rest(seg.q, stride, seg.A.shape[0], dwell) if exclude_rest else np.zeros(seg.A.shape[:2], bool)
+        if exclude_rest and held_stop is not None:
+            seg.rest |= _held_stops(layout, theta0, seg, stride, seg.A.shape[0], held_stop)
         per_block = max(1, int(round(block_seconds / (stride * seg.dt))))
         seg.block = np.arange(seg.A.shape[0]) // per_block
 

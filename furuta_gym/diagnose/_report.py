@@ -199,6 +199,7 @@ def _problem(res, segments, dynamics):
         dynamics,
         st.exclude_rest,
         st.stop_dwell,
+        st.held_stop,
     )
     return Problem(copies, _fit.input_direction(res.layout, theta0))
 

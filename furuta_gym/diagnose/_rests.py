@@ -26,10 +26,10 @@ from ..lagrangian import inverse_dynamics
 from ..measured import estimate_velocities
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
-from ._fit import NO_INPUT_DYNAMICS, InputDynamics, Segment, _compiled
+from ._fit import NO_INPUT_DYNAMICS, InputDynamics, Segment, _compiled, _free_acceleration, free_excursion
 from ._library import ParameterLayout
 
-__all__ = ["RestBound", "rest_bound", "held_at_rest"]
+__all__ = ["RestBound", "rest_bound", "held_at_rest", "Stop", "stop_excursions"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -124,3 +124,44 @@ def held_at_rest(
         assert tr.qd is not None
         segments.append(Segment(tr.name, tr.t, tr.q, tr.qd, tr.u, tr.dt, i, False))
     return rest_bound(layout, theta, segments, NO_INPUT_DYNAMICS, joint, count, window)
+
+
+@dataclasses.dataclass(frozen=True)
+class Stop:
+    """A run of ``samples`` samples of one trajectory on one logged value of a joint, from sample
+    ``start``, and how far the model's forces other than dry friction would have moved the joint,
+    free, over it (its least range over every start velocity, in counts): at most one through a
+    reversal or a slow pass; more, and friction held it (``DiagnosisSettings.held_stop``)."""
+
+    trajectory: str
+    start: int
+    samples: int
+    excursion: float
+
+
+def stop_excursions(
+    trajectories: Sequence[Trajectory],
+    joint: str,
+    layout: ParameterLayout,
+    theta,
+    *,
+    min_samples: int = 20,
+    count: float = 2 * np.pi / ENCODER_COUNTS_PER_REV,
+) -> list[Stop]:
+    """Every run of at least ``min_samples`` on one value of ``joint`` inside measured
+    ``trajectories`` (not at their ends) with its free excursion under ``layout``/``theta``, as
+    ``diagnose`` measures it (velocities estimated where a trajectory has none)."""
+    j = get_spec(layout.system).joint_names.index(joint)
+    acceleration = _free_acceleration(layout, j)
+    out = []
+    for tr in trajectories:
+        tr = estimate_velocities(tr)
+        assert tr.qd is not None
+        qdd = np.gradient(tr.qd, tr.dt, axis=0)
+        args = [jnp.asarray(x) for x in (tr.q, tr.qd, qdd, tr.u)]
+        a = np.asarray(acceleration(jnp.asarray(theta), *args))
+        change = np.flatnonzero(np.diff(tr.q[:, j]) != 0) + 1
+        for s, e in zip(change[:-1], change[1:]):
+            if e - s >= min_samples:
+                out.append(Stop(tr.name, int(s), int(e - s), free_excursion(a[s:e], tr.dt) / count))
+    return out
