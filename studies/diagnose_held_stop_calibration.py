@@ -5,8 +5,9 @@ model's forces other than dry friction would have moved a free rotor over it (th
 over every start velocity, in counts; ``furuta_gym.diagnose.stop_excursions``): a free joint
 through a reversal or a slow pass stays within one count, so on logs without dry friction every
 stop's excursion is at most about one. The threshold is set above what those logs show; the logs
-with dry friction only show what it then leaves out, against whether the simulator's rotor was
-held (its speed under 0.01 rad/s, a count per 0.3 s, for most of the stop). The grid's logs and
+with dry friction only show what it then leaves out, against whether the simulator's rotor stood
+still (``held`` in the file: its speed under 0.01 rad/s, a count per 0.3 s, for most of the stop;
+a free rotor reversing under a weak force can be that slow too). The grid's logs and
 seeds (``studies/diagnose_simulated.py``); velocities estimated as the diagnosis estimates them.
 
     python studies/diagnose_held_stop_calibration.py
