@@ -197,10 +197,10 @@ def scale_fit_check() -> dict:
         u=np.asarray(offline.u)[:stay],
         qd=np.asarray(offline.qd)[:stay],
     )
-    for folder in ("reproduce", "reproduce_span", "reproduce_offline"):
+    for folder in ("reproduce", "reproduce_span", "reproduce_offline", "reproduce_spring"):
         for path in sorted((OUT / folder / "runs" / "furuta").glob("*_prop/seed0/model.eqx")):
             recorded[f"{folder}/{path.parts[-3]}"] = read_header(path)["meta"].get("scale_fit")
-            if folder == "reproduce_offline":  # the same fit on the run's part inside the training range
+            if folder in ("reproduce_offline", "reproduce_spring"):  # the same fit inside the training range
                 model = load_model(path, expected_system="furuta")
                 in_range[f"{folder}/{path.parts[-3]}"] = fit_scale(model, [prefix], "simpson", SPAN_SAMPLES)[
                     1

@@ -30,13 +30,19 @@ re-estimated offline from the encoder angles (``studies/calibrated_itau.py`` say
         --sensor experiment --integral-span 10 --training-velocities zero_phase \\
         --itau-normalization joint_momentum --pair dln:prop \\
         --out results/calibrated_protocol/reproduce_joint
+    furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
+        --sensor experiment --integral-span 10 --training-velocities zero_phase \\
+        --learned-spring alpha --pair dln:prop --pair adln:prop \\
+        --out results/calibrated_protocol/reproduce_spring --jobs 2
 
 This script then measures, per model, the learned potential's shape (hanging a minimum, upright a
 maximum; :func:`real_models.potential_shape` at both ends) and runs the swing-up + LQR designed on
 it (:class:`~furuta_gym.controllers.SwingUpLQR`, 5 V, 500 Hz, 8 s) on the plant, with the QUBE's
 sensors (2048 counts, derivative-filter velocities), from x0 = 0 and 30 seeded starts near the
-hanging rest, as the paper's control figure does. The plant's own model and the nominal analytic
-model are designed on beside them. Writes ``results/calibrated_protocol/control.json``;
+hanging rest, as the paper's control figure does, twice: with the fixed default pump gain k_e and
+with k_e picked on the design model alone (the paper chooses k_e for each model by trial; the pick
+never sees the plant). The plant's own model and the nominal analytic model are designed on beside
+them. Writes ``results/calibrated_protocol/control.json``;
 ``studies/calibrated_protocol_table.py`` writes the tables into docs/learning.md.
 
     python studies/calibrated_protocol.py [--episodes 30] [--seed 0]
@@ -59,6 +65,7 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from calibrated_protocol_table import VARIANTS  # noqa: E402
 from real_models import potential_shape  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,13 +73,10 @@ OUT = ROOT / "results" / "calibrated_protocol"
 PLANT = OUT / "diagnosis.json"
 RUNS = OUT / "reproduce" / "runs" / "furuta"
 #: the L_prop runs again, by name suffix: the residual summed over 10 intervals (``--integral-span 10``),
-#: that with velocities re-estimated offline (``--training-velocities zero_phase``), and that with
-#: L_Iτ normalised per joint (``--itau-normalization joint_momentum``; DeLaN only)
-VARIANT_RUNS = {
-    "_span": OUT / "reproduce_span" / "runs" / "furuta",
-    "_offline": OUT / "reproduce_offline" / "runs" / "furuta",
-    "_joint": OUT / "reproduce_joint" / "runs" / "furuta",
-}
+#: that with velocities re-estimated offline (``--training-velocities zero_phase``), that with L_Iτ
+#: normalised per joint (``--itau-normalization joint_momentum``; DeLaN only), and that with a
+#: learned rotor spring in the potential (``--learned-spring alpha``)
+VARIANT_RUNS = {suffix: OUT / folder / "runs" / "furuta" for suffix, folder in VARIANTS.items()}
 PAIRS = (("dln", "traj"), ("dln", "prop"), ("aph", "aph"), ("aph", "prop"), ("adln", "aph"), ("adln", "prop"))
 SECONDS = 8.0
 
@@ -108,15 +112,19 @@ def designs():
     return out
 
 
-def swing_up(model, starts: np.ndarray, seed: int) -> dict:
-    """The swing-up + LQR designed on ``model``, run on the calibrated plant from ``starts``."""
+def swing_up(model, starts: np.ndarray, seed: int, auto_gain: bool = False) -> dict:
+    """The swing-up + LQR designed on ``model``, run on the calibrated plant from ``starts``.
+
+    ``auto_gain``: the pump gain k_e picked by a seeded closed-loop sweep on the design model
+    itself (:func:`~furuta_gym.controllers.pick_k_e`), as the paper chooses k_e for each model by
+    trial; otherwise the fixed default (150 rad/s² commanded at the bottom, whatever the model)."""
     import gymnasium as gym
 
     from furuta_gym.controllers import SwingUpLQR, evaluate_on_env
     from furuta_gym.envs import Episode, Plant, Sensors
 
     try:
-        ctrl = SwingUpLQR.from_model(model, seed=seed)
+        ctrl = SwingUpLQR.from_model(model, auto_gain=auto_gain, seed=seed)
     except Exception as exc:  # a learned design can fail: record how, keep the table
         return {"design_error": f"{type(exc).__name__}: {exc}"}
     plant = Plant.load(PLANT)
@@ -129,6 +137,7 @@ def swing_up(model, starts: np.ndarray, seed: int) -> dict:
     recs = evaluate_on_env(ctrl, make_env, starts, SECONDS, seed=seed)
     success = [bool(r.metrics.success) for r in recs]
     return {
+        "k_e": float(ctrl.swing_up.k_e),
         "from_rest": success[0],
         "seeded_successes": int(sum(success[1:])),
         "seeded": len(success) - 1,
@@ -187,8 +196,9 @@ def itau_stage(run: Path) -> dict:
 def terms(model) -> dict:
     """What a controller designed on ``model`` takes besides the potential, at rest: the mass
     matrix, the force per unit velocity of each joint at zero input (viscous damping and back-EMF:
-    the plant's lumped damping holds both) and the input force per volt (fixed at the nominal gain
-    in the learned models)."""
+    the plant's lumped damping holds both), the input force per volt (fixed at the nominal gain
+    in the learned models) and the potential's stiffness in α (a cable spring's k)."""
+    import jax
     import jax.numpy as jnp
 
     rest = jnp.zeros(2)
@@ -201,6 +211,7 @@ def terms(model) -> dict:
         "mass_matrix_at_rest": np.asarray(model.mass_matrix(rest)).tolist(),
         "force_per_unit_velocity": damping,
         "input_force_per_volt": np.asarray(model.input_force(rest, rest, jnp.ones(1))).tolist(),
+        "alpha_stiffness_at_rest": float(jax.hessian(model.potential)(rest)[0, 0]),
     }
 
 
@@ -232,6 +243,7 @@ def main(argv=None) -> int:
     rows = {}
     for name, model in designs():
         row = {"shape": shape(model) if hasattr(model, "potential") else None, **swing_up(model, starts, args.seed)}
+        row["gain_picked_on_model"] = swing_up(model, starts, args.seed, auto_gain=True)
         rows[name] = row
         print(name, json.dumps(row, default=str)[:300], flush=True)
     doc = {
