@@ -105,10 +105,10 @@ def designs():
         if path.exists():
             out.append((f"{kind}_{loss}", load_model(path, expected_system="furuta")))
     for suffix, runs in VARIANT_RUNS.items():
-        for kind in ("dln", "adln"):
-            path = runs / f"{kind}_prop" / "seed0" / "model.eqx"
+        for kind, loss in PAIRS:
+            path = runs / f"{kind}_{loss}" / "seed0" / "model.eqx"
             if path.exists():
-                out.append((f"{kind}_prop{suffix}", load_model(path, expected_system="furuta")))
+                out.append((f"{kind}_{loss}{suffix}", load_model(path, expected_system="furuta")))
     return out
 
 

@@ -33,6 +33,8 @@ LABELS = {
     "dln_prop_joint": "DeLaN L_prop, span 0.2 s, offline velocities, L_Iτ per joint",
     "dln_prop_spring": "DeLaN L_prop, span 0.2 s, offline velocities, learned rotor spring",
     "adln_prop_spring": "augmented DeLaN L_prop, span 0.1 s, offline velocities, learned rotor spring",
+    "dln_traj_spring": "DeLaN L_traj, offline velocities, learned rotor spring",
+    "adln_aph_spring": "augmented DeLaN L_aph, offline velocities, learned rotor spring",
     "plant model": "the plant's own model (reference)",
     "nominal analytic": "nominal analytic (reference)",
 }
