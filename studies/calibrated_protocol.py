@@ -32,7 +32,7 @@ re-estimated offline from the encoder angles (``studies/calibrated_itau.py`` say
         --out results/calibrated_protocol/reproduce_joint
     furuta-gym reproduce --system furuta --plant results/calibrated_protocol/diagnosis.json \\
         --sensor experiment --integral-span 10 --training-velocities zero_phase \\
-        --learned-spring alpha --pair dln:prop --pair adln:prop \\
+        --learned-spring alpha --pair dln:prop --pair adln:prop --pair dln:traj --pair adln:aph \\
         --out results/calibrated_protocol/reproduce_spring --jobs 2
 
 This script then measures, per model, the learned potential's shape (hanging a minimum, upright a
