@@ -135,3 +135,69 @@ def test_the_row_shrink_results_say_what_the_docs_read_from_them():
     assert least(a, "momentum") < 1 == least(a, "joint_momentum") == least(b, "momentum") == least(b, "joint_momentum")
     fits = a["best_fit"]
     assert fits["momentum"]["M11_over_M22"] < 0.5 * a["plant_M11_over_M22"] < fits["joint_momentum"]["M11_over_M22"]
+
+
+def test_the_row_shrink_results_point_at_the_spring():
+    """docs/learning.md: with the cable spring alone the loss's best fit keeps the plant's mass
+    ratio under both normalisers; with the Coulomb friction alone the rotor shrinks as without both."""
+    from pathlib import Path
+
+    doc = json.loads((Path(__file__).resolve().parents[1] / "results/calibrated_protocol/row_shrink.json").read_text())
+    spring, coulomb = doc["models"]["spring_only"], doc["models"]["coulomb_only"]
+    for n in ("momentum", "joint_momentum"):
+        assert spring["best_fit"][n]["M11_over_M22"] == pytest.approx(spring["plant_M11_over_M22"], rel=0.2)
+    assert coulomb["best_fit"]["momentum"]["M11_over_M22"] < 0.5 * coulomb["plant_M11_over_M22"]
+
+
+def test_the_control_results_say_what_the_docs_read_from_them():
+    """The protocol's control table as docs/learning.md reads it: both spring L_prop designs meet
+    the bar (x0 = 0, ≥ 90 % of the starts) with k_e picked on the model and not with the default
+    gain; the L_traj / L_aph designs without the spring fail the picked gain, with it they pass."""
+    from pathlib import Path
+
+    doc = json.loads((Path(__file__).resolve().parents[1] / "results/calibrated_protocol/control.json").read_text())
+
+    def bar(run):
+        return "design_error" not in run and run["from_rest"] and run["seeded_successes"] >= 0.9 * run["seeded"]
+
+    rows = doc["models"]
+    for name in ("dln_prop_spring", "adln_prop_spring"):
+        assert (
+            rows[name]["shape"]["curvature_at_top_Nm_per_rad"]
+            < 0
+            < rows[name]["shape"]["curvature_at_hanging_Nm_per_rad"]
+        )
+        assert bar(rows[name]["gain_picked_on_model"]) and not bar(rows[name]) and rows[name]["from_rest"]
+    for name in ("dln_traj", "adln_aph"):
+        assert not bar(rows[name]["gain_picked_on_model"]) and bar(rows[name])
+        assert bar(rows[f"{name}_spring"]) and bar(rows[f"{name}_spring"]["gain_picked_on_model"])
+
+
+def test_the_spring_l_prop_design_swings_the_rig_up_from_rest():
+    """End to end with today's code: the committed DeLaN L_prop checkpoint with a learned rotor
+    spring, k_e picked on it alone, swings up the calibrated rig's MuJoCo plant from x0 = 0 through
+    the QUBE's sensors, and holds it."""
+    from pathlib import Path
+
+    import gymnasium as gym
+
+    from furuta_gym.controllers import SwingUpLQR, evaluate_on_env
+    from furuta_gym.envs import Episode, Sensors
+    from furuta_gym.training.checkpoint import load_model
+
+    out = Path(__file__).resolve().parents[1] / "results/calibrated_protocol"
+    model = load_model(out / "reproduce_spring/runs/furuta/dln_prop/seed0/model.eqx", expected_system="furuta")
+    assert model.hyperparameters["springs"] == ("alpha",)
+    ctrl = SwingUpLQR.from_model(model, auto_gain=True, seed=0)
+    plant = Plant.load(out / "diagnosis.json")
+
+    def make_env():
+        return gym.make(
+            "furuta_gym/Furuta-v0",
+            episode=Episode(seconds=None),
+            plant=plant,
+            sensors=Sensors(encoder_counts=2048, velocity="filter"),
+        )
+
+    (record,) = evaluate_on_env(ctrl, make_env, np.zeros((1, 4)), 8.0, seed=0)
+    assert record.metrics.success and record.metrics.time_to_upright < 6.0
