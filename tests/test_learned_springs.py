@@ -102,3 +102,11 @@ def test_the_command_line_names_the_springs():
     assert config.model_overrides == {"springs": ("alpha",)}
     _, default = config_from_args(build_parser().parse_args(["reproduce"]))
     assert default.model_overrides is None
+    from furuta_gym.cli.train import model_hparams, run
+
+    train = ["train", "--system", "furuta", "--model", "dln", "--loss", "prop", "--data", "qube:1", "--out", "x"]
+    args = build_parser().parse_args([*train, "--learned-spring", "alpha", "--hidden", "8,8"])
+    assert model_hparams(args) == {"springs": ("alpha",), "hidden": (8, 8)}
+    aph = build_parser().parse_args([*train[:4], "aph", *train[5:], "--learned-spring", "alpha"])
+    with pytest.raises(ValueError, match="--learned-spring: APHYNITY's potential"):
+        run(aph)  # refused before any data is read or folder made

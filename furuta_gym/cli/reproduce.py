@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from ..systems import SYSTEMS
+from .train import add_learned_spring_argument, model_hparams
 
 __all__ = ["add_arguments", "add_executor_arguments", "config_from_args", "run"]
 
@@ -117,15 +118,7 @@ def _add_data_arguments(parser: argparse.ArgumentParser) -> None:
         "data); joint_momentum divides each joint's residual by its own momentum changes, so a "
         "model cannot lighten a joint whose forces it cannot express",
     )
-    parser.add_argument(
-        "--learned-spring",
-        action="append",
-        default=None,
-        metavar="JOINT",
-        help="give the DeLaN and augmented-DeLaN potentials a learned spring ½k(q − q_ref)² on "
-        "JOINT (repeatable; e.g. alpha, a rotor cable the diagnosis found: their periodic "
-        "potential cannot hold one that winds up over turns); name only dln / adln pairs",
-    )
+    add_learned_spring_argument(parser)
     parser.add_argument(
         "--quadrature",
         choices=["trapezoid", "simpson", "hermite"],
@@ -219,7 +212,7 @@ def config_from_args(args: argparse.Namespace):
         integral_span=args.integral_span,
         training_velocities=args.training_velocities,
         train_overrides=_train_overrides(args),
-        model_overrides={"springs": tuple(args.learned_spring)} if args.learned_spring else None,
+        model_overrides=model_hparams(args),
         figures=not args.no_figures,
         progress=not args.no_progress,
         jobs=jobs,

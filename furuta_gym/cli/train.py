@@ -60,6 +60,29 @@ def _horizons(text: str) -> tuple[int | float | None, ...]:
     return tuple(out)
 
 
+def add_learned_spring_argument(parser: argparse.ArgumentParser) -> None:
+    """``--learned-spring JOINT``: a spring with learned k and rest in a DeLaN's potential."""
+    parser.add_argument(
+        "--learned-spring",
+        action="append",
+        default=None,
+        metavar="JOINT",
+        help="give the DeLaN and augmented-DeLaN potentials a learned spring ½k(q − q_ref)² on "
+        "JOINT (repeatable; e.g. alpha, a rotor cable the diagnosis found: their periodic "
+        "potential cannot hold one that winds up over turns); dln / adln models only",
+    )
+
+
+def model_hparams(args: argparse.Namespace) -> dict | None:
+    """The model hyper-parameters the command line sets (None: the system's defaults)."""
+    hp = {}
+    if getattr(args, "hidden", None):
+        hp["hidden"] = args.hidden
+    if args.learned_spring:
+        hp["springs"] = tuple(args.learned_spring)
+    return hp or None
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--system", required=True, choices=sorted(SYSTEMS))
     parser.add_argument(
@@ -121,6 +144,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "a few estimator time constants on encoder logs with estimated velocities",
     )
     parser.add_argument("--hidden", type=_ints, help="MLP widths, e.g. 16,16")
+    add_learned_spring_argument(parser)
     parser.add_argument("--seed", type=int, help="random seed (weights, shuffling)")
     parser.add_argument("--checkpoint-every", type=int, help="model snapshot every N epochs")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -185,6 +209,9 @@ def run(args: argparse.Namespace) -> int:
 
     from ..training.train import train
 
+    hparams = model_hparams(args)
+    if hparams and "springs" in hparams and args.model == "aph":
+        raise ValueError("--learned-spring: APHYNITY's potential is its physics prior's; use --model dln or adln")
     trajs, notes = prepared_logs(args.data, args)
     forced = prepared_logs([args.forced], args, split=None)[0] if args.forced else None
     data_info = _describe_data(args, trajs, notes)
@@ -192,7 +219,6 @@ def run(args: argparse.Namespace) -> int:
 
     enable_compilation_cache()  # compiling once per machine, not once per run
     config = _config(args)
-    hparams = {"hidden": args.hidden} if args.hidden else None
     try:
         model, history = train(
             args.model,
