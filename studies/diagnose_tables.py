@@ -1,7 +1,8 @@
 """Docs tables of the diagnosis, generated from the committed result files (never typed by hand).
 
 Reads ``results/diagnose_sim/*.json``, ``results/diagnose_sim_exact_angles/*.json``,
-``results/diagnose_sim_uniform_blocks/*.json`` and ``results/diagnose_sim_stop_dwell/*.json``
+``results/diagnose_sim_uniform_blocks/*.json``, ``results/diagnose_sim_stop_dwell/*.json`` and
+``results/diagnose_sim_held_stop/*.json``
 (``studies/diagnose_simulated.py``) and ``results/diagnose_real/`` (its JSON files and
 ``reference/``, ``runs/``; ``studies/diagnose_real_data.py``) and rewrites the blocks between
 ``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->`` in docs/diagnose.md and README.md.
@@ -33,6 +34,9 @@ DRIFT = ROOT / "results" / "cable_centre_drift" / "drift.json"  # studies/cable_
 MATCH = ROOT / "results" / "closed_loop_match" / "match.json"  # studies/closed_loop_match.py
 # the same logs and runs with stops left out of the equation error (--stop-dwell 0.04)
 STOP, REAL_STOP = ROOT / "results" / "diagnose_sim_stop_dwell", ROOT / "results" / "diagnose_real_stop_dwell"
+# ... and with only the stops that dry friction held left out (--held-stop 2), and that rule's calibration
+HELD, REAL_HELD = ROOT / "results" / "diagnose_sim_held_stop", ROOT / "results" / "diagnose_real_held_stop"
+HELD_CALIBRATION = ROOT / "results" / "diagnose_held_stop" / "calibration.json"  # diagnose_held_stop_calibration.py
 
 
 def _load(folder: Path) -> dict[str, dict]:
@@ -249,6 +253,28 @@ def rest_bound_table(doc: dict) -> str:
         rows.append(
             f"| {kind} | {r['seed']} | {r['coulomb']:.2g} | {r['breakaway']:.2g} | {r['windows']} | "
             f"{r['held']:.2g} | {r['held_over_coulomb']:.2f} | {r['held_over_breakaway']:.2f} |"
+        )
+    return "\n".join(rows)
+
+
+def held_stop_table(doc: dict) -> str:
+    """Per experiment: the stops' largest free excursion, and which stops the rule leaves out
+    against whether the simulator's rotor stood still (``held`` in the file: under 0.01 rad/s
+    for most of the stop)."""
+    groups = defaultdict(list)
+    for r in doc["rows"]:
+        groups[(r["excitation"], r["case"])].append(r)
+    rows = [
+        "| experiment | case | logs | stops | largest free excursion (counts) | still in the simulator | "
+        f"of them left out (> {doc['held_stop']:g} counts) | their share of the still samples | others left out |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (exc, case), rs in groups.items():
+        held, samples = sum(r["held"] for r in rs), sum(r["held_samples"] for r in rs)
+        share = f"{sum(r['held_samples_left_out'] for r in rs) / samples:.0%}" if samples else "-"
+        rows.append(
+            f"| {exc} | {case} | {len(rs)} | {sum(r['stops'] for r in rs)} | {max(r['max_excursion'] for r in rs):.2f} | "
+            f"{held} | {sum(r['held_left_out'] for r in rs)} | {share} | {sum(r['moving_left_out'] for r in rs)} |"
         )
     return "\n".join(rows)
 
@@ -471,6 +497,13 @@ def blocks() -> dict[str, str]:
         out["diagnose-sim-stop-dwell"] = sim_table(stop) + "\n\nThe sticky sweeps:\n\n" + sticky_table(stop)
     if real_stop:
         out["diagnose-real-stop-dwell"] = readme_line(real_stop)
+    held, real_held = _load(HELD), _load(REAL_HELD)
+    if held:
+        out["diagnose-sim-held-stop"] = sim_table(held) + "\n\nThe sticky sweeps:\n\n" + sticky_table(held)
+    if real_held:
+        out["diagnose-real-held-stop"] = readme_line(real_held)
+    if HELD_CALIBRATION.exists():
+        out["diagnose-held-stop-calibration"] = held_stop_table(json.loads(HELD_CALIBRATION.read_text()))
     runs = REAL / "runs" / "per_run.json"
     if runs.exists():
         out["diagnose-real-runs"] = per_run_table(json.loads(runs.read_text()), real)
