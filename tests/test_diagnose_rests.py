@@ -12,7 +12,14 @@ import pytest
 
 import furuta_gym
 from furuta_gym.data import Trajectory
-from furuta_gym.diagnose import DiagnosisSettings, held_at_rest, layout_for, measured_like, sticky_rig
+from furuta_gym.diagnose import (
+    DiagnosisSettings,
+    held_at_rest,
+    layout_for,
+    measured_like,
+    sticky_rig,
+    stop_excursions,
+)
 from furuta_gym.diagnose._diagnose import EffectEvidence, _mark_unresolved, sensor_resolution
 from furuta_gym.diagnose import _diagnose, _fit
 from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment
@@ -139,6 +146,11 @@ def test_a_stop_is_left_out_when_the_force_on_it_would_have_moved_a_free_joint_b
         assert seg.rest[:, 0].tolist() == expected
         _fit.build_regressors([seg], layout, theta, 50, "zoh")  # off by default
         assert not seg.rest[:, 0].any()
+    # the same, as the calibration study reads it from a measured log (velocities estimated)
+    log = [Trajectory(t=np.arange(counts.size) * DT, q=_segment(counts, counts).q, u=np.full((counts.size, 1), 2.0))]
+    (stop,) = stop_excursions(log, "alpha", layout, theta)
+    assert (stop.start, stop.samples) == (82, 37)
+    assert stop.excursion == pytest.approx(9.2, abs=0.1)
 
 
 def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:

@@ -216,6 +216,7 @@ def _free_acceleration(layout: ParameterLayout, j: int):
 
 
 def _lower_hull(t: np.ndarray, x: np.ndarray) -> list[int]:
+    """Indices of the lower convex hull of the points (t, x), t increasing (Andrew's chain)."""
     hull: list[int] = []
     for k in range(t.size):
         while len(hull) >= 2:
