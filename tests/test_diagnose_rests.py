@@ -171,7 +171,7 @@ def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:
 def test_stops_left_out_keep_the_equation_error_spring_of_a_sticky_sweep_unbiased():
     """On a sticky sweep whose rotor stops at most reversals (issue 43's grid, seed 106), the
     intervals with a stop are where the estimated velocities, and with them the momentum and
-    sgn(q̇), are wrong: fitted with them (the default leaves out only whole intervals at rest),
+    sgn(q̇), are wrong: fitted with them (``held_stop=None`` leaves out only whole intervals at rest),
     the rotor's inertia comes out low and the spring, which trades against it at low frequency,
     far too weak. Left out (``stop_dwell``), both come out right. Leaving out only the stops that
     friction held (``held_stop``) mends the inertia and most of the spring's shortfall: the slow passes
@@ -181,12 +181,13 @@ def test_stops_left_out_keep_the_equation_error_spring_of_a_sticky_sweep_unbiase
     keys = ["spring:alpha", "constant_torque:alpha", "coulomb_friction:alpha", "stiction:alpha"]
     planted_j1 = layout_for("furuta").nominal()[layout_for("furuta").index("J1")]
     stops_out = _equation_error_coefficients(data, keys, stop_dwell=0.04)
-    whole_rests_only = _equation_error_coefficients(data, keys)  # the default
+    # whole rests only: the held-stop rule, on by default, turned off (what this test is about)
+    whole_rests_only = _equation_error_coefficients(data, keys, held_stop=None)
     assert stops_out["spring:alpha"] == pytest.approx(rig[0].coefficient, rel=0.1)
     assert stops_out["J1"] == pytest.approx(planted_j1, rel=0.02)
     assert whole_rests_only["spring:alpha"] < 0.7 * rig[0].coefficient
     assert whole_rests_only["J1"] < 0.97 * planted_j1
-    held_out = _equation_error_coefficients(data, keys, held_stop=2.0)
+    held_out = _equation_error_coefficients(data, keys)  # the default: held_stop=2
     assert 0.75 * rig[0].coefficient < held_out["spring:alpha"] < 0.9 * rig[0].coefficient
     assert held_out["J1"] == pytest.approx(planted_j1, rel=0.02)
 
@@ -201,11 +202,45 @@ def test_stop_dwell_is_off_by_default_and_checked():
     assert args.stop_dwell == 0.04
 
 
-def test_held_stop_is_off_by_default_and_checked():
-    assert DiagnosisSettings().held_stop is None
+def test_held_stop_is_on_by_default_can_be_turned_off_and_is_checked():
+    assert DiagnosisSettings().held_stop == 2.0
+    assert DiagnosisSettings(held_stop=None).resolved("furuta", DT).held_stop is None
     with pytest.raises(ValueError, match="held_stop: expected a number of counts >= 1 or None, got 0.5"):
         DiagnosisSettings(held_stop=0.5).resolved("furuta", DT)
     from furuta_gym.cli import build_parser
+    from furuta_gym.cli.diagnose import UNSET
 
-    args = build_parser().parse_args(["diagnose", "log.csv", "--system", "furuta", "--held-stop", "2"])
-    assert args.held_stop == 2.0
+    parse = build_parser().parse_args
+    base = ["diagnose", "log.csv", "--system", "furuta"]
+    assert parse(base).held_stop is UNSET  # not given: DiagnosisSettings' default
+    assert parse([*base, "--held-stop", "3"]).held_stop == 3.0
+    for off in ("off", "OFF", "0", "none"):
+        assert parse([*base, "--held-stop", off]).held_stop is None
+    for bad in ("0.5", "-2", "two"):
+        with pytest.raises(SystemExit):
+            parse([*base, "--held-stop", bad])
+
+
+def test_held_stop_off_on_the_cli_reaches_diagnose(monkeypatch, tmp_path):
+    """``--held-stop off`` passes ``held_stop=None`` on to ``diagnose``; no flag passes nothing, so
+    the default (2 counts) holds."""
+    from furuta_gym.cli import build_parser
+    from furuta_gym.cli import diagnose as cli
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_diagnose(*args, **kwargs):
+        seen.append(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(cli, "_load", lambda data, args: [])
+    monkeypatch.setattr("furuta_gym.diagnose.diagnose", fake_diagnose)  # run() imports it when called
+    for extra, expected in ((["--held-stop", "off"], None), ([], "absent"), (["--held-stop", "4"], 4.0)):
+        args = build_parser().parse_args(["diagnose", str(tmp_path / "log.csv"), "--system", "furuta", *extra])
+        with pytest.raises(Stop):
+            cli.run(args)
+        assert seen[-1].get("held_stop", "absent") == expected
+    assert DiagnosisSettings().held_stop == 2.0

@@ -14,7 +14,24 @@ from ..systems import SYSTEMS
 # the logs are read as train and evaluate read them (one helper); the old names stay
 from ._logs import load_logs as _load, pairs as _pairs, qube_runs as _qube_runs  # noqa: F401
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["add_arguments", "held_stop_counts", "run"]
+
+UNSET = object()  # an option not given: the setting keeps its default
+
+
+def held_stop_counts(text: str) -> float | None:
+    """``--held-stop``'s value: a number of counts >= 1, or ``off`` (or 0) for None, the rule off."""
+    if text.strip().lower() in ("off", "none"):
+        return None
+    try:
+        counts = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of counts >= 1, or 'off' (or 0), got {text!r}") from None
+    if counts == 0:
+        return None
+    if not counts >= 1:
+        raise argparse.ArgumentTypeError(f"expected a number of counts >= 1, or 'off' (or 0), got {text!r}")
+    return counts
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -101,10 +118,12 @@ def _add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--held-stop",
-        type=float,
+        type=held_stop_counts,
+        default=UNSET,
         metavar="COUNTS",
-        help="also leave out the intervals where a joint stays on one count while the model's other forces "
-        "would have moved it, free, by more than this many counts (its dry friction held it; default off)",
+        help="leave out the intervals where a joint stays on one count while the model's other forces "
+        "would have moved it, free, by more than this many counts (its dry friction held it; default 2; "
+        "'off' or 0 keeps every stop's equations, as before this became the default)",
     )
     parser.add_argument(
         "--skip",
@@ -141,10 +160,11 @@ def run(args: argparse.Namespace) -> int:
         ("interval", args.interval),
         ("oe_max_windows", args.oe_windows),
         ("stop_dwell", args.stop_dwell),
-        ("held_stop", args.held_stop),
     ):
         if val is not None:
             overrides[key] = val
+    if args.held_stop is not UNSET:  # None ('off') is a value here: it turns the default off
+        overrides["held_stop"] = args.held_stop
     res = diagnose(
         trajs,
         args.system,

@@ -92,8 +92,10 @@ class DiagnosisSettings:
     # ... or, given a number of counts, where it stops for longer than a free joint could: over the
     # stop, the model's forces other than dry friction would have moved it by more than that many
     # counts (through a reversal or a slow pass a free joint stays within one), so friction held it.
-    # Stops that are motion keep their equations (under feedback nearly all are)
-    held_stop: float | None = None
+    # Stops that are motion keep their equations (under feedback nearly all are). On by default
+    # (2 counts, issue 43: the whole grid and the shipped runs find what they found without it, and
+    # the sticky sweeps' spring is right on one more log); None turns it off
+    held_stop: float | None = 2.0
     identify_t: float = 3.0  # a base parameter whose nominal size moves the residual less is held
     veto_t: float = 2.0  # an added effect is dropped if its refit predicts significantly worse
     max_delay: float = 0.05
