@@ -13,10 +13,12 @@ here. Writes one JSON per run of ``diagnose`` into ``results/diagnose_real/`` (t
 docs tables are generated from them by ``studies/diagnose_tables.py``).
 
     python studies/diagnose_real_data.py [--out results/diagnose_real]
-    # the same with stops left out of the equation error
+    # the same with stops left out of the equation error (made before held_stop was the default:
+    # held stops kept; today add --held-stop off to reproduce it)
     python studies/diagnose_real_data.py --stop-dwell 0.04 --out results/diagnose_real_stop_dwell
-    # ... or only the stops that dry friction held
-    python studies/diagnose_real_data.py --held-stop 2 --out results/diagnose_real_held_stop
+    # the default leaves out only the stops that dry friction held (held_stop = 2 counts, issue 43);
+    # every stop kept, the default before it (results/diagnose_real_held_stop_off was made then):
+    python studies/diagnose_real_data.py --held-stop off --out results/diagnose_real_held_stop_off
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
+from furuta_gym.cli.diagnose import UNSET, held_stop_counts  # noqa: E402
 from furuta_gym.diagnose import diagnose  # noqa: E402
 
 SETTINGS = dict(window=0.1, oe_max_windows=64)
@@ -122,13 +125,15 @@ def main() -> None:
     )
     ap.add_argument(
         "--held-stop",
-        type=float,
-        help="DiagnosisSettings.held_stop, counts (default off; results/diagnose_real_held_stop: 2)",
+        type=held_stop_counts,
+        default=UNSET,
+        help="DiagnosisSettings.held_stop, counts, or 'off' (default: its default, 2; "
+        "results/diagnose_real_held_stop_off: off)",
     )
     args = ap.parse_args()
     if args.stop_dwell is not None:
         SETTINGS["stop_dwell"] = args.stop_dwell
-    if args.held_stop is not None:
+    if args.held_stop is not UNSET:
         SETTINGS["held_stop"] = args.held_stop
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

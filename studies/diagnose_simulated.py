@@ -21,10 +21,12 @@ per log into ``results/diagnose_sim/``; ``studies/diagnose_tables.py`` makes the
     # the sticky sweeps with every block weighted alike (the evidence before its weighting)
     python studies/diagnose_simulated.py --only sticky_cable --evidence-weighting uniform \
         --out results/diagnose_sim_uniform_blocks
-    # every log with stops left out of the equation error
+    # every log with stops left out of the equation error (made before held_stop was the default:
+    # held stops kept; today add --held-stop off to reproduce it)
     python studies/diagnose_simulated.py --stop-dwell 0.04 --out results/diagnose_sim_stop_dwell
-    # ... or only the stops that dry friction held (the free motion would have left the count)
-    python studies/diagnose_simulated.py --held-stop 2 --out results/diagnose_sim_held_stop
+    # the default leaves out only the stops that dry friction held (held_stop = 2 counts, issue 43);
+    # every stop kept, the default before it (results/diagnose_sim_held_stop_off was made then):
+    python studies/diagnose_simulated.py --held-stop off --out results/diagnose_sim_held_stop_off
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
+from furuta_gym.cli.diagnose import UNSET, held_stop_counts  # noqa: E402
 from furuta_gym.diagnose import diagnose, measured_like, sticky_rig  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
 
@@ -158,12 +161,17 @@ def main() -> None:
         help="DiagnosisSettings.evidence_weighting (default: its default)",
     )
     ap.add_argument("--stop-dwell", type=float, help="DiagnosisSettings.stop_dwell, s (default off)")
-    ap.add_argument("--held-stop", type=float, help="DiagnosisSettings.held_stop, counts (default off)")
+    ap.add_argument(
+        "--held-stop",
+        type=held_stop_counts,
+        default=UNSET,
+        help="DiagnosisSettings.held_stop, counts, or 'off' (default: its default, 2)",
+    )
     args = ap.parse_args()
     overrides = {} if args.start_iterations is None else {"start_iterations": args.start_iterations}
     if args.stop_dwell is not None:
         overrides["stop_dwell"] = args.stop_dwell
-    if args.held_stop is not None:
+    if args.held_stop is not UNSET:
         overrides["held_stop"] = args.held_stop
     if args.evidence_weighting:
         overrides["evidence_weighting"] = args.evidence_weighting

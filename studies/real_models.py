@@ -37,6 +37,7 @@ import dataclasses
 import json
 import platform
 import shutil
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -322,13 +323,14 @@ def main() -> None:
     ap.add_argument(
         "--learned",
         default=",".join([*LEARNED, *FINETUNE]),
-        help="comma list of learned models to train and score (the others' result files are kept)",
+        help="comma list of learned models to train and score (the others' result files are kept); "
+        "'' reruns only the nominal, fitted and diagnosed rows",
     )
     ap.add_argument("--fit-runs", type=_run_range, default=FIT_RUNS, help="runs to fit on, e.g. 1-10 (default 1-5)")
     ap.add_argument("--test-runs", type=_run_range, default=TEST_RUNS, help="runs to score on (default 6-15)")
     args = ap.parse_args()
     _use_runs(ap, args.fit_runs, args.test_runs)
-    names = args.learned.split(",")
+    names = [n for n in args.learned.split(",") if n]  # --learned "": only the declared-model rows
     if unknown := [n for n in names if n not in LEARNED and n not in FINETUNE]:
         ap.error(f"--learned: unknown {unknown}; expected some of {[*LEARNED, *FINETUNE]}")
     from furuta_gym.models import Furuta
@@ -355,7 +357,7 @@ def main() -> None:
             models[name] = load_model(out / "runs" / name / SELECTED, expected_system="furuta")
     energy_figure(models, test, out / "energy.png")
     summary = {
-        "command": " ".join(["python studies/real_models.py", *sys.argv[1:]]),
+        "command": shlex.join(["python", "studies/real_models.py", *sys.argv[1:]]),
         "fit_runs": FIT_RUNS,
         "test_runs": TEST_RUNS,
         "skip_seconds": SKIP,
@@ -372,6 +374,12 @@ def main() -> None:
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "machine": f"{platform.node()} {platform.processor() or platform.machine()}",
     }
+    if not names and (out / "summary.json").is_file():
+        # only the declared-model rows were rerun: the summary keeps the training run's command and
+        # date, and records this rerun beside them
+        kept = json.loads((out / "summary.json").read_text())
+        kept["declared_rerun"] = {k: summary[k] for k in ("command", "date", "machine")}
+        summary = kept
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     print(f"wrote {out}/*.json and {out}/energy.png")
 

@@ -202,8 +202,13 @@ def block(summary: dict, docs: list[dict], folder: Path = RESULTS, name: str = N
         "",
         f"Made by `{summary.get('command', STUDY)} && python studies/real_models_table.py"
         + ("" if folder == RESULTS else f" --results {folder.relative_to(ROOT)} --block {name}")
-        + f"` ({train_min:.0f} min of training in all, {summary['date']}); figure: "
-        f"[{folder.relative_to(ROOT)}/energy.png](../{folder.relative_to(ROOT)}/energy.png).",
+        + f"` ({train_min:.0f} min of training in all, {summary['date']})"
+        + (
+            f"; the nominal, fitted and diagnosed rows again by `{rerun['command']}` ({rerun['date']})"
+            if (rerun := summary.get("declared_rerun"))
+            else ""
+        )
+        + f"; figure: [{folder.relative_to(ROOT)}/energy.png](../{folder.relative_to(ROOT)}/energy.png).",
     ]
     return "\n".join(lines)
 
