@@ -2,7 +2,7 @@
 
 Reads ``results/diagnose_sim/*.json``, ``results/diagnose_sim_exact_angles/*.json``,
 ``results/diagnose_sim_uniform_blocks/*.json``, ``results/diagnose_sim_stop_dwell/*.json`` and
-``results/diagnose_sim_held_stop/*.json``
+``results/diagnose_sim_held_stop_off/*.json``
 (``studies/diagnose_simulated.py``) and ``results/diagnose_real/`` (its JSON files and
 ``reference/``, ``runs/``; ``studies/diagnose_real_data.py``) and rewrites the blocks between
 ``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->`` in docs/diagnose.md and README.md.
@@ -34,8 +34,9 @@ DRIFT = ROOT / "results" / "cable_centre_drift" / "drift.json"  # studies/cable_
 MATCH = ROOT / "results" / "closed_loop_match" / "match.json"  # studies/closed_loop_match.py
 # the same logs and runs with stops left out of the equation error (--stop-dwell 0.04)
 STOP, REAL_STOP = ROOT / "results" / "diagnose_sim_stop_dwell", ROOT / "results" / "diagnose_real_stop_dwell"
-# ... and with only the stops that dry friction held left out (--held-stop 2), and that rule's calibration
-HELD, REAL_HELD = ROOT / "results" / "diagnose_sim_held_stop", ROOT / "results" / "diagnose_real_held_stop"
+# ... and with every stop kept (--held-stop off: the default before issue 43 left out the stops that dry
+# friction held; these records were made then), and the held-stop rule's calibration
+OFF, REAL_OFF = ROOT / "results" / "diagnose_sim_held_stop_off", ROOT / "results" / "diagnose_real_held_stop_off"
 HELD_CALIBRATION = ROOT / "results" / "diagnose_held_stop" / "calibration.json"  # diagnose_held_stop_calibration.py
 
 
@@ -497,11 +498,11 @@ def blocks() -> dict[str, str]:
         out["diagnose-sim-stop-dwell"] = sim_table(stop) + "\n\nThe sticky sweeps:\n\n" + sticky_table(stop)
     if real_stop:
         out["diagnose-real-stop-dwell"] = readme_line(real_stop)
-    held, real_held = _load(HELD), _load(REAL_HELD)
-    if held:
-        out["diagnose-sim-held-stop"] = sim_table(held) + "\n\nThe sticky sweeps:\n\n" + sticky_table(held)
-    if real_held:
-        out["diagnose-real-held-stop"] = readme_line(real_held)
+    held_off, real_held_off = _load(OFF), _load(REAL_OFF)
+    if held_off:
+        out["diagnose-sim-held-stop-off"] = sim_table(held_off) + "\n\nThe sticky sweeps:\n\n" + sticky_table(held_off)
+    if real_held_off:
+        out["diagnose-real-held-stop-off"] = readme_line(real_held_off)
     if HELD_CALIBRATION.exists():
         out["diagnose-held-stop-calibration"] = held_stop_table(json.loads(HELD_CALIBRATION.read_text()))
     runs = REAL / "runs" / "per_run.json"
