@@ -215,6 +215,20 @@ def _free_acceleration(layout: ParameterLayout, j: int):
     return _compiled("free_acceleration", layout, j, build=build)
 
 
+def free_acceleration_along(layout: ParameterLayout, theta, q, qd, u, dt: float, j: int) -> np.ndarray:
+    """(T,) :func:`_free_acceleration` of joint ``j`` along a measured run, q̈ by central
+    differences of ``qd``."""
+    qdd = np.gradient(qd, dt, axis=0)
+    args = [jnp.asarray(x) for x in (q, qd, qdd, u)]
+    return np.asarray(_free_acceleration(layout, j)(jnp.asarray(theta), *args))
+
+
+def value_runs(q_j: np.ndarray) -> np.ndarray:
+    """Bounds [0, …, T] of the runs of ``q_j`` on one logged value: run k is ``bounds[k]:bounds[k + 1]``."""
+    change = np.flatnonzero(np.diff(q_j) != 0) + 1
+    return np.concatenate([[0], change, [q_j.size]])
+
+
 def _lower_hull(t: np.ndarray, x: np.ndarray) -> list[int]:
     """Indices of the lower convex hull of the points (t, x), t increasing (Andrew's chain)."""
     hull: list[int] = []
@@ -258,8 +272,7 @@ def held_samples(q_j: np.ndarray, a_j: np.ndarray, dt: float, counts: float) -> 
     steps = steps[steps > 0]
     if steps.size == 0:
         return held
-    change = np.flatnonzero(np.diff(q_j) != 0) + 1
-    bounds = np.concatenate([[0], change, [q_j.size]])
+    bounds = value_runs(q_j)
     for s, e in zip(bounds[:-1], bounds[1:]):
         if e - s >= 3 and free_excursion(a_j[s:e], dt) > counts * steps.min():
             held[s:e] = True
@@ -270,12 +283,10 @@ def _held_stops(layout, theta0, seg: Segment, stride: int, n_intervals: int, cou
     """(N, n): the joint was held within the interval (:func:`held_samples`). The measured input
     drives it, not one through a trial delay or lag: which equations are left out must not change
     between the input dynamics the search compares."""
-    qdd = np.gradient(seg.qd, seg.dt, axis=0)
-    args = [jnp.asarray(x) for x in (seg.q, seg.qd, qdd, seg.u)]
     out = np.zeros((n_intervals, seg.q.shape[1]), bool)
     idx = np.arange(n_intervals)[:, None] * stride + np.arange(stride + 1)[None, :]
     for j in range(seg.q.shape[1]):
-        a = np.asarray(_free_acceleration(layout, j)(jnp.asarray(theta0), *args))
+        a = free_acceleration_along(layout, theta0, seg.q, seg.qd, seg.u, seg.dt, j)
         held = held_samples(seg.q[:, j], a, seg.dt, counts)
         out[:, j] = held[np.minimum(idx, seg.q.shape[0] - 1)].any(axis=1)
     return out

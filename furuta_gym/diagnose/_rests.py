@@ -26,7 +26,15 @@ from ..lagrangian import inverse_dynamics
 from ..measured import estimate_velocities
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
-from ._fit import NO_INPUT_DYNAMICS, InputDynamics, Segment, _compiled, _free_acceleration, free_excursion
+from ._fit import (
+    NO_INPUT_DYNAMICS,
+    InputDynamics,
+    Segment,
+    _compiled,
+    free_acceleration_along,
+    free_excursion,
+    value_runs,
+)
 from ._library import ParameterLayout
 
 __all__ = ["RestBound", "rest_bound", "held_at_rest", "Stop", "stop_excursions"]
@@ -152,16 +160,13 @@ def stop_excursions(
     ``trajectories`` (not at their ends) with its free excursion under ``layout``/``theta``, as
     ``diagnose`` measures it (velocities estimated where a trajectory has none)."""
     j = get_spec(layout.system).joint_names.index(joint)
-    acceleration = _free_acceleration(layout, j)
     out = []
     for tr in trajectories:
         tr = estimate_velocities(tr)
         assert tr.qd is not None
-        qdd = np.gradient(tr.qd, tr.dt, axis=0)
-        args = [jnp.asarray(x) for x in (tr.q, tr.qd, qdd, tr.u)]
-        a = np.asarray(acceleration(jnp.asarray(theta), *args))
-        change = np.flatnonzero(np.diff(tr.q[:, j]) != 0) + 1
-        for s, e in zip(change[:-1], change[1:]):
+        a = free_acceleration_along(layout, theta, tr.q, tr.qd, tr.u, tr.dt, j)
+        interior = value_runs(tr.q[:, j])[1:-1]  # a run at either end may go on outside the log
+        for s, e in zip(interior[:-1], interior[1:]):
             if e - s >= min_samples:
                 out.append(Stop(tr.name, int(s), int(e - s), free_excursion(a[s:e], tr.dt) / count))
     return out
