@@ -164,7 +164,8 @@ class FurutaSharedTrig(Furuta):
     physics, faster under ``jit`` on XLA:CPU in float64. Equal to :class:`Furuta` to round-off,
     not always bit for bit (XLA may fuse, and so round, the arithmetic around the shared values
     otherwise; the functional env's steps came out bit for bit alike where checked). The
-    functional env steps with it; everything else keeps :class:`Furuta` and its numbers.
+    JAX env steps integrate with it (the functional and batched envs and their rollouts:
+    ``furuta_gym.envs._jax_rollout.stepping_model``); everything else keeps :class:`Furuta`.
     """
 
     def mass_matrix(self, q):

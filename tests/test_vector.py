@@ -503,3 +503,24 @@ def test_an_env_refused_at_construction_closes_quietly():
         env = object.__new__(FurutaVectorEnv)
         env.close()  # nothing was built: nothing to close, no AttributeError
         gc.collect()
+
+
+def test_the_batched_env_steps_the_analytic_furuta_with_its_trig_shared():
+    """The batched step integrates the analytic Furuta (also under a plant's effects) as
+    FurutaSharedTrig: one sin β per RK4 stage where Furuta's own graph has XLA:CPU evaluate it in
+    several kernels (about twice the steps/s, BENCHMARKS.md). The user's model stays Furuta; the
+    parity tests above check the numbers against Furuta's own step. Other models are left alone."""
+    from furuta_gym.effects import WithEffects
+    from furuta_gym.envs._jax_rollout import stepping_model
+    from furuta_gym.envs.vector import FurutaVectorEnv
+    from furuta_gym.models import FurutaSharedTrig
+
+    env = FurutaVectorEnv(8, dynamics="analytic")
+    assert type(env.system) is Furuta
+    xs, us = np.zeros((8, 4)), np.zeros((8, 1))
+    text = env._step_fn.lower(*env._step_args, xs, us).compile().as_text()
+    if jax.default_backend() == "cpu":
+        assert text.count(" sine(") <= 4 * env.frame_skip + 2
+    plant = WithEffects(Furuta(), ())
+    assert type(stepping_model(plant).base) is FurutaSharedTrig and type(plant.base) is Furuta
+    assert stepping_model(NMSD()) == NMSD()

@@ -39,11 +39,10 @@ from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from .._x64 import ensure_x64
 from ..effects import WithEffects
-from ..models import Furuta, FurutaSharedTrig
 from ..signals import quantize_joints
 from ._backends import ModelBackend
 from ._base import LagrangianEnv
-from ._jax_rollout import controlled_step
+from ._jax_rollout import controlled_step, stepping_model
 from ._observation import present_components
 from ._parameters import PARAMETER_CLASSES
 from ._settings import EnvArgumentError
@@ -85,17 +84,6 @@ def _physical_of(model: Any):
 def _has_physical(model, system: str) -> bool:
     base = model.base if isinstance(model, WithEffects) else model
     return isinstance(getattr(base, "params", None), PARAMETER_CLASSES[system])
-
-
-def _stepping_model(model):
-    """The model the step integrates: the analytic Furuta (also under a ``WithEffects`` plant) as
-    :class:`~furuta_gym.models.FurutaSharedTrig`, the same physics with its trig evaluated once
-    per RK4 stage (equal to round-off, faster under XLA:CPU); other models as given."""
-    base = model.base if isinstance(model, WithEffects) else model
-    if type(base) is not Furuta:  # a subclass may redefine the physics: leave it alone
-        return model
-    shared = FurutaSharedTrig(params=base.params)
-    return eqx.tree_at(lambda m: m.base, model, shared) if isinstance(model, WithEffects) else shared
 
 
 def _unsupported(template: LagrangianEnv) -> list[str]:
@@ -194,7 +182,7 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         action = jnp.reshape(jnp.asarray(action, float), (1,))
         volts = jnp.clip(action, -self.action_high, self.action_high) * (self.max_action / self.action_high)
         out = controlled_step(
-            _stepping_model(self.plant(params, state)),
+            stepping_model(self.plant(params, state)),
             state.x,
             volts,
             dt=self.dt,
