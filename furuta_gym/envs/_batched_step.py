@@ -17,7 +17,7 @@ import numpy as np
 from ..lagrangian import energy
 from ..signals import quantize_joints
 from ..simulate import small_kernel_compiler_options
-from ._jax_rollout import controlled_step, stepping_model
+from ._jax_rollout import controlled_step
 from ._tasks import divergence_bounds
 
 __all__ = ["Quantizer", "step_function", "packed_output_width", "unpack_outputs"]
@@ -108,7 +108,7 @@ def step_function(*, system, energy_model, dt, substeps, action_limit, task, qua
     """The jitted batched step ``(model leaves, energy leaves, xs, us) -> outputs`` of a vector env
     (``packed``: see :func:`_batched_step`) and its first two arguments. One function for the
     env's own process and its workers, so both compute the same thing."""
-    dynamic, static = eqx.partition(stepping_model(system), eqx.is_array)
+    dynamic, static = eqx.partition(system, eqx.is_array)
     leaves, treedef = jax.tree_util.tree_flatten(dynamic)
     energy_leaves, energy_treedef = jax.tree_util.tree_flatten(energy_model)
     fn = _batched_step(

@@ -145,7 +145,7 @@ def controlled_step(
     if action_limit is not None:
         u = jnp.clip(u, -action_limit, action_limit)
     u = jnp.where(bad_action, jnp.zeros_like(u), u)
-    x_new = rk4_zoh_step(system, x, u, dt, substeps)
+    x_new = rk4_zoh_step(stepping_model(system), x, u, dt, substeps)
     diverged = bad_action | is_diverged(x_new, state_bound)
     x_next = jnp.where(diverged, x, x_new)
     reward = jnp.asarray(reward_fn(x, u, x_next), dtype=x.dtype)
@@ -193,7 +193,6 @@ def rollout(
     Returns a :class:`Rollout` (states, actions, rewards, terminated/diverged/done flags).
     """
     steps, x0s = _checked_rollout_arguments(system, x0s, steps, substeps, dt)
-    system = stepping_model(system)
     single = x0s.ndim == 1
     step_fn, policy_state, stateful = _as_policy(policy, policy_state)
     batch = x0s[None] if single else x0s

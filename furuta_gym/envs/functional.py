@@ -42,7 +42,7 @@ from ..effects import WithEffects
 from ..signals import quantize_joints
 from ._backends import ModelBackend
 from ._base import LagrangianEnv
-from ._jax_rollout import controlled_step, stepping_model
+from ._jax_rollout import controlled_step
 from ._observation import present_components
 from ._parameters import PARAMETER_CLASSES
 from ._settings import EnvArgumentError
@@ -182,7 +182,7 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         action = jnp.reshape(jnp.asarray(action, float), (1,))
         volts = jnp.clip(action, -self.action_high, self.action_high) * (self.max_action / self.action_high)
         out = controlled_step(
-            stepping_model(self.plant(params, state)),
+            self.plant(params, state),
             state.x,
             volts,
             dt=self.dt,

@@ -38,7 +38,7 @@ from ..models import analytic_model
 from ._backends import ModelBackend
 from ._base import LagrangianEnv
 from ._batched_step import Quantizer, step_function
-from ._jax_rollout import Rollout, map_chunks, rollout, scan_closed_loop
+from ._jax_rollout import Rollout, map_chunks, rollout, scan_closed_loop, stepping_model
 from ._parameters import PARAMETER_CLASSES
 from ._settings import EnvArgumentError, check_int
 from ._sharding import ShardedSteps, resolve_devices
@@ -49,6 +49,7 @@ from .nmsd import NMSDEnv
 
 __all__ = [
     "scan_closed_loop",
+    "stepping_model",
     "LagrangianVectorEnv",
     "FurutaVectorEnv",
     "NMSDVectorEnv",
