@@ -33,6 +33,7 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import equinox as eqx
@@ -141,9 +142,14 @@ def run_episode(act, env: gymnasium.Env, x0: np.ndarray, seed: int) -> dict:
 
 def evaluate(policy, plant: str | None) -> dict:
     """The policy on the MuJoCo preset (``plant`` variant) from x0 = 0 and the seeded starts."""
+    return evaluate_actor(lambda env: GymnasiumPolicy(policy, env.action_space), plant)
+
+
+def evaluate_actor(actor_for: Callable[[gymnasium.Env], Callable], plant: str | None) -> dict:
+    """:func:`evaluate` for any policy: ``actor_for(env)`` gives the observation → action map."""
     env = gymnasium.make(SWINGUP, plant=plant) if plant else gymnasium.make(SWINGUP)
     try:
-        act = GymnasiumPolicy(policy, env.action_space)
+        act = actor_for(env)
         x0s = np.concatenate([np.zeros((1, 4)), near_rest_starts(STARTS, STARTS_SEED, include_rest=False)])
         episodes = [run_episode(act, env, x0, seed) for seed, x0 in enumerate(x0s)]
     finally:
