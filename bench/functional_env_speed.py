@@ -64,11 +64,33 @@ def runner(env, params, n: int, steps: int):
     return jax.jit(run)
 
 
-def steps_per_second(env, params, n: int, repeats: int, budget: int) -> float:
+def integration_runner(env, params, n: int, steps: int):
+    """:func:`runner` without the env: only each step's RK4 integration of the env's model (no
+    observation, reward, termination or autoreset), what those cost nothing could reach."""
+    import jax
+
+    from furuta_gym.envs.vector import stepping_model
+    from furuta_gym.simulate import rk4_zoh_step
+
+    model = stepping_model(env.plant(params))
+    advance = jax.vmap(lambda x, u: rk4_zoh_step(model, x, u, env.dt, env.substeps))
+
+    def run(key):
+        def body(x, key):
+            u = jax.random.uniform(key, (n, 1), minval=-env.max_action, maxval=env.max_action)
+            return advance(x, u), None
+
+        x0 = jax.random.uniform(key, (n, 2 * env.n), minval=-0.1, maxval=0.1)
+        return jax.lax.scan(body, x0, jax.random.split(key, steps))[0].sum()
+
+    return jax.jit(run)
+
+
+def steps_per_second(env, params, n: int, repeats: int, budget: int, make_runner=runner) -> float:
     import jax
 
     steps = min(20_000, max(200, budget // n))
-    run = runner(env, params, n, steps)
+    run = make_runner(env, params, n, steps)
     jax.block_until_ready(run(jax.random.PRNGKey(0)))  # compile
     best = float("inf")
     for k in range(repeats):
@@ -97,6 +119,10 @@ def measure(sizes, repeats: int, budget: int) -> dict:
         for name, (env, params) in envs.items():
             rates[name][n] = steps_per_second(env, params, n, repeats, budget)
             print(f"N = {n:5d}  {name:20s} {rates[name][n]:14,.0f} steps/s", flush=True)
+    integration = {}
+    for n in sizes:
+        integration[n] = steps_per_second(*envs["analytic"], n, repeats, budget, integration_runner)
+        print(f"N = {n:5d}  {'analytic integration':20s} {integration[n]:14,.0f} steps/s", flush=True)
     return {
         "machine": machine(),
         "cpu": cpu_conditions(),
@@ -106,6 +132,7 @@ def measure(sizes, repeats: int, budget: int) -> dict:
         "budget": budget,
         "steps_per_second": rates,
         "substeps": substeps,
+        "analytic_integration_only": integration,
     }
 
 
@@ -120,11 +147,24 @@ def section(results: dict) -> str:
     rates, sizes, substeps = results["steps_per_second"], results["sizes"], results["substeps"]
     pendulum = rates["gymnax Pendulum-v1"]
     rk4 = {name: {n: rates[name][n] * substeps[name] for n in sizes} for name in ("analytic", "delan")}
+    integration = results.get("analytic_integration_only")
     rows = [
         f"| {n:,} | {rates['analytic'][n]:,.0f} | {rates['delan'][n]:,.0f} | {pendulum[n]:,.0f} | "
         f"{rates['analytic'][n] / pendulum[n]:.2f} | {rk4['analytic'][n]:,.0f} | {rk4['delan'][n]:,.0f} |"
+        + (f" {integration[n]:,.0f} | {integration[n] / pendulum[n]:.2f} |" if integration else "")
         for n in sizes
     ]
+    extra_head = " analytic, integration only | its ÷ Pendulum-v1 |" if integration else ""
+    top = max(sizes)
+    extra_text = (
+        " The integration-only columns time the analytic env's RK4 integration alone (the same 10 steps per env step, "
+        "nothing else: no observation, reward, termination or autoreset), the most any saving outside the "
+        f"physics could reach: at N = {top:,} it is {integration[top] / pendulum[top]:.2f} of Pendulum-v1's env "
+        f"steps/s, and per physics step the swing-up runs at {rk4['analytic'][top] / pendulum[top]:.2f} of "
+        "Pendulum-v1's rate."
+        if integration
+        else ""
+    )
     return "\n".join(
         [
             START,
@@ -134,15 +174,15 @@ def section(results: dict) -> str:
             "over N copies and scanned inside one `jit`, uniform random actions, best of "
             f"{results['repeats']}. `FurutaSwingUp-v0` as a functional env (one step: a 20 ms control period, "
             "10 RK4 steps of the model; analytic model and the reproduction's DeLaN L_prop) beside gymnax's "
-            f"Pendulum-v1 (one Euler step) in the same run. The last two columns are the swing-up's "
+            f"Pendulum-v1 (one Euler step) in the same run. The two RK4 columns are the swing-up's "
             f"rates per physics step (env steps/s × {substeps['analytic']} RK4 steps per env step), beside Pendulum-v1's "
-            f"env steps/s, which are its Euler steps/s. Generated from "
+            f"env steps/s, which are its Euler steps/s.{extra_text} Generated from "
             f"`results/functional_env_speed/results.json` ({results['machine']}; run on {results['cpu']}; "
             f"{results['date']}).",
             "",
             "| N | analytic | DeLaN | gymnax Pendulum-v1 | analytic ÷ Pendulum-v1 | analytic, RK4 steps/s "
-            "| DeLaN, RK4 steps/s |",
-            "|---|---|---|---|---|---|---|",
+            "| DeLaN, RK4 steps/s |" + extra_head,
+            "|---|---|---|---|---|---|---|" + ("---|---|" if integration else ""),
             *rows,
             END,
         ]
@@ -179,6 +219,11 @@ def committed_section() -> str:
     return section(
         results
         | {"steps_per_second": {k: {int(n): v for n, v in r.items()} for k, r in results["steps_per_second"].items()}}
+        | (
+            {"analytic_integration_only": {int(n): v for n, v in results["analytic_integration_only"].items()}}
+            if "analytic_integration_only" in results
+            else {}
+        )
     )
 
 

@@ -164,8 +164,9 @@ class FurutaSharedTrig(Furuta):
     physics, faster under ``jit`` on XLA:CPU in float64. Equal to :class:`Furuta` to round-off,
     not always bit for bit (XLA may fuse, and so round, the arithmetic around the shared values
     otherwise; the functional env's steps came out bit for bit alike where checked). The
-    JAX env steps integrate with it (the functional and batched envs and their rollouts:
-    ``furuta_gym.envs._jax_rollout.stepping_model``); everything else keeps :class:`Furuta`.
+    JAX closed loops integrate with it (every controlled step: the functional and batched envs,
+    their rollouts and the controllers' ``closed_loop``; ``furuta_gym.envs.vector.stepping_model``);
+    everything else keeps :class:`Furuta`.
     """
 
     def mass_matrix(self, q):

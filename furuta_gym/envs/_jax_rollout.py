@@ -109,7 +109,7 @@ def _never_terminated(x_next):
 
 
 def stepping_model(model):
-    """The model the batched steps integrate: the analytic Furuta (also under a ``WithEffects``
+    """The model :func:`controlled_step` integrates: the analytic Furuta (also under a ``WithEffects``
     plant) as :class:`~furuta_gym.models.FurutaSharedTrig`, the same physics with its trig
     evaluated once per RK4 stage (equal to round-off, about twice the steps/s under XLA:CPU);
     other models as given."""
