@@ -8,8 +8,10 @@ gzip-compressed CSV. Other names come in through a ``column_map`` ({canonical: n
 file}), with per-column ``signs`` and ``offsets`` applied as ``canonical = sign · raw + offset``.
 A file without a ``traj`` column is one trajectory.
 
-Every check names the file and the column and says what was expected; loading never modifies
-the file, and saving refuses to overwrite unless asked.
+Before anything uses a log, :mod:`furuta_gym.reading` reads what it says about itself (its units,
+wrapping, gaps, repeated rows, missing values) and acts and says so, or stops naming the flag
+that fixes it. Every check names the file and the column and says what was expected; loading
+never modifies the file, and saving refuses to overwrite unless asked.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import gzip
+import warnings
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -25,13 +28,20 @@ from scipy.io import loadmat
 from scipy.io.matlab import MatReadError
 
 from .lagrangian import SystemSpec
+from .reading import Columns, DataError, DataNote, parse_units, read_columns, time_factor
 from .systems import SYSTEMS, get_spec
 
-__all__ = ["Trajectory", "DataError", "load_trajectories", "save_trajectories", "columns_for"]
-
-
-class DataError(ValueError):
-    """Bad data: says which file, which column and what was expected."""
+__all__ = [
+    "Trajectory",
+    "DataError",
+    "DataNote",
+    "LogReading",
+    "load_trajectories",
+    "read_log",
+    "read_trajectories",
+    "save_trajectories",
+    "columns_for",
+]
 
 
 @dataclasses.dataclass
@@ -126,6 +136,16 @@ def _is_float(v: str) -> bool:
         return False
 
 
+@dataclasses.dataclass
+class LogReading:
+    """What reading one log gave: its trajectories (pieces, where it was split), notes on what
+    was done to it, and, read with ``strict=False``, the findings that would have stopped it."""
+
+    trajectories: list[Trajectory]
+    notes: list[str]
+    problems: list[str] = dataclasses.field(default_factory=list)
+
+
 def load_trajectories(
     path: str | Path,
     system: str | SystemSpec,
@@ -133,24 +153,65 @@ def load_trajectories(
     column_map: Mapping[str, str] | None = None,
     signs: Mapping[str, float] | None = None,
     offsets: Mapping[str, float] | None = None,
+    units: Mapping[str, str] | str | None = None,
+    time_unit: str | None = None,
     require_velocities: bool = False,
     min_samples: int = 3,
     dt_tolerance: float = 1e-3,
 ) -> list[Trajectory]:
     """Load trajectories of ``system`` from a CSV (or gzip-compressed ``.csv.gz``) / NPZ / MAT
-    file in the long format.
+    file in the long format, read as :func:`read_log` reads it; what the reading did (unwrapped
+    an angle, split at a gap or at missing values, dropped repeated rows) is said in one
+    :class:`~furuta_gym.reading.DataNote` warning each.
 
-    Raises :class:`DataError` naming the file and column when a column is missing, holds NaN or
-    non-numbers, time is not strictly increasing or not uniformly sampled (relative tolerance
-    ``dt_tolerance``), a trajectory is shorter than ``min_samples``, or the file belongs to the
-    other system.
+    ``units``: {joint: ``"rad"``, ``"deg"`` or ``"counts:N"``} (lengths: ``"m"``, ``"cm"``,
+    ``"mm"``), applied before ``signs`` and ``offsets``; ``time_unit``: ``"s"``, ``"ms"`` or
+    ``"us"``. Raises :class:`DataError` naming the file and column when a column is missing or
+    holds non-numbers, time is not increasing or not uniformly sampled between gaps (relative
+    tolerance ``dt_tolerance``), no piece has ``min_samples``, the file belongs to the other
+    system, or its steps say an angle or the time is in another unit than given.
     """
+    reading = read_log(
+        path,
+        system,
+        column_map=column_map,
+        signs=signs,
+        offsets=offsets,
+        units=units,
+        time_unit=time_unit,
+        require_velocities=require_velocities,
+        min_samples=min_samples,
+        dt_tolerance=dt_tolerance,
+    )
+    for note in reading.notes:
+        warnings.warn(note, DataNote, stacklevel=2)
+    return reading.trajectories
+
+
+def read_log(
+    path: str | Path,
+    system: str | SystemSpec,
+    *,
+    column_map: Mapping[str, str] | None = None,
+    signs: Mapping[str, float] | None = None,
+    offsets: Mapping[str, float] | None = None,
+    units: Mapping[str, str] | str | None = None,
+    time_unit: str | None = None,
+    require_velocities: bool = False,
+    min_samples: int = 3,
+    dt_tolerance: float = 1e-3,
+    strict: bool = True,
+) -> LogReading:
+    """:func:`load_trajectories`' reading with its notes returned (:class:`LogReading`), for a
+    caller that reports them; ``strict=False`` returns the findings that would stop it
+    (``furuta-gym inspect``) and reads the log as it is."""
     path = Path(path)
     spec = get_spec(system) if isinstance(system, str) else system
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such data file")
     column_map, signs, offsets = dict(column_map or {}), dict(signs or {}), dict(offsets or {})
     _check_mapping_names(path, spec, [*column_map, *signs, *offsets])
+    factors, seconds = parse_units(units, spec), time_factor(time_unit)
     raw = _read_columns(path)
 
     def source(name: str) -> str:
@@ -158,21 +219,68 @@ def load_trajectories(
 
     has_vel = _check_columns_present(path, spec, raw, source, require_velocities)
 
-    def column(name: str) -> np.ndarray:
-        return signs.get(name, 1.0) * _finite_column(path, raw, source(name)) + offsets.get(name, 0.0)
+    def column(name: str, scale: float = 1.0) -> np.ndarray:
+        return signs.get(name, 1.0) * scale * np.asarray(raw[source(name)], dtype=float) + offsets.get(name, 0.0)
 
-    t = column("t")
-    q = np.stack([column(j) for j in spec.joint_names], axis=1)
+    t = column("t", seconds)
+    q = np.stack([column(j, factors.get(j, 1.0)) for j in spec.joint_names], axis=1)
     u = np.stack([column(c) for c in spec.input_names], axis=1)
-    qd = np.stack([column(f"{j}_dot") for j in spec.joint_names], axis=1) if has_vel else None
+    qd = (
+        np.stack([column(f"{j}_dot", factors.get(j, 1.0) / seconds) for j in spec.joint_names], axis=1)
+        if has_vel
+        else None
+    )
     labels = raw[source("traj")] if source("traj") in raw else np.zeros(t.shape[0])
-    trajectories = []
+    groups = []
     for label in _unique_in_order(labels):
         idx = np.flatnonzero(labels == label)
-        name = _label_name(label)
-        _check_time(path, source("t"), name, t[idx], idx, min_samples, dt_tolerance)
-        trajectories.append(Trajectory(t=t[idx], q=q[idx], u=u[idx], qd=None if qd is None else qd[idx], name=name))
-    return trajectories
+        groups.append(Columns(_label_name(label), t[idx], q[idx], u[idx], None if qd is None else qd[idx], idx + 1))
+    names = {c: source(c) for c in columns_for(spec, velocities=True)}
+    return _read(str(path), spec, groups, names, factors, time_unit, min_samples, dt_tolerance, strict)
+
+
+def read_trajectories(
+    trajectories: Sequence[Trajectory],
+    system: str | SystemSpec,
+    *,
+    units: Mapping[str, str] | str | None = None,
+    time_unit: str | None = None,
+    source: str = "data",
+    strict: bool = True,
+) -> LogReading:
+    """Trajectories already in memory, read as a file is (:func:`read_log`); the given
+    trajectories are left as they were."""
+    spec = get_spec(system) if isinstance(system, str) else system
+    factors, seconds = parse_units(units, spec), time_factor(time_unit)
+    scale = np.array([factors.get(j, 1.0) for j in spec.joint_names])
+    groups = []
+    for tr in trajectories:
+        q, u = np.asarray(tr.q, dtype=float), np.asarray(tr.u, dtype=float)
+        if q.ndim != 2 or q.shape[1] != spec.n_dof:
+            raise DataError(
+                f"{source}: trajectory {tr.name!r}: q has shape {q.shape}, expected (T, {spec.n_dof}) "
+                f"columns {list(spec.joint_names)}"
+            )
+        qd = None if tr.qd is None else np.asarray(tr.qd, dtype=float) * scale / seconds
+        t = np.asarray(tr.t, dtype=float) * seconds
+        groups.append(Columns(tr.name, t, q * scale, u.reshape(len(t), -1), qd, np.arange(1, len(t) + 1)))
+    return _read(source, spec, groups, {}, factors, time_unit, 3, 1e-3, strict)
+
+
+def _read(source, spec, groups, names, factors, time_unit, min_samples, dt_tolerance, strict) -> LogReading:
+    pieces, notes, problems = read_columns(
+        source,
+        spec,
+        groups,
+        names=names,
+        given_units=list(factors),
+        time_given=time_unit is not None,
+        min_samples=min_samples,
+        dt_tolerance=dt_tolerance,
+        strict=strict,
+    )
+    trajectories = [Trajectory(t=p.t, q=p.q, u=p.u, qd=p.qd, name=p.name) for p in pieces]
+    return LogReading(trajectories, notes, problems)
 
 
 def _check_mapping_names(path: Path, spec: SystemSpec, keys) -> None:
@@ -204,41 +312,6 @@ def _check_columns_present(path: Path, spec: SystemSpec, raw, source, require_ve
     if require_velocities and not has_vel:
         raise DataError(f"{path}: velocity columns {[source(c) for c in vel_names]} are required here")
     return has_vel
-
-
-def _finite_column(path: Path, raw, name: str) -> np.ndarray:
-    values = np.asarray(raw[name], dtype=float)
-    bad = ~np.isfinite(values)
-    if bad.any():
-        rows = np.flatnonzero(bad)
-        raise DataError(
-            f"{path}: column {name!r} has {bad.sum()} non-finite value(s) "
-            f"(NaN/inf), first at data row {rows[0] + 1}; expected finite numbers"
-        )
-    return values
-
-
-def _check_time(
-    path: Path, t_name: str, name: str, tt: np.ndarray, idx: np.ndarray, min_samples: int, dt_tolerance: float
-) -> None:
-    """One trajectory's time column: enough samples, strictly increasing, uniformly sampled."""
-    if idx.size < min_samples:
-        raise DataError(f"{path}: trajectory {name!r} has {idx.size} sample(s); expected at least {min_samples}")
-    steps = np.diff(tt)
-    if np.any(steps <= 0):
-        row = idx[1:][steps <= 0][0]
-        raise DataError(
-            f"{path}: column {t_name!r} is not strictly increasing in trajectory "
-            f"{name!r} (data row {row + 1}); expected increasing time"
-        )
-    dt = np.median(steps)
-    if np.max(np.abs(steps - dt)) > dt_tolerance * dt + 1e-12:
-        row = idx[1:][np.argmax(np.abs(steps - dt))]
-        raise DataError(
-            f"{path}: column {t_name!r} is not uniformly sampled in trajectory "
-            f"{name!r} (step {steps.max():.6g} s vs median {dt:.6g} s near data row "
-            f"{row + 1}); expected a constant sample period — resample first"
-        )
 
 
 def _unique_in_order(labels: np.ndarray) -> list:

@@ -63,9 +63,9 @@ def test_missing_column_names_file_column_and_expectation(tmp_path):
         load_trajectories(p, "furuta")
 
 
-def test_nan_rows_are_refused_naming_the_column(tmp_path):
+def test_nan_rows_leaving_no_trajectory_are_refused_naming_the_column(tmp_path):
     p = _write(tmp_path, "traj,t,p,u\n0,0,0.1,0\n0,0.01,nan,0\n0,0.02,0.3,0\n")
-    with pytest.raises(DataError, match=r"column 'p' has 1 non-finite.*row 2"):
+    with pytest.raises(DataError, match=r"expected at least 3.*missing values \(NaN/inf: 'p' 1\).*data row 2"):
         load_trajectories(p, "nmsd")
 
 
@@ -73,8 +73,9 @@ def test_non_monotonic_and_non_uniform_time_are_refused(tmp_path):
     p = _write(tmp_path, "t,p,u\n0,0,0\n0.02,0,0\n0.01,0,0\n")
     with pytest.raises(DataError, match="not strictly increasing"):
         load_trajectories(p, "nmsd")
-    p = _write(tmp_path, "t,p,u\n0,0,0\n0.01,0,0\n0.03,0,0\n0.04,0,0\n", name="e.csv")
-    with pytest.raises(DataError, match="not uniformly sampled"):
+    # a step of 1.3 periods is neither the period nor a gap (samples dropped): refused
+    p = _write(tmp_path, "t,p,u\n0,0,0\n0.01,0,0\n0.023,0,0\n0.033,0,0\n", name="e.csv")
+    with pytest.raises(DataError, match=r"column 't' is not uniformly sampled.*step 0.013 s vs median 0.01 s"):
         load_trajectories(p, "nmsd")
 
 

@@ -145,15 +145,17 @@ def test_no_excitation_is_a_clear_error():
         diagnose([_furuta_traj(move=False)] * 4, "furuta")
 
 
-def test_nan_in_data_is_a_clear_error(tmp_path, capsys):
+def test_nan_in_data_splits_the_log_and_an_error_says_so(tmp_path, capsys):
     tr = _furuta_traj()
     tr.q[100, 1] = np.nan
-    with pytest.raises(DataError, match="q has NaN"):
+    # split at the missing value into 100 + 1899 samples: too short, and the error says why
+    with pytest.raises(DataError, match=r"too short: 4.00 s.*split into 2 pieces at 1 row\(s\) with missing values"):
         diagnose([tr], "furuta")
+    assert np.isnan(tr.q[100, 1])  # the caller's trajectory as it was
     csv = tmp_path / "bad.csv"
     csv.write_text("t,alpha,beta,u\n0,0,0,0\n0.002,0,nan,0\n0.004,0,0,0\n")
     assert main(["diagnose", str(csv), "--system", "furuta"]) == 2
-    assert "column 'beta' has 1 non-finite" in capsys.readouterr().err
+    assert "missing values (NaN/inf: 'beta' 1)" in capsys.readouterr().err
 
 
 def test_wrong_columns_name_what_is_missing(tmp_path, capsys):

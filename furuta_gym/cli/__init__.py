@@ -23,6 +23,7 @@ SUBCOMMANDS: dict[str, str] = {
     "train": "train a DeLaN / APHYNITY / augmented DeLaN model",
     "evaluate": "evaluate a checkpoint on test data (log10 RMSE metrics)",
     "control": "closed-loop benchmark of a controller designed on one model, run on another plant",
+    "inspect": "what a log holds before diagnosing or training: units, gaps, ranges, what it can identify",
     "diagnose": "find which physical effect a model is missing on measured data",
     "reproduce": "regenerate the paper's Tables 1 and 2",
 }

@@ -9,10 +9,20 @@ start and cut elementary trajectories (:func:`furuta_gym.measured.prepare_log`).
 from __future__ import annotations
 
 import argparse
-from typing import Any, Callable
 from pathlib import Path
+from typing import Any, Callable
 
-__all__ = ["pairs", "qube_runs", "read_logs", "load_logs", "add_log_arguments", "prepared_logs", "QUBE_SKIP"]
+__all__ = [
+    "pairs",
+    "qube_runs",
+    "read_logs",
+    "load_logs",
+    "skip_start",
+    "add_reading_arguments",
+    "add_log_arguments",
+    "prepared_logs",
+    "QUBE_SKIP",
+]
 
 #: Seconds dropped at the start of a vendored QUBE run unless --skip says otherwise: the balancing
 #: controller's start transient (furuta_gym.datasets.load_qube_closed_loop drops the same).
@@ -48,11 +58,15 @@ def qube_runs(token: str) -> list[int] | None:
     return runs
 
 
-def read_logs(paths, system: str, column_map=None, sign=None, offset=None) -> list[tuple[str, list]]:
-    """``(source, trajectories)`` per log of ``paths``, nothing skipped. ``source`` names the
-    log for error messages (a vendored run: its token and file). With several DATA tokens the
-    trajectories are named ``<file stem>:<name>``."""
-    from ..data import load_trajectories
+def read_logs(
+    paths, system: str, column_map=None, sign=None, offset=None, units=None, time_unit=None, strict: bool = True
+) -> list[tuple[str, Any]]:
+    """``(source, reading)`` per log of ``paths``, nothing skipped, each read as
+    :func:`furuta_gym.data.read_log` reads it (a :class:`~furuta_gym.data.LogReading`: its
+    trajectories, notes on what the reading did, and with ``strict=False`` what would have
+    stopped it). ``source`` names the log for error messages (a vendored run: its token and
+    file). With several DATA tokens the trajectories are named ``<file stem>:<name>``."""
+    from ..data import LogReading, read_log
     from ..datasets import QUBE_CLOSED_LOOP_SYSTEM, load_qube_closed_loop, qube_closed_loop_files
 
     out = []
@@ -63,42 +77,73 @@ def read_logs(paths, system: str, column_map=None, sign=None, offset=None) -> li
                     f"{path!r}: the shipped QUBE-Servo runs are {QUBE_CLOSED_LOOP_SYSTEM.name} data; "
                     f"got --system {system}"
                 )
+            if units or time_unit:
+                raise ValueError(
+                    f"{path!r}: the shipped runs are read in rad and s; --units and --time-unit are for files"
+                )
             runs = qube_runs(path)
             files = qube_closed_loop_files(runs)  # checks the run numbers
             for run, file in zip(runs or range(1, len(files) + 1), files):
-                out.append((f"{path} (run {run}: {file})", load_qube_closed_loop([run], skip_seconds=0.0)))
+                out.append(
+                    (f"{path} (run {run}: {file})", LogReading(load_qube_closed_loop([run], skip_seconds=0.0), []))
+                )
             continue
-        trajs = load_trajectories(
+        read = read_log(
             path,
             system,
             column_map=pairs(column_map, "--column-map"),
             signs=pairs(sign, "--sign", float),
             offsets=pairs(offset, "--offset", float),
+            units=units,
+            time_unit=time_unit,
+            strict=strict,
         )
         if len(paths) > 1:
-            for tr in trajs:
+            for tr in read.trajectories:
                 tr.name = f"{Path(path).stem}:{tr.name}"
-        out.append((str(path), trajs))
+        out.append((str(path), read))
     return out
 
 
-def load_logs(paths, args):
-    """Trajectories of ``paths`` with the column map, signs and offsets, start skipped
-    (``furuta-gym diagnose``'s reading: velocities stay as logged)."""
+def _read(paths, args) -> list[tuple[str, Any]]:
+    return read_logs(
+        paths,
+        args.system,
+        args.column_map,
+        args.sign,
+        args.offset,
+        getattr(args, "units", None),
+        getattr(args, "time_unit", None),
+    )
+
+
+def skip_start(trajs: list, seconds: float) -> list:
+    """``trajs`` without the first ``seconds`` of each trajectory of the log; a piece of a log
+    split by its reading (named ``<name>/<k>``) counts from its trajectory's start."""
     from ..data import Trajectory
 
-    trajs = [tr for _, ts in read_logs(paths, args.system, args.column_map, args.sign, args.offset) for tr in ts]
-    if args.skip > 0:
-        trajs = [
-            Trajectory(t=tr.t[m], q=tr.q[m], u=tr.u[m], qd=None if tr.qd is None else tr.qd[m], name=tr.name)
-            for tr in trajs
-            for m in [tr.t >= tr.t[0] + args.skip]
-        ]
-    return trajs
+    if not seconds > 0:
+        return trajs
+    out, starts = [], _starts(trajs)
+    for tr in trajs:
+        m = tr.t >= starts[_trajectory_of(tr)] + seconds - 1e-9
+        if m.any():
+            out.append(
+                Trajectory(t=tr.t[m], q=tr.q[m], u=tr.u[m], qd=None if tr.qd is None else tr.qd[m], name=tr.name)
+            )
+    return out
 
 
-def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | None, split_help: str) -> None:
-    """The options of measured logs shared by ``train`` and ``evaluate``."""
+def load_logs(paths, args) -> tuple[list, list[str]]:
+    """Trajectories of ``paths`` with the column map, signs, offsets and units, start skipped
+    (``furuta-gym diagnose``'s reading: velocities stay as logged), and notes on what the
+    reading did."""
+    read = [r for _, r in _read(paths, args)]
+    return skip_start([tr for r in read for tr in r.trajectories], args.skip), [n for r in read for n in r.notes]
+
+
+def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
+    """How a log's columns are read: names, signs, offsets, units (every command reading logs)."""
     parser.add_argument(
         "--column-map",
         metavar="CANON=FILECOL,...",
@@ -106,6 +151,18 @@ def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | No
     )
     parser.add_argument("--sign", metavar="CANON=±1,...", help="per-column sign, e.g. beta=-1")
     parser.add_argument("--offset", metavar="CANON=VALUE,...", help="per-column offset, e.g. beta=3.14159")
+    parser.add_argument(
+        "--units",
+        metavar="JOINT=UNIT,...",
+        help="the angles' units in the file when not radians: deg, or counts:N (N counts per turn), "
+        "e.g. alpha=deg,beta=deg or alpha=counts:2048; applied before --sign and --offset",
+    )
+    parser.add_argument("--time-unit", choices=["s", "ms", "us"], help="the time column's unit (default s, checked)")
+
+
+def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | None, split_help: str) -> None:
+    """The options of measured logs shared by ``train`` and ``evaluate``."""
+    add_reading_arguments(parser)
     parser.add_argument(
         "--skip",
         type=float,
@@ -129,22 +186,32 @@ def prepared_logs(
 ) -> tuple[list, list[str]]:
     """Training / test trajectories of ``paths`` (:func:`furuta_gym.measured.prepare_log` per
     log; ``args`` carries the :func:`add_log_arguments` options and ``system``) and notes on what
-    was estimated. ``split``: seconds per elementary trajectory, ``None`` whole logs, or
-    ``"measured"``: ``--split`` if given, else the paper's length for logs without velocities
-    (measured: :data:`furuta_gym.measured.SPLIT_SECONDS`) and whole trajectories for logs that
-    carry them (generated data, already cut as the paper's appendix cuts them)."""
+    was estimated and what reading the logs did. ``split``: seconds per elementary trajectory,
+    ``None`` whole logs, or ``"measured"``: ``--split`` if given, else the paper's length for
+    logs without velocities (measured: :data:`furuta_gym.measured.SPLIT_SECONDS`) and whole
+    trajectories for logs that carry them (generated data, already cut as the paper's appendix
+    cuts them). A piece of a log its reading split that is too short to serve is left out and
+    counted in the notes."""
     from ..measured import SPLIT_SECONDS, prepare_log
 
-    out, estimated = [], []
-    for source, trajs in read_logs(paths, args.system, args.column_map, args.sign, args.offset):
+    out, estimated, notes, short = [], [], [], 0
+    for source, read in _read(paths, args):
+        trajs = read.trajectories
+        notes += read.notes
         is_qube = source.startswith("qube")
         skip = args.skip if args.skip is not None else (QUBE_SKIP if is_qube else 0.0)
+        starts = _starts(trajs)
         for tr in trajs:
             seconds: Any = split
             if split == "measured":
                 seconds = (
                     args.split if args.split is not None else (SPLIT_SECONDS[args.system] if tr.qd is None else None)
                 )
+            # a later piece of a split log starts past the skipped start
+            piece_skip = max(0.0, starts[_trajectory_of(tr)] + skip - float(tr.t[0]))
+            if "/" in tr.name and len(tr) * tr.dt - piece_skip < max(min_seconds, seconds or 0.0) - 1e-9:
+                short += 1
+                continue
             if tr.qd is None:
                 estimated.append(tr.name)
             out += prepare_log(
@@ -152,9 +219,25 @@ def prepared_logs(
                 source,
                 velocity=args.velocity,
                 cutoff_hz=args.cutoff,
-                skip=skip,
+                skip=piece_skip,
                 split=seconds or None,
                 min_seconds=min_seconds,
             )
-    notes = [f"velocities estimated ({args.velocity}) for {len(estimated)} log(s)"] if estimated else []
+    if short:
+        notes.append(f"{short} piece(s) of split logs shorter than one trajectory after the skipped start: left out")
+    if estimated:
+        notes.insert(0, f"velocities estimated ({args.velocity}) for {len(estimated)} log(s)")
     return out, notes
+
+
+def _starts(trajs: list) -> dict[str, float]:
+    """{trajectory: its first time}, over the pieces a log's reading split it into."""
+    out: dict[str, float] = {}
+    for tr in trajs:
+        out[_trajectory_of(tr)] = min(out.get(_trajectory_of(tr), float("inf")), float(tr.t[0]))
+    return out
+
+
+def _trajectory_of(tr) -> str:
+    """The trajectory a piece was cut from (pieces of a split log are named ``<name>/<k>``)."""
+    return tr.name.rpartition("/")[0] or tr.name

@@ -12,6 +12,7 @@ import argparse
 from ..systems import SYSTEMS
 
 # the logs are read as train and evaluate read them (one helper); the old names stay
+from ._logs import add_reading_arguments
 from ._logs import load_logs as _load, pairs as _pairs, qube_runs as _qube_runs  # noqa: F401
 
 __all__ = ["add_arguments", "held_stop_counts", "run"]
@@ -84,13 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     """How the data are read and fitted."""
-    parser.add_argument(
-        "--column-map",
-        metavar="CANON=FILECOL,...",
-        help="columns under other names, e.g. alpha=theta,beta=alpha,u=plant_input",
-    )
-    parser.add_argument("--sign", metavar="CANON=±1,...", help="per-column sign, e.g. beta=-1")
-    parser.add_argument("--offset", metavar="CANON=VALUE,...", help="per-column offset, e.g. beta=3.14159")
+    add_reading_arguments(parser)
     parser.add_argument(
         "--velocity",
         choices=["zero_phase", "derivative_filter"],
@@ -150,8 +145,8 @@ def run(args: argparse.Namespace) -> int:
     for out in (args.json, args.mjcf):
         if out and Path(out).exists() and not args.overwrite:
             raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
-    trajs = _load(args.data, args)
-    test = _load(args.test, args) if args.test else None
+    trajs, notes = _load(args.data, args)
+    test, test_notes = _load(args.test, args) if args.test else (None, [])
     overrides = {"velocity": args.velocity}
     for key, val in (
         ("max_effects", args.max_effects),
@@ -175,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
         finish="prediction" if args.prediction_first else None,
         **overrides,
     )
+    res.notes[:0] = notes + test_notes  # what reading the logs did, said first
     print(res.table())
     if res.prediction is not None:
         print(res.prediction.summary())

@@ -1,7 +1,8 @@
 """``furuta-gym evaluate``: the paper's log10-RMSE metrics of a checkpoint on test data.
 
 Test data are generated sets or measured logs (``qube:RUNS``, or files read with
-``--column-map/--sign/--offset``; absent velocities estimated, start skipped). ``--window 0.1``
+``--column-map/--sign/--offset/--units/--time-unit`` as every command reads a log; absent
+velocities estimated, start skipped). ``--window 0.1``
 scores open-loop predictions over short windows started from the measured states, the input held
 over each sample period (an inverted pendulum diverges from any model over a whole log). On
 measured logs there is no ground truth: the force and energy metrics, which compare with the
@@ -87,11 +88,14 @@ def run(args: argparse.Namespace) -> int:
     for path in args.data:
         trajs, notes = prepared_logs([path], args, split=args.split, min_seconds=args.window or 0.0)
         # estimated velocities mean a measured log: the analytic model is no ground truth there
-        physics = not args.no_physics and not notes
+        measured = any(n.startswith("velocities estimated") for n in notes)
+        physics = not args.no_physics and not measured
         metrics = _score(model, trajs, args, physics)
         if notes:
             metrics["note"] = "; ".join(notes) + (
-                "; force and energy metrics skipped (measured data: no ground truth)" if not args.no_physics else ""
+                "; force and energy metrics skipped (measured data: no ground truth)"
+                if measured and not args.no_physics
+                else ""
             )
         results[str(path)] = metrics
         cells = "  ".join(

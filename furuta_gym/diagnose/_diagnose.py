@@ -14,7 +14,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .._x64 import ensure_x64
-from ..data import DataError, Trajectory, load_trajectories
+from ..data import DataError, Trajectory, read_log, read_trajectories
 from ..effects import (
     EFFECT_KINDS,
     INPUT_DYNAMICS_EFFECTS,
@@ -335,31 +335,28 @@ class DiagnosisResult:
 # ----------------------------------------------------------------------------- data preparation
 
 
-def _as_trajectories(data, spec, column_map, signs, offsets) -> list[Trajectory]:
-    if isinstance(data, (str, Path)):
-        return load_trajectories(data, spec, column_map=column_map, signs=signs, offsets=offsets)
-    if isinstance(data, (list, tuple)) and data and all(isinstance(d, (str, Path)) for d in data):
+def _as_trajectories(data, spec, reading: dict, notes: list[str]) -> list[Trajectory]:
+    """``data`` (paths or trajectories) read as every log is (:func:`furuta_gym.data.read_log`),
+    what the reading did added to ``notes``."""
+    one_path = isinstance(data, (str, Path))
+    items = [data] if isinstance(data, (str, Path, Trajectory)) else list(data)
+    paths = [d for d in items if isinstance(d, (str, Path))]
+    trajs = [d for d in items if isinstance(d, Trajectory)]
+    if paths and len(paths) == len(items):
         out = []
-        for path in data:
-            for tr in load_trajectories(path, spec, column_map=column_map, signs=signs, offsets=offsets):
-                tr.name = f"{Path(path).stem}:{tr.name}"
+        for path in paths:
+            read = read_log(path, spec, **reading)
+            notes += read.notes
+            for tr in read.trajectories:
+                if not one_path:  # several files: their trajectories named by file
+                    tr.name = f"{Path(path).stem}:{tr.name}"
                 out.append(tr)
         return out
-    if isinstance(data, Trajectory):
-        data = [data]
-    trajs = list(data)
-    if not trajs or not all(isinstance(t, Trajectory) for t in trajs):
+    if not trajs or len(trajs) != len(items):
         raise DataError("data: expected a file path or a list of furuta_gym.data.Trajectory")
-    for tr in trajs:
-        for name, arr in (("t", tr.t), ("q", tr.q), ("u", tr.u)):
-            if not np.all(np.isfinite(arr)):
-                raise DataError(f"trajectory {tr.name!r}: {name} has NaN/inf values; expected finite numbers")
-        if tr.q.ndim != 2 or tr.q.shape[1] != spec.n_dof:
-            raise DataError(
-                f"trajectory {tr.name!r}: q has shape {tr.q.shape}, expected (T, {spec.n_dof}) "
-                f"columns {list(spec.joint_names)}"
-            )
-    return trajs
+    read = read_trajectories(trajs, spec, units=reading.get("units"), time_unit=reading.get("time_unit"))
+    notes += read.notes
+    return read.trajectories
 
 
 def _velocities(tr: Trajectory, settings: DiagnosisSettings) -> np.ndarray:
@@ -432,11 +429,11 @@ def _segments(trajs, qds, settings: DiagnosisSettings) -> list[_fit.Segment]:
     return segs
 
 
-def _test_segments(test, spec, settings, column_map, signs, offsets, dt) -> list[_fit.Segment]:
+def _test_segments(test, spec, settings, reading: dict, dt, notes) -> list[_fit.Segment]:
     """Segments of the test logs (``diagnose(test=...)``): never fitted, only scored."""
     if test is None:
         return []
-    trajs = _as_trajectories(test, spec, column_map, signs, offsets)
+    trajs = _as_trajectories(test, spec, reading, notes)
     if abs(trajs[0].dt - dt) > 1e-3 * dt:
         raise DataError(f"test: sample period {trajs[0].dt:.6g} s differs from the fit data's {dt:.6g} s; expected one")
     qds = [_velocities(tr, settings) for tr in trajs]
@@ -1305,10 +1302,13 @@ def _given_model(model, spec):
     return model
 
 
-def _prepare(data, spec, settings, column_map, signs, offsets):
-    trajs = _as_trajectories(data, spec, column_map, signs, offsets)
+def _prepare(data, spec, settings, reading: dict, notes: list[str]):
+    trajs = _as_trajectories(data, spec, reading, notes)
     settings = settings.resolved(spec.name, trajs[0].dt)
-    _check_data(trajs, spec, settings)
+    try:
+        _check_data(trajs, spec, settings)
+    except DataError as err:  # what reading did to the logs may be why
+        raise DataError("; ".join([str(err), *notes])) from None
     qds = [_velocities(tr, settings) for tr in trajs]
     return trajs, qds, settings
 
@@ -1321,6 +1321,8 @@ def diagnose(
     column_map: Mapping[str, str] | None = None,
     signs: Mapping[str, float] | None = None,
     offsets: Mapping[str, float] | None = None,
+    units: Mapping[str, str] | str | None = None,
+    time_unit: str | None = None,
     fixed: Mapping[str, float] | None = None,
     candidates: Sequence[str] | None = None,
     model=None,
@@ -1331,8 +1333,11 @@ def diagnose(
     """Fit the declared model, trace its residual to missing effects, add them, refit, report.
 
     ``data``: a CSV/NPZ/MAT path or a list of paths (long format, see
-    :func:`furuta_gym.data.load_trajectories`; ``column_map``/``signs``/``offsets`` as there) or a
-    list of :class:`~furuta_gym.data.Trajectory`. ``test``: logs in the same form never used by
+    :func:`furuta_gym.data.load_trajectories`; ``column_map``/``signs``/``offsets``/``units``/
+    ``time_unit`` as there) or a list of :class:`~furuta_gym.data.Trajectory` (``units`` and
+    ``time_unit`` apply to these too). Either is read as every log is (wrapped angles unwrapped,
+    split at gaps and missing values, repeated rows dropped, said in the notes; a log in degrees,
+    counts or milliseconds stops, naming the keyword that fixes it). ``test``: logs in the same form never used by
     any fit or decision; errors before/after on them are reported beside the held-out split.
     ``system``: ``"furuta"`` or ``"nmsd"``. ``fixed``: lumped parameters held at known values
     (the scale anchor; default: the pendulum's gravity term ``G`` = ½mp·g·Lp for the Furuta, the
@@ -1355,9 +1360,7 @@ def diagnose(
         data,
         system,
         test=test,
-        column_map=column_map,
-        signs=signs,
-        offsets=offsets,
+        reading=dict(column_map=column_map, signs=signs, offsets=offsets, units=units, time_unit=time_unit),
         candidates=candidates,
         model=model,
         settings=settings,
@@ -1444,9 +1447,7 @@ def _diagnose_once(
     system: str,
     *,
     test=None,
-    column_map: Mapping[str, str] | None = None,
-    signs: Mapping[str, float] | None = None,
-    offsets: Mapping[str, float] | None = None,
+    reading: dict,
     fixed: Mapping[str, float] | None = None,
     candidates: Sequence[str] | None = None,
     model=None,
@@ -1454,19 +1455,20 @@ def _diagnose_once(
     keep_fitter: bool = False,
     **overrides,
 ) -> DiagnosisResult:
-    """One diagnosis with ``fixed`` as given (see :func:`diagnose`); ``keep_fitter``: its fitting
-    context stays on the result, for a finish."""
+    """One diagnosis with ``fixed`` as given (see :func:`diagnose`; ``reading``: how its logs are
+    read, keywords of :func:`furuta_gym.data.read_log`); ``keep_fitter``: its fitting context
+    stays on the result, for a finish."""
     ensure_x64()
     spec = get_spec(system)
     layout = layout_for(spec.name, _given_model(model, spec))
     notes: list[str] = []
     trajs, qds, settings = _prepare(
-        data, spec, dataclasses.replace(settings or DiagnosisSettings(), **overrides), column_map, signs, offsets
+        data, spec, dataclasses.replace(settings or DiagnosisSettings(), **overrides), reading, notes
     )
     if any(tr.qd is None for tr in trajs):
         notes.append(f"velocities estimated ({settings.velocity})")
     segs = _segments(trajs, qds, settings)
-    test_segs = _test_segments(test, spec, settings, column_map, signs, offsets, trajs[0].dt)
+    test_segs = _test_segments(test, spec, settings, reading, trajs[0].dt, notes)
     u_all = np.concatenate([s.u[:, 0] for s in segs])
     forced = bool(np.std(u_all) > 1e-9 * max(1.0, np.abs(u_all).max()) and np.abs(u_all).max() > 0)
     fixed = _anchor(spec, layout, fixed, forced, notes)
