@@ -207,7 +207,8 @@ def _config(args):
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ..training.train import train
+    from ..training.free_dynamics import free_dynamics_summary
+    from ..training.train import FREE_DYNAMICS_FILE, train
 
     hparams = model_hparams(args)
     if hparams and "springs" in hparams and args.model == "aph":
@@ -242,4 +243,7 @@ def run(args: argparse.Namespace) -> int:
     summary = {k: v for k, v in last.items() if k in ("epoch", "traj", "itau", "penalty", "lambda")}
     print(f"trained {args.system} {args.model} with L_{args.loss}: {json.dumps(summary)}")
     print(f"model: {args.out}/model.eqx")
+    check = Path(args.out) / FREE_DYNAMICS_FILE
+    if check.exists():
+        print(free_dynamics_summary(json.loads(check.read_text())) + f" ({check})")
     return 0

@@ -9,6 +9,7 @@ from .consistency import (
     warn_data_coverage,
     warn_potential_shape,
 )
+from .free_dynamics import FreeDynamicsWarning, check_free_dynamics, warn_free_dynamics
 from .losses import (
     Windows,
     aphynity_loss,
@@ -18,7 +19,7 @@ from .losses import (
     proposed_loss,
     trajectory_loss,
 )
-from .train import ScaleFit, TrainConfig, data_hash, fit_scale, train, training_step
+from .train import ScaleFit, ScaleFitWarning, TrainConfig, data_hash, fit_scale, train, training_step
 
 __all__ = [
     "CheckpointError",
@@ -27,6 +28,9 @@ __all__ = [
     "check_data_coverage",
     "warn_data_coverage",
     "check_potential_shape",
+    "FreeDynamicsWarning",
+    "check_free_dynamics",
+    "warn_free_dynamics",
     "warn_potential_shape",
     "load_model",
     "read_header",
@@ -40,6 +44,7 @@ __all__ = [
     "trajectory_loss",
     "training_step",
     "ScaleFit",
+    "ScaleFitWarning",
     "TrainConfig",
     "data_hash",
     "fit_scale",

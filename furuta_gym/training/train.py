@@ -48,6 +48,7 @@ from ..systems import get_spec
 from . import _step_cache
 from . import checkpoint as ckpt
 from .consistency import check_potential_shape, warn_data_coverage, warn_potential_shape
+from .free_dynamics import has_free_motion, warn_free_dynamics
 from ._itau_block import CAPACITY as BLOCK_CAPACITY
 from ._itau_block import ItauBlock
 from .losses import (
@@ -79,6 +80,12 @@ AUGMENTATION_WEIGHT = {
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
+#: the physical check of the trained model's free motion (:mod:`.free_dynamics`), beside the model
+FREE_DYNAMICS_FILE = "free_dynamics.json"
+
+
+class ScaleFitWarning(UserWarning):
+    """The overall-scale fit on the forced trajectory failed; the trained model is kept unscaled."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -322,19 +329,26 @@ def fit_scale(model, trajs: Sequence[Trajectory], rule: QuadratureRule = "trapez
     Z = np.concatenate(Zs).ravel()
     if not np.any(np.concatenate([np.asarray(tr.u).ravel() for tr in trajs]) != 0):
         raise ValueError("the scale fit needs a forced trajectory (nonzero input u); got u ≡ 0")
-    denom = float(A @ A)
+    denom = _dot(A, A)
     if not np.isfinite(denom) or denom == 0.0:
         raise ValueError("the scale fit failed: the model's integral terms are zero or not finite")
-    s = float(Z @ A) / denom
+    s = _dot(Z, A) / denom
     if not s > 0:
         raise ValueError(
             f"the scale fit gave a non-positive scale {s:.3g}: the model does not explain the "
             "forced trajectory's input (wrong sign convention of u?)"
         )
-    zn = float(np.sqrt(Z @ Z))
-    before = float(np.linalg.norm(Z - A)) / zn
-    after = float(np.linalg.norm(Z - s * A)) / zn
+    zn = math.sqrt(_dot(Z, Z))
+    before = math.sqrt(_dot(Z - A, Z - A)) / zn
+    after = math.sqrt(_dot(Z - s * A, Z - s * A)) / zn
     return model.with_scale(model.scale * s), ScaleFit(s, before, after)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """⟨a, b⟩ rounded once (``math.fsum`` of the products): a BLAS dot sums in an order set by
+    the kernels it picks for the CPU, so the scale, and every number after it, would differ
+    between machines in the last bits (docs/conventions.md, "Same numbers on every machine")."""
+    return math.fsum((a * b).tolist())
 
 
 def _tree_where(ok, new, old):
@@ -942,19 +956,27 @@ def _finish(model, history: list, config: TrainConfig, loss: str, dhash: str, tr
         "final": history[-1] if history else None,
     }
     if forced_trajs:
-        model, fit = fit_scale(model, forced_trajs, rule=config.quadrature, span=config.integral_span)
-        meta["scale_fit"] = fit.to_json()
         meta["forced_data_hash"] = data_hash(forced_trajs)
+        try:
+            model, fit = fit_scale(model, forced_trajs, rule=config.quadrature, span=config.integral_span)
+            meta["scale_fit"] = fit.to_json()
+        except ValueError as exc:  # the trained model is kept, unscaled, and the reason said
+            meta["scale_fit"] = {"error": str(exc)}
+            warnings.warn(f"{exc}; the model is saved without a scale fit", ScaleFitWarning, stacklevel=3)
     elif not any(np.any(np.asarray(tr.u) != 0) for tr in trajs):
         meta["scale_fit"] = None
         meta["scale_note"] = "trained on free data only: the overall scale of L and τ_NC is unidentified"
     # after the scale fit, which multiplies V too; one warning if the shape is not physical
     meta["potential_shape"] = warn_potential_shape(model, stacklevel=3)
     meta["data_coverage"] = warn_data_coverage(trajs, model.spec, stacklevel=3)
+    if has_free_motion(trajs):
+        meta["free_dynamics"] = warn_free_dynamics(model, trajs, stacklevel=3)
     if history:
         history[-1]["potential_shape"] = meta["potential_shape"]
     if out is not None:
         if bool(_all_finite(model)):
             ckpt.save_model(out / MODEL_FILE, model, meta, overwrite=True)
         (out / "history.json").write_text(json.dumps({"meta": meta, "history": history}, indent=1, default=float))
+        if "free_dynamics" in meta:
+            (out / FREE_DYNAMICS_FILE).write_text(json.dumps(meta["free_dynamics"], indent=1, default=float) + "\n")
     return model, history

@@ -1,0 +1,138 @@
+"""The physical check of a trained model's free motion (issue 65 item 4): the oscillation
+frequency against the logs' zero crossings, the energy along free data, open-loop prediction
+against holding still; in Python, at the end of ``train`` and printed by ``furuta-gym train``."""
+
+from __future__ import annotations
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import furuta_gym
+from furuta_gym.data import Trajectory
+from furuta_gym.effects import Effect
+from furuta_gym.envs import MujocoBackend
+from furuta_gym.models import Furuta
+from furuta_gym.models._furuta import FurutaParameters
+from furuta_gym.signals import quantize_encoder
+from furuta_gym.simulate import rollout_zoh
+from furuta_gym.training import FreeDynamicsWarning, check_free_dynamics, warn_free_dynamics
+from furuta_gym.training.free_dynamics import free_dynamics_summary, model_frequencies
+
+furuta_gym.enable_x64()
+
+DT = 0.002
+
+
+def _release(seconds=4.0, beta0=np.pi - 0.3):
+    """A free release of the analytic Furuta near upright, exact states, cut into 1 s pieces."""
+    n = int(round(seconds / DT))
+    xs = np.asarray(rollout_zoh(Furuta(), jnp.array([0.0, beta0, 0.0, 0.0]), jnp.zeros((n, 1)), DT, 4))
+    t = np.arange(n + 1) * DT
+    per = int(round(1.0 / DT))
+    return [
+        Trajectory(
+            t=t[k : k + per + 1] - t[k],
+            q=xs[k : k + per + 1, :2],
+            u=np.zeros((per + 1, 1)),
+            qd=xs[k : k + per + 1, 2:],
+            name=str(k),
+        )
+        for k in range(0, n - per + 1, per)
+    ]
+
+
+def test_the_true_model_passes_on_its_own_free_motion():
+    pieces = _release()
+    result = check_free_dynamics(Furuta(), pieces)
+    row = result["frequency"][0]
+    assert result["physical"] is True
+    # the rotor moves freely here, so the logs' frequency is the model's with every joint free
+    # (within the few % by which swings of up to the 0.5 rad counted lengthen the period)
+    assert row["measured"]["held_share"] < 0.05
+    assert row["measured"]["hz"] == pytest.approx(row["model_free_hz"], rel=0.05)
+    assert row["model_held_hz"] < row["model_free_hz"]  # holding the rotor slows the pendulum
+    assert result["prediction"]["ratio"] < 0.01
+    assert result["energy"]["share_rising"] == 0.0
+    assert "physical" in free_dynamics_summary(result) and "NOT" not in free_dynamics_summary(result)
+
+
+def test_a_pendulum_twice_too_fast_is_flagged_with_its_frequencies():
+    pieces = _release()
+    fast = Furuta(FurutaParameters(Lp=FurutaParameters().Lp / 4))  # ω ∝ 1/√Lp: twice the frequency
+    free, _ = model_frequencies(fast, (0.0, 0.0), 1)
+    assert free == pytest.approx(2 * model_frequencies(Furuta(), (0.0, 0.0), 1)[0], rel=0.15)
+    with pytest.warns(FreeDynamicsWarning, match=r"free oscillation is .* Hz .* but the model's is"):
+        result = warn_free_dynamics(fast, pieces)
+    assert result["physical"] is False and result["frequency"][0]["ok"] is False
+
+
+def test_free_motion_run_backwards_gains_energy_and_is_flagged():
+    reversed_pieces = [
+        Trajectory(t=tr.t, q=tr.q[::-1].copy(), u=tr.u, qd=-tr.qd[::-1].copy(), name=tr.name)
+        for tr in _release(seconds=6.0, beta0=1.5)
+    ]
+    result = check_free_dynamics(Furuta(), reversed_pieces)
+    assert result["energy"]["share_rising"] > 0.5 and result["energy"]["ok"] is False
+    assert result["physical"] is False
+
+
+def test_data_without_free_motion_make_no_verdict():
+    forced = [Trajectory(t=tr.t, q=tr.q, u=np.ones_like(tr.u), qd=tr.qd, name=tr.name) for tr in _release()]
+    result = check_free_dynamics(Furuta(), forced)
+    assert result["frequency"][0]["measured"]["hz"] is None and result["prediction"]["ratio"] is None
+    assert result["energy"]["n_free"] == 0 and result["physical"] is True
+
+
+def _sticky_release_csv(path, seconds=8.0):
+    """A 0 V release near upright on MuJoCo with a rotor held by a large breakaway, as a user
+    logs it (encoder angles, no velocities)."""
+    effects = [Effect("coulomb_friction", "alpha", 2e-4), Effect("stiction", "alpha", 1.8e-3, stribeck_velocity=0.02)]
+    plant = MujocoBackend("furuta", 10, effects, timestep=DT / 10)
+    x = np.array([0.05, np.pi - 0.15, 0.0, 0.0])
+    plant.reset(x)
+    xs = [x] + [np.asarray(plant.step(np.zeros(1))) for _ in range(int(round(seconds / DT)))]
+    q = quantize_encoder(np.stack(xs)[:, :2])
+    rows = ["traj,t,alpha,beta,u"] + [f"0,{k * DT:.4f},{a:.10f},{b:.10f},0" for k, (a, b) in enumerate(q)]
+    path.write_text("\n".join(rows) + "\n")
+
+
+def test_train_checks_a_model_trained_to_fail_and_says_so(tmp_path, capsys):
+    """L_Iτ alone on one 8 s release (docs/learning.md, 'Free releases'): the equation error is
+    small, yet the learned rotor runs away when the model is let go; the CLI prints the check,
+    warns, and writes it beside the checkpoint."""
+    from furuta_gym.cli import main
+
+    _sticky_release_csv(tmp_path / "free.csv")
+    out = tmp_path / "run"
+    argv = [
+        "train",
+        "--system",
+        "furuta",
+        "--model",
+        "dln",
+        "--loss",
+        "prop",
+        "--data",
+        str(tmp_path / "free.csv"),
+        "--out",
+        str(out),
+        "--epochs",
+        "2000",
+        "--horizons",
+        "itau",
+        "--quadrature",
+        "simpson",
+        "--lambda",
+        "1e-3",
+        "--no-progress",
+    ]
+    with pytest.warns(FreeDynamicsWarning, match="than holding the angles still"):
+        assert main(argv) == 0
+    check = json.loads((out / "free_dynamics.json").read_text())
+    assert check["physical"] is False and check["prediction"]["ratio"] > 1.0
+    assert "NOT physical" in capsys.readouterr().out
+    meta = json.loads((out / "history.json").read_text())["meta"]
+    assert meta["free_dynamics"]["prediction"]["ratio"] == pytest.approx(check["prediction"]["ratio"])
