@@ -157,7 +157,7 @@ def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:
     """The equation-error fit of the declared model with ``keys`` added, as the search fits it."""
     spec, notes = get_spec("furuta"), []
     layout = layout_for("furuta")
-    trajs, qds, resolved = _diagnose._prepare(data, spec, DiagnosisSettings(**settings), None, None, None)
+    trajs, qds, resolved = _diagnose._prepare(data, spec, DiagnosisSettings(**settings), {}, notes)
     fixed = _diagnose._anchor(spec, layout, None, True, notes)
     theta_fixed = layout.nominal()
     for k, v in fixed.items():
@@ -236,7 +236,7 @@ def test_held_stop_off_on_the_cli_reaches_diagnose(monkeypatch, tmp_path):
         seen.append(kwargs)
         raise Stop
 
-    monkeypatch.setattr(cli, "_load", lambda data, args: [])
+    monkeypatch.setattr(cli, "_load", lambda data, args: ([], []))  # (trajectories, reading notes)
     monkeypatch.setattr("furuta_gym.diagnose.diagnose", fake_diagnose)  # run() imports it when called
     for extra, expected in ((["--held-stop", "off"], None), ([], "absent"), (["--held-stop", "4"], 4.0)):
         args = build_parser().parse_args(["diagnose", str(tmp_path / "log.csv"), "--system", "furuta", *extra])

@@ -153,19 +153,16 @@ def test_a_wrapped_log_gets_the_clean_logs_diagnosis_with_a_note(tmp_path, run1,
 
 
 @pytest.mark.parametrize("how", ["gap", "nan"])
-def test_a_split_log_gets_the_clean_logs_effects_with_a_note(tmp_path, run1, clean, how):
-    """Split at a gap or at missing values, run 1's diagnosis keeps its effects and the parameters
-    one run determines. The rotor's J1, K and viscous c_alpha move together as one scale, which one
-    19.5 s run leaves loose: moving the clean log's start by 0.05 s moves them by up to a third
-    (docs/diagnose.md, "Reading logs"); their ratios stay."""
+def test_a_split_log_gets_the_clean_logs_diagnosis_with_a_note(tmp_path, run1, clean, how):
+    """Split at a gap or at missing values, run 1 keeps its diagnosis: its pieces are cut into
+    the diagnosis' segments on the whole log's grid, so the split only removes the segment it
+    falls in (cut on their own, the pieces' segments all move, and with them the rotor's J1, K
+    and c_alpha, which one run leaves loose, by up to half)."""
     split = _diagnosis(tmp_path, _write(tmp_path, run1, how), how)
     assert any("split into 2 pieces" in n for n in split["notes"])
     assert _significant(split) == _significant(clean)
-    before, after = clean["parameters_after"], split["parameters_after"]
-    for name in ("J1b", "Jc", "J2", "G", "c_beta"):
-        assert after[name] == pytest.approx(before[name], rel=0.25), name
-    for name in ("J1", "c_alpha"):
-        assert after[name] / after["K"] == pytest.approx(before[name] / before["K"], rel=0.25), name
+    for name, value in clean["parameters_after"].items():
+        assert split["parameters_after"][name] == pytest.approx(value, rel=0.25), name
 
 
 def test_trajectories_in_memory_are_read_the_same_way(run1):

@@ -392,22 +392,50 @@ def _check_data(trajs: list[Trajectory], spec, settings: DiagnosisSettings) -> N
             )
 
 
+def _runs(trajs) -> list[list[int]]:
+    """Indices of ``trajs`` grouped by the trajectory they were cut from: consecutive pieces
+    ``<name>/1``, ``<name>/2``, ... of one log its reading split at a gap or at missing values."""
+    out: list[list[int]] = []
+    for k, tr in enumerate(trajs):
+        base = tr.name.rpartition("/")[0]
+        prev = trajs[out[-1][-1]] if out else None
+        if prev is not None and base and prev.name.rpartition("/")[0] == base and tr.t[0] > prev.t[-1]:
+            out[-1].append(k)
+        else:
+            out.append([k])
+    return out
+
+
 def _pieces(trajs, qds, settings: DiagnosisSettings):
-    """Trajectories cut into segments of about ``segment_seconds`` (ends trimmed)."""
+    """Trajectories cut into segments of about ``segment_seconds`` (ends trimmed), each with the
+    index of its segment on its trajectory's grid. The pieces of a split log are cut on the
+    whole log's grid, so a gap only removes the segments it falls in (trimmed at its edges too)
+    and the rest are fitted or held out as in the log without it."""
     dt = trajs[0].dt
     trim = int(round(settings.trim_seconds / dt))
     seg_len = int(round(settings.segment_seconds / dt))
     min_len = int(round(settings.window / dt)) + 2
-    pieces = []
-    for tr, qd in zip(trajs, qds):
-        lo, hi = trim, len(tr) - trim
+    pieces, i = [], 0
+    for run in _runs(trajs):
+        first, last = trajs[run[0]], trajs[run[-1]]
+        grid = [
+            np.arange(len(trajs[j])) if len(run) == 1 else np.round((trajs[j].t - first.t[0]) / first.dt).astype(int)
+            for j in run
+        ]
+        lo, hi = trim, int(grid[-1][-1]) + 1 - trim
         if hi - lo < min_len:
             continue
         n_seg = max(1, (hi - lo) // seg_len)
         bounds = np.linspace(lo, hi, n_seg + 1).astype(int)
         for k in range(n_seg):
-            a, b = bounds[k], bounds[k + 1]
-            pieces.append((f"{tr.name}[{k}]", tr.t[a:b], tr.q[a:b], qd[a:b], np.asarray(tr.u[a:b], float)))
+            for j, n in zip(run, grid):
+                tr, qd = trajs[j], qds[j]
+                a = max(bounds[k], n[0] + (trim if tr is not first else 0))
+                b = min(bounds[k + 1], n[-1] + 1 - (trim if tr is not last else 0))
+                if b - a >= min_len:
+                    s = slice(a - n[0], b - n[0])
+                    pieces.append((f"{tr.name}[{k}]", tr.t[s], tr.q[s], qd[s], np.asarray(tr.u[s], float), i))
+            i += 1
     return pieces
 
 
@@ -416,8 +444,8 @@ def _segments(trajs, qds, settings: DiagnosisSettings) -> list[_fit.Segment]:
     dt = trajs[0].dt
     every = settings.holdout_every
     segs = [
-        _fit.Segment(name, t, q, qd, u, dt, i, (i % every) == (every - 1))
-        for i, (name, t, q, qd, u) in enumerate(_pieces(trajs, qds, settings))
+        _fit.Segment(name, t, q, qd, u, dt, i, (k % every) == (every - 1))
+        for i, (name, t, q, qd, u, k) in enumerate(_pieces(trajs, qds, settings))
     ]
     if not any(s.held_out for s in segs) and len(segs) > 1:
         segs[-1].held_out = True
@@ -439,7 +467,7 @@ def _test_segments(test, spec, settings, reading: dict, dt, notes) -> list[_fit.
     qds = [_velocities(tr, settings) for tr in trajs]
     segs = [
         _fit.Segment(name, t, q, qd, u, dt, -1 - i, True)
-        for i, (name, t, q, qd, u) in enumerate(_pieces(trajs, qds, settings))
+        for i, (name, t, q, qd, u, _) in enumerate(_pieces(trajs, qds, settings))
     ]
     if not segs:
         raise DataError(f"test: too short; every test trajectory is shorter than one {settings.window} s window")
