@@ -5,9 +5,11 @@ Importing this package registers the Gymnasium envs ``furuta_gym/Furuta-v0``,
 settings objects exported here (:class:`Plant`, :class:`Episode`, :class:`Actuation`,
 :class:`Sensors`, :class:`Spaces`, :class:`Camera`, :class:`Target`; see :mod:`furuta_gym.envs`).
 It never changes JAX's configuration at import; see :func:`furuta_gym.ensure_x64` and the README
-section "Float64".
+section "Float64". Its first act is to pin XLA's CPU code generation through ``XLA_FLAGS``, so that
+every x86-64 machine computes the same bits (:mod:`furuta_gym._numerics`, :func:`numerics`).
 """
 
+from ._numerics import NumericsWarning, numerics  # first: it pins XLA_FLAGS before JAX starts
 from ._dispatch import inline_cpu_dispatch
 from ._x64 import Float64Warning, enable_x64, ensure_x64
 from .lagrangian import AbstractLagrangianSystem, SystemSpec
@@ -25,6 +27,8 @@ __all__ = [
     "enable_x64",
     "ensure_x64",
     "inline_cpu_dispatch",
+    "NumericsWarning",
+    "numerics",
     "Plant",
     "Episode",
     "Actuation",

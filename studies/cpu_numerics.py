@@ -1,0 +1,193 @@
+"""Does a training give the same bits on every x86-64 machine? (issue 68)
+
+Other machines are emulated on this one: the instruction set XLA may use by capping it
+(``XLA_FLAGS=--xla_cpu_max_isa=...``), the core count by the process's CPU affinity, and the BLAS
+kernels OpenBLAS picks by ``OPENBLAS_CORETYPE`` (``Haswell``: an AVX2 machine's; ``SkylakeX``: an
+Intel AVX-512 machine's; unset: what OpenBLAS detects here). Each setting runs the same CI-size
+training in a fresh process — MuJoCo data as the demo makes it, a DeLaN trained with L_prop
+(L_Iτ + λ·L_traj), the scale fit — with furuta_gym's pinned numerics (the default) and without them
+(``FURUTA_GYM_NATIVE_ISA=1``), and records a digest of the trained parameters and their largest
+relative difference from the reference (the first setting). Writes ``results/cpu_numerics/`` and
+the ``cpu-numerics`` block of docs/conventions.md.
+
+    python studies/cpu_numerics.py             # run every setting (≈ 4 min on 2 cores), write both
+    python studies/cpu_numerics.py --check     # exit 1 if the docs block is stale
+    python studies/cpu_numerics.py --one OUT   # (child) one training in this process, saved to OUT
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
+from _generated import fill_block, machine, update  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "results" / "cpu_numerics" / "results.json"
+DOC = ROOT / "docs" / "conventions.md"
+NAME = "cpu-numerics"
+
+# (label, pinned, XLA cap or None, cores or None for all, OPENBLAS_CORETYPE or None for unset)
+SETTINGS = [
+    ("this machine (AVX-512), 2 cores", True, None, None, None),
+    ("AVX2 machine, 2 cores", True, "AVX2", None, "Haswell"),
+    ("AVX2 machine, 1 core", True, "AVX2", 1, "Haswell"),
+    ("Intel AVX-512 machine, 1 core", True, None, 1, "SkylakeX"),
+    ("AVX machine (no FMA), 2 cores", True, "AVX", None, "Sandybridge"),
+    ("this machine, user's cap AVX512", True, "AVX512", None, None),
+    ("this machine (AVX-512), 2 cores", False, None, None, None),
+    ("AVX2 machine, 2 cores", False, "AVX2", None, "Haswell"),
+    ("this machine (AVX-512), 1 core", False, None, 1, None),
+    ("Intel AVX-512 machine, 2 cores", False, None, None, "SkylakeX"),
+]
+
+
+def tiny_training(out: Path) -> None:
+    """The CI-size training (the demo's ``--tiny`` data, shorter), its parameters saved to ``out``."""
+    import equinox as eqx
+    import jax
+
+    from furuta_gym import numerics
+    from furuta_gym.training.datagen import FurutaRecipe, generate_datasets
+    from furuta_gym.training.train import TrainConfig, train
+
+    recipe = dataclasses.replace(
+        FurutaRecipe.small(),
+        n_train=4,
+        n_test_free=1,
+        test_free_duration=1.0,
+        n_test_forced=1,
+        test_forced_duration=1.0,
+    )
+    data = generate_datasets("furuta", seed=0, recipe=recipe, ground_truth="mujoco")
+    arrays = {}
+    for loss in ("prop",):  # L_prop = L_Iτ + λ·L_traj: both losses' code in one training
+        config = TrainConfig.for_system(
+            "furuta", epochs=(12,), horizons=(2,), seed=0, progress=False, checkpoint_every=10**9
+        )
+        model, _ = train("dln", "furuta", loss, data["train"], config, forced_trajs=data["scale_fit"])
+        leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
+        arrays[loss] = np.concatenate([np.ravel(np.asarray(a, dtype=np.float64)) for a in leaves])
+    np.savez(out, **arrays)
+    (out.parent / (out.stem + ".json")).write_text(json.dumps(numerics()))
+
+
+def digest(arrays: dict) -> str:
+    h = hashlib.sha256()
+    for key in sorted(arrays):
+        h.update(np.ascontiguousarray(arrays[key]).tobytes())
+    return h.hexdigest()[:16]
+
+
+def run_setting(pinned: bool, cap: str | None, cores: int | None, blas: str | None, out: Path) -> dict:
+    """One training in a fresh process as ``(pinned, cap, cores, blas)`` say; its parameters."""
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "OPENBLAS_CORETYPE", "FURUTA_GYM_NATIVE_ISA")}
+    if not pinned:
+        env["FURUTA_GYM_NATIVE_ISA"] = "1"
+    if cap is not None:
+        env["XLA_FLAGS"] = f"--xla_cpu_max_isa={cap}"
+    if blas is not None:
+        env["OPENBLAS_CORETYPE"] = blas
+    env["FURUTA_GYM_COMPILATION_CACHE"] = "0"
+    cpus = sorted(os.sched_getaffinity(0))[:cores] if cores else None
+    proc = subprocess.run(
+        [sys.executable, __file__, "--one", str(out)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        preexec_fn=(lambda: os.sched_setaffinity(0, cpus)) if cpus else None,
+    )
+    if proc.returncode != 0:
+        raise RuntimeError(proc.stderr[-3000:])
+    with np.load(out) as f:
+        arrays = {k: f[k] for k in f.files}
+    return {"arrays": arrays, "numerics": json.loads((out.parent / (out.stem + ".json")).read_text())}
+
+
+def run_all() -> dict:
+    rows, reference = [], None
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, (label, pinned, cap, cores, blas) in enumerate(SETTINGS):
+            r = run_setting(pinned, cap, cores, blas, Path(tmp) / f"run{i}.npz")
+            arrays = r["arrays"]
+            if reference is None:
+                reference = arrays
+            rel = max(
+                float(np.max(np.abs(arrays[k] - reference[k]) / np.maximum(np.abs(reference[k]), 1e-300)))
+                for k in arrays
+            )
+            rows.append(
+                {
+                    "label": label,
+                    "pinned": pinned,
+                    "xla_cap": cap,
+                    "cores": cores,
+                    "openblas_coretype": blas,
+                    "xla_flags_seen": r["numerics"]["xla_flags"],
+                    "digest": digest(arrays),
+                    "max_rel_diff_vs_reference": rel,
+                }
+            )
+            print(rows[-1], flush=True)
+    return {
+        "machine": machine(),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "training": "Furuta DeLaN, 4 free MuJoCo trajectories of 1 s (seed 0), 12 epochs of 2-step windows, "
+        "L_prop, scale fit on one forced trajectory",
+        "rows": rows,
+    }
+
+
+def block(res: dict) -> str:
+    ref = res["rows"][0]["digest"]
+    lines = [
+        f"{res['training']}; each setting a fresh process on {res['machine'].split(',')[0]} ({res['date']}), "
+        "other machines emulated (XLA's instruction-set cap, CPU affinity, OpenBLAS core type):",
+        "",
+        "| furuta_gym numerics | emulated machine | XLA_FLAGS given | OPENBLAS_CORETYPE | parameters' digest "
+        "| same bits as the first row | largest relative difference |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in res["rows"]:
+        flags = f"`--xla_cpu_max_isa={r['xla_cap']}`" if r["xla_cap"] else "none"
+        lines.append(
+            f"| {'pinned' if r['pinned'] else 'native'} | {r['label']} | {flags} | {r['openblas_coretype'] or 'unset'} "
+            f"| `{r['digest']}` | {'yes' if r['digest'] == ref else 'no'} | {r['max_rel_diff_vs_reference']:.1e} |"
+        )
+    lines += [
+        "",
+        "Made by `python studies/cpu_numerics.py` (results/cpu_numerics/); the CI test is tests/test_numerics.py.",
+    ]
+    return "\n".join(lines)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="compare the docs block only; exit 1 if stale")
+    ap.add_argument("--one", type=Path, help="(child) run one training here and save its parameters")
+    args = ap.parse_args()
+    if args.one is not None:
+        tiny_training(args.one)
+        return 0
+    if not args.check:
+        RESULTS.parent.mkdir(parents=True, exist_ok=True)
+        RESULTS.write_text(json.dumps(run_all(), indent=2) + "\n")
+    res = json.loads(RESULTS.read_text())
+    text = fill_block(DOC.read_text(), NAME, block(res), where=DOC)
+    return update(DOC, text, args.check, "run python studies/cpu_numerics.py")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
