@@ -104,3 +104,13 @@ def test_cpu_numerics_docs_block_matches_its_results():
         [sys.executable, str(ROOT / "studies" / "cpu_numerics.py"), "--check"], capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_numerics_cost_benchmark_section_matches_its_results():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "numerics_cost.py"), "--check"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT / "bench",
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
