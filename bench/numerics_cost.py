@@ -11,8 +11,9 @@ its processes:
 * a batched env rollout (``FurutaVectorEnv.rollout``: policy and model in one ``lax.scan``), 256
   copies, of the analytic Furuta and of an (untrained) DeLaN.
 
-Run ``python bench/numerics_cost.py`` (≈ 5 min on 2 cores): writes results/numerics_cost/results.json
-and its section of BENCHMARKS.md; ``--check`` only compares that section with the results.
+Run ``python bench/numerics_cost.py`` (≈ 6 min on 2 cores): writes results/numerics_cost/results.json
+and its section of BENCHMARKS.md; ``--check`` only compares that section with the results,
+``--no-measure`` rewrites it from them.
 """
 
 from __future__ import annotations
@@ -125,6 +126,12 @@ def section(res: dict) -> str:
     def fmt(v, unit):
         return f"{v * 1e3:.1f} ms" if unit == "s" else f"{v:,.0f}"
 
+    def cell(mode, key, unit, is_time):
+        """The best of the mode's processes, and in brackets its worst (the machine's noise)."""
+        values = [r[key] for r in res["runs"][mode]]
+        worst = max(values) if is_time else min(values)
+        return f"{fmt(res['best'][mode][key], unit)} ({fmt(worst, unit)})"
+
     lines = [
         "## Pinned CPU numerics: what the same bits on every machine cost (`bench/numerics_cost.py`)",
         "",
@@ -133,7 +140,8 @@ def section(res: dict) -> str:
         "Fresh processes alternated pinned / native "
         f"({res['rounds']} of each; best of each), JAX persistent cache off. Pinned: furuta_gym's default, "
         f"`XLA_FLAGS={p['xla_flags']}` and OpenBLAS's Haswell kernels; native: `FURUTA_GYM_NATIVE_ISA=1` "
-        "(XLA's own choice for this CPU, YNNPACK on). The speed ratio is pinned ÷ native (above 1: the pin is faster).",
+        "(XLA's own choice for this CPU, YNNPACK on). Each cell: the best process (in brackets the worst, the "
+        "shared machine's noise); the speed ratio is of the bests, pinned ÷ native (above 1: the pin is faster).",
         "",
         "| what | pinned | native | unit | speed ratio pinned / native |",
         "|---|---:|---:|---|---:|",
@@ -141,7 +149,8 @@ def section(res: dict) -> str:
     for label, key, unit, is_time in rows:
         ratio = n[key] / p[key] if is_time else p[key] / n[key]
         lines.append(
-            f"| {label} | {fmt(p[key], unit)} | {fmt(n[key], unit)} | {'epoch' if unit == 's' else unit} | {ratio:.2f} |"
+            f"| {label} | {cell('pinned', key, unit, is_time)} | {cell('native', key, unit, is_time)} "
+            f"| {'epoch' if unit == 's' else unit} | {ratio:.2f} |"
         )
     lines += ["", "Results: results/numerics_cost/results.json."]
     return "\n".join(lines)
@@ -150,13 +159,14 @@ def section(res: dict) -> str:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--one", action="store_true", help="(child) time everything in this process, print JSON")
-    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--check", action="store_true", help="compare the BENCHMARKS.md section with the results")
+    ap.add_argument("--no-measure", action="store_true", help="rewrite the section from the committed results")
     args = ap.parse_args()
     if args.one:
         print(json.dumps(one_process()))
         return 0
-    if not args.check:
+    if not (args.check or args.no_measure):
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         RESULTS.write_text(json.dumps(measure(args.rounds), indent=2) + "\n")
     res = json.loads(RESULTS.read_text())

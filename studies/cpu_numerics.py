@@ -1,9 +1,10 @@
 """Does a training give the same bits on every x86-64 machine? (issue 68)
 
 Other machines are emulated on this one: the instruction set XLA may use by capping it
-(``XLA_FLAGS=--xla_cpu_max_isa=...``), the core count by the process's CPU affinity, and the BLAS
+(``XLA_FLAGS=--xla_cpu_max_isa=...``), the core count by the process's CPU affinity, the BLAS
 kernels OpenBLAS picks by ``OPENBLAS_CORETYPE`` (``Haswell``: an AVX2 machine's; ``SkylakeX``: an
-Intel AVX-512 machine's; unset: what OpenBLAS detects here). Each setting runs the same CI-size
+Intel AVX-512 machine's; unset: what OpenBLAS detects here), and NumPy's loops by
+``NPY_DISABLE_CPU_FEATURES`` (an AVX2 machine has none of its AVX-512 ones). Each setting runs the same CI-size
 training in a fresh process — MuJoCo data as the demo makes it, a DeLaN trained with L_prop
 (L_Iτ + λ·L_traj), the scale fit — with furuta_gym's pinned numerics (the default) and without them
 (``FURUTA_GYM_NATIVE_ISA=1``), and records a digest of the trained parameters and their largest
@@ -38,18 +39,21 @@ RESULTS = ROOT / "results" / "cpu_numerics" / "results.json"
 DOC = ROOT / "docs" / "conventions.md"
 NAME = "cpu-numerics"
 
-# (label, pinned, XLA cap or None, cores or None for all, OPENBLAS_CORETYPE or None for unset)
+# NumPy picks its loops by the CPU too: an AVX2 machine has none of its AVX-512 ones
+NO_AVX512_NUMPY = "AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR"
+# (label, pinned, XLA cap or None, cores or None for all, OPENBLAS_CORETYPE or None for unset,
+# NumPy without its AVX-512 loops)
 SETTINGS = [
-    ("this machine (AVX-512), 2 cores", True, None, None, None),
-    ("AVX2 machine, 2 cores", True, "AVX2", None, "Haswell"),
-    ("AVX2 machine, 1 core", True, "AVX2", 1, "Haswell"),
-    ("Intel AVX-512 machine, 1 core", True, None, 1, "SkylakeX"),
-    ("AVX machine (no FMA), 2 cores", True, "AVX", None, "Sandybridge"),
-    ("this machine, user's cap AVX512", True, "AVX512", None, None),
-    ("this machine (AVX-512), 2 cores", False, None, None, None),
-    ("AVX2 machine, 2 cores", False, "AVX2", None, "Haswell"),
-    ("this machine (AVX-512), 1 core", False, None, 1, None),
-    ("Intel AVX-512 machine, 2 cores", False, None, None, "SkylakeX"),
+    ("this machine (AVX-512), 2 cores", True, None, None, None, False),
+    ("AVX2 machine, 2 cores", True, "AVX2", None, "Haswell", True),
+    ("AVX2 machine, 1 core", True, "AVX2", 1, "Haswell", True),
+    ("Intel AVX-512 machine, 1 core", True, None, 1, "SkylakeX", False),
+    ("AVX machine (no FMA), 2 cores", True, "AVX", None, "Sandybridge", True),
+    ("this machine, user's cap AVX512", True, "AVX512", None, None, False),
+    ("this machine (AVX-512), 2 cores", False, None, None, None, False),
+    ("AVX2 machine, 2 cores", False, "AVX2", None, "Haswell", True),
+    ("this machine (AVX-512), 1 core", False, None, 1, None, False),
+    ("Intel AVX-512 machine, 2 cores", False, None, None, "SkylakeX", False),
 ]
 
 
@@ -90,9 +94,16 @@ def digest(arrays: dict) -> str:
     return h.hexdigest()[:16]
 
 
-def run_setting(pinned: bool, cap: str | None, cores: int | None, blas: str | None, out: Path) -> dict:
-    """One training in a fresh process as ``(pinned, cap, cores, blas)`` say; its parameters."""
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "OPENBLAS_CORETYPE", "FURUTA_GYM_NATIVE_ISA")}
+def run_setting(
+    pinned: bool, cap: str | None, cores: int | None, blas: str | None, out: Path, numpy_avx512_off: bool = False
+) -> dict:
+    """One training in a fresh process as ``(pinned, cap, cores, blas, numpy_avx512_off)`` say;
+    its parameters."""
+    # no compilation cache shared with other settings (a test session's): each compiles its own code
+    unset = ("XLA_FLAGS", "OPENBLAS_CORETYPE", "FURUTA_GYM_NATIVE_ISA", "JAX_COMPILATION_CACHE_DIR")
+    env = {k: v for k, v in os.environ.items() if k not in unset and k != "NPY_DISABLE_CPU_FEATURES"}
+    if numpy_avx512_off:
+        env["NPY_DISABLE_CPU_FEATURES"] = NO_AVX512_NUMPY
     if not pinned:
         env["FURUTA_GYM_NATIVE_ISA"] = "1"
     if cap is not None:
@@ -119,8 +130,8 @@ def run_setting(pinned: bool, cap: str | None, cores: int | None, blas: str | No
 def run_all() -> dict:
     rows, reference = [], None
     with tempfile.TemporaryDirectory() as tmp:
-        for i, (label, pinned, cap, cores, blas) in enumerate(SETTINGS):
-            r = run_setting(pinned, cap, cores, blas, Path(tmp) / f"run{i}.npz")
+        for i, (label, pinned, cap, cores, blas, numpy_off) in enumerate(SETTINGS):
+            r = run_setting(pinned, cap, cores, blas, Path(tmp) / f"run{i}.npz", numpy_off)
             arrays = r["arrays"]
             if reference is None:
                 reference = arrays
@@ -135,6 +146,7 @@ def run_all() -> dict:
                     "xla_cap": cap,
                     "cores": cores,
                     "openblas_coretype": blas,
+                    "numpy_avx512_off": numpy_off,
                     "xla_flags_seen": r["numerics"]["xla_flags"],
                     "digest": digest(arrays),
                     "max_rel_diff_vs_reference": rel,
@@ -154,17 +166,17 @@ def block(res: dict) -> str:
     ref = res["rows"][0]["digest"]
     lines = [
         f"{res['training']}; each setting a fresh process on {res['machine'].split(',')[0]} ({res['date']}), "
-        "other machines emulated (XLA's instruction-set cap, CPU affinity, OpenBLAS core type):",
+        "other machines emulated (XLA's instruction-set cap, CPU affinity, OpenBLAS's core type, NumPy's loops):",
         "",
-        "| furuta_gym numerics | emulated machine | XLA_FLAGS given | OPENBLAS_CORETYPE | parameters' digest "
-        "| same bits as the first row | largest relative difference |",
-        "|---|---|---|---|---|---|---|",
+        "| furuta_gym numerics | emulated machine | XLA_FLAGS given | OPENBLAS_CORETYPE | NumPy's AVX-512 loops "
+        "| parameters' digest | same bits as the first row | largest relative difference |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in res["rows"]:
         flags = f"`--xla_cpu_max_isa={r['xla_cap']}`" if r["xla_cap"] else "none"
         lines.append(
             f"| {'pinned' if r['pinned'] else 'native'} | {r['label']} | {flags} | {r['openblas_coretype'] or 'unset'} "
-            f"| `{r['digest']}` | {'yes' if r['digest'] == ref else 'no'} | {r['max_rel_diff_vs_reference']:.1e} |"
+            f"| {'off' if r.get('numpy_avx512_off') else 'on'} | `{r['digest']}` | {'yes' if r['digest'] == ref else 'no'} | {r['max_rel_diff_vs_reference']:.1e} |"
         )
     lines += [
         "",
