@@ -14,7 +14,7 @@ from ._library import Candidate, LumpedModel, layout_for, nominal_base
 from ._rests import RestBound, Stop, held_at_rest, stop_excursions
 from ._report import write_figures as write_report_figures
 from ._report import write_json as write_report_json
-from ._synthetic import ClosedLoopBalancing, measured_like, sticky_rig
+from ._synthetic import ClosedLoopBalancing, breakaway_rig, measured_like, moving_rest_rig, sticky_rig
 
 __all__ = [
     "diagnose",
@@ -30,6 +30,8 @@ __all__ = [
     "nominal_base",
     "measured_like",
     "sticky_rig",
+    "moving_rest_rig",
+    "breakaway_rig",
     "ClosedLoopBalancing",
     "held_at_rest",
     "RestBound",

@@ -21,6 +21,10 @@ Experiments (``excitation=``):
   third segment is a large swing followed by a slow low-amplitude chirp (the rotor left off the
   cable's neutral creeps and oscillates around where the swing left it), the others chirps of
   random amplitude and band (at high frequency the rotor moves a few counts in all).
+* ``"rotor_releases"`` (Furuta): at 0 V, pendulum hanging, the rotor carried 0.5–2 rad (either
+  sign) from where it rests and let go from rest, once per trajectory; the trajectories are one
+  rig's releases in order (the hand is not simulated, but a cable whose neutral moves remembers
+  where it carried the rotor: :meth:`MujocoBackend.move`).
 * ``"closed_loop_prbs"`` (Furuta): upright balancing as in the MIT rig logs: a PD controller on
   the quantised angles tracking a rotor reference that ramps back and forth and a ±0.01 rad
   pendulum reference, plus a ±0.5 V feed-forward, saturated at ±10 V. The logged u is the plant
@@ -46,9 +50,20 @@ from ..models import SYSTEM_DEFINITIONS, analytic_model, system_definition
 from ..signals import chirp, quantize_encoder
 from ..simulate import rk4_zoh_step, rollout_zoh
 
-__all__ = ["measured_like", "sticky_rig", "ClosedLoopBalancing", "EXCITATIONS", "BALANCE_GAINS"]
+__all__ = [
+    "measured_like",
+    "sticky_rig",
+    "moving_rest_rig",
+    "breakaway_rig",
+    "ClosedLoopBalancing",
+    "EXCITATIONS",
+    "BALANCE_GAINS",
+]
 
-EXCITATIONS = ("chirp", "sine_sweep", "sticky_sweep", "closed_loop_prbs")
+EXCITATIONS = ("chirp", "sine_sweep", "sticky_sweep", "rotor_releases", "closed_loop_prbs")
+
+#: rad: the rotor is carried no further from zero than this (a cable limits its travel)
+RELEASE_TRAVEL = 2.5
 
 #: the MIT rig logs' balance gains (their alpha = 0 upright), V/rad and V·s/rad. In our convention
 #: u = kp_theta·α + kd_theta·α̇ − kp_alpha·(β − π) − kd_alpha·β̇: of the 16 sign patterns the only
@@ -110,6 +125,43 @@ def sticky_rig(seed: int) -> list[Effect]:
         Effect("coulomb_friction", "alpha", coulomb),
         Effect("stiction", "alpha", (breakaway - 1.0) * coulomb),
     ]
+
+
+def moving_rest_rig(seed: int) -> list[Effect]:
+    """A rotor on a cable whose rest moves, drawn from ``seed`` (issue 64's case (a)): a
+    ``hysteretic_spring`` of 1.5e-3–2.5e-3 N·m/rad with a play of 0.1–0.8 rad, Coulomb friction
+    1e-4–3e-4 N·m and a modest breakaway, 1.5× that level (v_s 0.02 rad/s)."""
+    rng = np.random.default_rng([seed, 64, 1])
+    stiffness, play, coulomb = rng.uniform(1.5e-3, 2.5e-3), rng.uniform(0.1, 0.8), rng.uniform(1e-4, 3e-4)
+    return [
+        Effect("hysteretic_spring", "alpha", stiffness, play=play),
+        Effect("coulomb_friction", "alpha", coulomb),
+        Effect("stiction", "alpha", 0.5 * coulomb, stribeck_velocity=0.02),
+    ]
+
+
+def breakaway_rig(seed: int) -> list[Effect]:
+    """A rotor held by friction far above its sliding level, drawn from ``seed`` (issue 64's case
+    (b)): a fixed cable spring of 1.5e-3–2.5e-3 N·m/rad with its rest within ±0.1 rad, Coulomb
+    friction 1e-4–3e-4 N·m and a breakaway 5–10× that level (stiction ΔF = breakaway − Coulomb,
+    v_s 0.02 rad/s so that it holds only a rotor at rest)."""
+    rng = np.random.default_rng([seed, 64, 2])
+    stiffness, reference = rng.uniform(1.5e-3, 2.5e-3), rng.uniform(-0.1, 0.1)
+    coulomb, breakaway = rng.uniform(1e-4, 3e-4), rng.uniform(5.0, 10.0)
+    return [
+        Effect("spring", "alpha", stiffness, reference=reference),
+        Effect("coulomb_friction", "alpha", coulomb),
+        Effect("stiction", "alpha", (breakaway - 1.0) * coulomb, stribeck_velocity=0.02),
+    ]
+
+
+def _release_start(rotor: float, rng: np.random.Generator) -> np.ndarray:
+    """Where a hand lets the rotor go from ``rotor`` (rad): 0.5–2 rad away, either sign (turned
+    back if that would carry it beyond :data:`RELEASE_TRAVEL`), at rest, the pendulum hanging."""
+    step = rng.choice((-1.0, 1.0)) * rng.uniform(0.5, 2.0)
+    if abs(rotor + step) > RELEASE_TRAVEL:
+        step = -step
+    return np.array([rotor + step, rng.uniform(-0.02, 0.02), 0.0, 0.0])
 
 
 def _telegraph(n: int, dt: float, rng, level: float, unit: float, most: int) -> np.ndarray:
@@ -192,12 +244,14 @@ class _Plant:
         else:
             raise ValueError(f"plant must be 'mujoco' or 'analytic', got {plant!r}")
 
-    def roll(self, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """States at every sample time under the commanded samples ``u`` (T,); ``xs[0] = x0``."""
+    def roll(self, x0: np.ndarray, u: np.ndarray, carried: bool = False) -> np.ndarray:
+        """States at every sample time under the commanded samples ``u`` (T,); ``xs[0] = x0``.
+        ``carried``: the plant was carried to ``x0`` from where the last roll left it, so a
+        cable's moving neutral remembers that (MuJoCo; the analytic plant has no such memory)."""
         T, s = len(u), self.shift
         u_plant = np.concatenate([np.full(s, u[0]), u[: T - s]]) if s else u
         if self.backend is not None:
-            self.backend.reset(np.asarray(x0))
+            (self.backend.move if carried else self.backend.reset)(np.asarray(x0))
             steps = [self.backend.step(np.asarray(u_k)) for u_k in u_plant[:-1, None]]
             return np.stack([np.asarray(x0)] + steps)
         if self.lag is not None:  # open loop: the lag's held means can be computed up front
@@ -258,6 +312,17 @@ def _balance(sim: _Plant, t: np.ndarray, rng: np.random.Generator, experiment: C
     return qs, us, qds
 
 
+def _open_loop(system: str, excitation: str, k: int, t: np.ndarray, rng, forced: bool):
+    """(start state, input) of trajectory ``k`` of an open-loop sweep or chirp experiment."""
+    if excitation in ("sine_sweep", "sticky_sweep"):
+        q0 = [rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05)]
+        x0 = np.array([*q0, *rng.uniform(-0.01, 0.01, 2)])
+        u = _sine_with_rests(t, rng) if excitation == "sine_sweep" else _sticky_segment(t, rng, k % 3 == 0)
+        return x0, u
+    x0 = np.array([rng.uniform(lo, hi) for lo, hi in system_definition(system).chirp_initial_ranges])
+    return x0, _inputs(system, t, rng, forced)
+
+
 def _named_experiment(excitation) -> tuple[str, ClosedLoopBalancing]:
     """(the experiment's name, the closed loop's settings) of ``measured_like``'s ``excitation``."""
     if isinstance(excitation, ClosedLoopBalancing):
@@ -291,6 +356,9 @@ def measured_like(
     * ``"sine_sweep"``: near rest, hanging (α0 ~ U(−0.1, 0.1), β0 ~ U(−0.05, 0.05), velocities
       ~ U(−0.01, 0.01)); one sine of 0.3–2 V at 0.2–3 Hz, on for 60–80 % of each 3–8 s cycle
       (switched at zero crossings), 0 V in between.
+    * ``"rotor_releases"``: u = 0; each trajectory a release from rest, the rotor carried 0.5–2 rad
+      (either sign) from where the previous one left it (the first from α ~ U(−0.1, 0.1)), the
+      pendulum hanging (β0 ~ U(−0.02, 0.02)); the plant keeps its memory between them.
     * ``"closed_loop_prbs"``: upright balancing from β0 = π ± 0.05, α0 = ±0.1, velocities ±0.05;
       PD on the encoder angles (:data:`BALANCE_GAINS`, filtered-difference velocities) tracking
       references plus a ±0.5 V feed-forward as the MIT logs do, saturated at ±10 V; u is the
@@ -324,19 +392,18 @@ def measured_like(
     # of a second at 2 ms), where a real rotor sticks
     sim = _Plant(system, effects, plant, dt, substeps, fine=excitation != "chirp")
     sense = quantize_encoder if quantize else (lambda q: q)
-    out = []
+    out, rotor = [], None  # the releases' rotor, drawn only for them (other streams unchanged)
     for k in range(n_trajectories):
         if excitation == "closed_loop_prbs":
             q, u, qd = _balance(sim, t, rng, experiment, sense)
         else:
-            if excitation in ("sine_sweep", "sticky_sweep"):
-                q0 = [rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05)]
-                x0 = np.array([*q0, *rng.uniform(-0.01, 0.01, 2)])
-                u = _sine_with_rests(t, rng) if excitation == "sine_sweep" else _sticky_segment(t, rng, k % 3 == 0)
+            if excitation == "rotor_releases":
+                rotor = rng.uniform(-0.1, 0.1) if rotor is None else rotor
+                x0, u = _release_start(rotor, rng), np.zeros_like(t)
             else:
-                x0 = np.array([rng.uniform(lo, hi) for lo, hi in definition.chirp_initial_ranges])
-                u = _inputs(system, t, rng, forced)
-            xs = sim.roll(x0, u)
+                x0, u = _open_loop(system, excitation, k, t, rng, forced)
+            xs = sim.roll(x0, u, carried=excitation == "rotor_releases" and k > 0)
+            rotor = float(xs[-1, 0])
             q, qd = xs[:, : definition.spec.n_dof], xs[:, definition.spec.n_dof :]
             if definition.encoders:
                 q = sense(q)

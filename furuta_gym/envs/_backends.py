@@ -412,6 +412,15 @@ class MujocoBackend(AbstractBackend):
         for _, neutral in self._neutrals:
             neutral.reset()
 
+    def move(self, x) -> None:
+        """Put the system at state ``x`` as a hand would carry it there from where it is: unlike
+        :meth:`reset`, effects with memory are kept, and a hysteretic spring's neutral is dragged
+        along the joint's straight path (releases of a rig whose cable remembers the last one)."""
+        self.data.qpos[:] = x[: self._n]
+        self.data.qvel[:] = x[self._n :]
+        for dof, neutral in self._neutrals:
+            neutral.advance(float(self._qpos[dof]))
+
     @contextlib.contextmanager
     def passive_forces(self):
         """Context in which MuJoCo computes this plant's full passive force (callback installed);
