@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 
 import furuta_gym
-from furuta_gym.diagnose import breakaway_rig, measured_like, moving_rest_rig
+from furuta_gym.data import Trajectory
+from furuta_gym.diagnose import breakaway_rig, measured_like, moving_rest_rig, rest_drift
 from furuta_gym.effects import Effect
 from furuta_gym.envs import MujocoBackend
+from furuta_gym.signals import quantize_encoder
 
 furuta_gym.enable_x64()
 SEEDS = range(5)
@@ -86,3 +88,54 @@ def test_a_moving_rest_follows_the_release_and_a_fixed_neutral_holds_every_rest_
     for rig, log in releases["breakaway"]:
         rests = np.array([tr.q[-1, 0] for tr in log])
         assert np.all(np.abs(rests - rig[0].reference) <= _hold(rig))
+
+
+def _hand_log(path, dt=0.002) -> list[Trajectory]:
+    """One trajectory through the (angle, seconds) stops of ``path``: each held for its seconds,
+    joined by 0.1 s ramps; encoder-quantised, u = 0."""
+    q = [np.full(int(round(s / dt)), a) for a, s in path[:1]]
+    for (a0, _), (a1, s) in zip(path[:-1], path[1:]):
+        q += [np.linspace(a0, a1, 50, endpoint=False), np.full(int(round(s / dt)), a1)]
+    alpha = quantize_encoder(np.stack([np.concatenate(q), np.zeros(sum(map(len, q)))], 1))
+    t = np.arange(len(alpha)) * dt
+    return [Trajectory(t=t, q=alpha, u=np.zeros((len(t), 1)), name="hand")]
+
+
+def test_rest_drift_reads_each_rest_and_the_share_of_the_excursion_before_it_that_it_followed():
+    # rest at 0, out to +1 (0.1 s), rest at +0.8; out to -0.5, rest at -0.3; out to +1.4, rest +1.1
+    path = [
+        (0.0, 1.0),
+        (1.0, 0.1),
+        (0.8, 1.0),
+        (-0.5, 0.1),
+        (-0.3, 1.0),
+        (1.4, 0.1),
+        (1.1, 1.0),
+        (-0.2, 0.1),
+        (0.0, 1.0),
+    ]
+    drift = rest_drift(_hand_log(path))
+    assert [round(r.position, 2) for r in drift.rests] == [0.0, 0.8, -0.3, 1.1, 0.0]
+    assert [round(r.excursion, 2) for r in drift.rests[1:]] == [1.0, -0.5, 1.4, -0.2]
+    # followed: 0.8 of 1; 1.1 of 1.3 down; 1.4 of 1.7 up; 1.1 of 1.3 down
+    assert drift.follows == pytest.approx([0.8, 1.1 / 1.3, 1.4 / 1.7, 1.1 / 1.3], abs=2e-3)
+    assert drift.sides == (1, -1, 1, -1) and drift.spread == pytest.approx(1.4, abs=4e-3)
+    assert drift.verdict == "moving rest"
+    # the same excursions, every rest back by one neutral: a fixed cable held by friction
+    back = [
+        (0.0, 1.0),
+        (1.0, 0.1),
+        (-0.1, 1.0),
+        (-0.9, 0.1),
+        (0.05, 1.0),
+        (1.4, 0.1),
+        (-0.05, 1.0),
+        (-1.2, 0.1),
+        (0.1, 1.0),
+    ]
+    drift = rest_drift(_hand_log(back))
+    assert max(drift.follows) < 0 and drift.verdict == "fixed neutral held by friction"
+    # a rest the joint never came back from says nothing; a log without rests says nothing
+    stuck = [(0.0, 1.0), (1.0, 1.0), (-0.5, 1.0), (1.2, 1.0), (-0.8, 1.0)]
+    assert rest_drift(_hand_log(stuck)).follows == () and rest_drift(_hand_log(stuck)).verdict == "cannot tell"
+    assert rest_drift(_hand_log([(0.0, 0.2), (1.0, 0.2)])).rests == ()

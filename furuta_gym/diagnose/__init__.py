@@ -8,6 +8,7 @@ final model for prediction beside the report. See ``docs/diagnose.md``.
 """
 
 from ._diagnose import DiagnosisResult, DiagnosisSettings, EffectEvidence, ErrorSummary, diagnose
+from ._drift import REST_LAWS, Rest, RestDrift, rest_drift
 from ._finish import PredictionFinish
 from ._fit import InputDynamics
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
@@ -37,6 +38,10 @@ __all__ = [
     "RestBound",
     "Stop",
     "stop_excursions",
+    "rest_drift",
+    "RestDrift",
+    "Rest",
+    "REST_LAWS",
     "write_report_figures",
     "write_report_json",
 ]
