@@ -226,3 +226,25 @@ def test_rest_drift_over_thirty_logs_of_each_law():
     assert verdicts["moving"].count("moving rest") >= 25 and "fixed neutral held by friction" not in verdicts["moving"]
     assert verdicts["breakaway"].count("fixed neutral held by friction") >= 25
     assert "moving rest" not in verdicts["breakaway"] and set(verdicts["none"]) == {"cannot tell"}
+
+
+def _flickered(log, seed: int, share: float = 0.2) -> list[Trajectory]:
+    """``log`` with the rotor's encoder one count up on a random ``share`` of the samples."""
+    rng = np.random.default_rng(seed)
+    count = 2 * np.pi / 2048
+    out = []
+    for tr in log:
+        q = tr.q.copy()
+        q[:, 0] += count * (rng.random(len(q)) < share)
+        out.append(Trajectory(t=tr.t, q=q, u=tr.u, name=tr.name))
+    return out
+
+
+def test_a_one_count_flicker_cuts_every_rest_unless_rest_drift_reads_through_it(releases):
+    for law in ("moving", "breakaway"):
+        for k, (_, log) in enumerate(releases[law]):
+            clean, noisy = rest_drift(log), _flickered(log, k)
+            assert len(rest_drift(noisy).rests) == 0  # no 0.3 s on one count is left
+            through = rest_drift(noisy, flicker=1)
+            assert through.verdict == clean.verdict and len(through.follows) == len(clean.follows)
+            assert np.allclose(through.follows, clean.follows, atol=0.05)

@@ -7,7 +7,9 @@ past the neutral and stops where its friction catches it. A cable whose rest mov
 operator: its neutral dragged along beyond a play) leaves the rotor near where the excursion
 dragged the neutral: each rest moves towards the excursion before it, on either side.
 
-A rest is a run of at least ``min_rest`` seconds on one logged value (one encoder count). The
+A rest is a run of at least ``min_rest`` seconds on one logged value (one encoder count; with
+``flicker`` = n, within n counts of its first value, so that an encoder flickering between two
+counts under a resting joint does not cut the rest into pieces). The
 rests of all trajectories are taken in order as one history, so a log of releases
 (``excitation="rotor_releases"``, each trajectory continuing where the last left it) or of sweeps
 is read as it was recorded. For each rest after a large excursion (at least ``large`` from the
@@ -27,6 +29,7 @@ import numpy as np
 
 from ..data import Trajectory
 from ..systems import get_spec
+from ..signals import ENCODER_COUNTS_PER_REV
 from ._fit import value_runs
 
 __all__ = ["Rest", "RestDrift", "rest_drift", "REST_LAWS"]
@@ -82,14 +85,27 @@ class RestDrift:
         )
 
 
-def _rests(trajectories: Sequence[Trajectory], j: int, min_rest: float) -> list[Rest]:
+def _runs_within(q: np.ndarray, tolerance: float) -> np.ndarray:
+    """Bounds [0, …, T] of the runs of ``q`` that stay within ``tolerance`` of their first value
+    (greedy from the start); ``tolerance`` 0: runs on one value."""
+    if tolerance <= 0:
+        return value_runs(q)
+    bounds, start = [0], q[0]
+    for k in range(1, q.size):
+        if abs(q[k] - start) > tolerance:
+            bounds.append(k)
+            start = q[k]
+    return np.asarray(bounds + [q.size])
+
+
+def _rests(trajectories: Sequence[Trajectory], j: int, min_rest: float, tolerance: float) -> list[Rest]:
     """Every run of at least ``min_rest`` s on one value of joint ``j``, in order, each with the
     farthest point from the rest before it reached since that rest."""
     out: list[Rest] = []
     far: float | None = None  # farthest point from the last rest so far
     for tr in trajectories:
         q = np.asarray(tr.q[:, j], dtype=float)
-        bounds = value_runs(q)
+        bounds = _runs_within(q, tolerance)
         length = int(round(min_rest / tr.dt))
         for s, e in zip(bounds[:-1], bounds[1:]):
             if out:
@@ -98,7 +114,7 @@ def _rests(trajectories: Sequence[Trajectory], j: int, min_rest: float) -> list[
                 if far is None or abs(stretch[k] - out[-1].position) > abs(far - out[-1].position):
                     far = float(stretch[k])
             if e - s >= length:
-                out.append(Rest(tr.name, int(s), int(e - s), float(q[s]), far if out else None))
+                out.append(Rest(tr.name, int(s), int(e - s), float(np.median(q[s:e])), far if out else None))
                 far = None
     return out
 
@@ -139,15 +155,18 @@ def rest_drift(
     follow: float = 0.15,
     min_each: int = 1,
     min_pairs: int = 3,
+    flicker: int = 0,
+    count: float = 2 * np.pi / ENCODER_COUNTS_PER_REV,
 ) -> RestDrift:
     """Whether ``joint``'s rests in measured ``trajectories`` (in recorded order) follow its large
     excursions (a rest that moves) or stay by one neutral (a fixed one held by friction), with the
     numbers; no model is fitted (module docstring). ``large`` and ``returned`` are in the joint's
     unit; ``follow`` is the median share followed, on each side, that splits the two laws;
     ``min_each`` large excursions each way, ``min_pairs`` in all, are needed for a verdict other
-    than "cannot tell" (a law seen on one side only could be a constant force)."""
+    than "cannot tell" (a law seen on one side only could be a constant force). ``flicker``: a
+    rest may flicker by that many encoder counts of ``count`` (rad or m)."""
     j = get_spec(system).joint_names.index(joint)
-    rests = _rests(trajectories, j, min_rest)
+    rests = _rests(trajectories, j, min_rest, flicker * count * 1.01)  # 1.01: counts as floats
     follows, sides = [], []
     for before, rest in zip(rests[:-1], rests[1:]):
         assert rest.excursion is not None
