@@ -41,8 +41,9 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 from furuta_gym.data import Trajectory  # noqa: E402
+from furuta_gym.diagnose import LumpedModel, layout_for  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
-from furuta_gym.envs import MujocoBackend  # noqa: E402
+from furuta_gym.envs import MujocoBackend, Plant  # noqa: E402
 from furuta_gym.measured import prepare_log, window_errors  # noqa: E402
 from furuta_gym.models import Furuta  # noqa: E402
 from furuta_gym.signals import quantize_encoder  # noqa: E402
@@ -53,6 +54,7 @@ OUT = ROOT / "results" / "free_releases"
 DT = 0.002
 SUBSTEPS = 10
 WINDOW = 0.5
+CALIBRATED = ROOT / "results" / "calibrated_protocol" / "diagnosis.json"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,6 +63,7 @@ class Variant:
 
     name: str
     label: str
+    rig: str = "nominal"  # the rigid body: "nominal" (datasheet) or "calibrated" (fitted on the real runs)
     rotor: str = "real"  # "real" (breakaway 10x + moving-rest cable), "none" (no dry friction, no cable)
     quantize: bool = True
     true_velocities: bool = False
@@ -138,6 +141,32 @@ VARIANTS = {
             baseline="traj_with_forced",
         ),
         Variant(
+            "cal_base",
+            "calibrated rig: L_Iτ stage (the closed-loop recipe)",
+            rig="calibrated",
+            baseline="cal_traj_defaults",
+        ),
+        Variant(
+            "cal_prop_defaults",
+            "calibrated rig: L_prop, `train`'s defaults",
+            rig="calibrated",
+            epochs=(100, 20),
+            horizons=(2, 1.0),
+            lam=1.0,
+            quadrature="trapezoid",
+            baseline="cal_traj_defaults",
+        ),
+        Variant(
+            "cal_traj_defaults",
+            "calibrated rig: L_traj, `train`'s defaults",
+            rig="calibrated",
+            loss="traj",
+            epochs=(100, 20),
+            horizons=(2, 1.0),
+            quadrature="trapezoid",
+            baseline="cal_traj_defaults",
+        ),
+        Variant(
             "prop_defaults",
             "L_prop, `train`'s defaults",
             epochs=(100, 20),
@@ -159,6 +188,45 @@ VARIANTS = {
 }
 
 
+def _calibrated(name: str, label: str, **changes) -> Variant:
+    """A row on the calibrated rig, `train`'s defaults unless ``changes`` say otherwise."""
+    defaults = dict(epochs=(100, 20), horizons=(2, 1.0), lam=1.0, quadrature="trapezoid")
+    base = dict(rig="calibrated", baseline="cal_traj_defaults", **defaults)
+    return Variant(name, "calibrated rig: " + label, **{**base, **changes})
+
+
+#: the same questions on the rig fitted on the real runs (rotor heavier and far less damped)
+CALIBRATED_VARIANTS = [
+    _calibrated("cal_prop_no_friction", "L_prop defaults, no dry friction or cable", rotor="none"),
+    _calibrated(
+        "cal_prop_ideal",
+        "L_prop defaults, ideal sensor, no friction",
+        rotor="none",
+        quantize=False,
+        true_velocities=True,
+    ),
+    _calibrated("cal_prop_spring", "L_prop defaults, learned rotor spring", hparams=(("springs", ("alpha",)),)),
+    _calibrated(
+        "cal_prop_with_forced",
+        "L_prop defaults, the forced sweep in the training data too",
+        train_on_forced=True,
+        baseline="cal_traj_with_forced",
+    ),
+    _calibrated(
+        "cal_traj_with_forced",
+        "L_traj defaults, the forced sweep in the training data too",
+        loss="traj",
+        train_on_forced=True,
+        baseline="cal_traj_with_forced",
+    ),
+    _calibrated("cal_prop_lambda_10", "L_prop defaults, λ = 10", lam=10.0),
+]
+VARIANTS.update({v.name: v for v in CALIBRATED_VARIANTS})
+VARIANTS["prop_lambda_10"] = dataclasses.replace(
+    VARIANTS["prop_defaults"], name="prop_lambda_10", label="L_prop, `train`'s defaults with λ = 10", lam=10.0
+)
+
+
 def rotor_effects(kind: str, seed: int) -> list[Effect]:
     """The rotor of a real rig (issue 64's ranges), drawn from ``seed``; ``"none"``: no rotor effect."""
     if kind == "none":
@@ -172,9 +240,33 @@ def rotor_effects(kind: str, seed: int) -> list[Effect]:
     ]
 
 
-def release(effects, x0, seconds: float, u=None) -> tuple[np.ndarray, np.ndarray]:
+def rig_parameters(rig: str) -> dict | None:
+    """The rigid-body parameters of ``rig``: None for the datasheet's, or ``"calibrated"``: those
+    the diagnosis fitted on the fifteen shipped real runs (results/calibrated_protocol), whose rotor
+    is heavier and far less damped, and whose pendulum hardly damped at all."""
+    if rig == "nominal":
+        return None
+    return json.loads(CALIBRATED.read_text())["parameters_after"]
+
+
+def rig_model(rig: str):
+    """The rig's rigid-body model without the rotor's effects (the reference for frequency and
+    coupling, and the "nominal" row): the analytic Furuta, or its lumped form in the fitted values."""
+    params = rig_parameters(rig)
+    if params is None:
+        return Furuta()
+    layout = layout_for("furuta")
+    theta = [params[n] for n in layout.base] + [0.0] * len(layout.candidates)
+    return LumpedModel(theta=jnp.asarray(theta, dtype=float), system="furuta")
+
+
+def release(effects, x0, seconds: float, u=None, parameters=None) -> tuple[np.ndarray, np.ndarray]:
     """States at 500 Hz from ``x0`` under ``u`` (0 V by default) on the MuJoCo plant."""
-    plant = MujocoBackend("furuta", SUBSTEPS, effects, timestep=DT / SUBSTEPS)
+    if parameters is None:
+        plant = MujocoBackend("furuta", SUBSTEPS, effects, timestep=DT / SUBSTEPS)
+    else:  # lumped parameters come as a whole plant
+        rig = Plant(effects=effects, lumped=parameters, system="furuta", source="calibrated rig")
+        plant = MujocoBackend("furuta", SUBSTEPS, timestep=DT / SUBSTEPS, plant=rig)
     plant.reset(np.asarray(x0, float))
     n = int(round(seconds / DT)) + 1
     u = np.zeros(n) if u is None else np.asarray(u, float)
@@ -215,16 +307,18 @@ def _split(tr: Trajectory, seconds: float) -> list[Trajectory]:
 
 def dataset(v: Variant, seed: int):
     """(training pieces, test pieces, forced trajectories, plant effects) of ``v`` on ``seed``."""
-    effects = rotor_effects(v.rotor, seed)
+    effects, params = rotor_effects(v.rotor, seed), rig_parameters(v.rig)
     rng = np.random.default_rng([seed, 7])
     train_logs = []
     for k in range(v.releases):
         x0 = [rng.uniform(-0.1, 0.1), np.pi + rng.choice([-1, 1]) * rng.uniform(0.05, 0.2), 0.0, 0.0]
-        train_logs.append(logged(*release(effects, x0, 8.0), v, f"release{k}"))
-    test = logged(*release(effects, [0.0, np.pi / 2 + rng.uniform(-0.1, 0.1), 0.0, 0.0], 6.0), v, "test")
+        train_logs.append(logged(*release(effects, x0, 8.0, parameters=params), v, f"release{k}"))
+    test = logged(
+        *release(effects, [0.0, np.pi / 2 + rng.uniform(-0.1, 0.1), 0.0, 0.0], 6.0, parameters=params), v, "test"
+    )
     t = np.arange(int(round(10.0 / DT)) + 1) * DT
     sweep = 0.75 * np.sin(2 * np.pi * (0.5 * t + 0.175 * t**2))  # 0.5 -> 4 Hz over 10 s
-    forced = logged(*release(effects, np.zeros(4), 10.0, sweep), v, "forced")
+    forced = logged(*release(effects, np.zeros(4), 10.0, sweep, parameters=params), v, "forced")
     pieces = [p for tr in train_logs for p in prepared(tr, 1.0)]
     if v.train_on_forced:
         pieces += prepared(forced, 1.0)
@@ -291,7 +385,8 @@ def run(v: Variant, seed: int, out: Path) -> dict:
         ].factor
     except ValueError as exc:
         scale = str(exc)
-    plant_f = free_frequency(Furuta())  # the effects add no stiffness at hanging about a rest
+    rigid = rig_model(v.rig)
+    plant_f = free_frequency(rigid)  # the effects add no stiffness at hanging about a rest
     doc = {
         "variant": v.name,
         "label": v.label,
@@ -301,7 +396,8 @@ def run(v: Variant, seed: int, out: Path) -> dict:
         "train_seconds": seconds,
         "scale_fit": scale,
         "plant_free_frequency_hz": plant_f,
-        "nominal": score(Furuta(), test, plant_f),
+        "rig": v.rig,
+        "nominal": score(rigid, test, plant_f),
         "model": score(model, test, plant_f),
         "machine": cpu_name(),
         "command": "python studies/free_releases.py " + " ".join(sys.argv[1:]),

@@ -23,6 +23,7 @@ __all__ = [
     "DEFAULT_QUADRATURE",
     "DEFAULT_LEARNING_RATE",
     "recipe_row",
+    "FREE_RELEASE_LAMBDA",
 ]
 
 DEFAULT_QUADRATURE = "simpson"
@@ -160,6 +161,11 @@ PAPER_SCHEDULE = {
 #: ``--quick``: a few epochs per stage, for a pipeline check (minutes, not the paper's numbers)
 QUICK_EPOCHS = {"nmsd": (8, 2), "furuta": (4, 1)}
 QUICK_PROP_EPOCHS = {"nmsd": (300, 8, 2), "furuta": (300, 4, 1)}
+
+#: λ of L_prop that ``furuta-gym train`` takes on free (u = 0) data when none is given: with λ = 1
+#: L_Iτ's pull left a lightly damped rig's free dynamics wrong on some seeds where L_traj's
+#: trajectories are right (docs/learning.md, "Free releases")
+FREE_RELEASE_LAMBDA = 10.0
 
 
 def recipe_row(system: str, kind: str | None, loss: str, epochs: tuple[int, ...] | None = None) -> RunRecipe:
