@@ -181,6 +181,10 @@ def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | No
     parser.add_argument("--split", type=float, default=split_default, metavar="SECONDS", help=split_help)
 
 
+#: how :func:`prepared_logs`' notes begin when it estimated velocities (the logs were measured)
+ESTIMATED_NOTE = "velocities estimated"
+
+
 def prepared_logs(
     paths, args, *, split: float | str | None = "measured", min_seconds: float = 0.0
 ) -> tuple[list, list[str]]:
@@ -226,7 +230,7 @@ def prepared_logs(
     if short:
         notes.append(f"{short} piece(s) of split logs shorter than one trajectory after the skipped start: left out")
     if estimated:
-        notes.insert(0, f"velocities estimated ({args.velocity}) for {len(estimated)} log(s)")
+        notes.insert(0, f"{ESTIMATED_NOTE} ({args.velocity}) for {len(estimated)} log(s)")
     return out, notes
 
 

@@ -26,7 +26,7 @@ import json
 import numpy as np
 
 from ..systems import SYSTEMS
-from ._logs import add_log_arguments, prepared_logs
+from ._logs import ESTIMATED_NOTE, add_log_arguments, prepared_logs
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -176,9 +176,10 @@ def _describe_data(args, trajs, notes) -> dict:
     }
 
 
-def _config(args, free_data: bool = False):
-    """The TrainConfig the options ask for; on free data (``free_data``: no input anywhere) L_prop
-    without ``--lambda`` takes the free-release λ."""
+def _config(args, free_release: bool = False):
+    """The TrainConfig the options ask for; on measured free releases (``free_release``: logs
+    whose velocities were estimated, no input anywhere) L_prop without ``--lambda`` takes the
+    free-release λ."""
     from ..training.recipe import FREE_RELEASE_LAMBDA
     from ..training.train import TrainConfig
 
@@ -202,9 +203,9 @@ def _config(args, free_data: bool = False):
         overrides["batch_size"] = None if args.batch_size == 0 else args.batch_size
     if args.epochs is not None and args.horizons is None and len(args.epochs) == 1:
         overrides["horizons"] = (2,)
-    if free_data and args.loss == "prop" and args.lam is None and not args.paper:
+    if free_release and args.loss == "prop" and args.lam is None and not args.paper:
         overrides["lambda_traj"] = FREE_RELEASE_LAMBDA
-        print(f"free (u = 0) data: L_prop with λ = {FREE_RELEASE_LAMBDA:g} (--lambda to choose; docs/learning.md)")
+        print(f"measured free releases: L_prop with λ = {FREE_RELEASE_LAMBDA:g} (--lambda to choose; docs/learning.md)")
     overrides["progress"] = not args.no_progress
     make = TrainConfig.paper if args.paper else TrainConfig.for_system
     return make(args.system, **overrides)
@@ -225,7 +226,8 @@ def run(args: argparse.Namespace) -> int:
     from ._cache import enable_compilation_cache
 
     enable_compilation_cache()  # compiling once per machine, not once per run
-    config = _config(args, free_data=not any(np.any(np.asarray(tr.u) != 0) for tr in trajs))
+    free = not any(np.any(np.asarray(tr.u) != 0) for tr in trajs)
+    config = _config(args, free_release=free and any(n.startswith(ESTIMATED_NOTE) for n in notes))
     try:
         model, history = train(
             args.model,

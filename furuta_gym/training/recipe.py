@@ -162,7 +162,8 @@ PAPER_SCHEDULE = {
 QUICK_EPOCHS = {"nmsd": (8, 2), "furuta": (4, 1)}
 QUICK_PROP_EPOCHS = {"nmsd": (300, 8, 2), "furuta": (300, 4, 1)}
 
-#: λ of L_prop that ``furuta-gym train`` takes on free (u = 0) data when none is given: with λ = 1
+#: λ of L_prop that ``furuta-gym train`` takes on measured free releases (u = 0, velocities
+#: estimated) when none is given: with λ = 1
 #: L_Iτ's pull left a lightly damped rig's free dynamics wrong on some seeds where L_traj's
 #: trajectories are right (docs/learning.md, "Free releases")
 FREE_RELEASE_LAMBDA = 10.0
