@@ -13,6 +13,8 @@ the ``cpu-numerics`` block of docs/conventions.md.
 
     python studies/cpu_numerics.py             # run every setting (≈ 4 min on 2 cores), write both
     python studies/cpu_numerics.py --check     # exit 1 if the docs block is stale
+    python studies/cpu_numerics.py --render    # rewrite the docs block from the committed results
+    python studies/cpu_numerics.py --reproduce-quick   # reproduce --quick, pinned, on two machines (≈ 35 min)
     python studies/cpu_numerics.py --one OUT   # (child) one training in this process, saved to OUT
 """
 
@@ -99,26 +101,14 @@ def run_setting(
 ) -> dict:
     """One training in a fresh process as ``(pinned, cap, cores, blas, numpy_avx512_off)`` say;
     its parameters."""
-    # no compilation cache shared with other settings (a test session's): each compiles its own code
-    unset = ("XLA_FLAGS", "OPENBLAS_CORETYPE", "FURUTA_GYM_NATIVE_ISA", "JAX_COMPILATION_CACHE_DIR")
-    env = {k: v for k, v in os.environ.items() if k not in unset and k != "NPY_DISABLE_CPU_FEATURES"}
-    if numpy_avx512_off:
-        env["NPY_DISABLE_CPU_FEATURES"] = NO_AVX512_NUMPY
-    if not pinned:
-        env["FURUTA_GYM_NATIVE_ISA"] = "1"
-    if cap is not None:
-        env["XLA_FLAGS"] = f"--xla_cpu_max_isa={cap}"
-    if blas is not None:
-        env["OPENBLAS_CORETYPE"] = blas
-    env["FURUTA_GYM_COMPILATION_CACHE"] = "0"
-    cpus = sorted(os.sched_getaffinity(0))[:cores] if cores else None
+    env = _environment(pinned, cap, blas, numpy_avx512_off)
     proc = subprocess.run(
         [sys.executable, __file__, "--one", str(out)],
         env=env,
         capture_output=True,
         text=True,
         timeout=900,
-        preexec_fn=(lambda: os.sched_setaffinity(0, cpus)) if cpus else None,
+        preexec_fn=_affinity(cores),
     )
     if proc.returncode != 0:
         raise RuntimeError(proc.stderr[-3000:])
@@ -162,6 +152,93 @@ def run_all() -> dict:
     }
 
 
+QUICK = ROOT / "results" / "cpu_numerics" / "reproduce_quick.json"
+# (label, XLA cap, cores, OPENBLAS_CORETYPE, NumPy without AVX-512): pinned, as the CI test's pair
+QUICK_SETTINGS = [
+    ("this machine (AVX-512), 2 cores", None, None, None, False),
+    ("AVX2 machine, 1 core", "AVX2", 1, "Haswell", True),
+]
+
+
+def _environment(pinned: bool, cap: str | None, blas: str | None, numpy_avx512_off: bool) -> dict:
+    # no compilation cache shared with other settings (a test session's): each compiles its own code
+    unset = ("XLA_FLAGS", "OPENBLAS_CORETYPE", "FURUTA_GYM_NATIVE_ISA", "JAX_COMPILATION_CACHE_DIR")
+    env = {k: v for k, v in os.environ.items() if k not in unset and k != "NPY_DISABLE_CPU_FEATURES"}
+    if numpy_avx512_off:
+        env["NPY_DISABLE_CPU_FEATURES"] = NO_AVX512_NUMPY
+    if not pinned:
+        env["FURUTA_GYM_NATIVE_ISA"] = "1"
+    if cap is not None:
+        env["XLA_FLAGS"] = f"--xla_cpu_max_isa={cap}"
+    if blas is not None:
+        env["OPENBLAS_CORETYPE"] = blas
+    env["FURUTA_GYM_COMPILATION_CACHE"] = "0"
+    env["FURUTA_GYM_STEP_CACHE"] = "0"
+    return env
+
+
+def _affinity(cores: int | None):
+    cpus = sorted(os.sched_getaffinity(0))[:cores] if cores else None
+    return (lambda: os.sched_setaffinity(0, cpus)) if cpus else None
+
+
+def run_reproduce_quick() -> dict:
+    """``furuta-gym reproduce --quick`` (every model of both tables, scaled down) as each pinned
+    setting of :data:`QUICK_SETTINGS`; the digest of each run's tables.csv and of every model's
+    metrics.json."""
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, (label, cap, cores, blas, numpy_off) in enumerate(QUICK_SETTINGS):
+            out = Path(tmp) / f"quick{i}"
+            cmd = [sys.executable, "-m", "furuta_gym", "reproduce", "--quick", "--out", str(out), "--no-figures"]
+            proc = subprocess.run(
+                [*cmd, "--no-progress"],
+                env=_environment(True, cap, blas, numpy_off),
+                capture_output=True,
+                text=True,
+                timeout=7200,
+                preexec_fn=_affinity(cores),
+            )
+            if proc.returncode != 0:
+                raise RuntimeError(proc.stderr[-3000:])
+            metrics = {  # without "_seconds", the run's timings
+                str(p.relative_to(out / "runs")): hashlib.sha256(
+                    json.dumps({k: v for k, v in json.loads(p.read_text()).items() if k != "_seconds"}).encode()
+                ).hexdigest()[:16]
+                for p in sorted((out / "runs").rglob("metrics.json"))
+            }
+            rows.append(
+                {
+                    "label": label,
+                    "xla_cap": cap,
+                    "cores": cores,
+                    "openblas_coretype": blas,
+                    "numpy_avx512_off": numpy_off,
+                    "tables_csv": hashlib.sha256((out / "tables.csv").read_bytes()).hexdigest()[:16],
+                    "metrics": metrics,
+                }
+            )
+            print(rows[-1]["label"], rows[-1]["tables_csv"], flush=True)
+    return {
+        "machine": machine(),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "rows": rows,
+    }
+
+
+def quick_line(quick: dict) -> str:
+    a, b = quick["rows"]
+    line = (
+        f"`furuta-gym reproduce --quick` (every model of both tables, scaled down), pinned, on {a['label']} and "
+        f"on an emulated {b['label']} ({quick['date']}): tables.csv `{a['tables_csv']}` and `{b['tables_csv']}` "
+        f"({'the same bits' if a['tables_csv'] == b['tables_csv'] else '**different**'})"
+    )
+    if "metrics" in a and "metrics" in b:
+        same = sum(a["metrics"].get(k) == v for k, v in b["metrics"].items())
+        line += f"; {same} of {len(b['metrics'])} models' metrics the same bits"
+    return line + "."
+
+
 def block(res: dict) -> str:
     ref = res["rows"][0]["digest"]
     lines = [
@@ -178,9 +255,12 @@ def block(res: dict) -> str:
             f"| {'pinned' if r['pinned'] else 'native'} | {r['label']} | {flags} | {r['openblas_coretype'] or 'unset'} "
             f"| {'off' if r.get('numpy_avx512_off') else 'on'} | `{r['digest']}` | {'yes' if r['digest'] == ref else 'no'} | {r['max_rel_diff_vs_reference']:.1e} |"
         )
+    if QUICK.is_file():
+        lines += ["", quick_line(json.loads(QUICK.read_text()))]
     lines += [
         "",
-        "Made by `python studies/cpu_numerics.py` (results/cpu_numerics/); the CI test is tests/test_numerics.py.",
+        "Made by `python studies/cpu_numerics.py` (results/cpu_numerics/; `--reproduce-quick` the line above); "
+        "the CI test is tests/test_numerics.py.",
     ]
     return "\n".join(lines)
 
@@ -189,11 +269,15 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="compare the docs block only; exit 1 if stale")
     ap.add_argument("--one", type=Path, help="(child) run one training here and save its parameters")
+    ap.add_argument("--reproduce-quick", action="store_true", help="run reproduce --quick pinned on two machines")
+    ap.add_argument("--render", action="store_true", help="rewrite the docs block from the committed results")
     args = ap.parse_args()
     if args.one is not None:
         tiny_training(args.one)
         return 0
-    if not args.check:
+    if args.reproduce_quick:
+        QUICK.write_text(json.dumps(run_reproduce_quick(), indent=2) + "\n")
+    elif not (args.check or args.render):
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         RESULTS.write_text(json.dumps(run_all(), indent=2) + "\n")
     res = json.loads(RESULTS.read_text())

@@ -62,8 +62,8 @@ def _numerics(docs: list[dict]) -> str:
     if "--xla_cpu_max_isa=AVX2" not in flags:
         return f"native numerics (`XLA_FLAGS={flags}`): other machines may give other numbers"
     return (
-        f"with furuta_gym's pinned numerics (`XLA_FLAGS={flags}`): the same training on any x86-64 machine with "
-        'AVX2 and FMA (docs/conventions.md, "Same numbers on every machine", also says what lies outside the pin)'
+        f"with furuta_gym's pinned numerics (`XLA_FLAGS={flags}`); that another machine gives these exact numbers "
+        'is shown at CI size only, not for the demo (docs/conventions.md, "Same numbers on every machine")'
     )
 
 

@@ -85,7 +85,7 @@ def test_demo_seeds_docs_block_matches_its_results():
 def test_the_demos_word_on_seeds_holds_on_the_committed_seeds():
     """What the summary says over seeds is what results/demo_seeds shows: the stable comparison
     favours L_prop on every seed, each varying one favours L_traj on at least one; all made with
-    the pinned numerics (a machine with AVX2 and FMA trains the same models)."""
+    the pinned numerics."""
     from pathlib import Path
 
     folder = Path(__file__).resolve().parents[1] / "results" / "demo_seeds"
