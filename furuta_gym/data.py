@@ -1,6 +1,6 @@
 """Measured (or generated) trajectory data: one loader and one writer for every file format.
 
-The format (DEVELOPERS.md "Conventions"): long form, one row per sample, columns
+The format (docs/conventions.md): long form, one row per sample, columns
 ``traj, t, <joints>, u`` — ``traj,t,alpha,beta,u`` for the Furuta, ``traj,t,p,u`` for the N-MSD —
 with optional velocity columns ``alpha_dot, beta_dot`` / ``p_dot``. CSV, NPZ (one array per
 column) and MAT (one variable per column) hold the same columns; ``*.csv.gz`` is read as a

@@ -32,8 +32,7 @@ import numpy as np
 from .data import DataError, Trajectory
 from .models import SYSTEM_DEFINITIONS
 from .signals import ENCODER_COUNTS_PER_REV, derivative_filter, zero_phase_velocity
-from .simulate import rollout_zoh
-from .training.metrics import DIVERGED
+from .simulate import DIVERGED, rollout_zoh
 
 __all__ = [
     "SPLIT_SECONDS",

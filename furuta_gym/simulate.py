@@ -23,7 +23,10 @@ from jaxtyping import Array, Float
 
 from .lagrangian import AbstractLagrangianSystem, vector_field
 
-__all__ = ["simulate", "rk4_step", "rk4_zoh_step", "rollout_zoh", "small_kernel_compiler_options"]
+__all__ = ["simulate", "rk4_step", "rk4_zoh_step", "rollout_zoh", "small_kernel_compiler_options", "DIVERGED"]
+
+#: Table value of a prediction that diverged for at least one test trajectory (paper's "X")
+DIVERGED = "X"
 
 # XLA:CPU by default hands matrix products *together with the elementwise work around them* to
 # YNNPACK "custom fusions"; for the few-neuron layers of these models those fused calls cost more

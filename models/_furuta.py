@@ -40,7 +40,7 @@ __all__ = [
 
 
 class FurutaParameters(eqx.Module):
-    """Quanser QUBE-Servo 2 rotary pendulum (DEVELOPERS.md "Conventions"; SI units, volts)."""
+    """Quanser QUBE-Servo 2 rotary pendulum (docs/conventions.md; SI units, volts)."""
 
     mr: jnp.ndarray = eqx.field(default=0.095, converter=scalar)  # rotor arm mass, kg
     Lr: jnp.ndarray = eqx.field(default=0.085, converter=scalar)  # rotor arm length, m

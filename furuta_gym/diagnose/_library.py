@@ -8,7 +8,7 @@ coefficient per library effect. Because the residual is linear in ``theta``, its
 autodiff, through :func:`furuta_gym.lagrangian.momentum` and friends) *is* the regressor matrix of
 the equation-error fit, and the same model simulated open loop is the output-error model.
 
-Furuta lumped parameters (DEVELOPERS.md conventions):
+Furuta lumped parameters (docs/conventions.md):
 
 =============  =====================================  ==============
 ``J1``         Jr + mp·Lr²                            kg m²

@@ -39,7 +39,7 @@ import numpy as np
 from ..data import DataError, Trajectory
 from ..lagrangian import AbstractLagrangianSystem, energy, forward_dynamics, inverse_dynamics_terms
 from ..models import analytic_model
-from ..simulate import simulate
+from ..simulate import DIVERGED, simulate
 
 __all__ = [
     "DIVERGED",
@@ -56,8 +56,6 @@ __all__ = [
     "metrics_to_json",
 ]
 
-#: Table value of a prediction that diverged for at least one test trajectory (paper's "X").
-DIVERGED = "X"
 FORCE_TERMS = ("inertial", "coriolis", "potential")
 
 
