@@ -34,9 +34,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..data import Trajectory
+from ..data import DataError, Trajectory
 from ..lagrangian import energy
-from ..simulate import rollout_zoh
+from ..measured import prediction_windows, window_predictions
 from ..models import system_definition
 from .consistency import COVERAGE_RADIUS, check_potential_shape
 
@@ -70,16 +70,17 @@ def has_free_motion(trajs: Sequence[Trajectory]) -> bool:
     return any(tr.qd is not None and not np.any(np.asarray(tr.u) != 0) for tr in trajs)
 
 
-def model_frequencies(model, q, joint: int) -> tuple[float, float]:
+def model_frequencies(model, q, joint: int, damped: bool = True) -> tuple[float, float]:
     """(free, held) frequency in Hz of the model's small oscillation about the rest ``q`` along
     ``joint``, damped by its own τ_NC (a real rotor's back-EMF and friction slow the pendulum
     measurably): every joint free (the largest |Im λ| of the linearisation), and the other joints
-    held (one joint: ω² = K/M − (D/2M)²). Both are unchanged by scaling L and τ_NC together."""
+    held (one joint: ω² = K/M − (D/2M)²). Both are unchanged by scaling L and τ_NC together.
+    ``damped=False``: without τ_NC, the undamped ω² = eig(M⁻¹K)."""
     q = jnp.asarray(q, dtype=float)
     zero = jnp.zeros_like(q)
     k = np.asarray(jax.hessian(model.potential)(q))
     m = np.asarray(model.mass_matrix(q))
-    d = -np.asarray(jax.jacfwd(lambda v: model.nonconservative_force(q, v))(zero))
+    d = -np.asarray(jax.jacfwd(lambda v: model.nonconservative_force(q, v))(zero)) if damped else 0.0 * k
     n = len(q)
     a = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(m, k), -np.linalg.solve(m, d)]])
     free = float(np.abs(np.imag(np.linalg.eigvals(a))).max())
@@ -141,34 +142,21 @@ def energy_trend(model, trajs: Sequence[Trajectory], tolerance: float = TOLERANC
     }
 
 
-def _free_windows(trajs: Sequence[Trajectory], seconds: float):
-    """(x0 (W, 2n), measured angles (W, L + 1, n), dt) of back-to-back windows of the trajectories
-    with no input and with velocities."""
-    x0, qs, dts = [], [], []
-    for tr in trajs:
-        if tr.qd is None or np.any(np.asarray(tr.u) != 0):
-            continue
-        n = int(round(seconds / tr.dt))
-        x = np.concatenate([np.asarray(tr.q, float), np.asarray(tr.qd, float)], axis=1)
-        for k in range(0, len(x) - n, n):
-            x0.append(x[k])
-            qs.append(x[k : k + n + 1, : x.shape[1] // 2])
-            dts.append(tr.dt)
-    if not x0 or len({len(q) for q in qs}) != 1:
-        return None
-    return np.stack(x0), np.stack(qs), float(np.median(dts))
-
-
 def prediction_against_hold(model, trajs: Sequence[Trajectory], seconds: float = WINDOW) -> dict:
     """Open-loop angle RMSE of ``model`` over free windows (see the module docstring) and of
-    holding the start angles; ``ratio`` model / hold (None without free windows)."""
-    windows = _free_windows(trajs, seconds)
-    if windows is None:
+    holding the start angles; ``ratio`` model / hold (None without free windows). The windows and
+    rollouts are :mod:`furuta_gym.measured`'s, as ``evaluate`` scores a model."""
+    free = [tr for tr in trajs if tr.qd is not None and not np.any(np.asarray(tr.u) != 0)]
+    try:
+        x0, us, xs = prediction_windows(free, seconds) if free else (None, None, None)
+    except DataError:  # every free trajectory shorter than one window
+        x0 = None
+    if x0 is None:
         return {"n_windows": 0, "model_rmse": None, "hold_rmse": None, "ratio": None}
-    x0, qs, dt = windows
-    n = qs.shape[-1]
-    steps = jnp.zeros((qs.shape[1] - 1, model.spec.n_inputs))
-    pred = np.asarray(jax.jit(jax.vmap(lambda x: rollout_zoh(model, x, steps, dt, 4)))(jnp.asarray(x0)))[:, 1:, :n]
+    dt = float(np.median([tr.dt for tr in free]))
+    n = model.spec.n_dof
+    pred = window_predictions(model, x0, us, dt)[:, 1:, :n]
+    qs = xs[:, :, :n]
     err = np.where(np.isfinite(pred), pred - qs[:, 1:], 1e6)
     hold = qs[:, 1:] - qs[:, :1]
     model_rmse, hold_rmse = float(np.sqrt(np.mean(err**2))), float(np.sqrt(np.mean(hold**2)))
