@@ -32,7 +32,6 @@ import time
 import warnings
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -48,6 +47,7 @@ from furuta_gym.measured import prepare_log, window_errors  # noqa: E402
 from furuta_gym.models import Furuta  # noqa: E402
 from furuta_gym.signals import quantize_encoder  # noqa: E402
 from furuta_gym.training import TrainConfig, check_potential_shape, fit_scale, train  # noqa: E402
+from furuta_gym.training.free_dynamics import model_frequencies  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "free_releases"
@@ -326,13 +326,9 @@ def dataset(v: Variant, seed: int):
 
 
 def free_frequency(model) -> float:
-    """Small-oscillation frequency about hanging, the rotor free (Hz): the largest root of
-    det(K − ω²M) = 0 with K = ∂²V/∂q², M at q = 0."""
-    q = jnp.zeros(2)
-    k = np.asarray(jax.hessian(model.potential)(q))
-    m = np.asarray(model.mass_matrix(q))
-    w2 = np.real(np.linalg.eigvals(np.linalg.solve(m, k)))
-    return float(np.sqrt(max(w2.max(), 0.0)) / (2 * np.pi))
+    """Small-oscillation frequency about hanging, the rotor free, undamped (Hz): issue 65's
+    √(∂²V/∂β² · (M⁻¹)₂₂)/2π, the largest root of det(K − ω²M) = 0 at q = 0."""
+    return model_frequencies(model, (0.0, 0.0), 1, damped=False)[0]
 
 
 def score(model, test, plant_frequency: float) -> dict:
