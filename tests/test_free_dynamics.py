@@ -87,17 +87,49 @@ def test_data_without_free_motion_make_no_verdict():
     assert result["energy"]["n_free"] == 0 and result["physical"] is True
 
 
-def _sticky_release_csv(path, seconds=8.0):
-    """A 0 V release near upright on MuJoCo with a rotor held by a large breakaway, as a user
-    logs it (encoder angles, no velocities)."""
-    effects = [Effect("coulomb_friction", "alpha", 2e-4), Effect("stiction", "alpha", 1.8e-3, stribeck_velocity=0.02)]
-    plant = MujocoBackend("furuta", 10, effects, timestep=DT / 10)
-    x = np.array([0.05, np.pi - 0.15, 0.0, 0.0])
-    plant.reset(x)
-    xs = [x] + [np.asarray(plant.step(np.zeros(1))) for _ in range(int(round(seconds / DT)))]
+#: the rotor of the logs below: held by a breakaway ten times its sliding friction
+STICKY_ROTOR = [Effect("coulomb_friction", "alpha", 2e-4), Effect("stiction", "alpha", 1.8e-3, stribeck_velocity=0.02)]
+
+
+def _logged_csv(path, x0, u):
+    """The sticky-rotor rig on MuJoCo from ``x0`` with ``u[k]`` held over each sample period, as
+    a user logs it (encoder angles and the input, no velocities), written as a CSV."""
+    plant = MujocoBackend("furuta", 10, STICKY_ROTOR, timestep=DT / 10)
+    plant.reset(np.asarray(x0, float))
+    xs = [np.asarray(x0, float)] + [np.asarray(plant.step(u[k : k + 1])) for k in range(len(u) - 1)]
     q = quantize_encoder(np.stack(xs)[:, :2])
-    rows = ["traj,t,alpha,beta,u"] + [f"0,{k * DT:.4f},{a:.10f},{b:.10f},0" for k, (a, b) in enumerate(q)]
+    rows = ["traj,t,alpha,beta,u"] + [f"0,{k * DT:.4f},{a:.10f},{b:.10f},{u[k]:.6f}" for k, (a, b) in enumerate(q)]
     path.write_text("\n".join(rows) + "\n")
+
+
+def _sticky_release_csv(path, seconds=8.0):
+    """A 0 V release near upright."""
+    _logged_csv(path, [0.05, np.pi - 0.15, 0.0, 0.0], np.zeros(int(round(seconds / DT)) + 1))
+
+
+def _forced_sweep_csv(path, seconds=4.0):
+    """A 0.75 V open-loop sine sweep of the same rig, for the overall scale."""
+    t = np.arange(int(round(seconds / DT)) + 1) * DT
+    _logged_csv(path, np.zeros(4), 0.75 * np.sin(2 * np.pi * (0.5 * t + 0.4 * t**2)))
+
+
+def _train_argv(loss, data, out, *options):
+    """``furuta-gym train`` of a Furuta DeLaN on ``data`` into ``out``, quietly, with ``options``."""
+    return [
+        "train",
+        "--system",
+        "furuta",
+        "--model",
+        "dln",
+        "--loss",
+        loss,
+        "--data",
+        str(data),
+        "--out",
+        str(out),
+        "--no-progress",
+        *options,
+    ]
 
 
 def test_train_checks_a_model_trained_to_fail_and_says_so(tmp_path, capsys):
@@ -108,28 +140,8 @@ def test_train_checks_a_model_trained_to_fail_and_says_so(tmp_path, capsys):
 
     _sticky_release_csv(tmp_path / "free.csv")
     out = tmp_path / "run"
-    argv = [
-        "train",
-        "--system",
-        "furuta",
-        "--model",
-        "dln",
-        "--loss",
-        "prop",
-        "--data",
-        str(tmp_path / "free.csv"),
-        "--out",
-        str(out),
-        "--epochs",
-        "2000",
-        "--horizons",
-        "itau",
-        "--quadrature",
-        "simpson",
-        "--lambda",
-        "1e-3",
-        "--no-progress",
-    ]
+    options = ("--epochs", "2000", "--horizons", "itau", "--quadrature", "simpson", "--lambda", "1e-3")
+    argv = _train_argv("prop", tmp_path / "free.csv", out, *options)
     with pytest.warns(FreeDynamicsWarning, match="than holding the angles still"):
         assert main(argv) == 0
     check = json.loads((out / "free_dynamics.json").read_text())
@@ -211,19 +223,6 @@ def test_the_calibrated_rig_study_says_what_the_docs_say():
     assert max(d["train_seconds"] for d in docs["cal_prop_lambda_10"].values()) < 600
 
 
-def _forced_sweep_csv(path, seconds=4.0):
-    """A 0.75 V open-loop sine sweep of the same rig, for the overall scale."""
-    effects = [Effect("coulomb_friction", "alpha", 2e-4), Effect("stiction", "alpha", 1.8e-3, stribeck_velocity=0.02)]
-    plant = MujocoBackend("furuta", 10, effects, timestep=DT / 10)
-    plant.reset(np.zeros(4))
-    t = np.arange(int(round(seconds / DT)) + 1) * DT
-    u = 0.75 * np.sin(2 * np.pi * (0.5 * t + 0.4 * t**2))
-    xs = [np.zeros(4)] + [np.asarray(plant.step(u[k : k + 1])) for k in range(len(t) - 1)]
-    q = quantize_encoder(np.stack(xs)[:, :2])
-    rows = ["traj,t,alpha,beta,u"] + [f"0,{k * DT:.4f},{a:.10f},{b:.10f},{u[k]:.6f}" for k, (a, b) in enumerate(q)]
-    path.write_text("\n".join(rows) + "\n")
-
-
 @pytest.mark.parametrize("loss", ["prop", "traj"])
 def test_train_defaults_on_a_measured_free_release_end_to_end(tmp_path, capsys, loss):
     """No flag beyond data, forced run and output (the recipe docs/learning.md gives for free
@@ -233,22 +232,7 @@ def test_train_defaults_on_a_measured_free_release_end_to_end(tmp_path, capsys, 
     _sticky_release_csv(tmp_path / "free.csv")  # 8 s, as the docs' study (4 s is too little to learn from)
     _forced_sweep_csv(tmp_path / "forced.csv")
     out = tmp_path / loss
-    argv = [
-        "train",
-        "--system",
-        "furuta",
-        "--model",
-        "dln",
-        "--loss",
-        loss,
-        "--data",
-        str(tmp_path / "free.csv"),
-        "--forced",
-        str(tmp_path / "forced.csv"),
-        "--out",
-        str(out),
-        "--no-progress",
-    ]
+    argv = _train_argv(loss, tmp_path / "free.csv", out, "--forced", str(tmp_path / "forced.csv"))
     assert main(argv) == 0
     meta = json.loads((out / "history.json").read_text())["meta"]
     assert meta["scale_fit"]["factor"] > 0
