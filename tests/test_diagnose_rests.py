@@ -125,6 +125,19 @@ def test_a_free_parabola_through_a_reversal_stays_within_one_count_of_its_free_e
     assert _fit.free_excursion(10.0 * np.sin(2 * np.pi * 20 * t), DT) < 0.5 * COUNT
 
 
+def test_the_held_test_decides_as_the_free_excursion_does():
+    """held_samples decides most stops from the chord's bounds on the excursion; it answers as
+    free_excursion's hull would, on stretches of every shape and limits on both sides and at the
+    excursion itself."""
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        n = int(rng.integers(3, 80))
+        a = rng.normal(rng.normal(0, 3), rng.uniform(0, 20), n) + rng.uniform(0, 30) * np.sin(np.arange(n) * 0.3)
+        w = _fit.free_excursion(a, DT)
+        for limit in (w * 0.5, w * 0.999, w, w * 1.001, w * 2.0, 1e-12):
+            assert _fit._excursion_exceeds(a, DT, limit) == (w > limit)
+
+
 def test_a_stop_is_left_out_when_the_force_on_it_would_have_moved_a_free_joint_but_not_in_a_slow_pass():
     """The rotor's counts of a free reversal at 0.2 V (a = K·u/J1 = 4.3 rad/s²): 74 ms on the
     apex's count, as long as a free joint can stay on one count at that force, and kept. The

@@ -14,6 +14,8 @@
 from __future__ import annotations
 
 import dataclasses
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import jax.numpy as jnp
@@ -274,9 +276,25 @@ def held_samples(q_j: np.ndarray, a_j: np.ndarray, dt: float, counts: float) -> 
         return held
     bounds = value_runs(q_j)
     for s, e in zip(bounds[:-1], bounds[1:]):
-        if e - s >= 3 and free_excursion(a_j[s:e], dt) > counts * steps.min():
+        if e - s >= 3 and _excursion_exceeds(a_j[s:e], dt, counts * steps.min()):
             held[s:e] = True
     return held
+
+
+def _excursion_exceeds(a: np.ndarray, dt: float, limit: float) -> bool:
+    """``free_excursion(a, dt) > limit``, decided without the hull when the chord says: the
+    positions' deviation d from the chord of their ends bounds the least width w, max|d| ≤ w ≤
+    max d − min d (a strip of any slope holds the ends and the farthest point, whose deviation
+    from their chord does not depend on the slope; the chord's own strip is one strip)."""
+    v = np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * dt)])
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+    d = x - x[-1] * np.arange(a.size) / (a.size - 1)
+    # decided by a bound only well clear of the limit, so that round-off cannot flip the answer
+    if np.max(np.abs(d)) > limit * (1 + 1e-9):
+        return True
+    if np.max(d) - np.min(d) < limit * (1 - 1e-9):
+        return False
+    return free_excursion(a, dt) > limit
 
 
 def _held_stops(layout, theta0, seg: Segment, stride: int, n_intervals: int, counts: float) -> np.ndarray:
@@ -478,13 +496,29 @@ def predict_windows_at(layout, thetas, win: Windows, substeps: int = 1, start_it
     thetas = np.asarray(thetas, dtype=float)
     W = win.x0.shape[0]
     which, window = np.divmod(np.arange(len(thetas) * W), W)
-    out = []
-    for s in range(0, which.size, _BATCH):
+
+    def batch(s: int) -> np.ndarray:
         real = np.arange(s, min(s + _BATCH, which.size))
         pad = np.concatenate([real, np.full(_BATCH - real.size, real[-1])])  # repeats; masked out
         k, w = which[pad], window[pad]
-        out.append(np.asarray(predict(*map(jnp.asarray, (thetas[k], win.x0[w], win.us[w], win.q[w]))))[: real.size])
+        return np.asarray(predict(*map(jnp.asarray, (thetas[k], win.x0[w], win.us[w], win.q[w]))))[: real.size]
+
+    # the batches run side by side: one batch keeps about one core busy, and each gives the same
+    # numbers on any thread (one compiled shape, the same pairs in it)
+    starts = range(0, which.size, _BATCH)
+    out = list(_batch_pool().map(batch, starts)) if len(starts) > 1 else [batch(0)]
     return np.concatenate(out).reshape(len(thetas), *win.q.shape)
+
+
+_POOL: list[ThreadPoolExecutor] = []
+
+
+def _batch_pool() -> ThreadPoolExecutor:
+    """Threads for :func:`predict_windows_at`'s batches, one per core this process may use."""
+    if not _POOL:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        _POOL.append(ThreadPoolExecutor(max(1, cores), thread_name_prefix="furuta-gym-windows"))
+    return _POOL[0]
 
 
 def window_residuals(layout, theta, win: Windows, substeps: int = 1, start_iterations: int = 0) -> np.ndarray:
