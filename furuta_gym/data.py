@@ -43,6 +43,9 @@ __all__ = [
     "columns_for",
 ]
 
+#: the column of trajectory labels (a data-format name; no relation to the L_traj loss)
+LABEL_COLUMN = "traj"
+
 
 @dataclasses.dataclass
 class Trajectory:
@@ -76,7 +79,7 @@ class Trajectory:
 
 def columns_for(spec: SystemSpec, velocities: bool = True) -> list[str]:
     """Canonical column names of ``spec``'s data format, in file order."""
-    cols = ["traj", "t", *spec.joint_names, *spec.input_names]
+    cols = [LABEL_COLUMN, "t", *spec.joint_names, *spec.input_names]
     if velocities:
         cols += [f"{j}_dot" for j in spec.joint_names]
     return cols
@@ -105,7 +108,7 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
             try:
                 out[name] = np.array([float(v) if v != "" else np.nan for v in raw])
             except ValueError:
-                if name == "traj":
+                if name == LABEL_COLUMN:  # trajectory labels may be names
                     out[name] = np.array(raw, dtype=object)
                 else:
                     bad = next(v for v in raw if not _is_float(v))
@@ -230,7 +233,7 @@ def read_log(
         if has_vel
         else None
     )
-    labels = raw[source("traj")] if source("traj") in raw else np.zeros(t.shape[0])
+    labels = raw[source(LABEL_COLUMN)] if source(LABEL_COLUMN) in raw else np.zeros(t.shape[0])
     groups = []
     for label in _unique_in_order(labels):
         idx = np.flatnonzero(labels == label)
@@ -363,9 +366,9 @@ def save_trajectories(
         arrays: dict[str, Any] = {c: table[:, i] for i, c in enumerate(cols[1:])}
         label_arr = np.array(labels)
         try:
-            arrays["traj"] = label_arr.astype(float)
+            arrays[LABEL_COLUMN] = label_arr.astype(float)
         except ValueError:
-            arrays["traj"] = label_arr.astype(str)
+            arrays[LABEL_COLUMN] = label_arr.astype(str)
         np.savez(path, **arrays)
     else:
         raise DataError(f"{path}: unsupported output type {suffix!r}; expected .csv or .npz")

@@ -10,7 +10,7 @@ from ._nmsd import NMSD, NMSDParameters, nmsd_potential
 from ._aphynity import Aphynity
 from ._augmented import AbstractAugmentedSystem, AugmentedDeLaN
 from ._delan import DeLaN
-from ._factory import MODEL_KINDS, make_model
+from ._factory import MODEL_KINDS, make_model, model_kind
 from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
 from ._lumped import LumpedSystem
 from ._system import Equilibrium, LumpedForm, SystemDefinition, first_joint_input, parameter_defaults
@@ -44,6 +44,7 @@ __all__ = [
     "Aphynity",
     "AugmentedDeLaN",
     "MODEL_KINDS",
+    "model_kind",
     "SYSTEM_DEFAULTS",
     "make_model",
     "save_model",

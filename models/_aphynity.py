@@ -39,12 +39,26 @@ class Aphynity(AbstractAugmentedSystem):
     """APHYNITY (aph): frictionless analytic prior with learnable parameters + F_a network."""
 
     kind: ClassVar[str] = "aph"
+    label: ClassVar[str] = "APH"
+    analytic_prior: ClassVar[bool] = True
     log_ratios: Float[Array, " k"]
     force_net: ForceNetwork
     scale: Float[Array, ""]
     spec: SystemSpec = eqx.field(static=True)
     nominal: tuple[tuple[str, float], ...] = eqx.field(static=True)
     hparams: tuple[tuple[str, Any], ...] = eqx.field(static=True)
+
+    @classmethod
+    def form_1_hparams(cls, hparams: dict[str, Any]) -> dict[str, Any]:
+        """Form 1 kept the back-EMF in the prior."""
+        out = dict(hparams)
+        out.setdefault("prior_back_emf", True)
+        return super().form_1_hparams(out)
+
+    @classmethod
+    def _form_1_force_activation(cls, hparams: dict[str, Any]) -> str:
+        # form 1's ``activation`` was F_a's own (APHYNITY has no other network): renamed
+        return hparams.pop("activation", "tanh")
 
     def __init__(self, system: str, *, key: PRNGKeyArray, **hparams):
         spec = get_spec(system)

@@ -159,6 +159,22 @@ class AbstractAugmentedSystem(AbstractLearnedSystem):
     def has_augmentation(self) -> bool:
         return True
 
+    @classmethod
+    def form_1_hparams(cls, hparams: dict[str, Any]) -> dict[str, Any]:
+        """Form 1 had no linear W (so no scale of its own) and an F_a even in q̇."""
+        out = dict(hparams)
+        out.setdefault("linear_velocity", False)
+        out.setdefault("damping_scale", None)  # W in units of force_scale / velocity_scale
+        out.setdefault("odd_in_velocity", False)
+        if "force_activation" not in out:
+            out["force_activation"] = cls._form_1_force_activation(out)
+        return out
+
+    @classmethod
+    def _form_1_force_activation(cls, hparams: dict[str, Any]) -> str:
+        """Form 1's F_a activation: the model's ``activation`` (augmented DeLaN's networks share it)."""
+        return hparams.get("activation", "tanh")
+
     def augmentation(self, q, qd):
         return self.scale * self.force_net(q, qd)
 
@@ -174,6 +190,7 @@ class AugmentedDeLaN(AbstractAugmentedSystem):
     """Augmented DeLaN (adln): learned M, V and a learned τ_NC network; known τ_u."""
 
     kind: ClassVar[str] = "adln"
+    label: ClassVar[str] = "ADLN"
     lagrangian_nets: LagrangianNetworks
     force_net: ForceNetwork
     scale: Float[Array, ""]

@@ -157,6 +157,7 @@ class DeLaN(AbstractLearnedSystem):
     """
 
     kind: ClassVar[str] = "dln"
+    label: ClassVar[str] = "DLN"
     lagrangian_nets: LagrangianNetworks
     log_damping: Float[Array, " k"]
     scale: Float[Array, ""]

@@ -9,10 +9,22 @@ from ..systems import get_spec
 from ._aphynity import Aphynity
 from ._augmented import AugmentedDeLaN
 from ._delan import DeLaN
+from ._learned import AbstractLearnedSystem
 
-__all__ = ["MODEL_KINDS", "make_model"]
+__all__ = ["MODEL_KINDS", "model_kind", "make_model"]
 
-MODEL_KINDS = {"dln": DeLaN, "aph": Aphynity, "adln": AugmentedDeLaN}
+#: every model kind by its name: the model classes, each carrying what differs between kinds
+#: (``label``, ``analytic_prior``, ``has_augmentation``, ``form_1_hparams``); a new kind is one
+#: subclass of AbstractLearnedSystem listed here
+MODEL_KINDS: dict[str, type[AbstractLearnedSystem]] = {cls.kind: cls for cls in (DeLaN, Aphynity, AugmentedDeLaN)}
+
+
+def model_kind(name: str) -> type[AbstractLearnedSystem]:
+    """The model class of kind ``name`` (the public spelling: "dln", "aph", "adln")."""
+    try:
+        return MODEL_KINDS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"model kind must be one of {sorted(MODEL_KINDS)}, got {name!r}") from None
 
 
 def make_model(system: str, kind: str, key=None, **hparams):
@@ -24,10 +36,10 @@ def make_model(system: str, kind: str, key=None, **hparams):
     """
     ensure_x64()
     get_spec(system)
-    if kind not in MODEL_KINDS:
-        raise ValueError(f"model kind must be one of {sorted(MODEL_KINDS)}, got {kind!r}")
+    cls = model_kind(kind)
     if key is None:
         key = 0
     if isinstance(key, int):
         key = jax.random.PRNGKey(key)
-    return MODEL_KINDS[kind](system, key=key, **hparams)
+    # every kind is built as (system, *, key, **hparams); the abstract base declares no __init__
+    return cls(system, key=key, **hparams)  # pyright: ignore[reportCallIssue]

@@ -154,9 +154,18 @@ def freeze_hparams(hparams: dict[str, Any]) -> tuple[tuple[str, Any], ...]:
 
 
 class AbstractLearnedSystem(AbstractLagrangianSystem):
-    """Base of the learned models: an overall ``scale`` and the hyper-parameters that rebuild it."""
+    """Base of the learned models: an overall ``scale`` and the hyper-parameters that rebuild it.
 
+    Each subclass is one model kind (:data:`furuta_gym.models.MODEL_KINDS`) and carries what
+    differs between kinds, so code elsewhere asks the kind, never compares its name."""
+
+    #: the public spelling ("dln", "aph", "adln"): ``make_model``, ``--model``, checkpoints
     kind: ClassVar[str]
+    #: its label in the reproduction's tables and figures
+    label: ClassVar[str]
+    #: M and V are an analytic prior's (physical parameters learned, no networks): the paper
+    #: scores no energy or force decomposition for it (N/A) and no learned spring fits its potential
+    analytic_prior: ClassVar[bool] = False
     spec: eqx.AbstractVar[SystemSpec]
     scale: eqx.AbstractVar[Float[Array, ""]]
     hparams: eqx.AbstractVar[tuple[tuple[str, Any], ...]]
@@ -199,6 +208,12 @@ class AbstractLearnedSystem(AbstractLagrangianSystem):
     @property
     def has_augmentation(self) -> bool:
         return False
+
+    @classmethod
+    def form_1_hparams(cls, hparams: dict[str, Any]) -> dict[str, Any]:
+        """A form-1 checkpoint header's hyper-parameters (written before some options existed)
+        completed with what a model of this kind was then built with (models/checkpoint.py)."""
+        return dict(hparams)
 
 
 def _positive(x) -> jnp.ndarray:

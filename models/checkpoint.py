@@ -157,23 +157,8 @@ def _model_header(model, meta: dict | None) -> dict:
 
 #: The header's form. 2: ``hparams`` holds every hyper-parameter the model was built with.
 #: 1 (a header without ``"format"``): written before some F_a options existed; where such a
-#: header is silent, the model was built as :func:`_form_1_hparams` says.
+#: header is silent, the model was built as its kind's ``form_1_hparams`` says.
 HEADER_FORMAT = 2
-
-
-def _form_1_hparams(kind: str, hparams: dict) -> dict:
-    """A form-1 header's hyper-parameters completed with what its model was trained with: back-EMF
-    in APHYNITY's prior, no linear W (so no scale of its own), F_a even in q̇, tanh."""
-    out = dict(hparams)
-    if kind == "aph":
-        out.setdefault("prior_back_emf", True)
-    if kind in ("aph", "adln"):
-        out.setdefault("linear_velocity", False)
-        out.setdefault("damping_scale", None)  # W in units of force_scale / velocity_scale
-        out.setdefault("odd_in_velocity", False)
-        if "force_activation" not in out:
-            out["force_activation"] = out.pop("activation", "tanh") if kind == "aph" else out.get("activation", "tanh")
-    return out
 
 
 def _skeleton(header: dict, path: Path, expected_system: str | None, expected_kind: str | None = None):
@@ -197,7 +182,8 @@ def _skeleton(header: dict, path: Path, expected_system: str | None, expected_ki
             f"{HEADER_FORMAT} (a newer version wrote it?)"
         )
     if form == 1:
-        hparams = _form_1_hparams(kind, hparams)
+        # what its model was trained with: back-EMF in APHYNITY's prior, no linear W, F_a even in q̇, tanh
+        hparams = MODEL_KINDS[kind].form_1_hparams(hparams)
     try:
         return make_model(system, kind, jax.random.PRNGKey(0), **hparams)
     except (ValueError, TypeError) as exc:

@@ -45,10 +45,12 @@ def _rates(text: str) -> float | tuple[float, ...]:
 
 
 def _horizons(text: str) -> tuple[int | float | None, ...]:
+    from ..training.loss_kinds import INTEGRAL_ONLY
+
     out = []
     for v in text.split(","):
         v = v.strip()
-        if v.lower() == "itau":  # a stage of L_Iτ alone (prop)
+        if v.lower() == INTEGRAL_ONLY.name:  # a stage of L_Iτ alone (prop)
             out.append(None)
             continue
         try:
@@ -180,6 +182,7 @@ def _config(args, free_release: bool = False):
     """The TrainConfig the options ask for; on measured free releases (``free_release``: logs
     whose velocities were estimated, no input anywhere) L_prop without ``--lambda`` takes the
     free-release λ."""
+    from ..training.loss_kinds import loss_kind
     from ..training.recipe import FREE_RELEASE_LAMBDA
     from ..training.train import TrainConfig
 
@@ -203,7 +206,7 @@ def _config(args, free_release: bool = False):
         overrides["batch_size"] = None if args.batch_size == 0 else args.batch_size
     if args.epochs is not None and args.horizons is None and len(args.epochs) == 1:
         overrides["horizons"] = (2,)
-    if free_release and args.loss == "prop" and args.lam is None and not args.paper:
+    if free_release and loss_kind(args.loss).proposed and args.lam is None and not args.paper:
         overrides["lambda_traj"] = FREE_RELEASE_LAMBDA
         print(f"measured free releases: L_prop with λ = {FREE_RELEASE_LAMBDA:g} (--lambda to choose; docs/learning.md)")
     overrides["progress"] = not args.no_progress
@@ -214,11 +217,13 @@ def _config(args, free_release: bool = False):
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from ..models import model_kind
     from ..training.free_dynamics import free_dynamics_summary
+    from ..training.loss_kinds import INTEGRAL_TERM, PENALTY_TERM, TRAJECTORY_TERM
     from ..training.train import FREE_DYNAMICS_FILE, train
 
     hparams = model_hparams(args)
-    if hparams and "springs" in hparams and args.model == "aph":
+    if hparams and "springs" in hparams and model_kind(args.model).analytic_prior:
         raise ValueError("--learned-spring: APHYNITY's potential is its physics prior's; use --model dln or adln")
     trajs, notes = prepared_logs(args.data, args)
     forced = prepared_logs([args.forced], args, split=None)[0] if args.forced else None
@@ -248,7 +253,8 @@ def run(args: argparse.Namespace) -> int:
     # written once the run is this one's (a refused --out keeps the data record it had)
     (Path(args.out) / "data.json").write_text(json.dumps(data_info, indent=1) + "\n")
     last = history[-1] if history else {}
-    summary = {k: v for k, v in last.items() if k in ("epoch", "traj", "itau", "penalty", "lambda")}
+    shown = ("epoch", TRAJECTORY_TERM, INTEGRAL_TERM, PENALTY_TERM, "lambda")
+    summary = {k: v for k, v in last.items() if k in shown}
     print(f"trained {args.system} {args.model} with L_{args.loss}: {json.dumps(summary)}")
     print(f"model: {args.out}/model.eqx")
     check = Path(args.out) / FREE_DYNAMICS_FILE

@@ -19,6 +19,7 @@ from .losses import (
     proposed_loss,
     trajectory_loss,
 )
+from .loss_kinds import LOSS_KINDS, LossKind, loss_kind
 from .train import ScaleFit, ScaleFitWarning, TrainConfig, data_hash, fit_scale, train, training_step
 
 __all__ = [
@@ -35,6 +36,9 @@ __all__ = [
     "load_model",
     "read_header",
     "save_model",
+    "LOSS_KINDS",
+    "LossKind",
+    "loss_kind",
     "Windows",
     "aphynity_loss",
     "augmentation_penalty",

@@ -19,7 +19,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from ..models import system_definition
+from ..models import model_kind, system_definition
 from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
 from .checkpoint import load_model
 from .datagen import system_data
@@ -51,7 +51,7 @@ def make_figures(out: Path, config, per_system: dict) -> dict[str, Path]:
     for system in config.systems:
         data, truth = per_system[system]["data"], per_system[system]["truth"]
         models = _load_models(out, system, config)
-        physics = [(kind, loss, m) for kind, loss, m in models if kind != "aph"]
+        physics = [(kind, loss, m) for kind, loss, m in models if not model_kind(kind).analytic_prior]
         tr = data[system_data(system).forced_set][0]
         k = min(len(tr), int(round(10.0 / tr.dt)) + 1)  # the first 10 s
         figures = {

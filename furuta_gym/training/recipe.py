@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import dataclasses
 
+from .loss_kinds import loss_kind
+
 __all__ = [
     "RunRecipe",
     "RECIPE",
@@ -173,7 +175,7 @@ def recipe_row(system: str, kind: str | None, loss: str, epochs: tuple[int, ...]
     """The row of ``(system, kind, loss)`` (a pair without one: its system's baseline or L_prop
     row); with ``epochs`` (``--quick`` or the caller's own schedule) those epochs and the default
     quadrature and fine-tuning step."""
-    row = RECIPE.get((system, kind, loss)) or SYSTEM_ROWS[system]["prop" if loss == "prop" else "baseline"]
+    row = RECIPE.get((system, kind, loss)) or SYSTEM_ROWS[system]["prop" if loss_kind(loss).proposed else "baseline"]
     if epochs is None:
         return row
     return dataclasses.replace(

@@ -49,11 +49,12 @@ from .. import __version__, enable_x64, ensure_x64
 from ..data import load_trajectories
 from ..effects import WithEffects
 from ..envs import Plant
-from ..models import LumpedSystem, analytic_model, make_model, system_definition
+from ..models import LumpedSystem, analytic_model, make_model, model_kind, system_definition
 from ..signals import zero_phase_velocity
 from ..systems import get_spec
 from . import _ray_sweep, _reproduce_figures
 from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
+from .loss_kinds import PROPOSED_LOSS, loss_kind
 from .checkpoint import load_model, package_versions, read_header
 from .datagen import SYSTEM_DATA, MujocoGroundTruth, SensorOptions, data_package_versions, generate, system_data
 from .metrics import evaluate_model, metrics_to_json
@@ -222,7 +223,7 @@ class ReproduceConfig:
 # log in docs/reproduce.md); the names below are views of it.
 FULL_PROP_EPOCHS = {s: rows["prop"].epochs for s, rows in SYSTEM_ROWS.items()}
 REPRODUCE_QUADRATURE = DEFAULT_QUADRATURE
-_PROP_ROWS = {(s, k): row for (s, k, loss), row in RECIPE.items() if loss == "prop"}
+_PROP_ROWS = {(s, k): row for (s, k, loss), row in RECIPE.items() if loss_kind(loss).proposed}
 FULL_PROP_QUADRATURE = {key: row.quadrature for key, row in _PROP_ROWS.items() if row.quadrature != DEFAULT_QUADRATURE}
 FULL_PROP_FINETUNE_LEARNING_RATE = {
     key: row.finetune_learning_rate
@@ -234,7 +235,7 @@ FULL_PROP_FINETUNE_LEARNING_RATE = {
 def _run_recipe(system: str, config: ReproduceConfig, loss: str, kind: str | None) -> RunRecipe:
     """The recipe row of one run: the full run's, or with ``--quick``'s / the caller's epochs."""
     name = get_spec(system).name
-    if loss != "prop":
+    if not loss_kind(loss).proposed:
         table = config.epochs or (QUICK_EPOCHS if config.quick else None)
     else:
         table = config.prop_epochs or (QUICK_PROP_EPOCHS if config.quick else None)
@@ -259,7 +260,8 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
     name = get_spec(system).name
     row = _run_recipe(name, config, loss, kind)
     horizons = tuple(TrainConfig.for_system(name).horizons)
-    if loss == "prop" and len(row.epochs) == 3:  # a leading stage of L_Iτ alone
+    proposed = loss_kind(loss).proposed
+    if proposed and len(row.epochs) == 3:  # a leading stage of L_Iτ alone
         horizons = (None, *horizons)
     overrides: dict[str, Any] = dict(
         epochs=row.epochs,
@@ -271,7 +273,7 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
     )
     if config.quick:  # a few hundred steps per model: compiling them is most of the run
         overrides["fast_compile"] = True
-    if loss == "prop":
+    if proposed:
         overrides["lambda_traj"] = row.lambda_traj
         overrides["integral_span"] = config.integral_span
         if row.augmentation_weight is not None:
@@ -518,7 +520,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
     t_train = time.perf_counter() - t0
     metrics = {}
     for label, name in EVALUATION_SETS[config.split][system].items():
-        m = evaluate_model(model, data[name], truth, physics=(kind != "aph"))
+        m = evaluate_model(model, data[name], truth, physics=not model_kind(kind).analytic_prior)
         metrics[label] = metrics_to_json(m)
     metrics["_seconds"] = {"train": round(t_train, 1), "evaluate": round(time.perf_counter() - t0 - t_train, 1)}
     metrics_path.write_text(json.dumps(metrics, indent=1) + "\n")
@@ -842,7 +844,7 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
                         (system, label, MODEL_LABELS[kind], loss, _paper_metric(metric, config)), ""
                     )
                     values = []
-                    if kind == "aph" and metric in PHYSICS_METRICS:
+                    if model_kind(kind).analytic_prior and metric in PHYSICS_METRICS:
                         ours_text, mean, std, ndiv = "N/A", None, None, 0
                     else:
                         values = [m[label].get(metric) for m in per_seed]
@@ -970,7 +972,7 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
 
 def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
     out = ["## Summary", ""]
-    prop = [r for r in rows if r["loss"] == "prop" and r["better_or_equal"] in ("yes", "no")]
+    prop = [r for r in rows if loss_kind(r["loss"]).proposed and r["better_or_equal"] in ("yes", "no")]
     if prop:
         n_yes = sum(r["better_or_equal"] == "yes" for r in prop)
         out.append(f"- L_prop rows: {n_yes} of {len(prop)} numeric cells at or below the paper's.")
@@ -1003,18 +1005,19 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
             "DLN and than L_aph for ADLN), ours:"
         )
         for model, base in (("DLN", "traj"), ("ADLN", "aph")):
-            if ((model.lower(), base) not in config.pairs) or ((model.lower(), "prop") not in config.pairs):
+            if ((model.lower(), base) not in config.pairs) or ((model.lower(), PROPOSED_LOSS) not in config.pairs):
                 continue
             for label in EVALUATION_SETS[config.split][system]:
                 parts = []
                 for metric in ("inertial", "coriolis", "potential"):
-                    a = mean_of(system, label, model, "prop", metric)
+                    a = mean_of(system, label, model, PROPOSED_LOSS, metric)
                     b = mean_of(system, label, model, base, metric)
                     if a is None or b is None:
                         parts.append(f"{metric}: n/a")
                     else:
                         seeds = _seeds_holding(
-                            row_of(system, label, model, "prop", metric), row_of(system, label, model, base, metric)
+                            row_of(system, label, model, PROPOSED_LOSS, metric),
+                            row_of(system, label, model, base, metric),
                         )
                         parts.append(f"{metric} {a:.2f} vs {b:.2f} ({'holds' if a < b else 'does not hold'}{seeds})")
                 out.append(f"  - {model} {label}: " + "; ".join(parts))
@@ -1076,7 +1079,7 @@ def _prop_epochs_by_model(config: ReproduceConfig) -> dict[str, list[int]]:
         default = epoch_schedule(system, config, "prop")
         for kind, loss in config.pairs:
             own = epoch_schedule(system, config, "prop", kind)
-            if loss == "prop" and own != default:
+            if loss_kind(loss).proposed and own != default:
                 out[f"{system}/{kind}"] = list(own)
     return out
 

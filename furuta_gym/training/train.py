@@ -55,19 +55,18 @@ from .losses import (
     AUGMENTATION_PARTS,
     Normalization,
     Windows,
-    augmentation_penalty,
-    integral_loss_terms,
     make_windows,
     NORMALIZATIONS,
     resolve_normalization,
     span_sum,
-    trajectory_loss,
 )
+from .loss_kinds import INTEGRAL_ONLY, LOSS_KINDS, TRAJECTORY_TERM, StepSettings, loss_kind
 from .recipe import PAPER_SCHEDULE, RECIPE
 
 __all__ = ["TrainConfig", "train", "training_step", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
 
-LOSSES = ("traj", "aph", "prop", "itau")
+#: the built-in losses' names (:data:`.loss_kinds.LOSS_KINDS`: what each is made of)
+LOSSES = tuple(LOSS_KINDS)
 #: wall time aimed at per block of L_Iτ-alone epochs (between two writes of the training state)
 BLOCK_SECONDS = 2.0
 #: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
@@ -75,7 +74,7 @@ BLOCK_SECONDS = 2.0
 AUGMENTATION_WEIGHT = {
     (s, k): row.augmentation_weight
     for (s, k, loss), row in RECIPE.items()
-    if loss == "prop" and row.augmentation_weight is not None
+    if loss_kind(loss).proposed and row.augmentation_weight is not None
 }
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
@@ -383,44 +382,22 @@ def _step_function(
 ):
     """The optimiser step of ``loss``, not yet compiled: ``step(params, opt_state, traj_windows,
     integral_windows, lam, learning_rate) -> (params, opt_state, terms, ok)``."""
-    traj_kw: dict[str, Any] = dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps)
-    use_traj = loss in ("traj", "aph", "prop")
-    use_int = loss in ("prop", "itau")
-    use_share = use_int and augmentation_weight != 0.0
+    kind = loss_kind(loss)
+    settings = StepSettings(
+        trajectory=dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps),
+        integral=dict(
+            rule=config.quadrature,
+            augmentation_part=config.augmentation_part,
+            resolution_tolerance=config.resolution_tolerance,
+            span=config.integral_span,
+        ),
+        normalization=normalization,
+        augmentation_weight=augmentation_weight,
+    )
 
     def step(params, opt_state, traj_b: Windows | None, int_b: Windows | None, lam, learning_rate):
         def objective(p):
-            model = eqx.combine(p, static)
-            terms = {}
-            total = 0.0
-            if use_traj:
-                assert traj_b is not None
-                terms["traj"] = trajectory_loss(model, traj_b, **traj_kw)
-            if use_int:
-                assert int_b is not None
-                terms["itau"], share = integral_loss_terms(
-                    model,
-                    int_b,
-                    rule=config.quadrature,
-                    normalize=normalization,
-                    with_augmentation=use_share,
-                    augmentation_part=config.augmentation_part,
-                    resolution_tolerance=config.resolution_tolerance,
-                    span=config.integral_span,
-                )
-                total = total + terms["itau"]
-                if use_share:
-                    assert share is not None  # integral_loss_terms returns it with_augmentation
-                    terms["fa_share"] = share
-                    total = total + augmentation_weight * share
-            if loss == "aph":
-                assert traj_b is not None
-                terms["penalty"] = augmentation_penalty(model, traj_b)
-                total = total + terms["penalty"]
-            if use_traj:
-                total = total + (1.0 if loss == "traj" else lam) * terms["traj"]
-            terms["total"] = total
-            return total, terms
+            return kind.objective(eqx.combine(p, static), traj_b, int_b, lam, settings)
 
         (value, terms), grads = eqx.filter_value_and_grad(objective, has_aux=True)(params)
         ok = jnp.isfinite(value) & _all_finite(grads)
@@ -439,10 +416,9 @@ def _make_step(
 ):
     """:func:`_step_function` compiled (and, with JAX's persistent cache on, stored traced)."""
     step = _step_function(static, optimizer, loss, config, normalization, augmentation_weight)
-    use_traj = loss in ("traj", "aph", "prop")
     # level 0 skips LLVM's optimisations: a third less compile time for a slower step. Only
     # the steps with an ODE solve: an L_Iτ step compiles in seconds and runs many epochs
-    fast = config.fast_compile and use_traj
+    fast = config.fast_compile and loss_kind(loss).uses_trajectory
     compiler_options = {"xla_backend_optimization_level": 0} if fast else None
     # equinox's overloads leave out the jax.jit keywords it passes on
     live_step = eqx.filter_jit(step, compiler_options=compiler_options)  # pyright: ignore[reportCallIssue]
@@ -480,8 +456,8 @@ def training_step(
     ``step(params, opt_state, traj_windows, integral_windows, lam, learning_rate)`` returns
     ``(params, opt_state, losses, ok)``; ``loss`` is one of :data:`LOSSES` (``"itau"``: L_Iτ alone,
     ``traj_windows`` None). For benchmarks and experiments that time or probe the step itself."""
-    if loss not in LOSSES:
-        raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
+    if loss not in LOSS_KINDS:  # the registry as it is now: a loss defined after import counts
+        raise ValueError(f"loss: expected one of {tuple(LOSS_KINDS)}, got {loss!r}")
     optimizer, trainable, params = _build_optimizer(model, config)
     _, static = eqx.partition(model, trainable)
     step = _make_step(static, optimizer, loss, config, normalization, augmentation_weight)
@@ -517,7 +493,8 @@ class _Stages:
         self.int_windows, self._loss, self._make_step = int_windows, loss, make_step
         self._step_function = step_function
         self.bounds = np.cumsum(config.epochs)
-        self.lam_step = config.lambda_step if config.lambda_step is not None else (1000.0 if loss == "aph" else 0.0)
+        step = config.lambda_step
+        self.lam_step = step if step is not None else loss_kind(loss).dual_ascent_step
         self._windows: dict[int, Windows] = {}
         self._steps: dict[str, Any] = {}
         self._block: ItauBlock | None = None
@@ -528,7 +505,7 @@ class _Stages:
         return int(np.searchsorted(self.bounds, epoch, side="right"))
 
     def loss(self, stage: int) -> str:
-        return "itau" if self.config.horizons[stage] is None else self._loss
+        return INTEGRAL_ONLY.name if self.config.horizons[stage] is None else self._loss
 
     def windows(self, stage: int) -> Windows:
         if stage not in self._windows:
@@ -545,12 +522,13 @@ class _Stages:
     def in_blocks(self, stage: int) -> bool:
         """Whether the stage's epochs run as compiled blocks: L_Iτ alone on all windows per step."""
         ib = self.config.integral_batch_size
-        return self.loss(stage) == "itau" and (ib is None or ib >= self.int_windows.n_windows)
+        alone = not loss_kind(self.loss(stage)).uses_trajectory
+        return alone and (ib is None or ib >= self.int_windows.n_windows)
 
     def block(self) -> ItauBlock:
         if self._block is None:
             self._block = ItauBlock(
-                self._step_function("itau"), self.int_windows, self.config.seed, self.config.keep_best_itau
+                self._step_function(INTEGRAL_ONLY.name), self.int_windows, self.config.seed, self.config.keep_best_itau
             )
         return self._block
 
@@ -567,20 +545,20 @@ def _run_epoch(stages: _Stages, run: _RunState, epoch: int) -> tuple[dict, dict]
     config = stages.config
     t0 = time.perf_counter()
     stage = stages.of_epoch(epoch)
-    loss_now = stages.loss(stage)
+    solves = loss_kind(stages.loss(stage)).uses_trajectory
     traj_batches, int_batches = _epoch_batches(
         np.random.default_rng([config.seed, epoch]),
-        None if loss_now == "itau" else stages.windows(stage),
+        stages.windows(stage) if solves else None,
         stages.int_windows,
         config,
     )
     means, skipped = _run_steps(stages.step(stage), run, traj_batches, int_batches, config.epoch_learning_rate(epoch))
-    if stages.lam_step and "traj" in means:
-        run.lam = run.lam + stages.lam_step * means["traj"]
+    if stages.lam_step and TRAJECTORY_TERM in means:
+        run.lam = run.lam + stages.lam_step * means[TRAJECTORY_TERM]
     record = {
         "epoch": epoch + 1,
         "stage": stage,
-        "horizon": None if loss_now == "itau" else stages.windows(stage).length - 1,
+        "horizon": stages.windows(stage).length - 1 if solves else None,
         **means,
         "lambda": run.lam,
         "steps": len(traj_batches),
@@ -723,8 +701,9 @@ class _RunState:
 
 def _prepared_model(spec, model_kind: str, loss: str, trajs, config: TrainConfig, hparams, model):
     """The model to train (a new one unless given), after checking it fits the data and the loss."""
-    if loss not in LOSSES:
-        raise ValueError(f"loss must be one of {LOSSES}, got {loss!r}")
+    if loss not in LOSS_KINDS:
+        raise ValueError(f"loss must be one of {tuple(LOSS_KINDS)}, got {loss!r}")
+    kind = loss_kind(loss)
     if not trajs:
         raise ValueError("train_trajs is empty")
     for tr in trajs:
@@ -737,13 +716,14 @@ def _prepared_model(spec, model_kind: str, loss: str, trajs, config: TrainConfig
         model = make_model(spec.name, model_kind, jax.random.PRNGKey(config.seed), **(hparams or {}))
     elif model.kind != model_kind or model.spec.name != spec.name:
         raise ValueError(f"model is a {model.spec.name} {model.kind}; asked for {spec.name} {model_kind}")
-    if any(h is None for h in config.horizons) and loss not in ("prop", "itau"):
+    if any(h is None for h in config.horizons) and not kind.uses_integral:
+        with_integral = tuple(k.name for k in LOSS_KINDS.values() if k.uses_integral)
         raise ValueError(
             f"horizons {config.horizons}: a stage without a horizon (None) trains on L_Iτ alone, "
-            f"which only the 'prop' and 'itau' losses contain, not {loss!r}"
+            f"which only the {' and '.join(map(repr, with_integral))} losses contain, not {loss!r}"
         )
-    if loss == "aph" and not model.has_augmentation:
-        raise ValueError(f"loss 'aph' needs a model with a data-driven force F_a (aph or adln), not {model_kind!r}")
+    if kind.penalises_augmentation and not model.has_augmentation:
+        raise ValueError(f"loss {loss!r} needs a model with a data-driven force F_a (aph or adln), not {model_kind!r}")
     return model
 
 
@@ -761,7 +741,7 @@ def _augmentation_weight(config: TrainConfig, spec, model, model_kind: str) -> f
 
 def _integral_windows(trajs, config: TrainConfig, loss: str, shortest: int):
     """L_Iτ's windows (made once; None without L_Iτ) and the resolved normalisation."""
-    if loss not in ("prop", "itau"):
+    if not loss_kind(loss).uses_integral:
         return None, config.normalize
     w = min(config.integral_window, shortest)
     if config.quadrature == "simpson" and w % 2 == 0:
@@ -896,7 +876,7 @@ def _save_epochs(
 def _show_epoch(bar, means: dict, loss: str, lam: float, skipped: int, epoch: int, steps: int) -> None:
     if bar is not None:
         post: dict[str, Any] = {k: f"{v:.3g}" for k, v in means.items() if k != "total"}
-        if loss in ("aph", "prop"):
+        if loss_kind(loss).weighs_trajectory_by_lambda:
             post["λ"] = f"{lam:.3g}"
         if skipped:
             post["skipped"] = skipped
