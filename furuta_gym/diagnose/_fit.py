@@ -70,6 +70,9 @@ class Segment:
     dU: np.ndarray | None = None  # (N,) d/d(delay) of ∫u(t − d) at d = 0
     block: np.ndarray | None = None  # (N,) block index for paired held-out comparisons
     rest: np.ndarray | None = None  # (N, n) True where a joint's measured position never changes
+    #: _held_stops' answers by their arguments: they hang on the measured log alone, so the
+    #: regressors rebuilt for each trial input delay or lag ask the same question again
+    held_stops: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
 
     def residual_jacobian(self, c_input: np.ndarray, u_int: np.ndarray | None = None) -> np.ndarray:
         """(N, n, P): Z̄ − Ā = R θ, with Z̄ = ∫u · c_input (c_input = ∂τ_u/∂θ at u = 1)."""
@@ -301,12 +304,17 @@ def _held_stops(layout, theta0, seg: Segment, stride: int, n_intervals: int, cou
     """(N, n): the joint was held within the interval (:func:`held_samples`). The measured input
     drives it, not one through a trial delay or lag: which equations are left out must not change
     between the input dynamics the search compares."""
+    key = (layout.cache_key, layout.candidates, np.asarray(theta0, dtype=float).tobytes(), stride, n_intervals, counts)
+    if key in seg.held_stops:
+        return seg.held_stops[key]
     out = np.zeros((n_intervals, seg.q.shape[1]), bool)
     idx = np.arange(n_intervals)[:, None] * stride + np.arange(stride + 1)[None, :]
     for j in range(seg.q.shape[1]):
         a = free_acceleration_along(layout, theta0, seg.q, seg.qd, seg.u, seg.dt, j)
         held = held_samples(seg.q[:, j], a, seg.dt, counts)
         out[:, j] = held[np.minimum(idx, seg.q.shape[0] - 1)].any(axis=1)
+    out.flags.writeable = False  # shared by every build that asks
+    seg.held_stops[key] = out
     return out
 
 
