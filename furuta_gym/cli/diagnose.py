@@ -63,8 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--mjcf",
         metavar="OUT.xml",
-        help="write the diagnosed plant as MJCF (native terms in their elements, the rest as "
-        "<custom> data that furuta-gym's plant= reads back)",
+        help="write the diagnosed plant as MJCF: what plain MuJoCo can run of it (native terms, dry "
+        "friction as frictionloss, the input delay as the actuator's delay, ...), a comment naming what "
+        "it could not express, and the whole plant as <custom> data that furuta-gym's plant= reads back",
     )
     parser.add_argument(
         "--with-inconsistent",

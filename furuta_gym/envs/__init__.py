@@ -14,7 +14,7 @@ import gymnasium
 
 from ._backends import AbstractBackend, ModelBackend, MujocoBackend, load_checkpoint, make_backend
 from ._base import LagrangianEnv
-from ._mjcf_out import plant_mjcf, save_mjcf
+from ._mjcf_out import PlainForms, plain_forms, plant_mjcf, save_mjcf
 from ._parameters import default_parameters
 from ._settings import Actuation, Camera, EnvArgumentError, Episode, Plant, Sensors, Spaces
 from ._tasks import DEFAULT_STATE_BOUND, FurutaSwingUp, NMSDReach, is_diverged, tolerance
@@ -38,6 +38,8 @@ __all__ = [
     "Target",
     "save_mjcf",
     "plant_mjcf",
+    "plain_forms",
+    "PlainForms",
     "FurutaEnv",
     "NMSDEnv",
     "FurutaSwingUp",
