@@ -13,7 +13,7 @@ at N = 1 … 4096, the ratio analytic ÷ Pendulum-v1 at each N, and the swing-up
 physics step (env steps/s × the env's RK4 substeps; a Pendulum-v1 env step is its one physics
 step). Best of ``--repeats`` after a compiling warm-up. The results record the cores the process
 may run on and ``XLA_FLAGS`` (run it pinned, e.g. ``taskset -c 1`` with
-``XLA_FLAGS="--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"``, to time one
+``XLA_FLAGS="--xla_cpu_multi_thread_eigen=false"``, to time one
 core). Writes ``results/functional_env_speed/results.json`` and its BENCHMARKS.md section from it
 (``--no-write``: neither).
 

@@ -12,8 +12,11 @@ machine", has the measurements):
   training gives other bits on one core than on two). ``--xla_cpu_experimental_ynn_fusion_type=``
   (empty) leaves them to XLA's own code, whose order depends on neither.
 
-Both go into ``XLA_FLAGS`` when ``furuta_gym`` is imported (its first act), appended to the user's
-own flags, never replacing one the user set. XLA reads ``XLA_FLAGS`` once, when JAX creates its CPU
+Both go into ``XLA_FLAGS`` when ``furuta_gym`` is imported (its first act), before the user's own
+flags, never replacing one the user set: XLA stops reading ``XLA_FLAGS`` at the first word that
+does not start with ``--`` and silently drops everything after it (a widespread recipe's
+``intra_op_parallelism_threads=1`` is such a word), so a pin placed after one would not apply;
+:func:`unread_xla_flags` names what XLA will not read and :class:`NumericsWarning` says so. XLA reads ``XLA_FLAGS`` once, when JAX creates its CPU
 backend (the first computation), so importing ``jax`` earlier is fine but computing with it is
 not: then nothing is pinned, :class:`NumericsWarning` says so and :func:`numerics` reports it.
 ``OPENBLAS_CORETYPE=Haswell`` (on a CPU with AVX2 and FMA) does the same for the BLAS that NumPy
@@ -31,7 +34,15 @@ import sys
 import warnings
 from typing import Mapping
 
-__all__ = ["NumericsWarning", "numerics", "pinned_environment", "pin_numerics", "PINNED_ISA", "OPT_OUT"]
+__all__ = [
+    "NumericsWarning",
+    "numerics",
+    "pinned_environment",
+    "pin_numerics",
+    "unread_xla_flags",
+    "PINNED_ISA",
+    "OPT_OUT",
+]
 
 PINNED_ISA = "AVX2"
 OPT_OUT = "FURUTA_GYM_NATIVE_ISA"
@@ -50,6 +61,16 @@ class NumericsWarning(UserWarning):
 
 def _flag_set(flags: str, name: str) -> bool:
     return any(part == name or part.startswith(name + "=") for part in flags.split())
+
+
+def unread_xla_flags(flags: str) -> list[str]:
+    """The words of ``flags`` (an ``XLA_FLAGS`` value) that XLA will not read: from the first one
+    that does not start with ``--`` to the end (XLA's parser stops there without a word)."""
+    words = flags.split()
+    for i, word in enumerate(words):
+        if not word.startswith("--"):
+            return words[i:]
+    return []
 
 
 def _version(text: str) -> tuple[int, ...]:
@@ -77,8 +98,8 @@ def pinned_environment(
         added.append(f"{MAX_ISA}={PINNED_ISA}")
     if jaxlib_version is not None and _version(jaxlib_version) >= _YNN_SINCE and not _flag_set(flags, YNN_FUSIONS):
         added.append(f"{YNN_FUSIONS}=")
-    if added:
-        out["XLA_FLAGS"] = " ".join([flags.strip(), *added]).strip()
+    if added:  # first: a word XLA stops at in the user's flags must not swallow the pin
+        out["XLA_FLAGS"] = " ".join([*added, flags.strip()]).strip()
     # a core type the CPU lacks would crash OpenBLAS: only where AVX2 and FMA are known present
     if "OPENBLAS_CORETYPE" not in environ and cpu_flags is not None and {"avx2", "fma"} <= cpu_flags:
         out["OPENBLAS_CORETYPE"] = BLAS_CORE
@@ -130,6 +151,14 @@ def pin_numerics() -> dict[str, str]:
             f"yourself; {OPT_OUT}=1 silences this."
         )
         warnings.warn(_state["not_applied"], NumericsWarning, stacklevel=2)
+    unread = unread_xla_flags(wanted.get("XLA_FLAGS", os.environ.get("XLA_FLAGS", "")))
+    if unread:
+        warnings.warn(
+            f"XLA_FLAGS: XLA stops reading at {unread[0]!r} (not a '--' flag) and ignores it and what "
+            f"follows ({' '.join(unread)})" + ("; furuta_gym's pin comes before it" if "XLA_FLAGS" in wanted else ""),
+            NumericsWarning,
+            stacklevel=2,
+        )
     os.environ.update(wanted)
     _state["pinned"] = dict(wanted)
     return dict(wanted)
@@ -137,11 +166,13 @@ def pin_numerics() -> dict[str, str]:
 
 def numerics() -> dict:
     """What furuta_gym pinned in this process: ``{"pinned": {variable: value set}, "xla_flags":
-    XLA_FLAGS as XLA will read it, "openblas_coretype": ..., "not_applied": why the XLA pin did
-    not apply, or None}``."""
+    XLA_FLAGS as given, "xla_flags_unread": its words XLA will not read, "openblas_coretype": ...,
+    "not_applied": why the XLA pin did not apply, or None}``."""
+    flags = os.environ.get("XLA_FLAGS", "")
     return {
         "pinned": dict(_state["pinned"]),
-        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "xla_flags": flags,
+        "xla_flags_unread": unread_xla_flags(flags),
         "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE"),
         "not_applied": _state["not_applied"],
     }

@@ -48,7 +48,7 @@ def cluster(tmp_path_factory):
     env = {
         "JAX_COMPILATION_CACHE_DIR": str(root / "jax"),
         "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
-        "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+        "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false",
     }
     saved = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
@@ -184,15 +184,11 @@ def test_select_option_on_ray_makes_the_local_pools_choice_from_the_same_runs(cl
     hidden = tmp_path / "hidden"
     (hidden / "ray").mkdir(parents=True)
     (hidden / "ray" / "__init__.py").write_text("raise ImportError('Ray is hidden from this process')\n")
-    # Both runs with the CPU numerics unpinned: pinned (the default since issue 68), a Ray task and
-    # a local-pool process train NMSD models that differ by ~1e-8 relative, cause open (issue 68's
-    # note); this test holds the executors to the same runs, which unpinned they give bit for bit.
-    native = dict(os.environ, FURUTA_GYM_NATIVE_ISA="1")
-    no_ray = dict(native, PYTHONPATH=os.pathsep.join(filter(None, [str(hidden), os.environ.get("PYTHONPATH")])))
+    no_ray = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(hidden), os.environ.get("PYTHONPATH")])))
     local = _select(cluster / "select_local", env=no_ray)
     # each candidate × seed a task on the module's Ray instance, which the script joins
     address = ray.get_runtime_context().gcs_address
-    on_ray = _select(cluster / "select_ray", "--executor", "ray", "--address", address, env=native)
+    on_ray = _select(cluster / "select_ray", "--executor", "ray", "--address", address)
     assert on_ray == local  # the same scores, seed by seed, the same decision
     # both values were trained on both seeds: four tasks, and the seed-by-seed rule decided
     assert [score["seeds"] for score in local["scores"]["dln"].values()] == [[0, 1], [0, 1]]

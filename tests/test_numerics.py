@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from furuta_gym._numerics import pinned_environment
+from furuta_gym._numerics import pinned_environment, unread_xla_flags
 
 ROOT = Path(__file__).resolve().parents[1]
 PIN = "--xla_cpu_max_isa=AVX2 --xla_cpu_experimental_ynn_fusion_type="
@@ -30,11 +30,15 @@ def _study():
 def test_the_pin_extends_the_users_flags_and_never_replaces_them():
     env = dict(machine="x86_64", cpu_flags=AVX2, jaxlib_version="0.10.2")
     assert pinned_environment({}, **env) == {"XLA_FLAGS": PIN, "OPENBLAS_CORETYPE": "Haswell"}
-    # the user's flags stay, first; a cap or a YNN choice of the user's wins; so does a BLAS core
+    # the user's flags stay, after the pin (XLA stops reading at a word that is not a -- flag:
+    # one in the user's flags must not hide the pin); a cap or a YNN choice of the user's wins;
+    # so does a BLAS core
     got = pinned_environment({"XLA_FLAGS": " --xla_dump_to=/tmp/x ", "OPENBLAS_CORETYPE": "Zen"}, **env)
-    assert got == {"XLA_FLAGS": "--xla_dump_to=/tmp/x " + PIN}
+    assert got == {"XLA_FLAGS": PIN + " --xla_dump_to=/tmp/x"}
     got = pinned_environment({"XLA_FLAGS": "--xla_cpu_max_isa=AVX512"}, **env)
-    assert got["XLA_FLAGS"] == "--xla_cpu_max_isa=AVX512 --xla_cpu_experimental_ynn_fusion_type="
+    assert got["XLA_FLAGS"] == "--xla_cpu_experimental_ynn_fusion_type= --xla_cpu_max_isa=AVX512"
+    assert unread_xla_flags("--a=1 intra_op_parallelism_threads=1 --b=2") == ["intra_op_parallelism_threads=1", "--b=2"]
+    assert unread_xla_flags(PIN) == []
     assert "XLA_FLAGS" not in pinned_environment({"XLA_FLAGS": PIN}, **env)
     # opted out, another architecture: nothing; no AVX2 / FMA, or flags unknown: no BLAS core type
     assert pinned_environment({"FURUTA_GYM_NATIVE_ISA": "1"}, **env) == {}
@@ -77,6 +81,45 @@ def test_the_pin_reaches_xla_and_a_late_import_says_it_cannot():
     assert opted_out.stdout.strip() == "None"
 
 
+# One jitted float64 loop whose reductions YNNPACK splits by the core count when it is on: its
+# digest on one core and on two says whether the pin reached XLA.
+PROBE = """
+    import hashlib, os, warnings
+    warnings.simplefilter("ignore")
+    import furuta_gym, jax, jax.numpy as jnp, numpy as np
+    x = jax.random.normal(jax.random.PRNGKey(1), (4096, 64))
+    w = jax.random.normal(jax.random.PRNGKey(2), (64, 64)) * 0.1
+    def body(c, _):
+        c = jnp.tanh(c @ w) + 0.01 * jnp.sin(c)
+        return c, jnp.sum(c**2)
+    ys = jax.jit(lambda x: jax.lax.scan(body, x, None, length=100)[1])(x)
+    print(hashlib.sha1(np.asarray(ys).tobytes()).hexdigest())
+"""
+
+
+@pytest.mark.skipif(
+    sys.platform != "linux"
+    or platform.machine().lower() not in ("x86_64", "amd64")
+    or len(os.sched_getaffinity(0)) < 2,
+    reason="needs Linux x86-64 with two cores (the probe runs on one core and on two)",
+)
+def test_the_pin_applies_behind_a_word_xla_stops_reading_at():
+    """A widespread recipe's XLA_FLAGS ends in ``intra_op_parallelism_threads=1``, which is no XLA
+    flag: XLA stops reading there. The pin, placed after it, was silently dropped (a Ray task and
+    a local-pool process then trained different models); placed before, one core and two give
+    the same bits, and the user is told which words XLA ignores."""
+    user = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+    digests = []
+    for cores in ("0", "0,1"):
+        code = f"import os; os.sched_setaffinity(0, {{{cores}}})\n" + textwrap.dedent(PROBE)
+        done = _run(code, XLA_FLAGS=user, JAX_ENABLE_X64="1")
+        assert done.returncode == 0, done.stderr[-2000:]
+        digests.append(done.stdout.split()[-1])
+    assert digests[0] == digests[1]
+    warned = _run("import furuta_gym", XLA_FLAGS=user)
+    assert "XLA stops reading at 'intra_op_parallelism_threads=1'" in warned.stderr
+
+
 @pytest.mark.skipif(
     sys.platform != "linux"
     or platform.machine().lower() not in ("x86_64", "amd64")
@@ -94,7 +137,7 @@ def test_training_gives_the_same_bits_on_an_emulated_avx2_machine_with_one_core(
         study.run_setting(True, cap=None, cores=None, blas=None, out=tmp_path / "here.npz"),
         study.run_setting(True, cap="AVX2", cores=1, blas="Haswell", out=tmp_path / "avx2.npz", numpy_avx512_off=True),
     ]
-    assert all(r["numerics"]["xla_flags"] == PIN for r in runs)
+    assert all(sorted(r["numerics"]["xla_flags"].split()) == sorted(PIN.split()) for r in runs)
     assert study.digest(runs[0]["arrays"]) == study.digest(runs[1]["arrays"])
 
 

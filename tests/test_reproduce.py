@@ -497,19 +497,20 @@ def test_cli_executor_options_and_what_a_ray_worker_is_told():
         ReproduceConfig(executor="dask")
     with pytest.raises(ValueError, match="needs executor='ray'"):
         ReproduceConfig(address="auto")
-    # a task's XLA threads follow its CPU request; the node's other XLA flags and the caches stay
+    # a task's threads follow its CPU request; the node's other XLA flags and the caches stay,
+    # after the thread setting, and a word XLA would stop reading at (not a -- flag) is dropped
     env = worker_env(
         2,
         {
-            "XLA_FLAGS": "--xla_force_host_platform_device_count=2 intra_op_parallelism_threads=8",
+            "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=8 "
+            "--xla_force_host_platform_device_count=2",
             "JAX_COMPILATION_CACHE_DIR": "/cache",
             "HOME": "/root",
         },
     )
     assert env["XLA_FLAGS"].split() == [
-        "--xla_force_host_platform_device_count=2",
         "--xla_cpu_multi_thread_eigen=true",
-        "intra_op_parallelism_threads=2",
+        "--xla_force_host_platform_device_count=2",
     ]
     assert env["JAX_COMPILATION_CACHE_DIR"] == "/cache" and "HOME" not in env
     assert env["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false" and env["OMP_NUM_THREADS"] == "2"

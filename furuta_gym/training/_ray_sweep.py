@@ -38,7 +38,9 @@ _FORWARDED_ENV = (
     "FURUTA_GYM_STEP_CACHE",
     "MUJOCO_GL",
 )
-_THREAD_FLAGS = ("--xla_cpu_multi_thread_eigen", "intra_op_parallelism_threads")
+_THREAD_FLAG = "--xla_cpu_multi_thread_eigen"
+# not an XLA flag (a TensorFlow option in a widespread recipe): XLA stops reading XLA_FLAGS at it
+_NOT_A_FLAG = "intra_op_parallelism_threads"
 
 
 def _import_ray():
@@ -52,14 +54,16 @@ def _import_ray():
 def worker_env(cpus: int, environ=None) -> dict[str, str]:
     """Environment variables of a task asking for ``cpus`` CPUs.
 
-    Several tasks share a node, and JAX's CPU backend would otherwise size its thread pools to
-    every core of it (so ``cpus``-CPU tasks oversubscribe the node many times over) and, on an
-    accelerator, reserve most of its memory at start-up; the node's own XLA flags are kept,
-    except the thread counts set here."""
+    Several tasks share a node: a one-CPU task runs XLA's Eigen kernels on one thread and every
+    task's OpenMP / BLAS pools get its CPUs, instead of every core of the node each, and on an
+    accelerator no task reserves most of its memory at start-up. The node's own XLA flags are
+    kept, after the thread setting (XLA stops reading at the first word that is not a ``--``
+    flag), except ``intra_op_parallelism_threads``: not an XLA flag, and it would hide the flags
+    after it, the numerics pin among them."""
     environ = os.environ if environ is None else environ
-    kept = [f for f in environ.get("XLA_FLAGS", "").split() if not f.startswith(_THREAD_FLAGS)]
+    kept = [f for f in environ.get("XLA_FLAGS", "").split() if not f.startswith((_THREAD_FLAG, _NOT_A_FLAG))]
     multi = "true" if cpus > 1 else "false"
-    flags = [*kept, f"--xla_cpu_multi_thread_eigen={multi}", f"intra_op_parallelism_threads={cpus}"]
+    flags = [f"{_THREAD_FLAG}={multi}", *kept]
     env = {
         "XLA_FLAGS": " ".join(flags),
         "XLA_PYTHON_CLIENT_PREALLOCATE": "false",
