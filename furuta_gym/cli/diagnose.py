@@ -148,6 +148,9 @@ def run(args: argparse.Namespace) -> int:
             raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
     trajs, notes = _load(args.data, args)
     test, test_notes = _load(args.test, args) if args.test else (None, [])
+    from ._cache import enable_compilation_cache
+
+    enable_compilation_cache()  # the output-error predictors compile once per machine, not once per run
     overrides = {"velocity": args.velocity}
     for key, val in (
         ("max_effects", args.max_effects),
