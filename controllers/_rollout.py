@@ -3,9 +3,10 @@
 Used for gain picking on the design model, tests and the benchmark's model plants. The plant is
 integrated with fixed-step RK4 and the voltage held over each control period (``rk4_zoh_step``,
 the same scheme as MuJoCo's RK4 integrator and the model-backed envs). An optional
-:class:`Sensor` makes the observation measured-like: 2048-count encoder quantisation of both
-angles and velocities from the paper's causal derivative filter (ω0 = 100 rad/s, ξ = 0.8),
-instead of the exact state.
+sensor (:class:`furuta_gym.sensors.Sensors`, the envs' and the data generation's sensor model;
+:func:`Sensor` is the QUBE's: 2048-count encoder quantisation of both angles and velocities from
+the paper's causal derivative filter, ω0 = 100 rad/s, ξ = 0.8) makes the observation
+measured-like instead of the exact state.
 """
 
 from __future__ import annotations
@@ -19,25 +20,18 @@ from scipy import signal
 
 from ..envs.vector import scan_closed_loop
 from ..lagrangian import AbstractLagrangianSystem
-from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter_coefficients, quantize_encoder
+from ..sensors import Sensors
+from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter_coefficients, quantize_joints
 from ._base import AbstractController
 
 __all__ = ["Sensor", "ClosedLoop", "closed_loop"]
 
 
-class Sensor(eqx.Module):
-    """Measured-like observation: quantised angles, filtered-derivative velocities."""
-
-    counts_per_rev: int = eqx.field(static=True, default=ENCODER_COUNTS_PER_REV)
-    omega0: float = eqx.field(static=True, default=100.0)
-    xi: float = eqx.field(static=True, default=0.8)
-
-    def coefficients(self, dt: float):
-        """Bilinear-discretised F(s) = ω0² s / (s² + 2ξω0 s + ω0²), a[0] = 1."""
-        return derivative_filter_coefficients(dt, self.omega0, self.xi)
-
-    def quantize(self, angles):
-        return quantize_encoder(jnp.asarray(angles), self.counts_per_rev)
+def Sensor(counts_per_rev: int = ENCODER_COUNTS_PER_REV, omega0: float = 100.0, xi: float = 0.8) -> Sensors:
+    """The QUBE's sensor as :class:`~furuta_gym.sensors.Sensors` (kept for its callers:
+    ``closed_loop(..., sensor=Sensor())``): angles quantised to ``counts_per_rev`` counts, velocities
+    from the derivative filter (ω0, ξ)."""
+    return Sensors(encoder_counts=counts_per_rev, velocity="filter", filter_omega0=omega0, filter_xi=xi)
 
 
 class ClosedLoop(NamedTuple):
@@ -50,27 +44,48 @@ class ClosedLoop(NamedTuple):
 
 
 class _SensorObserver(eqx.Module):
-    """A :class:`Sensor` at a control period: quantise the angles, filter them into velocities
-    (direct form II transposed, one sample per joint), starting at rest at the first sample."""
+    """:class:`~furuta_gym.sensors.Sensors` at a control period, in JAX: quantise the positions
+    (``steps`` per joint) and, with ``velocity="filter"``, filter them into velocities (direct form
+    II transposed, one sample per joint), starting at rest at the first sample. No noise: a scan
+    without a key draws none (``closed_loop`` refuses a noisy sensor)."""
 
-    sensor: Sensor
+    sensor: Sensors = eqx.field(static=True)
+    steps: tuple[float, ...] = eqx.field(static=True)
     dt: float = eqx.field(static=True)
 
     def _filter(self):
-        b, a = self.sensor.coefficients(self.dt)
+        b, a = derivative_filter_coefficients(self.dt, self.sensor.filter_omega0, self.sensor.filter_xi)
         return jnp.asarray(b), jnp.asarray(a), jnp.asarray(signal.lfilter_zi(b, a))
+
+    def _quantize(self, x):
+        # one step for all joints as a scalar: the program (and its rounding) the loop always had
+        steps = self.steps[0] if len(set(self.steps)) == 1 else self.steps
+        return quantize_joints(jnp.asarray(x[: len(self.steps)]), steps)
 
     def init(self, x0):
         _, _, zi = self._filter()
         # the filter's steady state for a constant (quantised) first sample
-        return zi[:, None] * self.sensor.quantize(x0[:2])[None, :]
+        return zi[:, None] * self._quantize(x0)[None, :]
 
     def observe(self, x, z):
+        q = self._quantize(x)
+        if self.sensor.velocity == "exact":
+            return jnp.concatenate([q, x[len(self.steps) :]]), z
         b, a, _ = self._filter()
-        q = self.sensor.quantize(x[:2])
         v = b[0] * q + z[0]
         z_new = jnp.stack([b[1] * q - a[1] * v + z[1], b[2] * q - a[2] * v])
         return jnp.concatenate([q, v]), z_new
+
+
+def _observer(sensor: Sensors | None, plant: AbstractLagrangianSystem, dt: float) -> _SensorObserver | None:
+    if sensor is None:
+        return None
+    if any(sensor.noise(plant.spec)):
+        raise ValueError(
+            f"closed_loop's sensor draws no noise (a JAX scan without a key); got measurement_noise="
+            f"{sensor.measurement_noise!r}: use an env (furuta_gym.envs) for a noisy sensor"
+        )
+    return _SensorObserver(sensor, sensor.quantization(plant.spec), float(dt))
 
 
 def closed_loop(
@@ -80,7 +95,7 @@ def closed_loop(
     steps: int,
     dt: float = 1.0 / 500.0,
     substeps: int = 1,
-    sensor: Sensor | None = None,
+    sensor: Sensors | None = None,
 ) -> ClosedLoop:
     """Run ``controller`` on ``plant`` for ``steps`` control periods from ``x0`` (jittable; vmap
     over ``x0`` for a batch). The controller state starts at ``controller.init_state()``.
@@ -97,7 +112,7 @@ def closed_loop(
         steps=int(steps),
         dt=float(dt),
         substeps=int(substeps),
-        observer=None if sensor is None else _SensorObserver(sensor, float(dt)),
+        observer=_observer(sensor, plant, dt),
         record=True,
     )
     modes = jnp.zeros(int(steps), dtype=jnp.int32) if isinstance(cstates, tuple) else cstates.astype(jnp.int32)

@@ -1,7 +1,7 @@
 """The package's layers point one way (issue 26): a test that walks every import, at module level
 and inside functions, of every module of the installed package.
 
-* models (and the spine: lagrangian, systems, signals, effects, simulate, data, reading) import no env, no
+* models (and the spine: lagrangian, systems, signals, sensors, effects, simulate, data, reading) import no env, no
   training, no diagnosis, no command line; envs import neither training nor diagnosis;
 * no module imports another subpackage's private module (``furuta_gym.envs._backends`` from
   ``furuta_gym.diagnose``): packages talk through their public ``__init__``.
@@ -24,7 +24,7 @@ FORBIDDEN = {
     "training": {"diagnose", "cli", "demo"},
     "rl": {"training", "diagnose", "cli", "demo"},
 }
-SPINE = {"lagrangian", "systems", "signals", "effects", "simulate", "data", "reading"}
+SPINE = {"lagrangian", "systems", "signals", "sensors", "effects", "simulate", "data", "reading"}
 
 
 def _modules():

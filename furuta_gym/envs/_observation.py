@@ -61,7 +61,11 @@ class Observer:
         self.spec, self.n, self.random = spec, spec.n_dof, random
         self.quant = np.array(sensors.quantization(spec))
         self.noise = np.array(sensors.noise(spec))
-        self.filter = DerivativeFilter(dt, self.n) if sensors.velocity == "filter" else None
+        self.filter = (
+            DerivativeFilter(dt, self.n, sensors.filter_omega0, sensors.filter_xi)
+            if sensors.velocity == "filter"
+            else None
+        )
         self.exact_sensors = sensors.exact
         self.observation = layout.observation
         self.dtype = np.dtype(layout.dtype)

@@ -3,7 +3,8 @@
 * :class:`Plant` — the simulated device: named variants, extra effects, domain randomisation;
 * :class:`Episode` — the control period (``frame_skip``), the horizon, the start noise;
 * :class:`Actuation` — between the action and the plant: the limit and a delay;
-* :class:`Sensors` — between the plant and the observation: quantisation, noise, velocity;
+* :class:`Sensors` — between the plant and the observation: quantisation, noise, velocity (the
+  spine's :mod:`furuta_gym.sensors`, one type the data generation and the controllers read too);
 * :class:`Spaces` — what the agent sees: observation layout, dtype, a normalised action;
 * :class:`Camera` — the rendered frame.
 
@@ -26,8 +27,10 @@ import gymnasium
 import numpy as np
 
 from ..effects import Effect
-from ..lagrangian import SystemSpec
 from ..models import system_definition
+from ..sensors import Sensors, SettingsError, check_int
+from ..sensors import as_number as _number
+from ..sensors import set_fields as _set
 from ._plant import effect_json, plant_document
 
 __all__ = [
@@ -48,38 +51,15 @@ __all__ = [
 OBSERVATIONS = ("raw", "wrapped", "trig")
 
 
-class EnvArgumentError(ValueError, TypeError):
-    """A bad constructor keyword, settings field or reset option (a ValueError and, like Python's
-    own unknown-keyword error, a TypeError)."""
-
-
-def check_int(name: str, value: Any, minimum: int) -> int:
-    """``value`` as an int >= ``minimum`` (bools refused), or an EnvArgumentError naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise EnvArgumentError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
+#: a bad constructor keyword, settings field or reset option (a ValueError and a TypeError); the
+#: spine's SettingsError, which the sensor model shared with training and controllers raises too
+EnvArgumentError = SettingsError
 
 
 def _check_bool(name: str, value: Any) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise EnvArgumentError(f"{name} must be a bool, got {value!r}")
     return bool(value)
-
-
-def _number(value: Any) -> float:
-    """``value`` as a float, NaN when it is not a real number (bools and strings are not)."""
-    if isinstance(value, (bool, np.bool_, str, bytes)):
-        return math.nan
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return math.nan
-
-
-def _set(obj, **values) -> None:
-    """Normalise fields of a frozen dataclass in its ``__post_init__``."""
-    for name, value in values.items():
-        object.__setattr__(obj, name, value)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -235,84 +215,6 @@ class Actuation:
         if not (_number(self.delay) >= 0 and math.isfinite(self.delay)):
             raise EnvArgumentError(f"Actuation.delay must be a delay in seconds >= 0, got {self.delay!r}")
         _set(self, delay=float(self.delay), delay_steps=check_int("Actuation.delay_steps", self.delay_steps, 0))
-
-
-@dataclasses.dataclass(frozen=True)
-class Sensors:
-    """The sensor model: angles quantised to 2π/``encoder_counts`` (None: exact; the QUBE has
-    2048), other positions to ``position_resolution`` (joint units), Gaussian
-    ``measurement_noise`` std (scalar or one per observation component), and the observed
-    ``velocity``: ``"exact"`` or ``"filter"`` (the paper's derivative filter on the measured
-    positions)."""
-
-    encoder_counts: int | None = None
-    position_resolution: float | None = None
-    measurement_noise: float | Sequence[float] = 0.0
-    velocity: str = "exact"
-
-    def __post_init__(self):
-        if self.encoder_counts is not None:
-            _set(self, encoder_counts=check_int("Sensors.encoder_counts", self.encoder_counts, 1))
-        if self.position_resolution is not None:
-            res = _number(self.position_resolution)
-            if not (math.isfinite(res) and res > 0):
-                raise EnvArgumentError(f"Sensors.position_resolution must be > 0, got {self.position_resolution!r}")
-            _set(self, position_resolution=res)
-        noise = self.measurement_noise
-        values = np.asarray(noise, dtype=float) if np.ndim(noise) in (0, 1) and _numeric(noise) else None
-        if values is None or values.size == 0 or not np.all(np.isfinite(values)) or np.any(values < 0):
-            raise EnvArgumentError(
-                f"Sensors.measurement_noise must be a standard deviation >= 0, scalar or one per "
-                f"observation component; got {noise!r}"
-            )
-        _set(self, measurement_noise=float(values) if values.ndim == 0 else tuple(values.tolist()))
-        if self.velocity not in ("exact", "filter"):
-            raise EnvArgumentError(
-                f"Sensors.velocity must be 'exact' (true velocity) or 'filter' (the paper's derivative "
-                f"filter on the measured positions); got {self.velocity!r}"
-            )
-
-    def quantization(self, spec: SystemSpec) -> tuple[float, ...]:
-        """Quantisation step per joint of ``spec`` (rad or m; 0: exact)."""
-        quant = np.zeros(spec.n_dof)
-        if self.encoder_counts is not None:
-            if not any(spec.angular):
-                raise EnvArgumentError(
-                    f"encoder_counts quantises angles, but {spec.name} has no angular joint; "
-                    "use position_resolution (in joint units)"
-                )
-            quant[list(spec.angular)] = 2.0 * math.pi / self.encoder_counts
-        if self.position_resolution is not None:
-            quant[[not a for a in spec.angular]] = self.position_resolution
-        return tuple(float(q) for q in quant)
-
-    def noise(self, spec: SystemSpec) -> tuple[float, ...]:
-        """Noise std per observation component (q, q̇) of ``spec``."""
-        noise = np.asarray(self.measurement_noise, dtype=float)
-        if noise.size not in (1, 2 * spec.n_dof):
-            raise EnvArgumentError(
-                f"measurement_noise must be a standard deviation >= 0, scalar or one per observation "
-                f"component {spec.state_names}; got {self.measurement_noise!r}"
-            )
-        return tuple(float(s) for s in np.broadcast_to(noise, (2 * spec.n_dof,)))
-
-    @property
-    def exact(self) -> bool:
-        """The observation is the true state."""
-        return (
-            self.encoder_counts is None
-            and self.position_resolution is None
-            and not np.any(self.measurement_noise)
-            and self.velocity == "exact"
-        )
-
-
-def _numeric(value: Any) -> bool:
-    try:
-        np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return not isinstance(value, (bool, str))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -14,7 +14,7 @@ from gymnasium import spaces
 
 from ..lagrangian import SystemSpec
 from ._observation import Observer
-from ._settings import EnvArgumentError
+from ._settings import EnvArgumentError, Sensors
 
 __all__ = ["BatchTemplate"]
 
@@ -25,6 +25,7 @@ class BatchTemplate:
     # set by LagrangianEnv.__init__
     reset_option_names: ClassVar[tuple[str, ...]]
     _spec: SystemSpec
+    sensors: Sensors
     _observer: Observer
     _randomize: dict
     _max_steps: int | None
@@ -50,12 +51,12 @@ class BatchTemplate:
     @property
     def encoder_steps(self) -> np.ndarray:
         """Quantisation step of each measured joint position (0: exact), in rad or m."""
-        return self._observer.quant.copy()
+        return np.array(self.sensors.quantization(self._spec))
 
     @property
     def noise_std(self) -> np.ndarray:
         """Gaussian measurement noise std per observed state component (q, q̇); 0: none."""
-        return self._observer.noise.copy()
+        return np.array(self.sensors.noise(self._spec))
 
     @property
     def parameter_spreads(self) -> dict[str, float]:
@@ -89,9 +90,9 @@ class BatchTemplate:
         the step count (random draws or a signal history): what a stateless batched copy cannot
         reproduce. Empty for a deterministic, memoryless env."""
         features = []
-        if np.any(self._observer.noise):
+        if np.any(self.noise_std):
             features.append("measurement_noise")
-        if self._observer.filter is not None:
+        if self.sensors.velocity == "filter":
             features.append("velocity='filter'")
         if self._has_delay:
             features.append(

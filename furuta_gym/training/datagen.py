@@ -30,7 +30,8 @@ true model reproduces its own data to the solver tolerance. Ground truth: the Mu
 (``assets/*.xml``) when its backend is available, else the analytic model with tight tolerances
 (they agree to ~1e-6); the manifest records which one was used.
 
-Sensors (options, applied at ``sensor_rate_hz`` = 500 Hz, then subsampled to 100 Hz): encoder
+Sensors (the one sensor model, :class:`furuta_gym.sensors.Sensors`, given as such or through
+:class:`SensorOptions`; applied at ``sensor_rate_hz`` = 500 Hz, then subsampled to 100 Hz): encoder
 quantisation (Furuta, 2048 counts/rev), Gaussian position noise, and velocities either exact or
 from the paper's derivative filter F(s) = ω0²s/(s² + 2ξω0s + ω0²), ω0 = 100, ξ = 0.8, warmed up on
 a constant-velocity history ending at x0 (so no start-up transient).
@@ -59,7 +60,8 @@ from ..data import Trajectory, save_trajectories
 from ..envs import MujocoBackend
 from ..lagrangian import vector_field
 from ..models import analytic_model
-from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter, quantize_encoder
+from ..sensors import Sensors
+from ..signals import ENCODER_COUNTS_PER_REV, derivative_filter, quantize_joints
 from ..systems import get_spec
 from ._furuta_data import FURUTA_DATA, FurutaRecipe
 from ._nmsd_data import NMSD_DATA, NMSDRecipe
@@ -114,7 +116,9 @@ def recipe_for(system: str, small: bool = False):
 
 @dataclasses.dataclass(frozen=True)
 class SensorOptions:
-    """How the generated states are "measured".
+    """How the generated states are "measured": a sensor model (:attr:`sensors`, the envs' and
+    the controllers' :class:`~furuta_gym.sensors.Sensors`) and the rate it samples at. Its fields
+    are the datasets' manifests' record of it (``"sensor"``).
 
     ``quantize``: round angles to the encoder resolution (Furuta only; the N-MSD has no encoder).
     ``noise_std``: Gaussian noise on positions (rad or m), per sensor sample.
@@ -154,8 +158,31 @@ class SensorOptions:
         return int(round(self.sensor_rate_hz / DATA_RATE_HZ))
 
     @property
+    def sensors(self) -> Sensors:
+        """The sensor model these options describe."""
+        return Sensors(
+            encoder_counts=self.counts_per_rev if self.quantize else None,
+            measurement_noise=(self.noise_std, self.velocity_noise_std),
+            velocity=self.velocity,
+            filter_omega0=self.filter_omega0,
+            filter_xi=self.filter_xi,
+        )
+
+    @property
     def is_exact(self) -> bool:
-        return not self.quantize and self.noise_std == 0 and self.velocity == "exact" and self.velocity_noise_std == 0
+        return self.sensors.exact
+
+
+#: the rate a :class:`~furuta_gym.sensors.Sensors` given to the generators samples at (the QUBE's)
+SENSOR_RATE_HZ = SensorOptions.sensor_rate_hz
+
+
+def _sensor_model(sensor: SensorOptions | Sensors | None) -> tuple[Sensors, int]:
+    """The sensor model and how many of its samples make one data sample."""
+    if isinstance(sensor, Sensors):
+        return sensor, int(round(SENSOR_RATE_HZ / DATA_RATE_HZ))
+    options = sensor or SensorOptions()
+    return options.sensors, options.oversample
 
 
 # --------------------------------------------------------------------------------------------
@@ -304,33 +331,39 @@ def default_ground_truth(system: str, kind: str = "auto") -> GroundTruth:
 # --------------------------------------------------------------------------------------------
 
 
-def _measure(clean: Clean, n_dof: int, angular: Sequence[bool], options: SensorOptions, rng) -> Trajectory:
-    q_true, qd_true = clean.x[:, :n_dof], clean.x[:, n_dof:]
+def _measure(clean: Clean, spec, sensors: Sensors, oversample: int, rng) -> Trajectory:
+    """The clean sensor-rate states as ``sensors`` read them, subsampled to the data rate. Noise
+    is added before the quantisation (as these data always were); the envs add theirs to the
+    quantised reading."""
+    n = spec.n_dof
+    q_true, qd_true = clean.x[:, :n], clean.x[:, n:]
+    noise = np.asarray(sensors.noise(spec))
     q = q_true.copy()
-    if options.noise_std > 0:
-        q = q + rng.normal(0.0, options.noise_std, size=q.shape)
-    if options.quantize:
-        for j, is_angle in enumerate(angular):
-            if is_angle:
-                q[:, j] = quantize_encoder(q[:, j], options.counts_per_rev)
+    if noise[:n].any():
+        q = q + rng.normal(0.0, _std(noise[:n]), size=q.shape)
+    steps = sensors.quantization(spec)
+    if any(steps):
+        q = np.asarray(quantize_joints(q, steps))  # NumPy in, NumPy out
     dt_fine = float(clean.t[1] - clean.t[0])
-    if options.velocity == "filter":
-        qd = _warm_filter(q, qd_true[0], dt_fine, options)
-    else:
-        qd = qd_true.copy()
-        if options.velocity_noise_std > 0:
-            qd = qd + rng.normal(0.0, options.velocity_noise_std, size=qd.shape)
-    k = options.oversample
+    qd = _warm_filter(q, qd_true[0], dt_fine, sensors) if sensors.velocity == "filter" else qd_true.copy()
+    if noise[n:].any():
+        qd = qd + rng.normal(0.0, _std(noise[n:]), size=qd.shape)
+    k = oversample
     return Trajectory(t=np.round(clean.t[::k], 10), q=q[::k], u=clean.u[::k], qd=qd[::k], name=clean.name)
 
 
-def _warm_filter(q: np.ndarray, qd0: np.ndarray, dt: float, options: SensorOptions) -> np.ndarray:
+def _std(per_joint: np.ndarray):
+    """One std for every joint as a float (the draws the data were always made with), else per joint."""
+    return float(per_joint[0]) if np.all(per_joint == per_joint[0]) else per_joint
+
+
+def _warm_filter(q: np.ndarray, qd0: np.ndarray, dt: float, sensors: Sensors) -> np.ndarray:
     """The paper's derivative filter, run after a 0.2 s constant-velocity history ending at x0,
     so the estimate starts on the true velocity instead of a start-up transient."""
     n_warm = int(round(0.2 / dt))
     back = (np.arange(-n_warm, 0) * dt)[:, None]
     history = q[0][None, :] + back * qd0[None, :]
-    filtered = derivative_filter(np.concatenate([history, q], axis=0), dt, options.filter_omega0, options.filter_xi)
+    filtered = derivative_filter(np.concatenate([history, q], axis=0), dt, sensors.filter_omega0, sensors.filter_xi)
     return filtered[n_warm:]
 
 
@@ -345,7 +378,7 @@ def generate_datasets(
     seed: int = 0,
     small: bool = False,
     recipe=None,
-    sensor: SensorOptions | None = None,
+    sensor: SensorOptions | Sensors | None = None,
     ground_truth: GroundTruth | str = "auto",
 ) -> dict[str, list[Trajectory]]:
     """Generate the paper's datasets of ``system`` (``"nmsd"``/``"furuta"``) in memory.
@@ -365,7 +398,7 @@ def generate_validation(
     seed: int = 0,
     small: bool = False,
     recipe=None,
-    sensor: SensorOptions | None = None,
+    sensor: SensorOptions | Sensors | None = None,
     ground_truth: GroundTruth | str = "auto",
 ) -> dict[str, list[Trajectory]]:
     """The validation datasets of ``system`` (:data:`VALIDATION_NAMES`), with the arguments of
@@ -385,23 +418,26 @@ _NOISE_STREAM = {"test": 7919, "validation": 7927}  # sensor-noise streams, one 
 
 def _generate(system, kind, *, seed, small, recipe, sensor, ground_truth):
     spec = get_spec(system)
-    sensor = sensor or SensorOptions()
-    if sensor.quantize and not any(spec.angular):
+    if isinstance(sensor, SensorOptions) and sensor.quantize and not any(spec.angular):
         raise ValueError(
             f"quantize: {spec.name} has no encoder angles to quantise (its joints are "
             f"{spec.joint_names}); use noise_std for a position sensor's resolution"
         )
+    sensors, oversample = _sensor_model(sensor)
+    # a sensor this system cannot have fails here, before the ground truth's work
+    sensors.quantization(spec)
+    sensors.noise(spec)
     data = system_data(spec.name)
     recipe = recipe if recipe is not None else recipe_for(spec.name, small)
     if not isinstance(recipe, data.recipe):
         raise ValueError(f"recipe for {spec.name} must be a {data.recipe.__name__}, got {recipe!r}")
     gt = default_ground_truth(spec.name, ground_truth) if isinstance(ground_truth, str) else ground_truth
     make, names = (data.make_test, data.test_names) if kind == "test" else (data.make_validation, data.validation_names)
-    clean = make(recipe, gt, seed, sensor.oversample)
+    clean = make(recipe, gt, seed, oversample)
     out = {}
     for name, trajs in clean.items():
         rng = np.random.default_rng([seed, _NOISE_STREAM[kind], names.index(name)])
-        out[name] = [_measure(c, spec.n_dof, spec.angular, sensor, rng) for c in trajs]
+        out[name] = [_measure(c, spec, sensors, oversample, rng) for c in trajs]
     return out
 
 
@@ -509,7 +545,7 @@ def generate(
     *,
     seed: int = 0,
     small: bool = False,
-    sensor: SensorOptions | None = None,
+    sensor: SensorOptions | Sensors | None = None,
     ground_truth: GroundTruth | str = "auto",
     overwrite: bool = False,
     split: str = "test",
