@@ -50,3 +50,13 @@ def test_functional_env_benchmark_section_matches_its_results():
         cwd=ROOT / "bench",
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_diagnosis_speed_section_matches_its_results():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "diagnose_speed.py"), "--check"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT / "bench",
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
