@@ -1,6 +1,6 @@
 """The same numbers on every x86-64 machine: what furuta-gym pins before JAX starts.
 
-XLA compiles JAX code for the CPU it runs on, and two of its choices change the rounding of a
+XLA compiles JAX code for the CPU it runs on, and three of its choices change the rounding of a
 float64 computation, which training then amplifies (docs/conventions.md, "Same numbers on every
 machine", has the measurements):
 
@@ -10,15 +10,19 @@ machine", has the measurements):
 * YNNPACK, the kernel library XLA hands reductions and dots to: it splits them over the CPU's
   threads and picks its kernels by the CPU at run time, neither of which the cap reaches (a tiny
   training gives other bits on one core than on two). ``--xla_cpu_experimental_ynn_fusion_type=``
-  (empty) leaves them to XLA's own code, whose order depends on neither.
+  (empty) leaves them to XLA's own code, whose order depends on neither;
+* the size of XLA's intra-op thread pool (by default the process's cores): Eigen, which runs
+  XLA's dots, splits a long inner dimension into one partial sum per thread, so a dot's bits
+  follow the core count. ``PJRT_NPROC=2`` fixes the pool at two threads on every machine (a
+  one-core machine time-slices them; a larger one gives up its other cores to XLA).
 
-Both go into ``XLA_FLAGS`` when ``furuta_gym`` is imported (its first act), before the user's own
+The first two go into ``XLA_FLAGS`` when ``furuta_gym`` is imported (its first act), before the user's own
 flags, never replacing one the user set: XLA stops reading ``XLA_FLAGS`` at the first word that
 does not start with ``--`` and silently drops everything after it (a widespread recipe's
 ``intra_op_parallelism_threads=1`` is such a word), so a pin placed after one would not apply;
 :func:`unread_xla_flags` names what XLA will not read and :class:`NumericsWarning` says so. XLA reads ``XLA_FLAGS`` once, when JAX creates its CPU
-backend (the first computation), so importing ``jax`` earlier is fine but computing with it is
-not: then nothing is pinned, :class:`NumericsWarning` says so and :func:`numerics` reports it.
+backend (the first computation), as it reads ``PJRT_NPROC``, so importing ``jax`` earlier is
+fine but computing with it is not: then nothing is pinned, :class:`NumericsWarning` says so and :func:`numerics` reports it.
 ``OPENBLAS_CORETYPE=Haswell`` (on a CPU with AVX2 and FMA) does the same for the BLAS that NumPy
 and JAX's LAPACK calls load, when they load after furuta_gym (always under the ``furuta-gym``
 command). ``FURUTA_GYM_NATIVE_ISA=1`` turns all of it off. The variables are set in
@@ -41,6 +45,7 @@ __all__ = [
     "pin_numerics",
     "unread_xla_flags",
     "PINNED_ISA",
+    "PINNED_THREADS",
     "OPT_OUT",
 ]
 
@@ -48,6 +53,8 @@ PINNED_ISA = "AVX2"
 OPT_OUT = "FURUTA_GYM_NATIVE_ISA"
 MAX_ISA = "--xla_cpu_max_isa"
 YNN_FUSIONS = "--xla_cpu_experimental_ynn_fusion_type"
+THREADS = "PJRT_NPROC"  # XLA's intra-op pool size; XLA also reads NPROC, after this one
+PINNED_THREADS = 2
 BLAS_CORE = "Haswell"  # OpenBLAS's AVX2 + FMA kernels (AMD Zen uses the same ones)
 # an unknown flag in XLA_FLAGS aborts the process: the lowest supported jaxlib, 0.8.1, knows this one
 _YNN_SINCE = (0, 8, 1)
@@ -100,6 +107,8 @@ def pinned_environment(
         added.append(f"{YNN_FUSIONS}=")
     if added:  # first: a word XLA stops at in the user's flags must not swallow the pin
         out["XLA_FLAGS"] = " ".join([*added, flags.strip()]).strip()
+    if THREADS not in environ and "NPROC" not in environ:
+        out[THREADS] = str(PINNED_THREADS)
     # a core type the CPU lacks would crash OpenBLAS: only where AVX2 and FMA are known present
     if "OPENBLAS_CORETYPE" not in environ and cpu_flags is not None and {"avx2", "fma"} <= cpu_flags:
         out["OPENBLAS_CORETYPE"] = BLAS_CORE
@@ -142,13 +151,14 @@ def pin_numerics() -> dict[str, str]:
     wanted = pinned_environment(
         os.environ, machine=platform.machine(), cpu_flags=_cpu_flags(), jaxlib_version=_jaxlib_version()
     )
-    if "XLA_FLAGS" in wanted and _jax_started():
-        wanted.pop("XLA_FLAGS")
+    if {"XLA_FLAGS", THREADS} & wanted.keys() and _jax_started():
+        wanted.pop("XLA_FLAGS", None)
+        wanted.pop(THREADS, None)
         _state["not_applied"] = (
             "JAX had already started when furuta_gym was imported: XLA's CPU code generation is not "
             f"pinned in this process (results may differ between machines). Import furuta_gym before "
-            f"the first JAX computation, or set XLA_FLAGS='{MAX_ISA}={PINNED_ISA} {YNN_FUSIONS}=' "
-            f"yourself; {OPT_OUT}=1 silences this."
+            f"the first JAX computation, or set XLA_FLAGS='{MAX_ISA}={PINNED_ISA} {YNN_FUSIONS}=' and "
+            f"{THREADS}={PINNED_THREADS} yourself; {OPT_OUT}=1 silences this."
         )
         warnings.warn(_state["not_applied"], NumericsWarning, stacklevel=2)
     unread = unread_xla_flags(wanted.get("XLA_FLAGS", os.environ.get("XLA_FLAGS", "")))
@@ -166,13 +176,15 @@ def pin_numerics() -> dict[str, str]:
 
 def numerics() -> dict:
     """What furuta_gym pinned in this process: ``{"pinned": {variable: value set}, "xla_flags":
-    XLA_FLAGS as given, "xla_flags_unread": its words XLA will not read, "openblas_coretype": ...,
+    XLA_FLAGS as given, "xla_flags_unread": its words XLA will not read, "pjrt_nproc": XLA's thread
+    pool size if set, "openblas_coretype": ...,
     "not_applied": why the XLA pin did not apply, or None}``."""
     flags = os.environ.get("XLA_FLAGS", "")
     return {
         "pinned": dict(_state["pinned"]),
         "xla_flags": flags,
         "xla_flags_unread": unread_xla_flags(flags),
+        "pjrt_nproc": os.environ.get(THREADS),
         "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE"),
         "not_applied": _state["not_applied"],
     }

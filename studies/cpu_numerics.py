@@ -162,7 +162,7 @@ QUICK_SETTINGS = [
 
 def _environment(pinned: bool, cap: str | None, blas: str | None, numpy_avx512_off: bool) -> dict:
     # no compilation cache shared with other settings (a test session's): each compiles its own code
-    unset = ("XLA_FLAGS", "OPENBLAS_CORETYPE", "FURUTA_GYM_NATIVE_ISA", "JAX_COMPILATION_CACHE_DIR")
+    unset = ("XLA_FLAGS", "PJRT_NPROC", "OPENBLAS_CORETYPE", "FURUTA_GYM_NATIVE_ISA", "JAX_COMPILATION_CACHE_DIR")
     env = {k: v for k, v in os.environ.items() if k not in unset and k != "NPY_DISABLE_CPU_FEATURES"}
     if numpy_avx512_off:
         env["NPY_DISABLE_CPU_FEATURES"] = NO_AVX512_NUMPY

@@ -29,12 +29,15 @@ def _study():
 
 def test_the_pin_extends_the_users_flags_and_never_replaces_them():
     env = dict(machine="x86_64", cpu_flags=AVX2, jaxlib_version="0.10.2")
-    assert pinned_environment({}, **env) == {"XLA_FLAGS": PIN, "OPENBLAS_CORETYPE": "Haswell"}
+    assert pinned_environment({}, **env) == {"XLA_FLAGS": PIN, "OPENBLAS_CORETYPE": "Haswell", "PJRT_NPROC": "2"}
     # the user's flags stay, after the pin (XLA stops reading at a word that is not a -- flag:
     # one in the user's flags must not hide the pin); a cap or a YNN choice of the user's wins;
     # so does a BLAS core
     got = pinned_environment({"XLA_FLAGS": " --xla_dump_to=/tmp/x ", "OPENBLAS_CORETYPE": "Zen"}, **env)
-    assert got == {"XLA_FLAGS": PIN + " --xla_dump_to=/tmp/x"}
+    assert got == {"XLA_FLAGS": PIN + " --xla_dump_to=/tmp/x", "PJRT_NPROC": "2"}
+    # a thread count of the user's wins (XLA reads PJRT_NPROC, then NPROC)
+    assert "PJRT_NPROC" not in pinned_environment({"NPROC": "8"}, **env)
+    assert "PJRT_NPROC" not in pinned_environment({"PJRT_NPROC": "8"}, **env)
     got = pinned_environment({"XLA_FLAGS": "--xla_cpu_max_isa=AVX512"}, **env)
     assert got["XLA_FLAGS"] == "--xla_cpu_experimental_ynn_fusion_type= --xla_cpu_max_isa=AVX512"
     assert unread_xla_flags("--a=1 intra_op_parallelism_threads=1 --b=2") == ["intra_op_parallelism_threads=1", "--b=2"]
@@ -44,14 +47,17 @@ def test_the_pin_extends_the_users_flags_and_never_replaces_them():
     assert pinned_environment({"FURUTA_GYM_NATIVE_ISA": "1"}, **env) == {}
     assert pinned_environment({"FURUTA_GYM_NATIVE_ISA": "0"}, **env)["XLA_FLAGS"] == PIN
     assert pinned_environment({}, **{**env, "machine": "aarch64"}) == {}
-    assert pinned_environment({}, **{**env, "cpu_flags": frozenset({"sse4_2", "avx"})}) == {"XLA_FLAGS": PIN}
-    assert pinned_environment({}, **{**env, "cpu_flags": None}) == {"XLA_FLAGS": PIN}
+    no_blas = {"XLA_FLAGS": PIN, "PJRT_NPROC": "2"}
+    assert pinned_environment({}, **{**env, "cpu_flags": frozenset({"sse4_2", "avx"})}) == no_blas
+    assert pinned_environment({}, **{**env, "cpu_flags": None}) == no_blas
     # a jaxlib older than the supported ones may not know the YNN flag (an unknown flag aborts)
     assert pinned_environment({}, **{**env, "jaxlib_version": "0.7.2"})["XLA_FLAGS"] == "--xla_cpu_max_isa=AVX2"
 
 
 def _run(code: str, **env) -> subprocess.CompletedProcess:
-    environ = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "FURUTA_GYM_NATIVE_ISA")} | env
+    environ = {
+        k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "FURUTA_GYM_NATIVE_ISA", "PJRT_NPROC")
+    } | env
     return subprocess.run(
         [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=300, env=environ
     )
@@ -81,8 +87,9 @@ def test_the_pin_reaches_xla_and_a_late_import_says_it_cannot():
     assert opted_out.stdout.strip() == "None"
 
 
-# One jitted float64 loop whose reductions YNNPACK splits by the core count when it is on: its
-# digest on one core and on two says whether the pin reached XLA.
+# A jitted float64 loop whose reductions YNNPACK splits by the core count when it is on, and a
+# dot with a long inner dimension, which Eigen splits by XLA's thread count: their digests on one
+# core and on two say whether the pin reached XLA.
 PROBE = """
     import hashlib, os, warnings
     warnings.simplefilter("ignore")
@@ -93,7 +100,8 @@ PROBE = """
         c = jnp.tanh(c @ w) + 0.01 * jnp.sin(c)
         return c, jnp.sum(c**2)
     ys = jax.jit(lambda x: jax.lax.scan(body, x, None, length=100)[1])(x)
-    print(hashlib.sha1(np.asarray(ys).tobytes()).hexdigest())
+    dot = jax.jit(lambda a, b: a @ b)(x.T, jnp.cos(x))
+    print(hashlib.sha1(np.asarray(ys).tobytes()).hexdigest(), hashlib.sha1(np.asarray(dot).tobytes()).hexdigest())
 """
 
 
@@ -114,7 +122,7 @@ def test_the_pin_applies_behind_a_word_xla_stops_reading_at():
         code = f"import os; os.sched_setaffinity(0, {{{cores}}})\n" + textwrap.dedent(PROBE)
         done = _run(code, XLA_FLAGS=user, JAX_ENABLE_X64="1")
         assert done.returncode == 0, done.stderr[-2000:]
-        digests.append(done.stdout.split()[-1])
+        digests.append(done.stdout.split()[-2:])
     assert digests[0] == digests[1]
     warned = _run("import furuta_gym", XLA_FLAGS=user)
     assert "XLA stops reading at 'intra_op_parallelism_threads=1'" in warned.stderr
