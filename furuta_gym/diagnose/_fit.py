@@ -519,6 +519,8 @@ def predict_windows_at(layout, thetas, win: Windows, substeps: int = 1, start_it
 
 
 _POOL: list[ThreadPoolExecutor] = []
+if hasattr(os, "register_at_fork"):  # a forked child has none of the parent's threads: a new pool
+    os.register_at_fork(after_in_child=_POOL.clear)
 
 
 def _batch_pool() -> ThreadPoolExecutor:
