@@ -86,6 +86,13 @@ def import_tree(commit: str) -> Path:
     return tree
 
 
+def remove_tree(commit: str) -> None:
+    """Undo :func:`import_tree`: the worktree (with the links made in it) and the link tree."""
+    base = ROOT / "build" / "diagnose_speed"
+    subprocess.run(["git", "worktree", "remove", "--force", str(base / f"checkout-{commit}")], cwd=ROOT, check=False)
+    shutil.rmtree(base / f"tree-{commit}", ignore_errors=True)
+
+
 def timed_run(tree: Path, cache: Path) -> dict:
     """One diagnosis in a fresh process, importing the package from ``tree``, with JAX's
     persistent compilation cache in ``cache`` (as ``furuta-gym diagnose`` turns it on)."""
@@ -146,6 +153,8 @@ def measure(before: str, after: str, repeats: int) -> dict:
             print(
                 f"{label}: {r['wall_seconds']:.1f} s (load {r['load_start']:.1f}), {r['compiles']} compiles", flush=True
             )
+    for commit in (before, after):  # the checkouts are the bench's own: leave none behind
+        remove_tree(commit)
     same, differing = largest_difference(runs["before"][0]["result"], runs["after"][0]["result"])
     return {
         "machine": machine(),
