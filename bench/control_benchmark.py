@@ -152,10 +152,10 @@ def main(argv=None) -> int:
     import furuta_gym
 
     furuta_gym.enable_x64()
+    import equinox as eqx
     import gymnasium as gym
     import jax
     import jax.numpy as jnp
-    import equinox as eqx
 
     from furuta_gym.controllers import (
         EnergySwingUp,

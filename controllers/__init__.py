@@ -14,7 +14,6 @@ Quick start::
 """
 
 from ._base import AbstractController, wrap_angle
-from ._evaluate import EpisodeRecord, evaluate_on_env
 from ._energy import (
     DEFAULT_PUMP_ACCELERATION,
     EnergySwingUp,
@@ -22,6 +21,7 @@ from ._energy import (
     model_state,
     upright_potential,
 )
+from ._evaluate import EpisodeRecord, evaluate_on_env
 from ._lqr import DEFAULT_Q, DEFAULT_R, LQR, UPRIGHT_STATE, LQRDesign, lqr_design
 from ._metrics import EpisodeMetrics, episode_metrics
 from ._pfl import InputMap, input_map, pfl_torque, pfl_voltage

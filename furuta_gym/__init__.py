@@ -10,11 +10,13 @@ every x86-64 machine computes the same bits (:mod:`furuta_gym._numerics`, :func:
 """
 
 from ._numerics import NumericsWarning, numerics  # first: it pins XLA_FLAGS before JAX starts
+
+# isort: split
 from ._dispatch import inline_cpu_dispatch
 from ._x64 import Float64Warning, enable_x64, ensure_x64
+from .envs import Actuation, Camera, Episode, Plant, Sensors, Spaces, Target, register_envs
 from .lagrangian import AbstractLagrangianSystem, SystemSpec
 from .systems import FURUTA, NMSD
-from .envs import Actuation, Camera, Episode, Plant, Sensors, Spaces, Target, register_envs  # after the spine it uses
 
 __version__ = "0.1.0"
 

@@ -4,15 +4,15 @@ Analytic: :class:`Furuta`, :class:`NMSD`. Learned: DeLaN, APHYNITY, augmented De
 """
 
 from ..lagrangian import AbstractLagrangianSystem
-from ._definitions import SYSTEM_DEFINITIONS, system_definition
-from ._furuta import Furuta, FurutaParameters, FurutaSharedTrig, furuta_lumped, furuta_mass_matrix, furuta_potential
-from ._nmsd import NMSD, NMSDParameters, nmsd_potential
 from ._aphynity import Aphynity
 from ._augmented import AbstractAugmentedSystem, AugmentedDeLaN
+from ._definitions import SYSTEM_DEFINITIONS, system_definition
 from ._delan import DeLaN
 from ._factory import MODEL_KINDS, make_model, model_kind
+from ._furuta import Furuta, FurutaParameters, FurutaSharedTrig, furuta_lumped, furuta_mass_matrix, furuta_potential
 from ._learned import SYSTEM_DEFAULTS, AbstractLearnedSystem
 from ._lumped import LumpedSystem
+from ._nmsd import NMSD, NMSDParameters, nmsd_potential
 from ._system import Equilibrium, LumpedForm, SystemDefinition, first_joint_input, parameter_defaults
 from .checkpoint import CheckpointError, load_model, read_header, save_model
 

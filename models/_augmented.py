@@ -19,7 +19,6 @@ from ..lagrangian import SystemSpec
 from ..systems import get_spec
 from ._definitions import SYSTEM_DEFINITIONS
 from ._delan import LagrangianNetworks
-from ._system import first_joint_input
 from ._learned import (
     LEARNED_EXTRAS,
     MLP,
@@ -29,6 +28,7 @@ from ._learned import (
     freeze_hparams,
     system_defaults,
 )
+from ._system import first_joint_input
 
 __all__ = ["AugmentedDeLaN", "AbstractAugmentedSystem", "ForceNetwork", "FORCE_DEFAULTS"]
 

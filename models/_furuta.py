@@ -17,12 +17,12 @@ import jax.numpy as jnp
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import FURUTA
 from ._system import (
-    RigidBodyCondition,
-    check_rigid_bodies,
     Equilibrium,
     LumpedForm,
     MujocoTerms,
+    RigidBodyCondition,
     SystemDefinition,
+    check_rigid_bodies,
     parameter_defaults,
     scalar,
 )

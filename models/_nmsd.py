@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import dataclasses
-
 from typing import ClassVar, Mapping
 
 import equinox as eqx
@@ -13,12 +12,12 @@ import jax.numpy as jnp
 from ..lagrangian import AbstractLagrangianSystem, SystemSpec
 from ..systems import NMSD as NMSD_SPEC
 from ._system import (
-    RigidBodyCondition,
-    check_rigid_bodies,
     Equilibrium,
     LumpedForm,
     MujocoTerms,
+    RigidBodyCondition,
     SystemDefinition,
+    check_rigid_bodies,
     scalar,
 )
 

@@ -163,8 +163,8 @@ def itau_stage(run: Path) -> dict:
     from furuta_gym.lagrangian import forward_dynamics
     from furuta_gym.models import make_model
     from furuta_gym.models.checkpoint import load_training_state
-    from furuta_gym.training.reproduce import ReproduceConfig, truth_model
     from furuta_gym.training import TrainConfig, training_step
+    from furuta_gym.training.reproduce import ReproduceConfig, truth_model
 
     cfg = json.loads((run / "reproduce_config.json").read_text())
     tuples = lambda d: {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}  # noqa: E731

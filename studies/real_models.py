@@ -36,8 +36,8 @@ import argparse
 import dataclasses
 import json
 import platform
-import shutil
 import shlex
+import shutil
 import sys
 import time
 from pathlib import Path

@@ -55,6 +55,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from select_augmentation_weight import _run_dir, _score, parse_selection_args
 
 

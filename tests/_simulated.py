@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from furuta_gym.data import Trajectory
 from furuta_gym.models import NMSD
 from furuta_gym.signals import chirp

@@ -6,9 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from _simulated import nmsd_chirp_segments
 from furuta_gym.lagrangian import interval_difference, interval_integral
 from furuta_gym.models import make_model
-from _simulated import nmsd_chirp_segments
 from furuta_gym.training.losses import integral_loss, integral_loss_terms, make_windows, proposed_loss
 from furuta_gym.training.train import TrainConfig, train
 

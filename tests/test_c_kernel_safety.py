@@ -16,9 +16,7 @@ import numpy as np
 import pytest
 
 import furuta_gym  # noqa: F401  (registers the envs, enables float64)
-from furuta_gym._ckernel import CKernel, CKernelError, CKernelWarning, c_compiler
-from furuta_gym._ckernel import cache as kernel_cache
-from furuta_gym._ckernel import translate
+from furuta_gym._ckernel import CKernel, CKernelError, CKernelWarning, c_compiler, cache as kernel_cache, translate
 from furuta_gym.envs import _backends
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler on PATH")

@@ -9,7 +9,7 @@ import jax
 import numpy as np
 import pytest
 
-from furuta_gym.models import load_model, analytic_model
+from furuta_gym.models import analytic_model, load_model
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 REPRODUCTION = sorted(RESULTS.glob("reproduce/runs/*/*/seed0/model.eqx"))

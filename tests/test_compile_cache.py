@@ -18,8 +18,7 @@ from furuta_gym.data import Trajectory
 from furuta_gym.lagrangian import vector_field
 from furuta_gym.models import Furuta, make_model
 from furuta_gym.simulate import rollout_zoh
-from furuta_gym.training import _step_cache
-from furuta_gym.training import losses as losses_module
+from furuta_gym.training import _step_cache, losses as losses_module
 from furuta_gym.training.losses import make_windows, trajectory_loss
 from furuta_gym.training.train import TrainConfig, _build_optimizer, _make_step, train
 

@@ -16,9 +16,9 @@ import furuta_gym
 from furuta_gym.effects import Effect
 from furuta_gym.envs import FurutaEnv, FurutaSwingUp, NMSDEnv, NMSDReach, is_diverged
 from furuta_gym.lagrangian import AbstractLagrangianSystem, SystemSpec
-from furuta_gym.systems import FURUTA
 from furuta_gym.models import NMSD, Furuta, FurutaParameters
 from furuta_gym.signals import derivative_filter
+from furuta_gym.systems import FURUTA
 
 FURUTA_ID, NMSD_ID = "furuta_gym/Furuta-v0", "furuta_gym/NMSD-v0"
 

@@ -19,8 +19,8 @@ from furuta_gym.models._furuta import FurutaParameters
 from furuta_gym.signals import quantize_encoder
 from furuta_gym.simulate import rollout_zoh
 from furuta_gym.training import FreeDynamicsWarning, check_free_dynamics, warn_free_dynamics
-from furuta_gym.training.recipe import FREE_RELEASE_LAMBDA
 from furuta_gym.training.free_dynamics import free_dynamics_summary, model_frequencies
+from furuta_gym.training.recipe import FREE_RELEASE_LAMBDA
 
 furuta_gym.enable_x64()
 

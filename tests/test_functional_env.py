@@ -14,8 +14,7 @@ import pytest
 pytest.importorskip("gymnax")
 
 import furuta_gym  # noqa: F401  (registers the envs)
-from furuta_gym.envs import EnvArgumentError, Plant, Sensors, Spaces
-from furuta_gym.envs import functional
+from furuta_gym.envs import EnvArgumentError, Plant, Sensors, Spaces, functional
 
 SWINGUP = "furuta_gym/FurutaSwingUp-v0"
 DELAN = Path(__file__).resolve().parents[1] / "results/reproduce/runs/furuta/dln_prop/seed0/model.eqx"

@@ -106,9 +106,8 @@ def _simulated_run(seconds=1.0, delay=0.0, seed=0):
 def test_every_row_is_scored_like_window_errors():
     """The one scoring path (RK4, 4 substeps, dry friction that holds) gives window_errors' RMSE
     for a model without dry friction."""
-    from furuta_gym.measured import window_errors
-
     from furuta_gym.effects import Effect, WithEffects
+    from furuta_gym.measured import window_errors
 
     h2h, _ = _experiment()
     run = [_simulated_run(seconds=0.6)]

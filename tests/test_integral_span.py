@@ -85,8 +85,8 @@ def test_the_scale_fit_over_a_longer_span_is_not_diluted_by_velocity_noise():
 
     from furuta_gym.data import Trajectory
     from furuta_gym.models import make_model
-    from furuta_gym.training.train import fit_scale
     from furuta_gym.simulate import rollout_zoh
+    from furuta_gym.training.train import fit_scale
 
     truth = make_model("nmsd", "dln", jax.random.PRNGKey(5), hidden=(8, 8)).with_scale(2.5)
     dt, n = 0.01, 1000

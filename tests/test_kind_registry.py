@@ -11,13 +11,12 @@ import jax.numpy as jnp
 import pytest
 
 import furuta_gym
+from _simulated import nmsd_chirp_segments
 from furuta_gym.cli import train as cli_train
 from furuta_gym.models import MODEL_KINDS, AbstractLearnedSystem, make_model, model_kind
 from furuta_gym.training import TrainConfig, make_windows, training_step
 from furuta_gym.training.loss_kinds import INTEGRAL_ONLY, LOSS_KINDS, PROPOSED_LOSS, LossKind, loss_kind
 from furuta_gym.training.train import LOSSES
-
-from _simulated import nmsd_chirp_segments
 
 ROOT = Path(furuta_gym.__file__).resolve().parent
 REGISTRY = ROOT / "training" / "loss_kinds.py"

@@ -20,8 +20,8 @@ from furuta_gym.datasets import QUBE_CLOSED_LOOP_MAPPING, load_qube_closed_loop,
 from furuta_gym.measured import (  # noqa: E402
     MIN_MOTION,
     check_log,
-    prepare_log,
     prediction_windows,
+    prepare_log,
     split_elementary,
     window_errors,
 )

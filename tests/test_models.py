@@ -1,20 +1,20 @@
 """Learned models (DeLaN, APHYNITY, augmented DeLaN): structure guaranteed by construction."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import equinox as eqx
 import pytest
 
 from furuta_gym import lagrangian as lg
 from furuta_gym.models import (
     MODEL_KINDS,
+    NMSD,
     Aphynity,
     AugmentedDeLaN,
     DeLaN,
     Furuta,
     FurutaParameters,
-    NMSD,
     NMSDParameters,
     make_model,
 )

@@ -380,8 +380,9 @@ def test_the_shipped_real_data_plant():
     upright hides sin²β), which no rigid pendulum has (J2 − J1b is the pendulum's Ixx − Iyy + Izz
     ≥ 0). The diagnosis holds J1b at its datasheet value, which the held-out data allow, so the
     plant runs in MuJoCo, and its lumped model follows it."""
-    import gymnasium as gym
     from pathlib import Path
+
+    import gymnasium as gym
 
     path = Path(__file__).resolve().parents[1] / "docs" / "diagnose_qube.json"
     doc = json.loads(path.read_text())

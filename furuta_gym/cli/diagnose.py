@@ -12,8 +12,7 @@ import argparse
 from ..systems import SYSTEMS
 
 # the logs are read as train and evaluate read them (one helper); the old names stay
-from ._logs import add_reading_arguments
-from ._logs import load_logs as _load, pairs as _pairs, qube_runs as _qube_runs  # noqa: F401
+from ._logs import add_reading_arguments, load_logs as _load, pairs as _pairs, qube_runs as _qube_runs  # noqa: F401
 
 __all__ = ["add_arguments", "held_stop_counts", "run"]
 
@@ -132,9 +131,7 @@ def _add_fit_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ..diagnose import diagnose
-    from ..diagnose import write_report_figures as write_figures
-    from ..diagnose import write_report_json as write_json
+    from ..diagnose import diagnose, write_report_figures as write_figures, write_report_json as write_json
 
     if args.with_inconsistent and not args.mjcf:
         raise ValueError("--with-inconsistent: shapes the --mjcf plant; give --mjcf OUT.xml too")

@@ -12,12 +12,12 @@ Existing outputs are never overwritten unless ``--overwrite`` is given.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any, cast
 
-from ..systems import SYSTEMS
-from pathlib import Path
-
 import numpy as np
+
+from ..systems import SYSTEMS
 
 POLICIES = ("zero", "chirp", "random")
 VIDEO_FPS = 30
@@ -71,6 +71,7 @@ def run(args) -> int:
     import gymnasium as gym
 
     import furuta_gym  # noqa: F401  (registers the envs)
+
     from ..data import Trajectory, save_trajectories
     from ..envs import ENV_IDS, Camera, Episode, LagrangianEnv
 

@@ -28,9 +28,7 @@ import numpy as np
 
 from ..effects import Effect
 from ..models import system_definition
-from ..sensors import Sensors, SettingsError, check_int
-from ..sensors import as_number as _number
-from ..sensors import set_fields as _set
+from ..sensors import Sensors, SettingsError, as_number as _number, check_int, set_fields as _set
 from ._plant import effect_json, plant_document
 
 __all__ = [

@@ -10,6 +10,7 @@ from .consistency import (
     warn_potential_shape,
 )
 from .free_dynamics import FreeDynamicsWarning, check_free_dynamics, warn_free_dynamics
+from .loss_kinds import LOSS_KINDS, LossKind, loss_kind
 from .losses import (
     Windows,
     aphynity_loss,
@@ -19,7 +20,6 @@ from .losses import (
     proposed_loss,
     trajectory_loss,
 )
-from .loss_kinds import LOSS_KINDS, LossKind, loss_kind
 from .train import ScaleFit, ScaleFitWarning, TrainConfig, data_hash, fit_scale, train, training_step
 
 __all__ = [

@@ -42,6 +42,7 @@ import jax
 import jax.core
 import numpy as np
 from jax import export
+
 from .._versions import installed_versions
 
 __all__ = ["step_cache_dir", "ExportedStep"]

@@ -5,6 +5,7 @@ from ..models.checkpoint import (  # noqa: F401
     HEADER_FORMAT,
     MAGIC,
     CheckpointError,
+    __all__,
     load_model,
     load_training_state,
     package_versions,
@@ -12,4 +13,3 @@ from ..models.checkpoint import (  # noqa: F401
     save_model,
     save_training_state,
 )
-from ..models.checkpoint import __all__  # noqa: F401

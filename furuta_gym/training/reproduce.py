@@ -54,9 +54,9 @@ from ..signals import zero_phase_velocity
 from ..systems import get_spec
 from . import _ray_sweep, _reproduce_figures
 from ._labels import LOSS_LABELS, MODEL_LABELS, TEST_SETS
-from .loss_kinds import PROPOSED_LOSS, loss_kind
 from .checkpoint import load_model, package_versions, read_header
 from .datagen import SYSTEM_DATA, MujocoGroundTruth, SensorOptions, data_package_versions, generate, system_data
+from .loss_kinds import PROPOSED_LOSS, loss_kind
 from .metrics import evaluate_model, metrics_to_json
 from .recipe import (
     DEFAULT_LEARNING_RATE,

@@ -45,22 +45,20 @@ from ..data import Trajectory
 from ..lagrangian import QUADRATURE_RULES, QuadratureRule, integral_terms
 from ..models import make_model
 from ..systems import get_spec
-from . import _step_cache
-from . import checkpoint as ckpt
+from . import _step_cache, checkpoint as ckpt
+from ._itau_block import CAPACITY as BLOCK_CAPACITY, ItauBlock
 from .consistency import check_potential_shape, warn_data_coverage, warn_potential_shape
 from .free_dynamics import has_free_motion, warn_free_dynamics
-from ._itau_block import CAPACITY as BLOCK_CAPACITY
-from ._itau_block import ItauBlock
+from .loss_kinds import INTEGRAL_ONLY, LOSS_KINDS, TRAJECTORY_TERM, StepSettings, loss_kind
 from .losses import (
     AUGMENTATION_PARTS,
+    NORMALIZATIONS,
     Normalization,
     Windows,
     make_windows,
-    NORMALIZATIONS,
     resolve_normalization,
     span_sum,
 )
-from .loss_kinds import INTEGRAL_ONLY, LOSS_KINDS, TRAJECTORY_TERM, StepSettings, loss_kind
 from .recipe import PAPER_SCHEDULE, RECIPE
 
 __all__ = ["TrainConfig", "train", "training_step", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
