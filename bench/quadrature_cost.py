@@ -50,7 +50,7 @@ def measure(kinds=("dln", "adln"), rounds: int = 5, steps: int = 20) -> dict:
     results = {}
     for kind in kinds:
         cases = {rule: make_step(kind, rule, trajs) for rule in RULES}
-        for rule, (step, params, opt, w) in cases.items():
+        for step, params, opt, w in cases.values():
             jax.block_until_ready(step(params, opt, None, w, lam, lr)[2]["total"])  # compile
         best = {rule: float("inf") for rule in RULES}
         for _ in range(rounds):

@@ -360,7 +360,7 @@ def save_trajectories(
         with path.open("w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(cols)
-            for label, row in zip(labels, table):
+            for label, row in zip(labels, table, strict=True):
                 w.writerow([label, *(repr(float(v)) for v in row)])
     elif suffix == ".npz":
         arrays: dict[str, Any] = {c: table[:, i] for i, c in enumerate(cols[1:])}

@@ -123,7 +123,7 @@ def _joint_statements(trajs, spec: SystemSpec, j: int, joint: str, can: list[str
 def _gaps(trajs: Sequence[Trajectory]) -> list[dict[str, float]]:
     """Time missing between consecutive pieces of one trajectory (named ``<name>/<k>``)."""
     out = []
-    for a, b in zip(trajs[:-1], trajs[1:]):
+    for a, b in zip(trajs[:-1], trajs[1:], strict=True):
         if "/" in b.name and a.name.rpartition("/")[0] == b.name.rpartition("/")[0]:
             out.append({"after_s": float(a.t[-1]), "missing_s": float(b.t[0] - a.t[-1] - a.dt)})
     return out

@@ -352,7 +352,7 @@ def interval_quadrature(
     if rule != "hermite":
         return interval_integral(jax.vmap(g)(q, qd, u), dt, rule)
     total: Any = 0.0
-    for s, w in zip(_GAUSS_NODES, _GAUSS_WEIGHTS):
+    for s, w in zip(_GAUSS_NODES, _GAUSS_WEIGHTS, strict=True):
         total = total + w * jax.vmap(g)(*hermite_states(q, qd, u, dt, s))
     return dt * total
 

@@ -306,7 +306,7 @@ def _split(source: str, spec: SystemSpec, names, g: Columns, dt: float, tol: flo
         )
         arrays = [g.t[:, None], g.q, g.u] + ([g.qd] if g.qd is not None else [])
         bad = ~np.isfinite(np.concatenate(arrays, axis=1))
-        named = ", ".join(f"{_col(names, c)} {int(n)}" for c, n in zip(columns, bad.sum(axis=0)) if n)
+        named = ", ".join(f"{_col(names, c)} {int(n)}" for c, n in zip(columns, bad.sum(axis=0), strict=True) if n)
         runs = int(np.sum(np.diff(np.concatenate([[0], (~ok).astype(int), [0]])) == 1))
         first = g.rows[np.flatnonzero(~ok)[0]]
         why.append(

@@ -109,7 +109,7 @@ class LagrangianNetworks(eqx.Module):
         # Assembled from its entries at static positions rather than scattered into zeros with
         # .at[tril_indices].set: the scatter cost XLA:CPU ~15 extra kernels of index arithmetic
         # per evaluation (a fixed cost each, which dominates a single-copy env step).
-        below = {(int(r), int(c)): out[n + k] for k, (r, c) in enumerate(zip(*np.tril_indices(n, -1)))}
+        below = {(int(r), int(c)): out[n + k] for k, (r, c) in enumerate(zip(*np.tril_indices(n, -1), strict=True))}
         zero = jnp.zeros_like(diag[0])
         return jnp.stack(
             [jnp.stack([diag[i] if i == j else below.get((i, j), zero) for j in range(n)]) for i in range(n)]

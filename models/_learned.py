@@ -76,7 +76,7 @@ class MLP(eqx.Module):
             raise ValueError(f"activation must be one of {sorted(_ACTIVATIONS)}, got {activation!r}")
         sizes = (in_size, *hidden, out_size)
         keys = jax.random.split(key, len(sizes) - 1)
-        layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
+        layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys, strict=True)]
         # A small last layer starts the model near its physical reference (outputs ≈ bias ≈ 0).
         last = layers[-1]
         layers[-1] = eqx.tree_at(lambda l: (l.weight, l.bias), last, (last.weight * final_scale, last.bias * 0.0))

@@ -147,7 +147,9 @@ def plant_losses() -> dict:
     exact, measured = _data("exact")["train"], _data("experiment")["train"]
     variants = {
         "exact states": exact,
-        "encoder angles, exact velocities": [dataclasses.replace(m, qd=e.qd) for m, e in zip(measured, exact)],
+        "encoder angles, exact velocities": [
+            dataclasses.replace(m, qd=e.qd) for m, e in zip(measured, exact, strict=True)
+        ],
         "encoder angles, derivative filter": measured,
         "encoder angles, zero-phase": _velocities(measured, "zero_phase"),
     }

@@ -191,8 +191,8 @@ class Rig:
         from furuta_gym.effects import WithEffects
         from furuta_gym.models import LumpedSystem
 
-        values = {**self.lumped, **dict(zip(LINEAR, map(float, theta))), "K": 0.0}
-        extra = {m: float(c) for m, c in zip(self.names[7:], theta[7:])}
+        values = {**self.lumped, **dict(zip(LINEAR, map(float, theta[: len(LINEAR)]), strict=True)), "K": 0.0}
+        extra = {m: float(c) for m, c in zip(self.names[7:], theta[7:], strict=True)}
         effects = [e for n, e in self.effects.items() if n not in MISSING]
         effects += [dataclasses.replace(self.effects[m], coefficient=c) for m, c in extra.items() if c != 0]
         return WithEffects(LumpedSystem.of("furuta", values), effects)
@@ -272,7 +272,7 @@ def best_fit(rig: Rig, A, B, theta0, normalize: str) -> dict:
     th = unpack(min(runs, key=lambda o: o.fun).x)
     i = {n: rig.names.index(n) for n in ("J1", "Jc", "J2")}
     return {
-        "theta": dict(zip(rig.names, th.tolist())),
+        "theta": dict(zip(rig.names, th.tolist(), strict=True)),
         "ratio_to_plant": {rig.names[k]: float(th[k] / theta0[k]) for k in free},
         **{f"loss_{k}": v for k, v in losses(*form_sums(A, B, th)).items()},
         "M11_over_M22": float(th[i["J1"]] / th[i["J2"]]),

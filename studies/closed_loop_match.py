@@ -89,7 +89,7 @@ def statistics(trajs) -> dict:
         "u_power_5_30hz": float(np.mean(band)),
         "beta_repeats": float(np.mean(repeats)),
         "beta_steps_of_2_or_more": float(np.mean(jumps)),
-        "regression": dict(zip(("alpha", "alpha_dot", "beta_minus_pi", "beta_dot"), map(float, coef[:4]))),
+        "regression": dict(zip(("alpha", "alpha_dot", "beta_minus_pi", "beta_dot"), map(float, coef[:4]), strict=True)),
         "regression_r2": float(r2),
     }
 
@@ -121,7 +121,7 @@ def main() -> None:
         rows[name] = statistics(measured_like("furuta", excitation=experiment, seed=args.seeds[0], **LOG))
     cases = [(name, seed) for name in EXPERIMENTS for seed in args.seeds]
     with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        probes = list(pool.map(probe, *zip(*cases)))
+        probes = list(pool.map(probe, *zip(*cases, strict=True)))
     doc = {
         "statistics": rows,
         "experiments": {name: repr(e) for name, e in EXPERIMENTS.items()},

@@ -71,7 +71,7 @@ def _row(label: str, runs: list[dict], shapes: list[dict], scores: list, with_it
 def rows(docs: dict[str, list[dict]]) -> list[str]:
     """One row per cell; the baseline twice, at the short budget and at its end."""
     out = []
-    for cell, runs in docs.items():
+    for runs in docs.values():
         final = runs[0]["config"]["epochs"][0]
         short = [d for d in runs if "short" in d]
         if short:

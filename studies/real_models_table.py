@@ -63,7 +63,7 @@ def score_table(docs: list[dict]) -> str:
         "| model | "
         + " | ".join(f"{s} log10" for _, s in STATES)
         + " | mean log10 | "
-        + " | ".join(f"{s} RMSE ({u})" for (_, s), u in zip(STATES, units))
+        + " | ".join(f"{s} RMSE ({u})" for (_, s), u in zip(STATES, units, strict=True))
         + " |"
     )
     rows = [head, "|---" * (2 + 2 * len(STATES)) + "|"]

@@ -95,7 +95,7 @@ def run_ppo(budgets: list[int], seed: int, doc: dict, path: Path, force: bool) -
             continue
         config = PPOConfig(**{**CONFIG.__dict__, "total_timesteps": budget})
         policy, _, wall, own = train("analytic", False, config, seed)
-        scores = _scores(lambda env: GymnasiumPolicy(policy, env.action_space), budget == budgets[-1])
+        scores = _scores(lambda env, policy=policy: GymnasiumPolicy(policy, env.action_space), budget == budgets[-1])
         taken = config.num_updates * config.num_envs * config.num_steps  # whole updates only
         doc["budgets"][str(budget)] = {"env_steps": taken, "train_seconds": wall, "model_return": own, "mujoco": scores}
         _report(budget, doc)

@@ -136,7 +136,7 @@ def choose(seed_means: dict[str, list[float]], several_seeds: bool | None = None
         means = seed_means[value]
         if len(means) > len(seed_means[first]):
             raise ValueError(f"{value!r} has {len(means)} seed means, {first!r} has {len(seed_means[first])}")
-        diff = [b - a for a, b in zip(seed_means[first], means)]
+        diff = [b - a for a, b in zip(seed_means[first], means, strict=False)]  # a value may have fewer seeds so far
         if len(means) < len(seed_means[first]) and (not diff or diff[-1] < 0):
             raise ValueError(
                 f"{value!r} has {len(means)} seed means, {first!r} has "

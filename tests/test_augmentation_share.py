@@ -23,7 +23,7 @@ def test_share_is_the_augmentation_velocity_change_relative_to_the_data_and_scal
     w = make_windows(segments, 21, stride=20)
     itau, share = integral_loss_terms(model, w, rule="simpson", normalize="momentum", with_augmentation=True)
     num = den = 0.0
-    for t, x in zip(np.asarray(w.t), np.asarray(w.x)):
+    for t, x in zip(np.asarray(w.t), np.asarray(w.x), strict=True):
         q, qd = jnp.asarray(x[:, :1]), jnp.asarray(x[:, 1:])
         acc = jax.vmap(lambda a, b: jnp.linalg.solve(model.mass_matrix(a), model.augmentation(a, b)))(q, qd)
         num += float(jnp.sum(interval_integral(acc, t[1] - t[0], "simpson") ** 2))
@@ -50,7 +50,7 @@ def test_share_with_the_hermite_rule_integrates_at_its_interior_nodes(segments):
     _, share = integral_loss_terms(model, w, rule="hermite", normalize="momentum", with_augmentation=True)
     num = den = 0.0
     g = 0.5 / np.sqrt(3.0)
-    for t, x, u in zip(np.asarray(w.t), np.asarray(w.x), np.asarray(w.u)):
+    for t, x in zip(np.asarray(w.t), np.asarray(w.x), strict=True):
         q, qd, dt = x[:, :1], x[:, 1:], t[1] - t[0]
         total = 0.0
         for s in (0.5 - g, 0.5 + g):  # the cubic through (q, q̇) at both ends, written out here

@@ -73,7 +73,7 @@ def test_lowered_function_equals_jax(name):
     expected = jax.tree_util.tree_leaves(fn(jnp.asarray(W), jnp.asarray(V)))
     got = jax.tree_util.tree_leaves(CKernel(fn, W, V)(W, V))
     assert len(got) == len(expected)
-    for g, e in zip(got, expected):
+    for g, e in zip(got, expected, strict=True):
         assert g.shape == e.shape and g.dtype == e.dtype
         np.testing.assert_allclose(g, np.asarray(e), rtol=1e-13, atol=1e-14)
 
@@ -101,6 +101,8 @@ def test_in_place_buffers_and_compiled_library_reused():
     assert again.library_path == kernel.library_path  # same source: the cached library
     with pytest.raises(ValueError, match=r"inputs\[0\].*shape \(4,\)"):
         kernel.bind([np.zeros(3), inputs[1]], [inputs[0]])
+    with pytest.raises(ValueError, match="1 input and 1 output buffers; the kernel takes 2 and 1"):
+        kernel.bind(inputs[:1], [inputs[0]])  # C would read a pointer past the array
 
 
 # ------------------------------------------------------------------------------- the models
@@ -226,7 +228,7 @@ def test_indexed_updates_and_gathers_with_constant_indices():
 
     expected = jax.tree_util.tree_leaves(fn(jnp.asarray(W), jnp.asarray(V)))
     got = jax.tree_util.tree_leaves(CKernel(fn, W, V)(W, V))
-    for g, e in zip(got, expected):
+    for g, e in zip(got, expected, strict=True):
         np.testing.assert_allclose(g, np.asarray(e), rtol=1e-14, atol=1e-15)
 
 

@@ -180,7 +180,7 @@ def _same_as_jax(fn, *args):
     kernel = CKernel(fn, *args)
     got = jax.tree_util.tree_leaves(kernel(*args))
     want = jax.tree_util.tree_leaves(jax.jit(fn)(*args))
-    for g, w in zip(got, want):
+    for g, w in zip(got, want, strict=True):
         w = np.asarray(w)
         assert g.dtype == w.dtype and g.shape == w.shape
         np.testing.assert_array_equal(g, w)

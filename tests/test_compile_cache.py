@@ -105,7 +105,7 @@ def test_a_solve_hitting_max_steps_is_a_non_finite_loss_the_nan_guard_skips(furu
     assert history[-1]["skipped"] == history[-1].get("steps", 1) >= 1
     before = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
     after = jax.tree_util.tree_leaves(eqx.filter(trained, eqx.is_inexact_array))
-    assert all(np.array_equal(a, b) for a, b in zip(before, after))  # nothing applied, nothing NaN
+    assert all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))  # nothing applied, nothing NaN
 
 
 @pytest.fixture(scope="module")
@@ -141,7 +141,7 @@ def test_exported_step_round_trips_through_disk_exactly(itau_step, tmp_path):
     loaded = _step_cache.ExportedStep(_never_traced, key, tmp_path)(*args)  # a "new process"
     for out in (first, loaded):
         assert jax.tree_util.tree_structure(out) == jax.tree_util.tree_structure(live)
-        for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(live)):
+        for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(live), strict=True):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     assert bool(loaded[3]) and float(loaded[2]["itau"]) > 0
 
@@ -246,7 +246,7 @@ def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported
             with pytest.raises(ValueError, match="compiler_options"):
                 jax.make_jaxpr(live)(*args)
         store = tmp_path / f"fast_{fast}"
-        monkeypatch.setattr(_step_cache, "step_cache_dir", lambda: store)
+        monkeypatch.setattr(_step_cache, "step_cache_dir", lambda store=store: store)
         exported = _make_step(static, optimizer, "prop", config, "momentum")
         monkeypatch.undo()
         assert isinstance(exported, _step_cache.ExportedStep)
@@ -258,7 +258,7 @@ def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported
         assert len(list(store.glob("step-*.jaxexport"))) == 1
     reference = outputs[0]
     for out in outputs[1:]:
-        for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(reference)):
+        for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(reference), strict=True):
             np.testing.assert_allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), rtol=1e-10, atol=1e-14)
     assert float(reference[2]["traj"]) > 0 and float(reference[2]["itau"]) > 0
     # a stage of L_Iτ alone keeps the optimised code: it runs thousands of cheap-to-compile steps

@@ -137,7 +137,7 @@ def test_voltage_lqr_tolerates_unmodelled_cable_spring_where_pfl_reading_does_no
     worst = {}
     for acts_on in ("voltage", "pfl"):
         lqr = LQR.from_model(model, acts_on=acts_on)
-        K_eff = -np.asarray(jax.jit(jax.jacfwd(lambda x: lqr.step((), x)[0]))(xd))
+        K_eff = -np.asarray(jax.jit(jax.jacfwd(lambda x, lqr=lqr: lqr.step((), x)[0]))(xd))
         worst[acts_on] = np.max(np.linalg.eigvals(A - B @ K_eff).real)
     assert worst["voltage"] < -1.0
     assert worst["pfl"] > 0.0
@@ -289,7 +289,7 @@ def test_auto_gain_pick_sits_above_the_stall_threshold(model):
         n_starts=2,
         horizon=5.0,
     )
-    rates = dict(zip(sweep.grid, sweep.catch_rate))
+    rates = dict(zip(sweep.grid, sweep.catch_rate, strict=True))
     assert rates[1000.0] < 1.0  # small gains stall under 5 V (pitfalls note)
     assert sweep.k_e == 2 * sweep.stall_threshold
     assert all(rates[k] == 1.0 for k in sweep.grid if sweep.stall_threshold <= k <= sweep.k_e)

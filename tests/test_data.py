@@ -27,7 +27,7 @@ def test_round_trip_is_exact(tmp_path, suffix):
     path = save_trajectories(tmp_path / f"d{suffix}", trajs, "furuta")
     back = load_trajectories(path, "furuta")
     assert [b.name for b in back] == ["run0", "run1"]
-    for a, b in zip(trajs, back):
+    for a, b in zip(trajs, back, strict=True):
         np.testing.assert_array_equal(a.q, b.q)
         np.testing.assert_array_equal(a.qd, b.qd)
         np.testing.assert_array_equal(a.u, b.u)

@@ -76,7 +76,7 @@ def test_nmsd_training_segments_are_one_continuous_chirp(nmsd_small):
     r = NMSDRecipe.small()
     segs = nmsd_small["train"]
     assert len(segs) == int(r.train_duration / r.segment_duration) == 10
-    for a, b in zip(segs[:-1], segs[1:]):
+    for a, b in zip(segs[:-1], segs[1:], strict=True):
         np.testing.assert_array_equal(a.x[-1], b.x[0])  # adjacent segments share the boundary
     u = np.concatenate([s.u[:-1, 0] for s in segs] + [segs[-1].u[-1:, 0]])
     t = np.arange(u.size) * 0.01
@@ -106,7 +106,7 @@ def test_generated_data_follow_the_true_dynamics(nmsd_small):
 def test_mujoco_ground_truth_agrees_with_the_analytic_one(nmsd_small):
     mj = generate_datasets("nmsd", small=True, ground_truth="mujoco", seed=3)
     for name in DATASET_NAMES["nmsd"]:
-        for a, b in zip(mj[name], nmsd_small[name]):
+        for a, b in zip(mj[name], nmsd_small[name], strict=True):
             assert np.max(np.abs(a.x - b.x)) < 1e-5
 
 
@@ -124,7 +124,7 @@ def test_round_trip_through_the_loader(tmp_path, furuta_tiny):
     for name, trajs in furuta_tiny.items():
         loaded = load_trajectories(paths[name], "furuta", require_velocities=True)
         assert [tr.name for tr in loaded] == [tr.name for tr in trajs]
-        for a, b in zip(loaded, trajs):
+        for a, b in zip(loaded, trajs, strict=True):
             np.testing.assert_array_equal(a.q, b.q)
             np.testing.assert_array_equal(a.qd, b.qd)
             np.testing.assert_array_equal(a.u, b.u)
@@ -161,7 +161,7 @@ def test_filtered_velocities_lag_like_the_papers_filter(furuta_gt, furuta_tiny):
     filt = generate_datasets(
         "furuta", recipe=TINY_FURUTA, ground_truth=furuta_gt, seed=3, sensor=SensorOptions(velocity="filter")
     )
-    for a, b in zip(filt["test_free"], furuta_tiny["test_free"]):
+    for a, b in zip(filt["test_free"], furuta_tiny["test_free"], strict=True):
         np.testing.assert_array_equal(a.q, b.q)  # positions unchanged
         # warmed up on a constant-velocity history: starts on the true velocity, no transient
         np.testing.assert_allclose(a.qd[0], b.qd[0], rtol=0.02, atol=0.05)

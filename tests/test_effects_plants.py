@@ -253,7 +253,7 @@ def _longest_still_run(alpha: np.ndarray, dt: float, off_zero: float = 0.05) -> 
     """Longest time the encoder count stays the same at |α| > off_zero."""
     change = np.flatnonzero(np.diff(alpha) != 0) + 1
     starts, ends = np.r_[0, change], np.r_[change, len(alpha)]
-    still = [(e - s) * dt for s, e in zip(starts, ends) if abs(alpha[s]) > off_zero]
+    still = [(e - s) * dt for s, e in zip(starts, ends, strict=True) if abs(alpha[s]) > off_zero]
     return max(still, default=0.0)
 
 
@@ -296,7 +296,7 @@ def test_the_closed_loop_experiment_is_an_object_whose_knobs_act():
     short = dict(n_trajectories=2, duration=0.6, seed=4)
     named = measured_like("furuta", excitation="closed_loop_prbs", **short)
     default = measured_like("furuta", excitation=ClosedLoopBalancing(), **short)
-    assert all(np.array_equal(a.u, b.u) and np.array_equal(a.q, b.q) for a, b in zip(named, default))
+    assert all(np.array_equal(a.u, b.u) and np.array_equal(a.q, b.q) for a, b in zip(named, default, strict=True))
     clipped = measured_like("furuta", excitation=ClosedLoopBalancing(voltage_limit=0.3), **short)
     assert np.abs(np.concatenate([tr.u for tr in clipped])).max() == pytest.approx(0.3)
 

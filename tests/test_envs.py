@@ -244,7 +244,7 @@ def test_broken_model_ends_with_diverged_and_no_nan(nan):
     env.reset(seed=0)
     for k in range(500):
         obs, reward, terminated, truncated, info = env.step(np.array([5.0]))
-        assert np.all(np.isfinite(obs)) and math.isfinite(reward)
+        assert np.all(np.isfinite(obs)) and math.isfinite(reward), f"step {k}"
         if terminated:
             break
     assert terminated and info["diverged"] and k < 499
@@ -353,7 +353,7 @@ def test_task_functions_agree_on_floats_numpy_and_jax():
     task = FurutaSwingUp()
     batch_np = task.reward(None, us, xs)
     batch_jax = np.asarray(task.reward(None, jnp.asarray(us), jnp.asarray(xs)))
-    scalar = np.array([task.reward(None, u.tolist(), x.tolist()) for x, u in zip(xs, us)])
+    scalar = np.array([task.reward(None, u.tolist(), x.tolist()) for x, u in zip(xs, us, strict=True)])
     np.testing.assert_allclose(batch_np, scalar, rtol=1e-12)
     np.testing.assert_allclose(batch_jax, scalar, rtol=1e-12)
     assert np.all((batch_np >= 0) & (batch_np <= 1))

@@ -77,7 +77,7 @@ def _dynamics_and_parameter_gradient(model, q, qd, u):
 def _assert_trees_close(a, b, rtol=1e-12):
     la, lb = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
     assert len(la) == len(lb)
-    for x, y in zip(la, lb):
+    for x, y in zip(la, lb, strict=True):
         x, y = np.asarray(x), np.asarray(y)
         scale = max(np.max(np.abs(y)), 1e-300)
         np.testing.assert_allclose(x, y, rtol=0, atol=rtol * scale)
@@ -98,7 +98,7 @@ def test_learned_model_dynamics_and_gradients_equal_the_reference_formulation(sy
     reference = _dynamics_and_parameter_gradient(model, q, qd, u)
 
     assert np.all(np.isfinite(np.asarray(reference[0])))
-    for got, want in zip(fast, reference):  # q̈, parameter gradient, M(q)
+    for got, want in zip(fast, reference, strict=True):  # q̈, parameter gradient, M(q)
         _assert_trees_close(got, want)
 
 
@@ -126,10 +126,10 @@ def test_env_step_compiler_options_do_not_change_the_step(system):
     us = jnp.asarray(rng.uniform(-5.0, 5.0, (256, 1)))
 
     def steps(ms, x, u):  # every model in one compile
-        return [jax.vmap(lambda a, b: rk4_step(m, a, b, 0.002))(x, u) for m in ms]
+        return [jax.vmap(lambda a, b, m=m: rk4_step(m, a, b, 0.002))(x, u) for m in ms]
 
     default = eqx.filter_jit(steps)(models, xs, us)
     tuned = eqx.filter_jit(steps, compiler_options=small_kernel_compiler_options())(models, xs, us)
-    for got, want in zip(tuned, default):
+    for got, want in zip(tuned, default, strict=True):
         assert np.all(np.isfinite(np.asarray(want)))
         _assert_trees_close(got, want)

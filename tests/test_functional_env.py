@@ -37,7 +37,7 @@ def _states_and_actions(count: int, seed: int = 0):
 def _assert_parity(env, params, gym_env, xs, actions, obs_atol=1e-6):
     step = jax.jit(env.step_env)
     key = jax.random.PRNGKey(0)
-    for x, a in zip(xs, actions):
+    for x, a in zip(xs, actions, strict=True):
         state = env.state_at(x, params)
         obs, new, reward, terminated, info = step(key, state, a, params)
         gym_env.reset(options={"state": x})

@@ -51,7 +51,7 @@ def test_angles_enter_periodically(models, kind):
     """Angles enter as (cos, sin): q and q + 2π give the same M, V and τ_NC."""
     model = models[("furuta", kind)]
     qs, qds = _random_states(2, 5, seed=1)
-    for q, qd in zip(qs, qds):
+    for q, qd in zip(qs, qds, strict=True):
         q2 = q + 2 * np.pi * np.array([1.0, -1.0])
         np.testing.assert_allclose(model.mass_matrix(q), model.mass_matrix(q2), rtol=1e-12, atol=0)
         np.testing.assert_allclose(model.potential(q), model.potential(q2), rtol=1e-9, atol=1e-15)
@@ -114,7 +114,7 @@ def test_aphynity_prior_is_the_frictionless_analytic_model(system):
         ref = NMSD(params=NMSDParameters(b1=0.0, b2=0.0))
     n = ref.spec.n_dof
     qs, qds = _random_states(n, 5, seed=3)
-    for q, qd in zip(qs, qds):
+    for q, qd in zip(qs, qds, strict=True):
         np.testing.assert_allclose(m.mass_matrix(q), ref.mass_matrix(q), rtol=1e-14)
         np.testing.assert_allclose(m.potential(q), ref.potential(q), rtol=1e-14)
         np.testing.assert_allclose(m.input_force(q, qd, jnp.ones(1)), ref.input_force(q, qd, jnp.ones(1)), rtol=1e-14)

@@ -121,7 +121,7 @@ def test_the_npz_and_mat_readers_read_the_same(tmp_path, run1, suffix):
     assert [len(tr) for tr in read.trajectories] == [NAN[0], len(run1) - NAN[-1] - 1]
     assert any("wrapped to one turn" in n for n in read.notes) and any("missing values" in n for n in read.notes)
     csv = read_log(save_trajectories(tmp_path / "log.csv", [spoiled], "furuta"), "furuta")
-    for a, b in zip(read.trajectories, csv.trajectories):
+    for a, b in zip(read.trajectories, csv.trajectories, strict=True):
         np.testing.assert_array_equal(a.q, b.q)
         np.testing.assert_array_equal(a.t, b.t)
 

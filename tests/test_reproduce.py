@@ -651,7 +651,7 @@ def test_decision_log_quotes_match_their_evidence():
     number = r"[+−-]?\d+\.\d+"
     value = lambda text: float(text.replace("−", "-"))  # noqa: E731
     matches = lambda quoted, actual: all(  # noqa: E731
-        abs(a - value(q)) <= 0.5 * 10.0 ** -len(q.split(".")[1]) + 1e-12 for q, a in zip(quoted, actual)
+        abs(a - value(q)) <= 0.5 * 10.0 ** -len(q.split(".")[1]) + 1e-12 for q, a in zip(quoted, actual, strict=True)
     )
     checked = 0
     for row in _decision_log_rows():

@@ -66,7 +66,7 @@ def test_the_data_generation_measures_with_the_same_type():
     a = generate_datasets("furuta", sensor=options, **kw)
     b = generate_datasets("furuta", sensor=options.sensors, **kw)
     for name in a:
-        for x, y in zip(a[name], b[name]):
+        for x, y in zip(a[name], b[name], strict=True):
             np.testing.assert_array_equal(x.q, y.q)
             np.testing.assert_array_equal(x.qd, y.qd)
     step = 2 * np.pi / 2048

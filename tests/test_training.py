@@ -155,7 +155,7 @@ def test_resume_continues_the_same_optimiser_state(nmsd_data, tmp_path):
         "dln", "nmsd", "itau", train_set, _itau_config(), tmp_path / "b", resume=True, hparams=hp
     )
     assert len(h_resumed) == 4 and [h["itau"] for h in h_resumed] == [h["itau"] for h in h_straight]
-    for a, b in zip(jax.tree_util.tree_leaves(straight), jax.tree_util.tree_leaves(resumed)):
+    for a, b in zip(jax.tree_util.tree_leaves(straight), jax.tree_util.tree_leaves(resumed), strict=True):
         np.testing.assert_array_equal(a, b)
     # resuming on other data is refused
     other = [Trajectory(tr.t, tr.q * 1.01, tr.u, tr.qd) for tr in train_set]
@@ -214,7 +214,7 @@ def test_checkpoint_roundtrip_is_bit_identical(tmp_path, system, kind):
     loaded = ckpt.load_model(path)
     assert type(loaded) is type(model)
     assert jax.tree_util.tree_structure(loaded) == jax.tree_util.tree_structure(model)
-    for a, b in zip(jax.tree_util.tree_leaves(model), jax.tree_util.tree_leaves(loaded)):
+    for a, b in zip(jax.tree_util.tree_leaves(model), jax.tree_util.tree_leaves(loaded), strict=True):
         assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
     header = ckpt.read_header(path)
     assert header["system"] == system and header["model_kind"] == kind and header["meta"] == {"note": "x"}

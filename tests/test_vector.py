@@ -414,8 +414,8 @@ def test_split_and_worker_processes_give_every_copy_the_same_numbers():
             assert (env.chunks, env.workers) == ((3, 0) if "chunks" in split else (1, 2))
             outs = _run_env(env, 7, actions)
         assert _max_diff(outs[0], reference[0]) == 0.0
-        for got, want in zip(outs[1:], reference[1:]):
-            for a, b in zip(got, want):
+        for got, want in zip(outs[1:], reference[1:], strict=True):
+            for a, b in zip(got, want, strict=True):
                 assert _max_diff(a, b) <= 1e-12, split
 
     targets = []
@@ -480,7 +480,7 @@ def test_rollout_in_concurrent_chunks_equals_one_batch_and_still_traces():
     kwargs = dict(dt=DT, action_limit=5.0)
     whole = rollout(Furuta(), lqr_like, x0s, 50, chunks=1, **kwargs)
     split = rollout(Furuta(), lqr_like, x0s, 50, chunks=3, **kwargs)
-    for a, b in zip(split, whole):
+    for a, b in zip(split, whole, strict=True):
         assert a.shape == b.shape and _max_diff(a, b) <= 1e-12
     assert _max_diff(whole.states[:, -1], whole.states[:, 0]) > 1e-3  # it moved
     traced = jax.jit(lambda x: rollout(Furuta(), lqr_like, x, 50, chunks=3, **kwargs).states)(x0s)

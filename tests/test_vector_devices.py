@@ -60,11 +60,11 @@ def test_two_host_devices_give_every_copy_the_one_device_numbers():
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["n_devices"] == 2
     # each device computes exactly what one device computes for the same copies
-    for got, first, second in zip(result["halves"], result["first"], result["second"]):
+    for got, first, second in zip(result["halves"], result["first"], result["second"], strict=True):
         np.testing.assert_array_equal(np.asarray(got), np.concatenate([first, second]))
     # against one device stepping all 7 at once, only XLA's kernels for another batch shape
     # differ: in the last bit, as with chunks= (tests/test_vector.py)
-    for got, want in zip(result["two"], result["one"]):
+    for got, want in zip(result["two"], result["one"], strict=True):
         np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(result["two"][0], result["one"][0])  # the reset: no arithmetic
 

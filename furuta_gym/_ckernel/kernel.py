@@ -100,11 +100,11 @@ class CKernel:
         reference = jax.jit(flat_fn)
         rng = np.random.default_rng(0)
         for trial in range(1 + _VERIFY_TRIALS):
-            inputs = [_trial_input(x, a, rng if trial else None) for x, a in zip(leaves, self.in_avals)]
+            inputs = [_trial_input(x, a, rng if trial else None) for x, a in zip(leaves, self.in_avals, strict=True)]
             _, got = self.new_buffers()
             self.bind(inputs, got)()
             want = [np.asarray(w) for w in jax.tree_util.tree_leaves(reference(*inputs))]
-            for k, (g, w) in enumerate(zip(got, want)):
+            for k, (g, w) in enumerate(zip(got, want, strict=True)):
                 problem = _disagreement(g, w)
                 if problem:
                     message = (
@@ -129,9 +129,15 @@ class CKernel:
 
     def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> Callable[[], None]:
         """A zero-argument call reading ``inputs`` and writing ``outputs`` (fixed buffers)."""
-        for k, (buf, aval) in enumerate(zip(inputs, self.in_avals)):
+        if len(inputs) != len(self.in_avals) or len(outputs) != len(self.out_avals):
+            # C would read pointers past the arrays' ends for a missing buffer
+            raise ValueError(
+                f"{len(inputs)} input and {len(outputs)} output buffers; the kernel takes "
+                f"{len(self.in_avals)} and {len(self.out_avals)}"
+            )
+        for k, (buf, aval) in enumerate(zip(inputs, self.in_avals, strict=True)):
             self._check(buf, aval, f"inputs[{k}]")
-        for k, (buf, aval) in enumerate(zip(outputs, self.out_avals)):
+        for k, (buf, aval) in enumerate(zip(outputs, self.out_avals, strict=True)):
             self._check(buf, aval, f"outputs[{k}]")
         in_ptrs = (ctypes.c_void_p * max(len(inputs), 1))(*[b.ctypes.data for b in inputs])
         out_ptrs = (ctypes.c_void_p * max(len(outputs), 1))(*[b.ctypes.data for b in outputs])
@@ -161,7 +167,8 @@ class CKernel:
         """Convenience call (allocates; for tests and one-off use): same pytree as ``fn``."""
         leaves = jax.tree_util.tree_leaves(args)
         inputs = [
-            np.ascontiguousarray(np.asarray(x, dtype=a.dtype).reshape(a.shape)) for x, a in zip(leaves, self.in_avals)
+            np.ascontiguousarray(np.asarray(x, dtype=a.dtype).reshape(a.shape))
+            for x, a in zip(leaves, self.in_avals, strict=True)
         ]
         _, outputs = self.new_buffers()
         self.bind(inputs, outputs)()

@@ -455,7 +455,13 @@ class _Translator:
             if length == 1:
                 self.emit(f"{out.name}[{dst}] = {source.at(first)};")
             else:
-                self.loop(length, lambda i: f"{out.name}[{dst} + {i}] = {source.at(f'{first} + {stride} * {i}')};")
+                # loop calls the body at once; the defaults bind this run's values all the same
+                self.loop(
+                    length,
+                    lambda i, dst=dst, source=source, first=first, stride=stride: (
+                        f"{out.name}[{dst} + {i}] = {source.at(f'{first} + {stride} * {i}')};"
+                    ),
+                )
 
     # -- the jaxpr walk -----------------------------------------------------------------------
     def read(self, env: dict, atom) -> _Var:
@@ -479,14 +485,14 @@ class _Translator:
 
     def jaxpr(self, jaxpr, consts: Sequence[_Var], args: Sequence[_Var]) -> list[_Var]:
         env = {}
-        for v, c in zip(jaxpr.constvars, consts):
+        for v, c in zip(jaxpr.constvars, consts, strict=True):
             env[v] = c
-        for v, a in zip(jaxpr.invars, args):
+        for v, a in zip(jaxpr.invars, args, strict=True):
             env[v] = a
         for eqn in jaxpr.eqns:
             ins = [self.read(env, a) for a in eqn.invars]
             outs = self.equation(eqn, ins)
-            for v, o in zip(eqn.outvars, outs):
+            for v, o in zip(eqn.outvars, outs, strict=True):
                 env[v] = o
         return [self.read(env, a) for a in jaxpr.outvars]
 
@@ -552,7 +558,7 @@ class _Translator:
         rows = [np.asarray(j).reshape(size, -1) for j in jacobians]
         for o in range(size):
             terms = [] if offset[o] == 0 else [_c_literal(offset[o], aval.dtype)]
-            for k, row in zip(linear, rows):
+            for k, row in zip(linear, rows, strict=True):
                 for j in np.flatnonzero(row[o]):
                     c = row[o, j]
                     terms.append(ins[k].at(int(j)) if c == 1 else f"{_c_literal(c, aval.dtype)} * {ins[k].at(int(j))}")
@@ -705,7 +711,7 @@ class _Translator:
 
     def op_slice(self, ins, avals, start_indices, limit_indices, strides=None):
         strides = strides or (1,) * len(start_indices)
-        sl = tuple(slice(a, b, s) for a, b, s in zip(start_indices, limit_indices, strides))
+        sl = tuple(slice(a, b, s) for a, b, s in zip(start_indices, limit_indices, strides, strict=True))
         return [self._gather_by_numpy(ins, avals[0], lambda a: a[sl])]
 
     def op_broadcast_in_dim(self, ins, avals, shape, broadcast_dimensions, **_):
@@ -769,19 +775,21 @@ class _Translator:
         return [self._gather_by_numpy([operand], avals[0], pad, fill=fill)]
 
     # -- reductions and products --------------------------------------------------------------
+    def _index_expr(self, offsets) -> Callable[[str], str]:
+        """C expression of ``offsets[v]``: ``a + b * v`` for an arithmetic progression, else a table."""
+        prog = _progression(offsets)
+        if prog:
+            return lambda v: f"{prog[0]} + {prog[1]} * {v}"
+        name = self.table(offsets)
+        return lambda v: f"{name}[{v}]"
+
     def _reduce(self, ins, avals, axes, combine: str, init: str):
         x = ins[0]
         out = self.fresh(avals[0])
         kept = [d for d in range(len(x.shape)) if d not in axes]
         outer = _linear_tables(x.shape, kept)
         inner = _linear_tables(x.shape, sorted(axes))
-        o_prog, i_prog = _progression(outer), _progression(inner)
-        o_expr = (
-            (lambda o: f"{o_prog[0]} + {o_prog[1]} * {o}") if o_prog else (lambda o, t=self.table(outer): f"{t}[{o}]")
-        )
-        i_expr = (
-            (lambda r: f"{i_prog[0]} + {i_prog[1]} * {r}") if i_prog else (lambda r, t=self.table(inner): f"{t}[{r}]")
-        )
+        o_expr, i_expr = self._index_expr(outer), self._index_expr(inner)
         self.counter += 1
         o, r = f"o{self.counter}", f"r{self.counter}"
         acc = f"{_ctype(out.dtype)} acc = {init};"
@@ -855,10 +863,7 @@ class _Translator:
         }
         exprs = {}
         for key, t in groups.items():
-            prog = _progression(t)
-            exprs[key] = (
-                (lambda v, pr=prog: f"{pr[0]} + {pr[1]} * {v}") if prog else (lambda v, n=self.table(t): f"{n}[{v}]")
-            )
+            exprs[key] = self._index_expr(t)
         nb, ni, nj, nk = len(groups["lb"]), len(groups["li"]), len(groups["rj"]), len(groups["lk"])
         self.counter += 1
         b, i, j, k = (f"{c}{self.counter}" for c in "bijk")
@@ -920,7 +925,7 @@ class _Translator:
 
     def _update_carry(self, carry: Sequence[_Var], new: Sequence[_Var]) -> None:
         """carry ← new, reading every new value before overwriting any (they may alias)."""
-        for dst, src in zip(carry, self._fresh_copies(new)):
+        for dst, src in zip(carry, self._fresh_copies(new), strict=True):
             self._copy_into(dst, src)
 
     @contextlib.contextmanager
@@ -947,7 +952,7 @@ class _Translator:
 
     def _scan_body(self, jaxpr, consts, carry, xs, ys, index, num_consts, num_carry):
         x_slices = []
-        for x, var in zip(xs, jaxpr.jaxpr.invars[num_consts + num_carry :]):
+        for x, var in zip(xs, jaxpr.jaxpr.invars[num_consts + num_carry :], strict=True):
             self.counter += 1
             size = max(int(np.prod(var.aval.shape, dtype=np.int64)), 1)
             name = f"v{self.counter}"
@@ -955,7 +960,7 @@ class _Translator:
             x_slices.append(_Var(name, var.aval.shape, var.aval.dtype))
         outs = self.closed(jaxpr, list(consts) + carry + x_slices)
         self._update_carry(carry, outs[:num_carry])
-        for dst, src in zip(ys, outs[num_carry:]):
+        for dst, src in zip(ys, outs[num_carry:], strict=True):
             size = max(src.size, 1)
             self.loop(size, lambda i, d=dst, s=src, n=size: f"{d.name}[{index} * {n} + {i}] = {s.at(i)};")
 
@@ -979,7 +984,7 @@ class _Translator:
             keyword = "if" if k == 0 else "else if"
             test = f"({index.at(0)} <= {k})" if k < len(branches) - 1 else None
             with self._block(f"{keyword} {test} {{" if test else "else {"):
-                for dst, src in zip(outs, self.closed(branch, operands)):
+                for dst, src in zip(outs, self.closed(branch, operands), strict=True):
                     self._copy_into(dst, src)
         return outs
 
@@ -1018,7 +1023,7 @@ def _translate(closed) -> tuple[str, set[str]]:
             f"the step needs {t.stack_bytes / 2**20:.1f} MiB of intermediates (limit "
             f"{MAX_STACK_BYTES / 2**20:.0f} MiB on the stack); use the XLA kernel for this model"
         )
-    for k, (res, var) in enumerate(zip(results, closed.jaxpr.outvars)):
+    for k, (res, var) in enumerate(zip(results, closed.jaxpr.outvars, strict=True)):
         ct = _ctype(var.aval.dtype)
         t.emit(f"{{ {ct} *o = ({ct} *)outs[{k}];")
         t.indent += 1

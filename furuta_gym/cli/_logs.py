@@ -83,7 +83,7 @@ def read_logs(
                 )
             runs = qube_runs(path)
             files = qube_closed_loop_files(runs)  # checks the run numbers
-            for run, file in zip(runs or range(1, len(files) + 1), files):
+            for run, file in zip(runs or range(1, len(files) + 1), files, strict=True):
                 out.append(
                     (f"{path} (run {run}: {file})", LogReading(load_qube_closed_loop([run], skip_seconds=0.0), []))
                 )

@@ -241,7 +241,11 @@ def apply_parameters(
         e.kind.to_mujoco(e, -1 if e.kind.on_input else e.joint_index(spec), form)
     assert form.shift is not None
     extra = PassiveForces(
-        {dof: cubic for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping)) if any(cubic)},
+        {
+            dof: cubic
+            for dof, cubic in enumerate(zip(terms.cubic_stiffness, terms.cubic_damping, strict=True))
+            if any(cubic)
+        },
         form.laws,
         form.shift,
         form.neutrals,
@@ -633,9 +637,9 @@ class _CStepper:
         """(call, the step's input buffers after x); x's buffer is shared by both kernels."""
         kernel = self._kernel(which)
         inputs, _ = kernel.new_buffers()
-        for buf, leaf in zip(inputs, self._leaves):
+        k = len(self._leaves)  # the model's leaves come first, then x and the step's inputs
+        for buf, leaf in zip(inputs[:k], self._leaves, strict=True):
             buf[...] = leaf
-        k = len(self._leaves)
         if self._x_buf is None:
             self._x_buf = inputs[k]
         inputs[k] = self._x_buf
@@ -723,22 +727,28 @@ class ModelBackend(AbstractBackend):
         self._n = self.spec.n_dof
         self._scene = None
         # the model's own parameter values (an analytic model may carry non-pinned ones)
-        self._parameters = _params_as_floats(getattr(model, "params")) if self._has_parameters() else {}
+        own = self._model_parameters()
+        self._parameters = _params_as_floats(own) if own is not None else {}
         if parameters:
             self.set_parameters(parameters)
         else:
             self._set_model(model)
 
+    def _model_parameters(self):
+        """The model's physical parameters when it carries the system's (an analytic model), else None."""
+        params = getattr(self.base_model, "params", None)  # a learned model has none
+        return params if isinstance(params, PARAMETER_CLASSES[self.system]) else None
+
     def _has_parameters(self) -> bool:
-        return isinstance(getattr(self.base_model, "params", None), PARAMETER_CLASSES[self.system])
+        return self._model_parameters() is not None
 
     def _set_model(self, model: AbstractLagrangianSystem) -> None:
         self.model = WithEffects(model, self.effects) if self.effects else model
         dynamic, static = eqx.partition(self.model, eqx.is_array)
         leaves, treedef = jax.tree_util.tree_flatten(dynamic)
         is_matrix = tuple(a.ndim >= 2 for a in leaves)
-        vector, unravel = ravel_pytree([a for a, m in zip(leaves, is_matrix) if not m])
-        self._dynamic = (vector, [a for a, m in zip(leaves, is_matrix) if m])
+        vector, unravel = ravel_pytree([a for a, m in zip(leaves, is_matrix, strict=True) if not m])
+        self._dynamic = (vector, [a for a, m in zip(leaves, is_matrix, strict=True) if m])
 
         def rebuild(arrays):  # (vector, matrices) -> the model's dynamic pytree
             small, matrices = iter(unravel(arrays[0])), iter(arrays[1])
@@ -772,14 +782,15 @@ class ModelBackend(AbstractBackend):
         return self._stepper.name
 
     def set_parameters(self, values: Mapping[str, float]) -> None:
-        if not self._has_parameters():
-            super().set_parameters(values)
+        own = self._model_parameters()
+        if own is None:
+            super().set_parameters(values)  # raises: nothing to change
 
         nominal = default_parameters(self.system)
         unknown = sorted(set(values) - set(nominal))
         if unknown:
             raise ValueError(f"unknown {self.system} parameter(s) {unknown}; expected {list(nominal)}")
-        merged = {**{k: float(v) for k, v in _params_as_floats(getattr(self.base_model, "params")).items()}}
+        merged = {**{k: float(v) for k, v in _params_as_floats(own).items()}}
         merged.update({k: float(v) for k, v in values.items()})
         self._parameters = merged
         params = PARAMETER_CLASSES[self.system](**merged)

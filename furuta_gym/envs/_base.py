@@ -326,7 +326,7 @@ class LagrangianEnv(BatchTemplate, gymnasium.Env):
         # fast accept: Σ|x| ≤ bound (False for NaN/inf); otherwise the exact per-component test,
         # which leaves the angles unbounded (finite is enough)
         if not sum(map(abs, xl)) <= self._state_bound and not all(
-            math.isfinite(v) and -b <= v <= b for v, b in zip(xl, self._bounds)
+            math.isfinite(v) and -b <= v <= b for v, b in zip(xl, self._bounds, strict=True)
         ):
             # a blown-up model: end the episode at the last good state, never leak NaN
             self._diverged = True

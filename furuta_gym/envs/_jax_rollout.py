@@ -223,7 +223,7 @@ def rollout(
     else:
         with ThreadPoolExecutor(int(chunks), thread_name_prefix="furuta_gym-rollout") as pool:
             parts = map_chunks(lambda a, b: run(batch[a:b]), n, int(chunks), pool)
-        out = Rollout(*(jnp.concatenate(fields, axis=0) for fields in zip(*parts)))
+        out = Rollout(*(jnp.concatenate(fields, axis=0) for fields in zip(*parts, strict=True)))
     assert isinstance(out, Rollout)
     if single:
         out = Rollout(*(a[0] for a in out))
@@ -267,7 +267,7 @@ def map_chunks(fn: Callable[[int, int], Any], n: int, chunks: int, pool=None) ->
     """``fn(a, b)`` for each sub-batch ``[a, b)`` of :func:`chunk_bounds`, in order; concurrently
     on ``pool`` (a thread pool: JAX releases the GIL while XLA runs) or, without one, in turn."""
     edges = chunk_bounds(n, chunks)
-    spans = list(zip(edges[:-1].tolist(), edges[1:].tolist()))
+    spans = list(zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True))
     if pool is None:
         return [fn(a, b) for a, b in spans]
     return list(pool.map(lambda span: fn(*span), spans))

@@ -109,7 +109,7 @@ def is_diverged(x, state_bound: Any = DEFAULT_STATE_BOUND):
     xp = _namespace(x)
     if xp is _SCALAR:
         bounds = state_bound if np.ndim(state_bound) else [state_bound] * len(x)
-        return not all(math.isfinite(v) and abs(v) <= b for v, b in zip(x, bounds))
+        return not all(math.isfinite(v) and abs(v) <= b for v, b in zip(x, bounds, strict=True))
     bound = xp.asarray(state_bound)
     return xp.logical_not(xp.all(xp.isfinite(x), axis=-1)) | xp.any(xp.abs(x) > bound, axis=-1)
 

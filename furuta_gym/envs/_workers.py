@@ -119,7 +119,8 @@ def _attach(name: str) -> shared_memory.SharedMemory:
     would otherwise unlink it (with a "leaked" warning) when the worker exits: the env owns it."""
     block = shared_memory.SharedMemory(name=name)
     try:
-        resource_tracker.unregister(getattr(block, "_name"), "shared_memory")
+        # the tracker's key is CPython's private _name, which typeshed does not declare
+        resource_tracker.unregister(getattr(block, "_name"), "shared_memory")  # noqa: B009
     except Exception:  # the tracker's layout is CPython's; without it only a warning is at stake
         pass
     return block

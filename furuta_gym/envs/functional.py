@@ -235,7 +235,7 @@ class FunctionalEnv(environment.Environment[EnvState, EnvParams]):
         leaves, treedef = jax.tree_util.tree_flatten(nominal)
         spreads = jax.tree_util.tree_leaves(params.spreads)
         draws = jax.random.uniform(key, (len(leaves),), float, -1.0, 1.0)
-        drawn = [p * (1.0 + s * draws[i]) for i, (p, s) in enumerate(zip(leaves, spreads))]
+        drawn = [p * (1.0 + s * draws[i]) for i, (p, s) in enumerate(zip(leaves, spreads, strict=True))]
         return jax.tree_util.tree_unflatten(treedef, drawn)
 
 

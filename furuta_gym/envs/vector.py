@@ -101,7 +101,7 @@ class _ConcurrentChunks:
         parts = map_chunks(part, self.num_envs, self.chunks, pool)
         if pool is None:
             self._pool = ThreadPoolExecutor(self.chunks, thread_name_prefix="furuta_gym-vector")
-        return tuple(np.concatenate(outs) for outs in zip(*parts))
+        return tuple(np.concatenate(outs) for outs in zip(*parts, strict=True))
 
     def close(self) -> None:
         if self._pool is not None:

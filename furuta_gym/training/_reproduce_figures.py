@@ -106,7 +106,7 @@ def _energy_over_state(system, truth, physics):
     import matplotlib.pyplot as plt  # noqa: PLC0415  matplotlib loads only when a figure is drawn
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-    for ax, (x, q, qd, xlabel) in zip(axes, _energy_cases(system)):
+    for ax, (x, q, qd, xlabel) in zip(axes, _energy_cases(system), strict=True):
         ax.plot(x, energy_along(truth, q, qd, normalize=False), "k", lw=2, label="ground truth")
         for kind, loss, model in physics:
             ax.plot(x, energy_along(model, q, qd, normalize=False), lw=1, label=_label(kind, loss))

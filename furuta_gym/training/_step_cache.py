@@ -182,9 +182,9 @@ class ExportedStep:
             "source": _source_digest(),
             "versions": _versions(),
             "backend": jax.default_backend(),
-            # flags with a context manager refuse config.read(); their value is an attribute
-            "x64": bool(getattr(jax.config, "jax_enable_x64")),
-            "matmul_precision": str(getattr(jax.config, "jax_default_matmul_precision")),
+            # flags with a context manager refuse config.read(); config.values holds their current value
+            "x64": bool(jax.config.values["jax_enable_x64"]),
+            "matmul_precision": str(jax.config.values["jax_default_matmul_precision"]),
             "eqx_on_error": os.environ.get("EQX_ON_ERROR", ""),
         }
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:32]
@@ -230,7 +230,7 @@ class ExportedStep:
             params = jax.tree_util.tree_unflatten(params_def, out[:n_params])
             opt_state = jax.tree_util.tree_unflatten(opt_def, out[n_params : n_params + n_opt])
             values = out[n_params + n_opt : -1]
-            return params, opt_state, dict(zip(terms, values)), out[-1]
+            return params, opt_state, dict(zip(terms, values, strict=True)), out[-1]
 
         return call
 

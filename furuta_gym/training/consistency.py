@@ -84,7 +84,7 @@ def check_potential_shape(model, system: str | SystemSpec | None = None) -> dict
             "curvature": c,
             "ok": bool(c > 0 if e.shape == "minimum" else c < 0),
         }
-        for e, c in zip(eqs, curv)
+        for e, c in zip(eqs, curv, strict=True)
     ]
     return {"physical": all(r["ok"] for r in rows), "equilibria": rows}
 

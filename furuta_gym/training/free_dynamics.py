@@ -94,7 +94,7 @@ def _free_runs(tr: Trajectory, j: int, centre: float, radius: float) -> list[sli
     d = np.angle(np.exp(1j * (np.asarray(tr.q, float)[:, j] - centre)))
     ok = np.all(u == 0, axis=1) & (np.abs(d) <= radius)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(int), [0]])))
-    return [slice(a, b) for a, b in zip(edges[::2], edges[1::2])]
+    return [slice(a, b) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def measured_frequency(trajs: Sequence[Trajectory], q, joint: int, radius: float = COVERAGE_RADIUS) -> dict:

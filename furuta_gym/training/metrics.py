@@ -155,7 +155,7 @@ def prediction_errors(
     diverged = any((not np.all(np.isfinite(p))) or np.max(np.abs(p)) > settings.divergence_bound for p in preds)
     if diverged:
         return {name: DIVERGED for name in names}
-    err = np.concatenate([p - tr.x for p, tr in zip(preds, trajs)], axis=0)
+    err = np.concatenate([p - tr.x for p, tr in zip(preds, trajs, strict=True)], axis=0)
     return {name: log10_rmse(err[:, k]) for k, name in enumerate(names)}
 
 

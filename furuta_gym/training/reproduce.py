@@ -299,7 +299,10 @@ def load_paper_table(path: str | Path | None = None) -> dict[tuple[str, str, str
                 lines = [ln for ln in fh if ln.strip() and not ln.startswith("#")]
             header = [h.strip() for h in lines[0].split(",")]
             for ln in lines[1:]:
-                row = dict(zip(header, (c.strip() for c in ln.split(","))))
+                cells = [c.strip() for c in ln.split(",")]
+                if len(cells) != len(header):  # zip would drop or pad silently
+                    raise ValueError(f"{p}: {len(cells)} cells where the header has {len(header)}: {ln.strip()!r}")
+                row = dict(zip(header, cells, strict=True))
                 key = (row["system"], row["test_set"], row["model"], row["loss"], row["metric"])
                 table[key] = row["log10_rmse"]
             return table
@@ -331,7 +334,9 @@ def _datasets(system: str, out: Path, config: ReproduceConfig):
         wanted = (config.data_seed, config.small, config.split, _plant_json(config), config.sensor)
         if held != wanted:
             names = ("seed", "small", "split", "plant", "sensor")
-            diff = ", ".join(f"{n}={h!r} (this run: {w!r})" for n, h, w in zip(names, held, wanted) if h != w)
+            diff = ", ".join(
+                f"{n}={h!r} (this run: {w!r})" for n, h, w in zip(names, held, wanted, strict=True) if h != w
+            )
             raise ValueError(f"{folder}: holds data generated with {diff}; choose another --out")
         missing = [name for name, f in meta.get("files", {}).items() if not (folder / f["path"]).exists()]
         if missing:
@@ -1028,9 +1033,10 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
 def _seeds_holding(prop_row: dict, base_row: dict) -> str:
     """With several seeds, on how many the claim holds seed by seed (seed k of L_prop against
     seed k of the baseline): a mean can hold on one lucky seed."""
-    pairs = list(zip(prop_row["ours_per_seed"].split(), base_row["ours_per_seed"].split()))
-    if len(pairs) < 2:
+    prop, base = prop_row["ours_per_seed"].split(), base_row["ours_per_seed"].split()
+    if len(prop) < 2 or len(prop) != len(base):  # seed k against seed k needs the same seeds on both rows
         return ""
+    pairs = list(zip(prop, base, strict=True))
     numeric = [(float(a), float(b)) for a, b in pairs if _is_number(a) and _is_number(b)]
     return f"; on {sum(a < b for a, b in numeric)} of {len(pairs)} seeds"
 

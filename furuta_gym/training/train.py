@@ -809,7 +809,7 @@ def _run_steps(step, run: _RunState, traj_batches, int_batches, learning_rate: f
     returns the mean loss terms of the steps taken and how many were skipped."""
     sums: dict[str, float] = {}
     skipped = 0
-    for tb, ib_ in zip(traj_batches, int_batches):
+    for tb, ib_ in zip(traj_batches, int_batches, strict=True):
         run.params, run.opt_state, terms, ok = step(
             run.params, run.opt_state, tb, ib_, jnp.asarray(run.lam), jnp.asarray(learning_rate)
         )
