@@ -132,6 +132,54 @@ def _row(name, design, plant, records, wall):
     )
 
 
+def _sensitivity_lines(model, ctrl, starts, seed: int) -> list[str]:
+    """The k_e sensitivity table on model plants (pure-JAX rollouts, vmapped) and the automatic pick."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from furuta_gym.controllers import EnergySwingUp, SwingUpLQR, closed_loop, episode_metrics, pick_k_e
+    from furuta_gym.effects import WithEffects
+    from furuta_gym.envs import PLANT_PRESETS
+
+    sens_lines = []
+    plants = {
+        "analytic": model,
+        "+ cable spring": WithEffects(model, PLANT_PRESETS["furuta"]["cable_spring"]),
+        "+ Coulomb": WithEffects(model, PLANT_PRESETS["furuta"]["coulomb"]),
+    }
+    grid = [1500.0, 2000.0, 2500.0, 3000.0, 4000.0, 5000.0, 7000.0, 10000.0, 20000.0, 40000.0]
+    x0s = jnp.asarray(starts(19))
+    steps = int(SECONDS * 500)
+
+    @eqx.filter_jit
+    def batch(c, plant):
+        return jax.vmap(lambda x0: closed_loop(c, plant, x0, steps))(x0s)
+
+    lqr = ctrl.lqr
+    sens_lines.append("| k_e | " + " | ".join(plants) + " |")
+    sens_lines.append("|---:|" + "---|" * len(plants))
+    for k in grid:
+        c = SwingUpLQR(EnergySwingUp(model, k_e=k), lqr)
+        cells = []
+        for plant in plants.values():
+            r = batch(c, plant)
+            ms = [episode_metrics(r.xs[i], r.us[i], 1 / 500) for i in range(x0s.shape[0])]
+            ok = [m.time_to_upright for m in ms if m.success]
+            cells.append(f"{np.mean([m.success for m in ms]):.0%}" + (f" ({np.median(ok):.2f} s)" if ok else ""))
+        sens_lines.append(f"| {k:.0f} | " + " | ".join(cells) + " |")
+        print(sens_lines[-1], flush=True)
+    t = time.perf_counter()
+    sweep = pick_k_e(lambda k: SwingUpLQR(EnergySwingUp(model, k_e=k), lqr), model, seed=seed)
+    sens_lines.append("")
+    sens_lines.append(
+        f"Automatic pick on the analytic design model (`SwingUpLQR.from_model(model, "
+        f"auto_gain=True)`): stall threshold {sweep.stall_threshold:.0f}, "
+        f"k_e = {sweep.k_e:.0f} ({time.perf_counter() - t:.0f} s)."
+    )
+    return sens_lines
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--episodes", type=int, default=100)
@@ -152,22 +200,14 @@ def main(argv=None) -> int:
     import furuta_gym
 
     furuta_gym.enable_x64()
-    import equinox as eqx
     import gymnasium as gym
-    import jax
-    import jax.numpy as jnp
 
     from furuta_gym.controllers import (
-        EnergySwingUp,
         SwingUpLQR,
-        closed_loop,
-        episode_metrics,
         evaluate_on_env,
         near_rest_starts,
-        pick_k_e,
     )
-    from furuta_gym.effects import WithEffects
-    from furuta_gym.envs import PLANT_PRESETS, Episode, Sensors
+    from furuta_gym.envs import Episode, Sensors
     from furuta_gym.models import Furuta
 
     def env_factory(**kw):
@@ -216,42 +256,7 @@ def main(argv=None) -> int:
     learned_section = learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR)
 
     # k_e sensitivity on model plants (pure JAX, vmapped)
-    sens_lines = []
-    if not args.skip_sensitivity:
-        plants = {
-            "analytic": model,
-            "+ cable spring": WithEffects(model, PLANT_PRESETS["furuta"]["cable_spring"]),
-            "+ Coulomb": WithEffects(model, PLANT_PRESETS["furuta"]["coulomb"]),
-        }
-        grid = [1500.0, 2000.0, 2500.0, 3000.0, 4000.0, 5000.0, 7000.0, 10000.0, 20000.0, 40000.0]
-        x0s = jnp.asarray(starts(19))
-        steps = int(SECONDS * 500)
-
-        @eqx.filter_jit
-        def batch(c, plant):
-            return jax.vmap(lambda x0: closed_loop(c, plant, x0, steps))(x0s)
-
-        lqr = ctrl.lqr
-        sens_lines.append("| k_e | " + " | ".join(plants) + " |")
-        sens_lines.append("|---:|" + "---|" * len(plants))
-        for k in grid:
-            c = SwingUpLQR(EnergySwingUp(model, k_e=k), lqr)
-            cells = []
-            for plant in plants.values():
-                r = batch(c, plant)
-                ms = [episode_metrics(r.xs[i], r.us[i], 1 / 500) for i in range(x0s.shape[0])]
-                ok = [m.time_to_upright for m in ms if m.success]
-                cells.append(f"{np.mean([m.success for m in ms]):.0%}" + (f" ({np.median(ok):.2f} s)" if ok else ""))
-            sens_lines.append(f"| {k:.0f} | " + " | ".join(cells) + " |")
-            print(sens_lines[-1], flush=True)
-        t = time.perf_counter()
-        sweep = pick_k_e(lambda k: SwingUpLQR(EnergySwingUp(model, k_e=k), lqr), model, seed=args.seed)
-        sens_lines.append("")
-        sens_lines.append(
-            f"Automatic pick on the analytic design model (`SwingUpLQR.from_model(model, "
-            f"auto_gain=True)`): stall threshold {sweep.stall_threshold:.0f}, "
-            f"k_e = {sweep.k_e:.0f} ({time.perf_counter() - t:.0f} s)."
-        )
+    sens_lines = [] if args.skip_sensitivity else _sensitivity_lines(model, ctrl, starts, args.seed)
 
     lines = [
         MARK_START,

@@ -164,6 +164,29 @@ def write_section_text(text: str) -> None:
     write_section(f"{start}\n{text.rstrip()}\n{end}", start, end)
 
 
+def _compile_rows() -> dict[tuple[str, bool], tuple[float, float]]:
+    """(loss, step cache on) -> first-call seconds (cold, warm), each in a fresh process."""
+    compile_rows = {}
+    for loss, step_cache in (("itau", True), ("traj", True), ("traj", False)):
+        cache = tempfile.mkdtemp(prefix="furuta_gym_jax_cache_")
+        try:
+            cold = _probe_subprocess(loss, cache, step_cache)
+            warm = _probe_subprocess(loss, cache, step_cache)
+        finally:
+            shutil.rmtree(cache, ignore_errors=True)
+        compile_rows[(loss, step_cache)] = (cold, warm)
+        print(loss, step_cache, cold, warm, flush=True)
+    return compile_rows
+
+
+def _epoch_row(rows: list[dict], loss: str, n: int, full: bool) -> dict:
+    """The epoch timing of ``loss`` on ``n`` trajectories (L_traj: full batch or minibatches)."""
+    for r in rows:
+        if r["loss"] == loss and r["n_traj"] == n and (r["full_batch"] == full or loss == "itau"):
+            return r
+    raise KeyError((loss, n, full))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--probe", choices=["traj", "itau"])
@@ -190,24 +213,12 @@ def main() -> None:
         rows.append(epoch_time("traj", n, batch_size=256))
         rows.append(epoch_time("traj", n, batch_size=None, repeats=2))
         print(rows[-3:], flush=True)
-    compile_rows = {}
-    for loss, step_cache in (("itau", True), ("traj", True), ("traj", False)):
-        cache = tempfile.mkdtemp(prefix="furuta_gym_jax_cache_")
-        try:
-            cold = _probe_subprocess(loss, cache, step_cache)
-            warm = _probe_subprocess(loss, cache, step_cache)
-        finally:
-            shutil.rmtree(cache, ignore_errors=True)
-        compile_rows[(loss, step_cache)] = (cold, warm)
-        print(loss, step_cache, cold, warm, flush=True)
+    compile_rows = _compile_rows()
     breakdown = {loss: _probe_subprocess(loss, None, breakdown=True) for loss in ("traj", "itau")}
     print(breakdown, flush=True)
 
     def get(loss, n, full=False):
-        for r in rows:
-            if r["loss"] == loss and r["n_traj"] == n and (r["full_batch"] == full or loss == "itau"):
-                return r
-        raise KeyError((loss, n, full))
+        return _epoch_row(rows, loss, n, full)
 
     try:
         load = os.getloadavg()

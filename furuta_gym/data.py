@@ -89,46 +89,53 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
     suffix = path.suffix.lower()
     gzipped = path.name.lower().endswith(".csv.gz")
     if suffix == ".csv" or gzipped:
-        # ``*.csv.gz`` is a gzip-compressed CSV, parsed exactly like ``*.csv``.
-        try:
-            with gzip.open(path, "rt", newline="") if gzipped else path.open(newline="") as fh:
-                reader = csv.reader(fh)
-                try:
-                    header = [h.strip() for h in next(reader)]
-                except StopIteration:
-                    raise DataError(f"{path}: the file is empty; expected a header row") from None
-                rows = [r for r in reader if r and any(c.strip() for c in r)]
-        except (gzip.BadGzipFile, EOFError) as err:
-            raise DataError(f"{path}: not a readable gzip file ({err}); expected a gzip-compressed CSV") from None
-        if not rows:
-            raise DataError(f"{path}: no data rows after the header")
-        out: dict[str, np.ndarray] = {}
-        for i, name in enumerate(header):
-            raw = [r[i].strip() if i < len(r) else "" for r in rows]
-            try:
-                out[name] = np.array([float(v) if v != "" else np.nan for v in raw])
-            except ValueError:
-                if name == LABEL_COLUMN:  # trajectory labels may be names
-                    out[name] = np.array(raw, dtype=object)
-                else:
-                    bad = next(v for v in raw if not _is_float(v))
-                    raise DataError(f"{path}: column {name!r} holds {bad!r}, expected numbers") from None
-        return out
+        return _read_csv_columns(path, gzipped)
     if suffix == ".npz":
         with np.load(path, allow_pickle=False) as z:
             return {k: np.ravel(z[k]) for k in z.files}
     if suffix == ".mat":
-        try:
-            m = loadmat(path, squeeze_me=True)
-        except NotImplementedError:  # scipy reads MAT v4-v7.2, not the HDF5-based v7.3
-            raise DataError(
-                f"{path}: a MATLAB v7.3 (HDF5) file, which cannot be read here; save it "
-                "with save(..., '-v7') or export CSV"
-            ) from None
-        except (ValueError, MatReadError) as err:
-            raise DataError(f"{path}: not a readable MAT file ({err})") from None
-        return {k: np.ravel(np.asarray(v)) for k, v in m.items() if not k.startswith("__")}
+        return _read_mat_columns(path)
     raise DataError(f"{path}: unsupported file type {suffix!r}; expected .csv, .csv.gz, .npz or .mat")
+
+
+def _read_csv_columns(path: Path, gzipped: bool) -> dict[str, np.ndarray]:
+    # ``*.csv.gz`` is a gzip-compressed CSV, parsed exactly like ``*.csv``.
+    try:
+        with gzip.open(path, "rt", newline="") if gzipped else path.open(newline="") as fh:
+            reader = csv.reader(fh)
+            try:
+                header = [h.strip() for h in next(reader)]
+            except StopIteration:
+                raise DataError(f"{path}: the file is empty; expected a header row") from None
+            rows = [r for r in reader if r and any(c.strip() for c in r)]
+    except (gzip.BadGzipFile, EOFError) as err:
+        raise DataError(f"{path}: not a readable gzip file ({err}); expected a gzip-compressed CSV") from None
+    if not rows:
+        raise DataError(f"{path}: no data rows after the header")
+    out: dict[str, np.ndarray] = {}
+    for i, name in enumerate(header):
+        raw = [r[i].strip() if i < len(r) else "" for r in rows]
+        try:
+            out[name] = np.array([float(v) if v != "" else np.nan for v in raw])
+        except ValueError:
+            if name == LABEL_COLUMN:  # trajectory labels may be names
+                out[name] = np.array(raw, dtype=object)
+            else:
+                bad = next(v for v in raw if not _is_float(v))
+                raise DataError(f"{path}: column {name!r} holds {bad!r}, expected numbers") from None
+    return out
+
+
+def _read_mat_columns(path: Path) -> dict[str, np.ndarray]:
+    try:
+        m = loadmat(path, squeeze_me=True)
+    except NotImplementedError:  # scipy reads MAT v4-v7.2, not the HDF5-based v7.3
+        raise DataError(
+            f"{path}: a MATLAB v7.3 (HDF5) file, which cannot be read here; save it with save(..., '-v7') or export CSV"
+        ) from None
+    except (ValueError, MatReadError) as err:
+        raise DataError(f"{path}: not a readable MAT file ({err})") from None
+    return {k: np.ravel(np.asarray(v)) for k, v in m.items() if not k.startswith("__")}
 
 
 def _is_float(v: str) -> bool:

@@ -129,9 +129,35 @@ def _add_fit_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    from ..diagnose import diagnose
 
-    from ..diagnose import diagnose, write_report_figures as write_figures, write_report_json as write_json
+    _check_arguments(args)
+    trajs, notes = _load(args.data, args)
+    test, test_notes = _load(args.test, args) if args.test else (None, [])
+    from ._cache import enable_compilation_cache
+
+    enable_compilation_cache()  # the output-error predictors compile once per machine, not once per run
+    res = diagnose(
+        trajs,
+        args.system,
+        test=test,
+        model=args.model,
+        fixed=_pairs(args.fix, "--fix", float) or None,
+        candidates=args.candidates.split(",") if args.candidates else None,
+        finish="prediction" if args.prediction_first else None,
+        **_overrides(args),
+    )
+    res.notes[:0] = notes + test_notes  # what reading the logs did, said first
+    print(res.table())
+    if res.prediction is not None:
+        print(res.prediction.summary())
+    _write_outputs(res, args)
+    return 0
+
+
+def _check_arguments(args: argparse.Namespace) -> None:
+    """Options that do not go together, and outputs that exist, refused before any work."""
+    from pathlib import Path
 
     if args.with_inconsistent and not args.mjcf:
         raise ValueError("--with-inconsistent: shapes the --mjcf plant; give --mjcf OUT.xml too")
@@ -143,11 +169,10 @@ def run(args: argparse.Namespace) -> int:
     for out in (args.json, args.mjcf):
         if out and Path(out).exists() and not args.overwrite:
             raise FileExistsError(f"{out}: exists; refusing to overwrite (pass --overwrite)")
-    trajs, notes = _load(args.data, args)
-    test, test_notes = _load(args.test, args) if args.test else (None, [])
-    from ._cache import enable_compilation_cache
 
-    enable_compilation_cache()  # the output-error predictors compile once per machine, not once per run
+
+def _overrides(args: argparse.Namespace) -> dict:
+    """The diagnosis settings the options set (an option not given keeps the default)."""
     overrides = {"velocity": args.velocity}
     for key, val in (
         ("max_effects", args.max_effects),
@@ -161,20 +186,13 @@ def run(args: argparse.Namespace) -> int:
             overrides[key] = val
     if args.held_stop is not UNSET:  # None ('off') is a value here: it turns the default off
         overrides["held_stop"] = args.held_stop
-    res = diagnose(
-        trajs,
-        args.system,
-        test=test,
-        model=args.model,
-        fixed=_pairs(args.fix, "--fix", float) or None,
-        candidates=args.candidates.split(",") if args.candidates else None,
-        finish="prediction" if args.prediction_first else None,
-        **overrides,
-    )
-    res.notes[:0] = notes + test_notes  # what reading the logs did, said first
-    print(res.table())
-    if res.prediction is not None:
-        print(res.prediction.summary())
+    return overrides
+
+
+def _write_outputs(res, args: argparse.Namespace) -> None:
+    """The report's JSON, figures and plant MJCF, as asked."""
+    from ..diagnose import write_report_figures as write_figures, write_report_json as write_json
+
     if args.json:
         print(f"wrote {write_json(res, args.json, overwrite=args.overwrite)}")
     if args.report:
@@ -185,4 +203,3 @@ def run(args: argparse.Namespace) -> int:
 
         plant = res.plant(include_inconsistent=args.with_inconsistent, prediction_first=args.prediction_first)
         print(f"wrote {save_mjcf(plant, args.mjcf, overwrite=args.overwrite)}")
-    return 0

@@ -75,18 +75,7 @@ def run(args) -> int:
     from ..data import Trajectory, save_trajectories
     from ..envs import ENV_IDS, Camera, Episode, LagrangianEnv
 
-    outputs = [p for p in (args.out, args.video, args.data) if p is not None]
-    if args.out.suffix.lower() != ".png":
-        raise ValueError(f"--out must be a .png path, got {str(args.out)!r}")
-    if args.video is not None and args.video.suffix.lower() not in (".mp4", ".gif"):
-        raise ValueError(f"--video must end in .mp4 or .gif, got {str(args.video)!r}")
-    if not args.overwrite:
-        for p in outputs:
-            if p.exists():
-                raise FileExistsError(f"{p}: exists; refusing to overwrite (pass --overwrite)")
-    if not (np.isfinite(args.seconds) and args.seconds > 0):
-        raise ValueError(f"--seconds must be > 0, got {args.seconds}")
-
+    _check_arguments(args)
     kwargs: dict[str, Any] = dict(dynamics=args.dynamics, episode=Episode(seconds=None))
     if args.plant:
         kwargs["plant"] = args.plant
@@ -98,25 +87,8 @@ def run(args) -> int:
     rng = np.random.default_rng(args.seed)
     policy = _policy(args.policy, env, amplitude, args.seconds, rng)
 
-    options = None if args.state is None else {"state": np.asarray(args.state, dtype=float)}
-    obs, info = env.reset(seed=args.seed, options=options)
-    steps = int(round(args.seconds / unwrapped.dt))
     every = max(1, int(round(1.0 / (VIDEO_FPS * unwrapped.dt))))
-    ts, xs, us, rewards = [0.0], [info["state"]], [], []
-    frames = [env.render()] if args.video is not None else []
-    ended = ""
-    for k in range(steps):
-        action = np.array([policy(k * unwrapped.dt)])
-        obs, reward, terminated, truncated, info = env.step(action)
-        us.append(info["action"])
-        rewards.append(reward)
-        ts.append(info["time"])
-        xs.append(info["state"])
-        if args.video is not None and (k + 1) % every == 0:
-            frames.append(env.render())
-        if terminated or truncated:
-            ended = " (diverged)" if info["diverged"] else " (episode ended)"
-            break
+    ts, xs, us, rewards, frames, ended = _roll_out(env, unwrapped.dt, policy, args, every)
     env.close()
     t, x = np.array(ts), np.array(xs)
     u = np.array(us + [us[-1] if us else 0.0])  # input held: repeat the last sample
@@ -136,6 +108,45 @@ def run(args) -> int:
         f"{t[-1]:.3f} s{ended}, return {sum(rewards):.3f}; wrote {', '.join(map(str, written))}"
     )
     return 0
+
+
+def _check_arguments(args) -> None:
+    """Output paths of the right kinds, none overwritten unless asked, and a positive duration."""
+    outputs = [p for p in (args.out, args.video, args.data) if p is not None]
+    if args.out.suffix.lower() != ".png":
+        raise ValueError(f"--out must be a .png path, got {str(args.out)!r}")
+    if args.video is not None and args.video.suffix.lower() not in (".mp4", ".gif"):
+        raise ValueError(f"--video must end in .mp4 or .gif, got {str(args.video)!r}")
+    if not args.overwrite:
+        for p in outputs:
+            if p.exists():
+                raise FileExistsError(f"{p}: exists; refusing to overwrite (pass --overwrite)")
+    if not (np.isfinite(args.seconds) and args.seconds > 0):
+        raise ValueError(f"--seconds must be > 0, got {args.seconds}")
+
+
+def _roll_out(env, dt: float, policy, args, every: int):
+    """Reset and step the env for ``args.seconds`` (or until its episode ends): times, states,
+    actions, rewards, video frames (every ``every`` steps) and how it ended."""
+    options = None if args.state is None else {"state": np.asarray(args.state, dtype=float)}
+    _, info = env.reset(seed=args.seed, options=options)
+    steps = int(round(args.seconds / dt))
+    ts, xs, us, rewards = [0.0], [info["state"]], [], []
+    frames = [env.render()] if args.video is not None else []
+    ended = ""
+    for k in range(steps):
+        action = np.array([policy(k * dt)])
+        _, reward, terminated, truncated, info = env.step(action)
+        us.append(info["action"])
+        rewards.append(reward)
+        ts.append(info["time"])
+        xs.append(info["state"])
+        if args.video is not None and (k + 1) % every == 0:
+            frames.append(env.render())
+        if terminated or truncated:
+            ended = " (diverged)" if info["diverged"] else " (episode ended)"
+            break
+    return ts, xs, us, rewards, frames, ended
 
 
 def _plot(path: Path, env, t, x, u, rewards, args, ended: str) -> None:

@@ -869,6 +869,21 @@ def _lumped_backend(system, dynamics, substeps, effects, lumped, kernel) -> Abst
     )
 
 
+def _named_model(name: str, system: str) -> AbstractLagrangianSystem:
+    """The model ``dynamics=name`` names: ``"analytic"`` or a checkpoint's path."""
+    if name == "analytic":
+        return analytic_model(system)
+    if Path(name).exists() or os.sep in name or Path(name).suffix:
+        model = load_checkpoint(name, system)
+        if not isinstance(model, AbstractLagrangianSystem):
+            raise ValueError(
+                f"dynamics: checkpoint {name!r} did not load as an AbstractLagrangianSystem "
+                f"(got {type(model).__name__})"
+            )
+        return model
+    raise ValueError(f"dynamics: unknown backend {name!r}; accepted: {_ACCEPTED}")
+
+
 def make_backend(
     system: str,
     dynamics="mujoco",
@@ -901,17 +916,7 @@ def make_backend(
                     "is stepped by MuJoCo itself (leave kernel at 'auto')"
                 )
             return MujocoBackend(system, substeps, effects, parameters)
-        if name == "analytic":
-            model = analytic_model(system)
-        elif Path(name).exists() or os.sep in name or Path(name).suffix:
-            model = load_checkpoint(name, system)
-            if not isinstance(model, AbstractLagrangianSystem):
-                raise ValueError(
-                    f"dynamics: checkpoint {name!r} did not load as an AbstractLagrangianSystem "
-                    f"(got {type(model).__name__})"
-                )
-        else:
-            raise ValueError(f"dynamics: unknown backend {name!r}; accepted: {_ACCEPTED}")
+        model = _named_model(name, system)
     else:
         raise ValueError(f"dynamics: expected {_ACCEPTED}; got an object of type {type(dynamics).__name__}")
     model_system = getattr(getattr(model, "spec", None), "name", None)

@@ -55,31 +55,8 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
         sys.path[:] = list(path) + [p for p in sys.path if p not in path]
 
         enable_x64()  # the env's own process already runs in float64 (and warned if it switched)
-
-        if core is not None and hasattr(os, "sched_setaffinity"):
-            # XLA:CPU sizes its thread pool from the cores this process may use when its backend
-            # starts: one core gives one thread, none left spinning against the other workers.
-            # Then the scheduler may place the worker anywhere again: kept pinned, a worker woken
-            # on the env's own core waited for the env to yield it, and the workers ran in turn.
-            allowed = os.sched_getaffinity(0)
-            os.sched_setaffinity(0, {core})
-            jax.devices()
-            os.sched_setaffinity(0, allowed)
-        if hasattr(os, "SCHED_BATCH"):
-            # a batch-class worker does not pre-empt the env's process when woken, so the env
-            # sends every worker its step at once (without it, some steps waited a worker's turn)
-            try:
-                os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-            except OSError:
-                pass
-        try:
-            settings = pickle.loads(payload)
-        except Exception as exc:
-            raise RuntimeError(
-                "the model or task could not be rebuilt in a worker process: its class must be "
-                "importable by name (defined in a module on the import path, not in __main__, a "
-                f"notebook or a function): {type(exc).__name__}: {exc}"
-            ) from exc
+        _start_backend(core)
+        settings = _rebuilt_settings(payload)
         shm_in, shm_out = (_attach(name) for name in names)
         inputs = np.ndarray((num_envs, n_state + n_input), dtype=np.float64, buffer=shm_in.buf)
         outputs = np.ndarray((num_envs, packed_output_width(n_state, n_input)), dtype=np.float64, buffer=shm_out.buf)
@@ -112,6 +89,38 @@ def _worker_main(conn, names, num_envs, n_state, n_input, lo, hi, core, payload,
         for block in (shm_in, shm_out):
             if block is not None:
                 block.close()
+
+
+def _start_backend(core: int | None) -> None:
+    """Start JAX's backend on ``core`` alone, then run as a batch-class process."""
+    if core is not None and hasattr(os, "sched_setaffinity"):
+        # XLA:CPU sizes its thread pool from the cores this process may use when its backend
+        # starts: one core gives one thread, none left spinning against the other workers.
+        # Then the scheduler may place the worker anywhere again: kept pinned, a worker woken
+        # on the env's own core waited for the env to yield it, and the workers ran in turn.
+        allowed = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, {core})
+        jax.devices()
+        os.sched_setaffinity(0, allowed)
+    if hasattr(os, "SCHED_BATCH"):
+        # a batch-class worker does not pre-empt the env's process when woken, so the env
+        # sends every worker its step at once (without it, some steps waited a worker's turn)
+        try:
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+        except OSError:
+            pass
+
+
+def _rebuilt_settings(payload: bytes) -> dict:
+    """The env's step settings (model, task, ...), unpickled in this worker."""
+    try:
+        return pickle.loads(payload)
+    except Exception as exc:
+        raise RuntimeError(
+            "the model or task could not be rebuilt in a worker process: its class must be "
+            "importable by name (defined in a module on the import path, not in __main__, a "
+            f"notebook or a function): {type(exc).__name__}: {exc}"
+        ) from exc
 
 
 def _attach(name: str) -> shared_memory.SharedMemory:

@@ -367,16 +367,7 @@ class LagrangianVectorEnv(VectorEnv):
     def reset(self, *, seed=None, options: dict | None = None):
         """Reset all copies (or ``options["reset_mask"]``); see the class docstring."""
         options = dict(options or {})
-        mask = options.pop("reset_mask", None)
-        if mask is None:
-            mask = np.ones(self.num_envs, dtype=bool)
-        else:
-            mask = np.asarray(mask)
-            if mask.shape != (self.num_envs,) or mask.dtype != np.bool_ or not mask.any():
-                raise ValueError(
-                    f"options['reset_mask'] must be a bool array of shape ({self.num_envs},) with "
-                    f"at least one True, got {mask!r}"
-                )
+        mask = self._reset_mask(options.pop("reset_mask", None))
         allowed = set(self._template.reset_option_names)
         unknown = sorted(set(options) - allowed)
         if unknown:
@@ -390,22 +381,7 @@ class LagrangianVectorEnv(VectorEnv):
                 self._rngs[k] = rngs[k]
         self._reset_options(options, partial=len(idx) < self.num_envs)
         state = options.get("state")
-        n_state = 2 * self._n
-        if state is not None:
-            x0 = np.asarray(state, dtype=np.float64)
-            if x0.shape == (n_state,):
-                x0 = np.broadcast_to(x0, (len(idx), n_state)).copy()
-            elif x0.shape == (self.num_envs, n_state):
-                x0 = x0[idx].copy()
-            else:
-                raise EnvArgumentError(
-                    f"options['state'] must have shape ({n_state},) or ({self.num_envs}, {n_state}) "
-                    f"= {self.spec_system.state_names} per copy, got shape {x0.shape}"
-                )
-            if not np.all(np.isfinite(x0)):
-                raise EnvArgumentError("options['state'] must be finite")
-        else:
-            x0 = self._initial_states(idx)
+        x0 = self._initial_states(idx) if state is None else self._given_states(state, idx)
         if self._needs_reset and len(idx) < self.num_envs:
             raise ValueError("reset: the first reset must reset every copy (no reset_mask)")
         self._needs_reset = False
@@ -416,6 +392,35 @@ class LagrangianVectorEnv(VectorEnv):
         self._autoreset[idx] = False
         return self._obs.copy(), self._reset_info(idx, x0)
 
+    def _reset_mask(self, mask) -> np.ndarray:
+        """The copies a reset resets: ``options["reset_mask"]``, checked, or all of them."""
+        if mask is None:
+            return np.ones(self.num_envs, dtype=bool)
+        mask = np.asarray(mask)
+        if mask.shape != (self.num_envs,) or mask.dtype != np.bool_ or not mask.any():
+            raise ValueError(
+                f"options['reset_mask'] must be a bool array of shape ({self.num_envs},) with "
+                f"at least one True, got {mask!r}"
+            )
+        return mask
+
+    def _given_states(self, state, idx: np.ndarray) -> np.ndarray:
+        """``options["state"]`` for the copies ``idx``: one state for all, or one per copy."""
+        n_state = 2 * self._n
+        x0 = np.asarray(state, dtype=np.float64)
+        if x0.shape == (n_state,):
+            x0 = np.broadcast_to(x0, (len(idx), n_state)).copy()
+        elif x0.shape == (self.num_envs, n_state):
+            x0 = x0[idx].copy()
+        else:
+            raise EnvArgumentError(
+                f"options['state'] must have shape ({n_state},) or ({self.num_envs}, {n_state}) "
+                f"= {self.spec_system.state_names} per copy, got shape {x0.shape}"
+            )
+        if not np.all(np.isfinite(x0)):
+            raise EnvArgumentError("options['state'] must be finite")
+        return x0
+
     def _reset_options(self, options: dict, partial: bool) -> None:
         """System-specific reset options (N-MSD: ``target``)."""
 
@@ -424,20 +429,7 @@ class LagrangianVectorEnv(VectorEnv):
         truncated, info)."""
         if self._needs_reset:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
-        us = np.asarray(actions, dtype=np.float64)
-        if us.shape == (self.num_envs,):
-            us = us[:, None]
-        if us.shape != (self.num_envs, 1):
-            raise ValueError(
-                f"actions must have shape ({self.num_envs}, 1) (one "
-                f"{self.spec_system.input_names[0]} per copy), got shape {us.shape}"
-            )
-        bad = ~np.isfinite(us[:, 0])
-        if bad.any():
-            raise ValueError(
-                f"actions must be finite (NaN/inf actions are rejected); copies "
-                f"{np.flatnonzero(bad)[:10].tolist()} are not"
-            )
+        us = self._checked_actions(actions)
         if self._workers is not None:
             x_next, obs, u, reward, terminated, diverged, e = self._workers.step(self._x, us)
         else:
@@ -455,14 +447,11 @@ class LagrangianVectorEnv(VectorEnv):
         truncated = stepped & (self._max_steps is not None) & (steps >= (self._max_steps or 0))
         # a diverged copy keeps its last observation (already the frozen state's observation)
         action = u[:, 0].copy()
-        final = None
+        final = final_obs = None
         if mode == AutoresetMode.SAME_STEP:
             resetting = terminated | truncated
             if resetting.any():
-                final = self._step_info(steps, e, diverged, x_next, action, resetting)
-                final_obs = np.full(self.num_envs, None, dtype=object)
-                for k in np.flatnonzero(resetting):
-                    final_obs[k] = obs[k].copy()
+                final, final_obs = self._final_entries(steps, e, diverged, x_next, action, obs, resetting)
         if resetting.any():
             idx = np.flatnonzero(resetting)
             x0 = self._initial_states(idx)
@@ -485,6 +474,31 @@ class LagrangianVectorEnv(VectorEnv):
             info.update(final_obs=final_obs, _final_obs=resetting.copy())
             info.update(final_info=final, _final_info=resetting.copy())
         return obs.copy(), reward, terminated, truncated, info
+
+    def _checked_actions(self, actions) -> np.ndarray:
+        """The actions as a finite (num_envs, 1) float64 array (one number per copy also does)."""
+        us = np.asarray(actions, dtype=np.float64)
+        if us.shape == (self.num_envs,):
+            us = us[:, None]
+        if us.shape != (self.num_envs, 1):
+            raise ValueError(
+                f"actions must have shape ({self.num_envs}, 1) (one "
+                f"{self.spec_system.input_names[0]} per copy), got shape {us.shape}"
+            )
+        bad = ~np.isfinite(us[:, 0])
+        if bad.any():
+            raise ValueError(
+                f"actions must be finite (NaN/inf actions are rejected); copies "
+                f"{np.flatnonzero(bad)[:10].tolist()} are not"
+            )
+        return us
+
+    def _final_entries(self, steps, e, diverged, x, action, obs, ending) -> tuple[dict[str, Any], np.ndarray]:
+        """SAME_STEP's final info and final observations of the copies ``ending`` this step."""
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        for k in np.flatnonzero(ending):
+            final_obs[k] = obs[k].copy()
+        return self._step_info(steps, e, diverged, x, action, ending), final_obs
 
     def _step_info(self, steps, e, diverged, x, action, mask) -> dict[str, Any]:
         """Batched info (entries outside ``mask`` zeroed, as Gymnasium fills absent copies)."""

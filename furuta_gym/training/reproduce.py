@@ -182,6 +182,12 @@ class ReproduceConfig:
     training_velocities: str = "recorded"
 
     def __post_init__(self):
+        self._check_execution()
+        self._check_runs()
+        self._check_data()
+
+    def _check_execution(self) -> None:
+        """What is evaluated, and how the runs are spread over processes or a cluster."""
         if self.split not in EVALUATION_SETS:
             raise ValueError(f"split must be one of {sorted(EVALUATION_SETS)}, got {self.split!r}")
         if int(self.jobs) < 1:
@@ -192,6 +198,9 @@ class ReproduceConfig:
             raise ValueError("address names a Ray cluster: it needs executor='ray'")
         if int(self.cpus_per_task) < 1:
             raise ValueError(f"cpus_per_task must be at least 1, got {self.cpus_per_task}")
+
+    def _check_runs(self) -> None:
+        """The systems, (model, loss) pairs and seeds, each run once."""
         for s in self.systems:
             get_spec(s)
         for kind, loss in self.pairs:
@@ -199,6 +208,11 @@ class ReproduceConfig:
                 raise ValueError(f"pair ({kind!r}, {loss!r}) is not one the paper reports: {PAPER_PAIRS}")
         if not self.seeds:
             raise ValueError("seeds must name at least one seed")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"seeds must differ: a seed twice would count one model twice, got {self.seeds}")
+
+    def _check_data(self) -> None:
+        """How the training data are made and read."""
         if not (isinstance(self.integral_span, int) and self.integral_span >= 1):
             raise ValueError(
                 f"integral_span must be a positive integer (intervals per L_Iτ residual), got {self.integral_span!r}"
@@ -211,8 +225,6 @@ class ReproduceConfig:
             raise ValueError(f"sensor must be one of {sorted(SENSORS)}, got {self.sensor!r}")
         if self.plant is not None and self.ground_truth == "analytic":
             raise ValueError("plant= is a MuJoCo plant: it needs ground_truth 'auto' or 'mujoco'")
-        if len(set(self.seeds)) != len(self.seeds):
-            raise ValueError(f"seeds must differ: a seed twice would count one model twice, got {self.seeds}")
 
     @property
     def small(self) -> bool:
@@ -985,49 +997,60 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
     if allnum:
         n_yes = sum(r["better_or_equal"] == "yes" for r in allnum)
         out.append(f"- All rows: {n_yes} of {len(allnum)} numeric cells at or below the paper's.")
-
-    def row_of(system, label, model, loss, metric) -> Any:  # the row (a dict), or None
-        return next(
-            (
-                r
-                for r in rows
-                if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"])
-                == (system, label, model, loss, metric)
-            ),
-            None,
-        )
-
-    def mean_of(*key):
-        r = row_of(*key)
-        return float(r["ours_mean"]) if r and r["ours_mean"] else None
-
     for system in config.systems:
-        claim = system_data(system).main_claim
-        if claim is None:
-            continue
-        out.append(
-            f"- Main claim ({claim}: L_prop gives a better force decomposition than L_traj for "
-            "DLN and than L_aph for ADLN), ours:"
-        )
-        for model, base in (("DLN", "traj"), ("ADLN", "aph")):
-            if ((model.lower(), base) not in config.pairs) or ((model.lower(), PROPOSED_LOSS) not in config.pairs):
-                continue
-            for label in EVALUATION_SETS[config.split][system]:
-                parts = []
-                for metric in ("inertial", "coriolis", "potential"):
-                    a = mean_of(system, label, model, PROPOSED_LOSS, metric)
-                    b = mean_of(system, label, model, base, metric)
-                    if a is None or b is None:
-                        parts.append(f"{metric}: n/a")
-                    else:
-                        seeds = _seeds_holding(
-                            row_of(system, label, model, PROPOSED_LOSS, metric),
-                            row_of(system, label, model, base, metric),
-                        )
-                        parts.append(f"{metric} {a:.2f} vs {b:.2f} ({'holds' if a < b else 'does not hold'}{seeds})")
-                out.append(f"  - {model} {label}: " + "; ".join(parts))
+        out += _main_claim_lines(rows, config, system)
     out.append("")
     return out
+
+
+def _main_claim_lines(rows: list[dict], config: ReproduceConfig, system: str) -> list[str]:
+    """The summary's lines on ``system``'s main claim, metric by metric (none without a claim)."""
+    claim = system_data(system).main_claim
+    if claim is None:
+        return []
+    out = [
+        f"- Main claim ({claim}: L_prop gives a better force decomposition than L_traj for "
+        "DLN and than L_aph for ADLN), ours:"
+    ]
+    for model, base in (("DLN", "traj"), ("ADLN", "aph")):
+        if ((model.lower(), base) not in config.pairs) or ((model.lower(), PROPOSED_LOSS) not in config.pairs):
+            continue
+        for label in EVALUATION_SETS[config.split][system]:
+            parts = [
+                _claim_part(
+                    _row_of(rows, system, label, model, PROPOSED_LOSS, metric),
+                    _row_of(rows, system, label, model, base, metric),
+                    metric,
+                )
+                for metric in ("inertial", "coriolis", "potential")
+            ]
+            out.append(f"  - {model} {label}: " + "; ".join(parts))
+    return out
+
+
+def _row_of(rows: list[dict], system, label, model, loss, metric) -> Any:
+    """The row (a dict) of this cell, or None."""
+    return next(
+        (
+            r
+            for r in rows
+            if (r["system"], r["test_set"], r["model"], r["loss"], r["metric"]) == (system, label, model, loss, metric)
+        ),
+        None,
+    )
+
+
+def _claim_part(prop_row, base_row, metric: str) -> str:
+    """One metric of a main-claim line: L_prop's mean against the baseline's, and on how many seeds it holds."""
+    a, b = _mean_of(prop_row), _mean_of(base_row)
+    if a is None or b is None:
+        return f"{metric}: n/a"
+    seeds = _seeds_holding(prop_row, base_row)
+    return f"{metric} {a:.2f} vs {b:.2f} ({'holds' if a < b else 'does not hold'}{seeds})"
+
+
+def _mean_of(row) -> float | None:
+    return float(row["ours_mean"]) if row and row["ours_mean"] else None
 
 
 def _seeds_holding(prop_row: dict, base_row: dict) -> str:

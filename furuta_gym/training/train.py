@@ -163,6 +163,12 @@ class TrainConfig:
     progress: bool = True
 
     def __post_init__(self):
+        self._check_schedule()
+        self._check_loss()
+        self._check_batches()
+
+    def _check_schedule(self) -> None:
+        """Stages, learning rates and their decay (epochs and rates stored as tuples)."""
         object.__setattr__(self, "epochs", tuple(int(e) for e in self.epochs))
         object.__setattr__(self, "horizons", tuple(self.horizons))
         if len(self.epochs) != len(self.horizons):
@@ -180,6 +186,9 @@ class TrainConfig:
             raise ValueError(f"cosine_decay_to must be in (0, 1], got {self.cosine_decay_to!r}")
         if any(e < 0 for e in self.epochs):
             raise ValueError(f"epochs must be non-negative, got {self.epochs}")
+
+    def _check_loss(self) -> None:
+        """The loss's quadrature, normalisation and augmentation penalty."""
         if self.quadrature not in QUADRATURE_RULES:
             raise ValueError(f"quadrature must be one of {QUADRATURE_RULES}, got {self.quadrature!r}")
         if self.normalize not in NORMALIZATIONS:
@@ -188,6 +197,9 @@ class TrainConfig:
             raise ValueError(f"augmentation_part must be one of {AUGMENTATION_PARTS}, got {self.augmentation_part!r}")
         if self.augmentation_weight is not None and not self.augmentation_weight >= 0:
             raise ValueError(f"augmentation_weight must be non-negative or None, got {self.augmentation_weight!r}")
+
+    def _check_batches(self) -> None:
+        """How the windows are cut and batched."""
         if self.resolution_tolerance is not None and not float(self.resolution_tolerance) > 0:
             raise ValueError(f"resolution_tolerance must be positive or None, got {self.resolution_tolerance!r}")
         if not (isinstance(self.integral_span, (int, np.integer)) and self.integral_span >= 1):
