@@ -77,6 +77,10 @@ __all__ = [
     "can_join",
     "ActuatorLag",
     "CableNeutral",
+    "WithNeutral",
+    "dragged_neutral",
+    "cable_force",
+    "play_operator",
     "actuator_lag_time",
     "effects_potential",
 ]
@@ -138,6 +142,11 @@ class EffectKind:
     is_constant_force: ClassVar[bool] = False
     #: the dry friction this one is the breakaway above (a stiction's Coulomb friction)
     breakaway_above: ClassVar[str | None] = None
+    #: a law with memory: the memoryless kind it generalises (the diagnosis tries it where that
+    #: one is a candidate), the name of its second parameter (an :class:`Effect` field) and its bounds
+    generalises: ClassVar[str | None] = None
+    second_parameter: ClassVar[str] = ""
+    second_bounds: ClassVar[tuple[float, float]] = (0.0, 0.0)
     #: scales the input force
     scales_input: ClassVar[bool] = False
     #: what the sensor must resolve for a found value to mean something: "position" (one count)
@@ -268,7 +277,11 @@ class _ComOffset(EffectKind):
 
 class _HystereticSpring(EffectKind):
     name, units, physically_positive = "hysteretic_spring", ("N m/rad", "N/m"), True
-    has_memory, home = True, "the MuJoCo plant (MujocoBackend), which keeps its state"
+    has_memory = True
+    home = "the MuJoCo plant (MujocoBackend) or an analytic model at its neutral (WithNeutral), which keep its state"
+    # the memoryless law it generalises (play 0: a fixed cable) and its second parameter, fitted by
+    # the diagnosis within these bounds (rad or m) where the memoryless one is in its library
+    generalises, second_parameter, second_bounds = "spring", "play", (0.02, 2.0)
 
     def to_mujoco(self, effect, dof, form):
         form.neutrals.setdefault(dof, []).append(CableNeutral(effect))
@@ -427,6 +440,31 @@ def effects_potential(potential, effects: Sequence[Effect], q, spec: SystemSpec)
     return v
 
 
+def dragged_neutral(neutral, q, play, xp: Any = np):
+    """The play operator's one step: a cable's neutral ``neutral`` dragged to within ``play`` of
+    the joint at ``q`` (unchanged while the joint stays within the play of it). Written once for
+    the MuJoCo plant (:class:`CableNeutral`), the analytic model (:class:`WithNeutral`) and the
+    diagnosis's neutral paths (:func:`play_operator`)."""
+    return xp.minimum(xp.maximum(neutral, q - play), q + play)
+
+
+def cable_force(stiffness, play, q_j, neutral, xp: Any = np):
+    """A ``hysteretic_spring``'s force at q_j with its neutral as dragged there from ``neutral``
+    (exact for a joint moving one way from where the neutral was last advanced)."""
+    return -stiffness * (q_j - dragged_neutral(neutral, q_j, play, xp))
+
+
+def play_operator(q, play: float, start: float) -> np.ndarray:
+    """The neutral after each sample of the joint's path ``q`` (1-D), dragged from ``start``: what
+    a ``hysteretic_spring`` of this ``play`` has been pulled to by the history ``q``."""
+    out, r = np.empty(len(q)), float(start)
+    lo, hi = np.asarray(q, dtype=float) - play, np.asarray(q, dtype=float) + play
+    for k in range(len(out)):  # a recursion: each neutral depends on the last
+        r = min(max(r, lo[k]), hi[k])
+        out[k] = r
+    return out
+
+
 class CableNeutral:
     """The moving neutral r of a ``hysteretic_spring`` (the play operator): r starts at the
     effect's ``reference`` and is dragged along once the joint is more than ``play`` from it.
@@ -445,13 +483,42 @@ class CableNeutral:
         self.neutral = self.start
 
     def _dragged(self, q: float) -> float:
-        return min(max(self.neutral, q - self.play), q + self.play)
+        return float(dragged_neutral(self.neutral, q, self.play, np))
 
     def force(self, q: float) -> float:
-        return -self.stiffness * (q - self._dragged(q))
+        return float(cable_force(self.stiffness, self.play, q, self.neutral, np))
 
     def advance(self, q: float) -> None:
         self.neutral = self._dragged(q)
+
+
+class WithNeutral(AbstractLagrangianSystem):
+    """``base`` plus a ``hysteretic_spring`` whose neutral stands at ``neutral``: the analytic
+    model of the law with memory over one step, its force dragged within the step as
+    :class:`CableNeutral`'s; the caller advances the neutral after each step
+    (:func:`dragged_neutral` at the step's end), as the MuJoCo plant does. ``neutral`` may be
+    traced (a predictor carries it through a scan)."""
+
+    base: AbstractLagrangianSystem
+    neutral: Any
+    stiffness: Any
+    play: Any
+    joint: int = eqx.field(static=True)
+
+    spec: ClassVar = property(lambda self: self.base.spec)  # type: ignore[assignment]
+
+    def mass_matrix(self, q):
+        return self.base.mass_matrix(q)
+
+    def potential(self, q):
+        return self.base.potential(q)
+
+    def nonconservative_force(self, q, qd):
+        f = cable_force(self.stiffness, self.play, q[self.joint], self.neutral, jnp)
+        return self.base.nonconservative_force(q, qd).at[self.joint].add(f)
+
+    def input_force(self, q, qd, u):
+        return self.base.input_force(q, qd, u)
 
 
 def actuator_lag_time(effects: Sequence[Effect]) -> float:
