@@ -33,6 +33,8 @@ from ..models.checkpoint import load_model
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
 from . import _finish, _fit, _intervals, _rests
+from . import _rotor_laws as _laws
+from ._drift import rest_drift
 from . import _trace as _trace_mod
 from ._intervals import FitOrigin, Interval
 from ._library import (
@@ -144,6 +146,7 @@ class EffectEvidence:
     note: str = ""
     resolved: bool = True  # False: its size is below what the sensor resolves (one count, one sample)
     interval: Interval | None = None  # 95 % interval of an added effect's coefficient (see _intervals)
+    play: float | None = None  # a law with memory's second parameter (a moving rest's play)
 
     @property
     def kind(self) -> EffectKind:
@@ -164,6 +167,7 @@ class EffectEvidence:
             "note": self.note,
             "resolved": bool(self.resolved),
             "interval": None if self.interval is None else self.interval.to_json(),
+            **({} if self.play is None else {self.kind.second_parameter: float(self.play)}),
         }
 
 
@@ -196,7 +200,12 @@ class ErrorSummary:
 def _as_effects(evidence: Sequence[EffectEvidence]) -> list[Effect]:
     """Fitted effects in :mod:`furuta_gym.effects` vocabulary, a spring's rest merged in."""
     assert all(e.coefficient is not None for e in evidence)  # only fitted effects come here
-    return merge_spring_rests([Effect(e.name, e.joint, float(e.coefficient or 0.0)) for e in evidence])
+    return merge_spring_rests(
+        [
+            Effect(e.name, e.joint, float(e.coefficient or 0.0), **({} if e.play is None else {"play": e.play}))
+            for e in evidence
+        ]
+    )
 
 
 @dataclasses.dataclass
@@ -231,6 +240,8 @@ class DiagnosisResult:
     _test_segments: list = dataclasses.field(default_factory=list, repr=False)
     # the fitting context, kept only until a prediction-first finish has used it
     _fitter: object = dataclasses.field(default=None, repr=False, compare=False)
+    # Method step 11: what a joint's rests and the two cable laws' fits said (issue 64)
+    rotor_laws: list = dataclasses.field(default_factory=list)
 
     @property
     def delay_after(self) -> float:
@@ -260,10 +271,11 @@ class DiagnosisResult:
 
     @property
     def model_after(self):
-        """The declared model plus the found memoryless effects, as ``WithEffects``."""
+        """The declared model plus the found memoryless effects, as ``WithEffects`` (a cable with
+        memory lives in the plant: :meth:`plant`)."""
         base_theta = np.array(self.theta_after, dtype=float)
         base_theta[len(self.layout.base) :] = 0.0
-        effects = [e for e in self.found if not e.kind.input_dynamics]
+        effects = [e for e in self.found if not e.kind.input_dynamics and not e.kind.has_memory]
         return WithEffects(self.layout.model(base_theta), effects)
 
     def plant(self, include_inconsistent: bool = False, prediction_first: bool = False) -> Plant:
@@ -325,6 +337,7 @@ class DiagnosisResult:
             "settings": dataclasses.asdict(self.settings),
             "plant": None if self.layout.learned is not None else self.plant().to_json(),
             "prediction_finish": None if self.prediction is None else self.prediction.to_json(),
+            **({"rotor_laws": [r.to_json(self.layout) for r in self.rotor_laws]} if self.rotor_laws else {}),
         }
 
     def table(self) -> str:
@@ -1082,6 +1095,127 @@ def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBoun
     return th, f"found from rests: {seen}; breakaway at least {th[i] + th[j]:.3g}"
 
 
+# ----------------------------------------------------------------------------- the cable laws (issue 64)
+
+
+def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
+    """(spring, rests) of each joint where the two cable laws are tried (Method step 11): not loaded
+    by gravity (there gravity sets the rest), encoder-quantised, with a spring a law with memory
+    generalises and dry friction in the library, the spring not added and vetoed for predicting
+    worse, or removing ``inconsistent_gain`` of the held-out residual, or (a log without input,
+    whose rests no input holds) its rests naming a law (:func:`rest_drift`, read through a
+    one-count flicker), the spring added or not."""
+    gravity = system_definition(fx.spec.name).lumped.gravity_joints
+    out, comparer = [], None
+    for c in library:
+        friction = [d for d in library if d.joint == c.joint and d.kind.is_dry_friction]
+        if not (c.kind.absorbs_constant_force and _laws.memory_law_for(c.kind)) or len(friction) < 2:
+            continue
+        ev = evidence.get(c.key)
+        if (
+            c.joint in gravity
+            or c.joint not in fx.resolution
+            or (ev is not None and not ev.significant and ev.status in ("absorbed", "not identifiable", "equivalent"))
+        ):
+            continue
+        rests = rest_drift(trajs, fx.spec.name, c.joint, flicker=1, count=fx.resolution[c.joint])
+        named = not forced and rests.verdict in _laws.LAWS  # a spring added too may be the wrong law
+        if c in accepted and not named:
+            continue
+        if not (named or (ev is not None and ev.status == "not confirmed")):
+            comparer = comparer or fx.comparer()
+            if comparer.compare(accepted, [c]).improvement < fx.settings.inconsistent_gain:
+                continue
+        out.append((c, rests))
+    return out
+
+
+def _reported(fx: _Fitter, theta, accepted, dyn, ordered, after: ErrorSummary, cable, test_after):
+    """(held-out errors after, intervals, their method): as fitted, or with a kept cable with
+    memory (its evidence put first), whose errors are predicted with its moving neutral and whose
+    fit has no intervals (their criterion has no such cable in it)."""
+    if cable is None:
+        return (after, *_reported_intervals(fx, theta, accepted, dyn, ordered))
+    ordered.insert(0, cable[2])
+    fx.notes.append(f"{cable[2].name}:{cable[2].joint}: fitted with a neutral that moves; no intervals reported")
+    if test_after is not None:
+        fx.notes.append("the test logs' errors after are of the model without the cable's moving neutral")
+    after = _with_cable(fx, after, cable, theta, fx.held_segs, fx.held_prob)
+    none: dict[str, Interval | None] = {b: None for b in fx.layout.base}
+    return after, none, None
+
+
+def _cable_owned(c: Candidate, joint: str) -> bool:
+    """Whether the cable laws refit ``c``: a spring, constant force or dry friction of ``joint``."""
+    return c.joint == joint and (c.kind.in_potential or c.kind.is_constant_force or c.kind.is_dry_friction)
+
+
+def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, forced):
+    """Method step 11 (:mod:`._rotor_laws`): on each joint of :func:`_cable_law_joints`, the
+    moving rest and the large breakaway fitted by prediction and told apart; the law the data
+    support (or the better of two that cannot be told apart) replaces the joint's spring and dry
+    friction. Returns (accepted, θ, the joints' reports, (context, cable, its evidence) of a cable
+    with memory kept, or None)."""
+    s, reports, kept_cable = fx.settings, [], None
+    rule = _laws.Rule(s.min_improvement, s.z_threshold, s.veto_t, rests_count=not forced)
+    for spring, rests in _cable_law_joints(fx, trajs, library, accepted, evidence, forced):
+        stays = [a for a in accepted if not _cable_owned(a, spring.joint)]
+        ctx = _laws.Context(fx, spring.joint, trajs, dyn, stays, max(1, s.start_iterations))
+        stiffness = float(fx.fit_ee(accepted + [spring])[0][fx.layout.index(spring.key)])
+        held = _rest_bound(fx, theta, dyn, spring.joint).held
+        fits = _laws.fit_laws(ctx, theta, stiffness, held, s.oe_max_nfev)
+        verdict, reason, kept, h2h = _laws.verdict(fits, rests, ctx.win_val.q, rule)
+        fx.notes.append(f"{spring.joint}: the cable laws (Method step 11): {verdict}: {reason}")
+        reports.append(_laws.RotorLaw(spring.joint, verdict, reason, rests, fits, kept, h2h))
+        if kept is None:
+            continue
+        f = fits[kept]
+        accepted, theta = ctx.others + f.effects, f.theta
+        why = f"the {kept} law (Method step 11: {verdict})"
+        if spring.key in evidence and evidence[spring.key].status == "not confirmed":
+            why += f"; it fixed {spring.key}, vetoed for predicting worse with the joint's friction as it was"
+            fx.notes.append(f"{spring.key}: vetoed, then fixed by the {kept} law (Method step 11)")
+        for c in f.effects:
+            evidence[c.key] = EffectEvidence(
+                c.name, c.joint, None, c.unit(fx.spec), True, f.evidence.improvement, f.evidence.z, "selected", why
+            )
+        if f.cable[0]:
+            kind = _laws.memory_law_for(spring.kind)
+            assert kind is not None
+            cable = EffectEvidence(
+                kind.name,
+                spring.joint,
+                f.cable[0],
+                spring.unit(fx.spec),
+                True,
+                f.evidence.improvement,
+                f.evidence.z,
+                "selected",
+                why,
+                play=f.cable[1],
+            )
+            kept_cable = (ctx, f.cable, cable)
+        else:
+            free = free_columns(fx.layout, accepted, fx.fixed_idx)
+            fx.record(theta, FitOrigin("output_error", theta, free, dyn, ctx.start_iterations))
+    return accepted, theta, reports, kept_cable
+
+
+def _with_cable(fx: _Fitter, summary: ErrorSummary, kept_cable, theta, segs, prob) -> ErrorSummary:
+    """``summary`` of ``segs`` with a kept cable with memory in the predictions and the residual."""
+    ctx, cable, _ = kept_cable
+    per, comb = _laws.window_errors(ctx, theta, cable, segs)
+    r = _laws.residual(ctx, theta, cable, prob)
+    names = fx.spec.joint_names
+    return dataclasses.replace(
+        summary,
+        trajectory_rmse=comb,
+        trajectory_rmse_per_joint={j: float(v) for j, v in zip(names, per)},
+        residual_rms=float(np.sqrt(np.mean(r**2))),
+        residual_rms_per_joint={j: float(v) for j, v in zip(names, np.sqrt(np.mean(r**2, axis=0)))},
+    )
+
+
 def _anchor(spec, layout, fixed, forced, notes):
     """The fixed lumped parameters (the scale anchor; with free data, the gain too)."""
     if layout.learned is not None:
@@ -1516,11 +1650,12 @@ def _diagnose_once(
     accepted, th_after, dyn, vetoed = _confirm(fx, steps, th_before, evidence)
     accepted, th_after = _stiction_by_prediction(fx, library, accepted, th_after, dyn, evidence)
     accepted, th_after = _vetoed_with_stiction(fx, library, vetoed, accepted, th_after, dyn, evidence)
+    accepted, th_after, cable_laws, cable = _cable_laws(fx, trajs, library, accepted, th_after, dyn, evidence, forced)
     after = fx.errors(th_after, fx.held_segs, fx.held_prob) if accepted else before
     test_after = fx.test_errors(th_after) if accepted else test_before
     ordered = _finish_evidence(fx, library, accepted, th_after, dyn, evidence)
     _mark_unresolved(ordered, fx.resolution, trajs[0].dt, notes)
-    intervals, interval_method = _reported_intervals(fx, th_after, accepted, dyn, ordered)
+    after, intervals, interval_method = _reported(fx, th_after, accepted, dyn, ordered, after, cable, test_after)
     if not accepted:
         notes.append("no effect is significant on held-out data: none added")
 
@@ -1547,4 +1682,5 @@ def _diagnose_once(
         _segments=segs,
         _test_segments=test_segs,
         _fitter=fx if keep_fitter else None,
+        rotor_laws=cable_laws,
     )

@@ -47,6 +47,10 @@ def format_table(res) -> str:
     for e in res.effects:
         if e.status == "inconsistent":  # never just "none": say where it helps and where it hurts
             lines.append(f"-> {e.name}:{e.joint} {e.note}")
+        if e.significant and e.play is not None:
+            lines.append(f"-> {e.name}:{e.joint} {e.kind.second_parameter} {e.play:.3g}")
+    for law in res.rotor_laws:  # Method step 11: which law of the joint's cable the data support
+        lines.append(f"-> {law.joint}'s cable: {law.verdict}: {law.reason}")
     lines.append("")
     lines += _error_rows(
         f"held-out errors ({res.error_before.n_windows} open-loop windows of {res.error_before.window_seconds} s)",
