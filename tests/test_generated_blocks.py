@@ -2,6 +2,7 @@
 sections): a check compares and never writes, and fails on a block that differs from its results."""
 
 import importlib.util
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -60,3 +61,28 @@ def test_diagnosis_speed_section_matches_its_results():
         cwd=ROOT / "bench",
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_head_to_head_ablation_table_matches_its_results():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "studies" / "head_to_head_ablation_table.py"), "--check"],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_head_to_head_ablation_prose_matches_its_results():
+    """docs/diagnose.md says no ablation of the prediction-first refit clears the diagnosis' rule
+    for a gain on the fit runs' held-out windows, and that the friction law's is the best refit."""
+    doc = json.loads((ROOT / "results" / "head_to_head" / "ablation.json").read_text())
+    variants = doc["variants"]
+    assert not any(v.get("passes_rule") for v in variants.values())
+    single = {k: v for k, v in variants.items() if k not in ("current", "j1b_20ms") and not k.startswith("sysid")}
+    best = min(single, key=lambda k: single[k]["heldout_rmse"])
+    assert variants[best]["per_fold"][0]["train_windows"] > 0 and best in (
+        "karnopp_10ms",
+        "karnopp_20ms",
+        "mujoco_friction",
+    )
+    assert variants["tanh"]["heldout_rmse"] > variants["current"]["heldout_rmse"]

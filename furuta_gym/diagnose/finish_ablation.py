@@ -1,0 +1,290 @@
+"""Ablations of the prediction-first finish on the fit logs' own folds (issue 66).
+
+The finish (:mod:`._finish`) refits the diagnosed model by output error on the fit segments'
+windows and judges it on the held-out ones. To ask what a change of its recipe is worth without
+touching any test data, the diagnosis' segments are split into folds as the diagnosis splits them
+(every third segment of a log; fold 2 is its held-out set), and a variant of the refit is fitted
+on the other folds and scored on each fold in turn (:func:`run_variant`). A variant changes one
+thing: the dry-friction law of the predictor (``friction_law``), the input delay refitted with the
+rest, J1b freed to the rigid-body boundary, the refit's data (one fold), its evaluations or its
+start. ``studies/head_to_head_ablation.py`` runs them on the head-to-head's fit runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..lagrangian import forward_dynamics, forward_dynamics_with_dry_friction, solve_mass_matrix
+from ..simulate import rollout_zoh
+from ..systems import get_spec
+from . import _finish, _fit
+from . import _trace as _trace_mod
+from ._diagnose import DiagnosisSettings, diagnose
+from ._fit import InputDynamics
+from ._library import Candidate
+
+__all__ = ["Variant", "diagnose_with_context", "fold_of", "friction_law", "refit_start", "run_variant", "summarise"]
+
+FOLDS = 3
+#: the delay grid around the refit's value (s), and the margin kept off a body boundary
+DELAY_STEPS = np.array([-0.5e-3, -0.25e-3, 0.25e-3, 0.5e-3])
+BOUNDARY_MARGIN = 0.01
+RULE = DiagnosisSettings()  # its rule for a gain judges a variant against the current finish
+
+
+@dataclasses.dataclass(frozen=True)
+class Variant:
+    name: str
+    label: str
+    law: tuple[str, float] | None = None  # ("karnopp", relaxation s) or ("tanh", ε rad/s); None: the diagnosis'
+    refit_delay: bool = False
+    free_j1b: bool = False
+    one_fold: bool = False  # refit on one fold (the next one) instead of two
+    max_nfev: int | None = None  # the refit's output-error evaluations (None: the finish's 15)
+    # or "nominal" (the datasheet's lumped values) or "given" (``given(context, start)`` -> (θ, input dynamics))
+    start: str = "diagnosis"
+    refit: bool = True  # False: the start itself scored (e.g. another tool's fit in this predictor)
+
+
+def diagnose_with_context(data, system: str, **kwargs):
+    """``diagnose(data, system, finish="prediction", **kwargs)`` and the finish's fitting context
+    (the diagnosis' fitter: segments, layout, fixed parameters), which the diagnosis drops once it
+    has finished: (result, context, wall seconds). The finish is wrapped while it runs, so
+    whatever the diagnosis does before it is the diagnosis as shipped (wrapped rather than given a
+    hook: the diagnosis keeps no option for this; one ablation at a time, not thread-safe)."""
+    captured = {}
+    original = _finish.prediction_finish
+
+    def capture(fx, result):
+        captured.update(fx=fx)
+        return original(fx, result)
+
+    _finish.prediction_finish = capture
+    try:
+        t0 = time.perf_counter()
+        res = diagnose(data, system, finish="prediction", **kwargs)
+        wall = time.perf_counter() - t0
+    finally:
+        _finish.prediction_finish = original
+    return res, captured["fx"], wall
+
+
+def fold_of(segment) -> int:
+    """A segment's fold: its index on its log (the ``[k]`` of its name) modulo 3, as the
+    diagnosis holds out every third segment (fold 2 is its held-out set)."""
+    return int(segment.name.rsplit("[", 1)[1].rstrip("]")) % FOLDS
+
+
+#: MuJoCo's friction loss with its default solver parameters: the reference acceleration −b·q̇,
+#: b = 2 / (d_max·timeconst) (solreffriction 0.02 s, solimp d_max 0.95), and impedance d = 0.9
+#: (solimp d_0 at zero violation): the constraint supplies only d of the force that would reach
+#: the reference, so a loaded joint creeps instead of sticking
+MUJOCO_RELAXATION, MUJOCO_IMPEDANCE = 0.95 * 0.02 / 2, 0.9
+
+
+def soft_friction_dynamics(model, limit, q, qd, u):
+    """q̈ with MuJoCo's soft friction loss: the Karnopp law of
+    :func:`~furuta_gym.lagrangian.forward_dynamics_with_dry_friction` (Gauss–Seidel over the
+    joints) with its holding force scaled by the impedance and its relaxation MuJoCo's."""
+    M = model.mass_matrix(q)
+    free = forward_dynamics(model, q, qd, u)
+    n = free.shape[-1]
+    response = jnp.stack([solve_mass_matrix(M, e) for e in jnp.eye(n, dtype=free.dtype)], axis=1)
+    friction = jnp.zeros_like(free)
+    for _ in range(2):
+        for j in range(n):
+            others = free[j] + response[j] @ friction - response[j, j] * friction[j]
+            holding = MUJOCO_IMPEDANCE * (-qd[j] / MUJOCO_RELAXATION - others) / response[j, j]
+            friction = friction.at[j].set(jnp.clip(holding, -limit[j], limit[j]))
+    return free + response @ friction
+
+
+def _law_field(layout, theta, law, n: int):
+    """ẋ(x, u) of θ with the library's dry friction under ``law``."""
+    model = layout.model(theta, dry_friction=False)
+    kind, value = law
+
+    def field(x, u):
+        q, qd = x[:n], x[n:]
+        limit = layout.dry_friction_limit(theta, qd)
+        if kind == "karnopp":  # the diagnosis' stick-slip, relaxing over ``value`` s, not one substep
+            return jnp.concatenate([qd, forward_dynamics_with_dry_friction(model, limit, q, qd, u, value)])
+        if kind == "mujoco":
+            return jnp.concatenate([qd, soft_friction_dynamics(model, limit, q, qd, u)])
+        smooth = solve_mass_matrix(model.mass_matrix(q), -limit * jnp.tanh(qd / value))
+        return jnp.concatenate([qd, forward_dynamics(model, q, qd, u) + smooth])
+
+    return model, field
+
+
+@contextlib.contextmanager
+def friction_law(law):
+    """The diagnosis' window predictor (and so its output-error fit) under another dry-friction
+    law while inside; ``None`` leaves it alone. The predictor is swapped for the while, since the
+    finish's output-error fit takes none as an argument (one ablation at a time)."""
+    if law is None:
+        yield
+        return
+    original = _fit._predictor
+
+    def predictor(layout, dt, length, substeps, start_iterations=0):
+        assert start_iterations == 0, "the finish refits with start_iterations 0"
+        n = get_spec(layout.system).n_dof
+
+        def one(theta, x, u, q_measured):
+            model, field = _law_field(layout, theta, law, n)
+            return rollout_zoh(model, x, u, dt, substeps, field)[1:, :n]
+
+        key = f"predict-{law[0]}-{law[1]}"
+        return _fit._compiled(key, layout, dt, length, substeps, 0, build=lambda: jax.jit(jax.vmap(one)))
+
+    _fit._predictor = predictor
+    try:
+        yield
+    finally:
+        _fit._predictor = original
+
+
+def _windows(segments, length: int, dyn) -> _fit.Windows:
+    """The segments' windows (the diagnosis cut every segment to hold at least one)."""
+    win = _fit.make_windows(segments, length, dyn)
+    assert win is not None, "every segment holds a window"
+    return win
+
+
+def refit_start(fx, res):
+    """The finish's start: the diagnosed θ with its inconsistent effects and every joint's
+    Coulomb friction at their tested values, the candidates it frees and its input dynamics."""
+    dyn, extra_dynamics = _finish._refit_dynamics(res)
+    found = [Candidate(e.name, e.joint) for e in res.significant] + extra_dynamics
+    extra = _finish._extra_candidates(fx.layout, res)
+    start = np.array(res.theta_after, dtype=float)
+    for c, coefficient in extra:
+        start[fx.layout.index(c.key)] = coefficient
+    return start, found + [c for c, _ in extra], dyn
+
+
+def refit_delay(fx, theta, chosen, dyn, train):
+    """The delay on a grid about ``dyn`` by the training windows' error at θ, then θ refitted at
+    the best one (the finish holds the delay; here it moves with the rest)."""
+    if dyn.kind == "none":
+        return theta, chosen, dyn
+    grid = [dyn] + [InputDynamics(dyn.kind, dyn.seconds + s) for s in DELAY_STEPS]
+    sums = [_fit.window_square_sums(fx.layout, theta, _windows(train, fx.L, d), fx.substeps).sum() for d in grid]
+    best = grid[int(np.argmin(sums))]
+    if best == dyn:
+        return theta, chosen, dyn
+    theta, chosen, _, _ = _finish._refit(fx, theta, chosen, best, _windows(train, fx.L, best))
+    return theta, chosen, best
+
+
+def at_body_boundary(fx, res, theta) -> float | None:
+    """The J1b nearest a fitted one that rigid bodies have (J1 − Jc²/J1b > 0, J2 − J1b > point
+    mass), ``BOUNDARY_MARGIN`` inside; None when the fit's values already have rigid bodies."""
+    if _finish._rigid_failure(res.system, theta, fx.layout) is None:
+        return None
+    b = {name: float(theta[i]) for i, name in enumerate(fx.layout.base)}
+    lowest = b["Jc"] ** 2 / b["J1"] * (1 + BOUNDARY_MARGIN)
+    return float(np.clip(b["J1b"], lowest, max(lowest, b["J2"] * (1 - BOUNDARY_MARGIN) - 1e-9)))
+
+
+def refit_j1b(fx, res, start, chosen, dyn, win):
+    """The refit with J1b free; held at the body boundary it crossed, and the rest refitted."""
+    j = fx.layout.index("J1b")
+    fixed = set(fx.fixed_idx)
+    fx.fixed_idx = fixed - {j}
+    try:
+        theta, chosen, _, _ = _finish._refit(fx, start, chosen, dyn, win)
+    finally:
+        fx.fixed_idx = fixed
+    boundary = at_body_boundary(fx, res, theta)
+    if boundary is not None:
+        theta = np.array(theta, dtype=float)
+        theta[j] = boundary
+        theta, chosen, _, _ = _finish._refit(fx, theta, chosen, dyn, win)
+    return theta, chosen
+
+
+@contextlib.contextmanager
+def _restoring(fx, settings):
+    try:
+        yield
+    finally:
+        fx.settings = settings
+
+
+def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
+    """Refit on the ``train`` segments as the variant says; per-window squared errors on ``held``."""
+    start, chosen, dyn = refit_start(fx, res)
+    if variant.start == "given":
+        assert given is not None, f"{variant.name}: a given start needs ``given``"
+        start, dyn = given(fx, start)
+    elif variant.start == "nominal":
+        nb = len(fx.layout.base)
+        start[:nb] = np.where([i in fx.fixed_idx for i in range(nb)], start[:nb], fx.layout.nominal()[:nb])
+    win = _windows(train, fx.L, dyn)
+    settings = fx.settings
+    if variant.max_nfev is not None:
+        fx.settings = dataclasses.replace(settings, oe_max_nfev=variant.max_nfev)
+    with friction_law(variant.law), _restoring(fx, settings):
+        if not variant.refit:
+            theta = start
+        elif variant.free_j1b:
+            theta, chosen = refit_j1b(fx, res, start, chosen, dyn, win)
+        else:
+            theta, chosen, _, _ = _finish._refit(fx, start, chosen, dyn, win)
+        if variant.refit_delay:
+            theta, chosen, dyn = refit_delay(fx, theta, chosen, dyn, train)
+        sums = _fit.window_square_sums(fx.layout, theta, _windows(held, fx.L, dyn), fx.substeps)
+    return {
+        "sums": sums,
+        "theta": {name: float(theta[i]) for i, name in enumerate(fx.layout.base)},
+        "effects": {c.key: float(theta[fx.layout.index(c.key)]) for c in chosen if not c.kind.input_dynamics},
+        "delay": dyn.seconds,
+        "input_dynamics": dyn.kind,
+        "train_windows": int(win.x0.shape[0]) if variant.refit else 0,
+    }
+
+
+def run_variant(fx, res, variant: Variant, given=None) -> dict:
+    """Every fold held out in turn (refit on the other two, or on the next one only)."""
+    folds = [[s for s in fx.segs if fold_of(s) == k] for k in range(FOLDS)]
+    assert list(map(id, folds[FOLDS - 1])) == list(map(id, fx.held_segs)), "fold 2: the diagnosis' held-out set"
+    per_fold, t0 = [], time.perf_counter()
+    for k in range(FOLDS):
+        others = [(k + 1) % FOLDS] if variant.one_fold else [m for m in range(FOLDS) if m != k]
+        train = [s for m in others for s in folds[m]]
+        per_fold.append(fit_and_score(fx, res, variant, train, folds[k], given))
+    return {
+        "name": variant.name,
+        "label": variant.label,
+        "per_fold": [{**{k: v for k, v in f.items() if k != "sums"}, "sums": f["sums"].tolist()} for f in per_fold],
+        "wall_seconds": round(time.perf_counter() - t0, 1),
+    }
+
+
+def rmse(sums, length: int, n: int) -> float:
+    """Position RMSE over every joint from per-window sums of squares."""
+    sums = np.asarray(sums, dtype=float)
+    return float(np.sqrt(sums.sum() / (sums.size * length * n)))
+
+
+def summarise(doc: dict, length: int, n: int) -> None:
+    """Pooled held-out RMSE, fold 2's (the finish's own held-out windows) and the change against
+    the current finish, with the diagnosis' rule for a gain (relative drop of the sum of squares,
+    t of per-window log ratios)."""
+    pooled = {v: np.concatenate([f["sums"] for f in r["per_fold"]]) for v, r in doc["variants"].items()}
+    base = pooled.get("current")
+    for v, r in doc["variants"].items():
+        r["heldout_rmse"] = rmse(pooled[v], length, n)
+        r["fold_rmse"] = [rmse(f["sums"], length, n) for f in r["per_fold"]]
+        if base is not None and v != "current":
+            ev = _trace_mod.Evidence.of_sums(base, pooled[v])
+            r["vs_current"] = {"improvement": float(ev.improvement), "z_score": float(ev.z)}
+            r["passes_rule"] = bool(ev.passes(RULE.min_improvement, RULE.z_threshold))
