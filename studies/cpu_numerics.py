@@ -15,6 +15,7 @@ the ``cpu-numerics`` block of docs/conventions.md.
     python studies/cpu_numerics.py --check     # exit 1 if the docs block is stale
     python studies/cpu_numerics.py --render    # rewrite the docs block from the committed results
     python studies/cpu_numerics.py --reproduce-quick   # reproduce --quick, pinned, on two machines (≈ 35 min)
+    python studies/cpu_numerics.py --demo      # furuta-gym demo (seed 0), pinned, on two machines (≈ 8 min)
     python studies/cpu_numerics.py --one OUT   # (child) one training in this process, saved to OUT
 """
 
@@ -226,6 +227,60 @@ def run_reproduce_quick() -> dict:
     }
 
 
+DEMO = ROOT / "results" / "cpu_numerics" / "demo.json"
+DEMO_SEED0 = ROOT / "results" / "demo_seeds" / "seed0.json"
+# what the demo computes (its summary without where it wrote, how long it took, which numerics)
+DEMO_PARTS = ("tracking", "physics", "control", "table")
+
+
+def _demo_digest(summary: dict) -> str:
+    parts = {k: summary[k] for k in DEMO_PARTS}
+    parts["diagnose"] = {k: v for k, v in summary["diagnose"].items() if k != "log"}
+    return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def run_demo() -> dict:
+    """``furuta-gym demo`` at seed 0 (the README's command, no video) as each pinned setting of
+    :data:`QUICK_SETTINGS`: the digest of what its summary reports, beside the committed
+    demo-seeds row's (results/demo_seeds/seed0.json, made on this machine)."""
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, (label, cap, cores, blas, numpy_off) in enumerate(QUICK_SETTINGS):
+            out = Path(tmp) / f"demo{i}"
+            cmd = [sys.executable, "-m", "furuta_gym", "demo", "--no-progress", "--no-video", "--seed", "0"]
+            proc = subprocess.run(
+                [*cmd, "--out", str(out)],
+                env=_environment(True, cap, blas, numpy_off),
+                capture_output=True,
+                text=True,
+                timeout=3600,
+                preexec_fn=_affinity(cores),
+            )
+            if proc.returncode != 0:
+                raise RuntimeError(proc.stderr[-3000:])
+            summary = json.loads((out / "summary.json").read_text())
+            rows.append({"label": label, "digest": _demo_digest(summary), "table": summary["table"]})
+            print(label, rows[-1]["digest"], flush=True)
+    return {
+        "machine": machine(),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "demo_seeds_row": _demo_digest(json.loads(DEMO_SEED0.read_text())),
+        "rows": rows,
+    }
+
+
+def demo_line(demo: dict) -> str:
+    a, b = demo["rows"]
+    same = a["digest"] == b["digest"]
+    committed = sum(r["digest"] == demo["demo_seeds_row"] for r in demo["rows"])
+    return (
+        f"`furuta-gym demo` (seed 0, no video), pinned, on {a['label']} and on an emulated {b['label']} "
+        f"({demo['date']}): its summary's digests `{a['digest']}` and `{b['digest']}` "
+        f"({'the same bits' if same else '**different**'}); {committed} of 2 the committed demo-seeds seed-0 row's "
+        f"(`{demo['demo_seeds_row']}`, docs/learning.md)."
+    )
+
+
 def quick_line(quick: dict) -> str:
     a, b = quick["rows"]
     line = (
@@ -257,9 +312,11 @@ def block(res: dict) -> str:
         )
     if QUICK.is_file():
         lines += ["", quick_line(json.loads(QUICK.read_text()))]
+    if DEMO.is_file():
+        lines += ["", demo_line(json.loads(DEMO.read_text()))]
     lines += [
         "",
-        "Made by `python studies/cpu_numerics.py` (results/cpu_numerics/; `--reproduce-quick` the line above); "
+        "Made by `python studies/cpu_numerics.py` (results/cpu_numerics/; `--reproduce-quick` and `--demo` the lines above); "
         "the CI test is tests/test_numerics.py.",
     ]
     return "\n".join(lines)
@@ -270,6 +327,7 @@ def main() -> int:
     ap.add_argument("--check", action="store_true", help="compare the docs block only; exit 1 if stale")
     ap.add_argument("--one", type=Path, help="(child) run one training here and save its parameters")
     ap.add_argument("--reproduce-quick", action="store_true", help="run reproduce --quick pinned on two machines")
+    ap.add_argument("--demo", action="store_true", help="run furuta-gym demo pinned on two machines")
     ap.add_argument("--render", action="store_true", help="rewrite the docs block from the committed results")
     args = ap.parse_args()
     if args.one is not None:
@@ -277,6 +335,8 @@ def main() -> int:
         return 0
     if args.reproduce_quick:
         QUICK.write_text(json.dumps(run_reproduce_quick(), indent=2) + "\n")
+    elif args.demo:
+        DEMO.write_text(json.dumps(run_demo(), indent=2) + "\n")
     elif not (args.check or args.render):
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         RESULTS.write_text(json.dumps(run_all(), indent=2) + "\n")
