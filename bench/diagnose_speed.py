@@ -109,7 +109,7 @@ def largest_difference(a, b, path: str = "") -> tuple[float, list[str]]:
     if isinstance(a, dict) and isinstance(b, dict) and set(a) == set(b):
         parts = [largest_difference(a[k], b[k], f"{path}/{k}") for k in a]
     elif isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
-        parts = [largest_difference(x, y, f"{path}[{i}]") for i, (x, y) in enumerate(zip(a, b))]
+        parts = [largest_difference(x, y, f"{path}[{i}]") for i, (x, y) in enumerate(zip(a, b, strict=True))]
     elif isinstance(a, float) and isinstance(b, float):
         return abs(a - b) / max(abs(a), abs(b), 1e-300), []
     else:

@@ -383,7 +383,7 @@ def machine() -> str:
     return f"{platform.node()} {platform.processor() or platform.machine()}"
 
 
-def main() -> None:
+def _arguments() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="results/head_to_head")
     ap.add_argument("--rows", default=",".join(ROWS), help=f"comma list of rows to run, of {list(ROWS)}")
@@ -396,17 +396,16 @@ def main() -> None:
         "with its inconsistent effects)",
     )
     args = ap.parse_args()
-    rows = args.rows.split(",")
-    if unknown := [r for r in rows if r not in ROWS]:
+    args.rows = args.rows.split(",")
+    if unknown := [r for r in args.rows if r not in ROWS]:
         ap.error(f"--rows: unknown {unknown}; expected some of {list(ROWS)}")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    fit, test = load_runs(FIT_RUNS), load_runs(TEST_RUNS)
-    if args.rescore_only:
-        return rescore(out, test)
-    stamp = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    return args
 
-    def write(d: dict) -> None:  # as each row is made: the prediction-first row reads the diagnosed one
+
+def _run_rows(args, rows: list[str], fit, test, out: Path, stamp: dict) -> None:
+    """Each requested row, written as it is made: the prediction-first row reads the diagnosed one."""
+
+    def write(d: dict) -> None:
         (out / f"{d['name']}.json").write_text(json.dumps({**d, **stamp}, indent=1, default=float) + "\n")
         print(f"{d['label']:55s} position RMSE {d['position_rmse']:.5f} rad  wall {d['wall_seconds']} s", flush=True)
 
@@ -421,6 +420,17 @@ def main() -> None:
             write(diagnose_row(name, candidates, test))
     if "diagnosed_prediction" in rows:
         write(prediction_first_row(test, out / "diagnosed.json"))
+
+
+def main() -> None:
+    args = _arguments()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    fit, test = load_runs(FIT_RUNS), load_runs(TEST_RUNS)
+    if args.rescore_only:
+        return rescore(out, test)
+    stamp = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    _run_rows(args, args.rows, fit, test, out, stamp)
     summary = {
         "fit_runs": FIT_RUNS,
         "test_runs": TEST_RUNS,

@@ -27,7 +27,6 @@ furuta_gym.enable_x64()
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from diagnose_simulated import simulate  # noqa: E402
-
 from furuta_gym.data import Trajectory  # noqa: E402
 from furuta_gym.diagnose import DiagnosisSettings, layout_for, stop_excursions  # noqa: E402
 
@@ -58,10 +57,10 @@ def _log(excitation: str, case: str, seed: int, held_stop: float) -> dict:
         "stops": len(stops),
         "max_excursion": max((s.excursion for s in stops), default=0.0),
         "held": int(sum(held)),
-        "held_left_out": int(sum(h and o for h, o in zip(held, out))),
-        "moving_left_out": int(sum(o and not h for h, o in zip(held, out))),
-        "held_samples": int(sum(s.samples for s, h in zip(stops, held) if h)),
-        "held_samples_left_out": int(sum(s.samples for s, h, o in zip(stops, held, out) if h and o)),
+        "held_left_out": int(sum(h and o for h, o in zip(held, out, strict=True))),
+        "moving_left_out": int(sum(o and not h for h, o in zip(held, out, strict=True))),
+        "held_samples": int(sum(s.samples for s, h in zip(stops, held, strict=True) if h)),
+        "held_samples_left_out": int(sum(s.samples for s, h, o in zip(stops, held, out, strict=True) if h and o)),
     }
 
 

@@ -35,8 +35,8 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
 from furuta_gym.cli.diagnose import UNSET, held_stop_counts  # noqa: E402
+from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
 from furuta_gym.diagnose import diagnose  # noqa: E402
 
 SETTINGS = dict(window=0.1, oe_max_windows=64)

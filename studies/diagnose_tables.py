@@ -467,47 +467,60 @@ def match_table(doc: dict, real: dict) -> str:
 
 
 def blocks() -> dict[str, str]:
-    sim, real = _load(SIM), _load(REAL)
-    out = {}
+    real = _load(REAL)
+    return {**_simulated_blocks(), **_real_blocks(real), **_single_file_blocks(real)}
+
+
+def _simulated_blocks() -> dict[str, str]:
+    """The simulated grids' tables, each from its results folder when it exists."""
+    sim, out = _load(SIM), {}
     if sim:
         out["diagnose-sim"] = sim_table(sim)
         if any(d["case"] in DRAWN for d in sim.values()):
             out["diagnose-sim-sticky"] = sticky_table(sim)
         if any(_outside_library(d["planted"]) for d in sim.values()):
             out["diagnose-sim-outside"] = outside_table(sim)
+    if uniform := _load(UNIFORM):
+        out["diagnose-sim-sticky-uniform"] = sticky_table(uniform)
+    if exact := _load(EXACT):
+        out["diagnose-sim-exact-angles"] = sim_table(exact)
+    if stop := _load(STOP):
+        out["diagnose-sim-stop-dwell"] = sim_table(stop) + "\n\nThe sticky sweeps:\n\n" + sticky_table(stop)
+    if held_off := _load(OFF):
+        out["diagnose-sim-held-stop-off"] = sim_table(held_off) + "\n\nThe sticky sweeps:\n\n" + sticky_table(held_off)
+    return out
+
+
+def _real_blocks(real: dict) -> dict[str, str]:
+    """The real runs' tables and README lines (the default study and its variants)."""
+    out = {}
     if real:
         out["diagnose-real"] = real_table(real) + "\n\nAcross the independent splits:\n\n" + agreement_table(real)
         out["diagnose-real-readme"] = readme_line(real)
     refs = _load(REAL / "reference")
     if refs and "split_runs01-05" in real:
         out["diagnose-real-reference"] = reference_table(real["split_runs01-05"], refs)
+    if real_stop := _load(REAL_STOP):
+        out["diagnose-real-stop-dwell"] = readme_line(real_stop)
+    if real_held_off := _load(REAL_OFF):
+        out["diagnose-real-held-stop-off"] = readme_line(real_held_off)
+    runs = REAL / "runs" / "per_run.json"
+    if runs.exists():
+        out["diagnose-real-runs"] = per_run_table(json.loads(runs.read_text()), real)
+    return out
+
+
+def _single_file_blocks(real: dict) -> dict[str, str]:
+    """The tables made from one JSON file each."""
+    out = {}
     if DRIFT.exists():
         out["diagnose-cable-drift"] = drift_table(json.loads(DRIFT.read_text()))
     if MATCH.exists():
         out["diagnose-closed-loop-match"] = match_table(json.loads(MATCH.read_text()), real)
     if RESTS.exists():
         out["diagnose-rest-bound"] = rest_bound_table(json.loads(RESTS.read_text()))
-    uniform = _load(UNIFORM)
-    if uniform:
-        out["diagnose-sim-sticky-uniform"] = sticky_table(uniform)
-    exact = _load(EXACT)
-    if exact:
-        out["diagnose-sim-exact-angles"] = sim_table(exact)
-    stop, real_stop = _load(STOP), _load(REAL_STOP)
-    if stop:
-        out["diagnose-sim-stop-dwell"] = sim_table(stop) + "\n\nThe sticky sweeps:\n\n" + sticky_table(stop)
-    if real_stop:
-        out["diagnose-real-stop-dwell"] = readme_line(real_stop)
-    held_off, real_held_off = _load(OFF), _load(REAL_OFF)
-    if held_off:
-        out["diagnose-sim-held-stop-off"] = sim_table(held_off) + "\n\nThe sticky sweeps:\n\n" + sticky_table(held_off)
-    if real_held_off:
-        out["diagnose-real-held-stop-off"] = readme_line(real_held_off)
     if HELD_CALIBRATION.exists():
         out["diagnose-held-stop-calibration"] = held_stop_table(json.loads(HELD_CALIBRATION.read_text()))
-    runs = REAL / "runs" / "per_run.json"
-    if runs.exists():
-        out["diagnose-real-runs"] = per_run_table(json.loads(runs.read_text()), real)
     return out
 
 

@@ -189,7 +189,6 @@ def in_sample(results: Path) -> dict:
     says whether the gap is there already on the data both fitted, no reading of runs 11–15."""
     import diagnose_head_to_head as h2h  # the head-to-head's scoring (its module imports MuJoCo's sysid helpers)
     import head_to_head_sysid as hsysid
-
     from furuta_gym.envs import Plant
     from furuta_gym.measured import prediction_windows
 
@@ -209,7 +208,7 @@ def in_sample(results: Path) -> dict:
         }
 
     fit = h2h.load_runs(FIT_RUNS)
-    return {**scores(fit), "per_run": {str(k): scores([tr]) for k, tr in zip(FIT_RUNS, fit)}}
+    return {**scores(fit), "per_run": {str(k): scores([tr]) for k, tr in zip(FIT_RUNS, fit, strict=True)}}
 
 
 def main() -> None:

@@ -225,15 +225,14 @@ def fit(trajs, window: float, every: int = 1, max_iters: int = 30, names=tuple(P
         "objective": objective,
         "rms_angle_residual": float(np.sqrt(np.mean(np.concatenate(r_star) ** 2))),
     }
-    return fitted, physical(fitted), dict(zip(fitted.keys(), (np.asarray(half) * units).tolist())), record
+    return fitted, physical(fitted), dict(zip(fitted.keys(), (np.asarray(half) * units).tolist(), strict=True)), record
 
 
 def predictor(params):
     """``(x0, u_ext, dt) -> states (W, L + 1, 4)`` of the identified MJCF (the fitted spec, MuJoCo's own
     rollout), the logged inputs delayed by the fitted delay."""
     import mujoco
-    from mujoco import rollout as mj_rollout
-    from mujoco import sysid
+    from mujoco import rollout as mj_rollout, sysid
 
     model = sysid.apply_param_modifiers(params, furuta_spec())
     delay = (

@@ -21,7 +21,6 @@ from pathlib import Path
 
 sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
 from _generated import block_main  # noqa: E402
-
 from furuta_gym.effects import EFFECT_KINDS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,8 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from furuta_gym.diagnose import diagnose, measured_like
-from furuta_gym.diagnose import _intervals
+from furuta_gym.diagnose import _intervals, diagnose, measured_like
 from furuta_gym.diagnose._intervals import (
     Interval,
     cluster_intervals,
@@ -128,7 +127,7 @@ def test_without_mujoco_sysid_the_intervals_are_the_same(monkeypatch):
         r = np.concatenate(residuals)
         with_sysid.append(cluster_intervals(J, r, np.arange(r.size) // 5, np.zeros(J.shape[1])))
     monkeypatch.setattr(_intervals, "_mujoco_calculate_intervals", lambda: None)
-    for (residuals, J), a in zip(_random_problems(), with_sysid):
+    for (residuals, J), a in zip(_random_problems(), with_sysid, strict=True):
         r = np.concatenate(residuals)
         b = cluster_intervals(J, r, np.arange(r.size) // 5, np.zeros(J.shape[1]))
         assert b.backend == "own"

@@ -63,7 +63,7 @@ def test_residual_series_after_is_smaller_on_the_test_logs(res):
     before = residual_series(res, res._test_segments, "before")
     after = residual_series(res, res._test_segments, "after")
     assert len(before) == len(after) == len(res._test_segments)
-    for (tb, rb), (ta, ra), seg in zip(before, after, res._test_segments):
+    for (tb, rb), (ta, ra), seg in zip(before, after, res._test_segments, strict=True):
         assert np.array_equal(tb, ta) and rb.shape == ra.shape == (tb.size, 2)
         assert seg.t[0] < tb[0] < tb[-1] < seg.t[-1]
         assert np.array_equal(np.isnan(rb), np.isnan(ra))  # rest intervals are the same for both
@@ -72,7 +72,7 @@ def test_residual_series_after_is_smaller_on_the_test_logs(res):
     assert rms(after, 0) < 0.5 * rms(before, 0)
     assert rms(after, 1) < 1.1 * rms(before, 1)
     # the result's own segments keep the regressors diagnose left in them
-    assert all(a is s.A for a, s in zip(kept, res._segments))
+    assert all(a is s.A for a, s in zip(kept, res._segments, strict=True))
     with pytest.raises(ValueError, match="before"):
         residual_series(res, res._test_segments, "later")
 

@@ -14,6 +14,8 @@ import furuta_gym
 from furuta_gym.data import Trajectory
 from furuta_gym.diagnose import (
     DiagnosisSettings,
+    _diagnose,
+    _fit,
     held_at_rest,
     layout_for,
     measured_like,
@@ -21,7 +23,6 @@ from furuta_gym.diagnose import (
     stop_excursions,
 )
 from furuta_gym.diagnose._diagnose import EffectEvidence, _mark_unresolved, sensor_resolution
-from furuta_gym.diagnose import _diagnose, _fit
 from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment
 from furuta_gym.diagnose._rests import rest_bound
 from furuta_gym.systems import get_spec
@@ -237,8 +238,7 @@ def test_held_stop_is_on_by_default_can_be_turned_off_and_is_checked():
 def test_held_stop_off_on_the_cli_reaches_diagnose(monkeypatch, tmp_path):
     """``--held-stop off`` passes ``held_stop=None`` on to ``diagnose``; no flag passes nothing, so
     the default (2 counts) holds."""
-    from furuta_gym.cli import build_parser
-    from furuta_gym.cli import diagnose as cli
+    from furuta_gym.cli import build_parser, diagnose as cli
 
     seen = []
 

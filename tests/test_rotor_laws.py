@@ -79,7 +79,7 @@ def test_a_hand_carrying_the_rotor_drags_the_cables_neutral_and_a_reset_forgets_
 
 def test_releases_start_at_rest_carried_half_a_radian_to_two_from_the_last_rest(releases):
     for _, log in releases["moving"] + releases["breakaway"]:
-        for before, tr in zip(log[:-1], log[1:]):
+        for before, tr in zip(log[:-1], log[1:], strict=True):
             step = abs(tr.q[0, 0] - before.q[-1, 0])
             assert 0.5 - 0.01 <= step <= 2.0 + 0.01 and abs(tr.q[0, 0]) <= 2.5
             assert np.all(tr.u == 0.0) and abs(tr.q[0, 1]) <= 0.03
@@ -101,7 +101,7 @@ def _hand_log(path, dt=0.002) -> list[Trajectory]:
     """One trajectory through the (angle, seconds) stops of ``path``: each held for its seconds,
     joined by 0.1 s ramps; encoder-quantised, u = 0."""
     q = [np.full(int(round(s / dt)), a) for a, s in path[:1]]
-    for (a0, _), (a1, s) in zip(path[:-1], path[1:]):
+    for (a0, _), (a1, s) in zip(path[:-1], path[1:], strict=True):
         q += [np.linspace(a0, a1, 50, endpoint=False), np.full(int(round(s / dt)), a1)]
     alpha = quantize_encoder(np.stack([np.concatenate(q), np.zeros(sum(map(len, q)))], 1))
     t = np.arange(len(alpha)) * dt

@@ -12,9 +12,8 @@ from ._drift import REST_LAWS, Rest, RestDrift, rest_drift
 from ._finish import PredictionFinish
 from ._fit import InputDynamics
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
+from ._report import write_figures as write_report_figures, write_json as write_report_json
 from ._rests import RestBound, Stop, held_at_rest, stop_excursions
-from ._report import write_figures as write_report_figures
-from ._report import write_json as write_report_json
 from ._synthetic import ClosedLoopBalancing, breakaway_rig, measured_like, moving_rest_rig, sticky_rig
 
 __all__ = [

@@ -32,10 +32,8 @@ from ..models import system_definition
 from ..models.checkpoint import load_model
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
-from . import _finish, _fit, _intervals, _rests
-from . import _rotor_laws as _laws
+from . import _finish, _fit, _intervals, _rests, _rotor_laws as _laws, _trace as _trace_mod
 from ._drift import rest_drift
-from . import _trace as _trace_mod
 from ._intervals import FitOrigin, Interval
 from ._library import (
     Candidate,
@@ -441,7 +439,7 @@ def _pieces(trajs, qds, settings: DiagnosisSettings):
         n_seg = max(1, (hi - lo) // seg_len)
         bounds = np.linspace(lo, hi, n_seg + 1).astype(int)
         for k in range(n_seg):
-            for j, n in zip(run, grid):
+            for j, n in zip(run, grid, strict=True):
                 tr, qd = trajs[j], qds[j]
                 a = max(bounds[k], n[0] + (trim if tr is not first else 0))
                 b = min(bounds[k + 1], n[-1] + 1 - (trim if tr is not last else 0))
@@ -686,9 +684,9 @@ class _Fitter:
         names = self.spec.joint_names
         return ErrorSummary(
             trajectory_rmse=comb,
-            trajectory_rmse_per_joint={j: float(v) for j, v in zip(names, per_q)},
+            trajectory_rmse_per_joint={j: float(v) for j, v in zip(names, per_q, strict=True)},
             residual_rms=float(np.sqrt(np.mean(r**2))),
-            residual_rms_per_joint={j: float(v) for j, v in zip(names, np.sqrt(np.mean(r**2, axis=0)))},
+            residual_rms_per_joint={j: float(v) for j, v in zip(names, np.sqrt(np.mean(r**2, axis=0)), strict=True)},
             window_seconds=self.settings.window,
             n_windows=int(win.x0.shape[0]),
         )
@@ -725,7 +723,7 @@ def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputD
         best = min(tried, key=lambda p: p[0].sum())
         # refine between the grid's neighbours of its best point
         res = minimize_scalar(
-            lambda x: sums(_fit.InputDynamics(kind, x)).sum(),
+            lambda x, kind=kind: sums(_fit.InputDynamics(kind, x)).sum(),
             method="bounded",
             bounds=(max(0.0, best[1] - 0.5 * dt), best[1] + 0.5 * dt),
             options={"xatol": 1e-5},
@@ -915,7 +913,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
                 f"{c.key}: tested by prediction given coulomb_friction:{c.joint}: ΔF {coef:.3g}, "
                 f"validation gain {ev.improvement:.1%}, t {ev.z:.1f}; not added"
             )
-            found = _stiction_from_rests(fx, base, c, bound, lambda th0: refit(th0, accepted)[0], dyn)
+            found = _stiction_from_rests(fx, base, c, bound, lambda th0, acc=accepted: refit(th0, acc)[0], dyn)
             if found is None:
                 continue
             fitted, (th, how) = (th, trial_pred), found
@@ -1210,9 +1208,9 @@ def _with_cable(fx: _Fitter, summary: ErrorSummary, kept_cable, theta, segs, pro
     return dataclasses.replace(
         summary,
         trajectory_rmse=comb,
-        trajectory_rmse_per_joint={j: float(v) for j, v in zip(names, per)},
+        trajectory_rmse_per_joint={j: float(v) for j, v in zip(names, per, strict=True)},
         residual_rms=float(np.sqrt(np.mean(r**2))),
-        residual_rms_per_joint={j: float(v) for j, v in zip(names, np.sqrt(np.mean(r**2, axis=0)))},
+        residual_rms_per_joint={j: float(v) for j, v in zip(names, np.sqrt(np.mean(r**2, axis=0)), strict=True)},
     )
 
 
@@ -1667,7 +1665,7 @@ def _diagnose_once(
         error_after=after,
         parameters_before=params(th_before),
         parameters_after=params(th_after),
-        parameter_units=dict(zip(layout.base, layout.base_units)),
+        parameter_units=dict(zip(layout.base, layout.base_units, strict=True)),
         fixed=dict(fixed),
         notes=notes,
         settings=settings,

@@ -28,8 +28,8 @@ from typing import Sequence
 import numpy as np
 
 from ..data import Trajectory
-from ..systems import get_spec
 from ..signals import ENCODER_COUNTS_PER_REV
+from ..systems import get_spec
 from ._fit import value_runs
 
 __all__ = ["Rest", "RestDrift", "rest_drift", "REST_LAWS"]
@@ -107,7 +107,7 @@ def _rests(trajectories: Sequence[Trajectory], j: int, min_rest: float, toleranc
         q = np.asarray(tr.q[:, j], dtype=float)
         bounds = _runs_within(q, tolerance)
         length = int(round(min_rest / tr.dt))
-        for s, e in zip(bounds[:-1], bounds[1:]):
+        for s, e in zip(bounds[:-1], bounds[1:], strict=True):
             if out:
                 stretch = q[s:e]
                 k = int(np.argmax(np.abs(stretch - out[-1].position)))
@@ -168,14 +168,14 @@ def rest_drift(
     j = get_spec(system).joint_names.index(joint)
     rests = _rests(trajectories, j, min_rest, flicker * count * 1.01)  # 1.01: counts as floats
     follows, sides = [], []
-    for before, rest in zip(rests[:-1], rests[1:]):
+    for before, rest in zip(rests[:-1], rests[1:], strict=True):
         assert rest.excursion is not None
         reach = rest.excursion - before.position
         if abs(reach) >= large and abs(rest.excursion - rest.position) >= returned:
             follows.append((rest.position - before.position) / reach)
             sides.append(int(np.sign(reach)))
-    pos = [f for f, s in zip(follows, sides) if s > 0]
-    neg = [f for f, s in zip(follows, sides) if s < 0]
+    pos = [f for f, s in zip(follows, sides, strict=True) if s > 0]
+    neg = [f for f, s in zip(follows, sides, strict=True) if s < 0]
     verdict, reason = _verdict(pos, neg, min_each, min_pairs, follow)
     positions = [r.position for r in rests]
     return RestDrift(

@@ -20,8 +20,7 @@ import numpy as np
 from ..effects import Effect, can_join, merge_spring_rests
 from ..envs import Plant
 from ..models import system_definition
-from . import _fit
-from . import _trace as _trace_mod
+from . import _fit, _trace as _trace_mod
 from ._library import Candidate, is_physical
 from ._problem import free_columns
 
@@ -136,7 +135,7 @@ def _refit(fx, theta, chosen, dyn, win):
         theta, ok = _fit.oe_fit(fx.layout, theta, free, win, fx.substeps, s.oe_max_nfev, s.start_iterations)
         improved |= ok
         effects = _effects(fx.layout, theta, chosen, dyn)
-        bad = [c for c, e in zip(chosen, effects) if not can_join(e, effects)]
+        bad = [c for c, e in zip(chosen, effects, strict=True) if not can_join(e, effects)]
         if not bad:
             break
         theta = np.array(theta, dtype=float)

@@ -27,8 +27,8 @@ from scipy.signal import lfilter
 from ..lagrangian import (
     forward_dynamics_with_dry_friction,
     interval_difference,
-    inverse_dynamics,
     interval_integral,
+    inverse_dynamics,
     momentum,
     potential_derived_force,
 )
@@ -261,7 +261,7 @@ def free_excursion(a: np.ndarray, dt: float) -> float:
     slopes = []
     for sign in (1.0, -1.0):
         h = _lower_hull(t, sign * x)
-        slopes += [(x[b] - x[a]) / (t[b] - t[a]) for a, b in zip(h[:-1], h[1:])]
+        slopes += [(x[b] - x[a]) / (t[b] - t[a]) for a, b in zip(h[:-1], h[1:], strict=True)]
     y = x[None, :] - np.asarray(slopes)[:, None] * t[None, :]
     return float((y.max(axis=1) - y.min(axis=1)).min())
 
@@ -278,7 +278,7 @@ def held_samples(q_j: np.ndarray, a_j: np.ndarray, dt: float, counts: float) -> 
     if steps.size == 0:
         return held
     bounds = value_runs(q_j)
-    for s, e in zip(bounds[:-1], bounds[1:]):
+    for s, e in zip(bounds[:-1], bounds[1:], strict=True):
         if e - s >= 3 and _excursion_exceeds(a_j[s:e], dt, counts * steps.min()):
             held[s:e] = True
     return held

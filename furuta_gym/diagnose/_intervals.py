@@ -251,7 +251,7 @@ def _null_note(iv: Intervals, names: list[str], source: str) -> list[str]:
     """One note per near-null direction: which parameters it combines (components ≥ 0.1)."""
     out = []
     for v in iv.null_directions:
-        involved = [n for n, c in zip(names, v) if abs(c) >= 0.1]
+        involved = [n for n, c in zip(names, v, strict=True) if abs(c) >= 0.1]
         out.append(
             f"interval unbounded for {', '.join(involved)}: a near-null direction of the {source} "
             f"Jacobian (these data do not pin down that combination)"

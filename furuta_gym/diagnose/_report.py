@@ -27,12 +27,31 @@ def _g(x, fmt="{:.3g}"):
 
 def format_table(res) -> str:
     """Human-readable summary: effects by evidence, errors before/after, fitted parameters."""
-    lines = [f"diagnosis of a {res.system} model"]
+    lines = [f"diagnosis of a {res.system} model", ""]
+    lines += _effect_rows(res)
     lines.append("")
-    lines.append(
+    lines += _error_rows(
+        f"held-out errors ({res.error_before.n_windows} open-loop windows of {res.error_before.window_seconds} s)",
+        res.error_before,
+        res.error_after,
+    )
+    if res.test_before is not None:
+        # the test logs (``test=``) are never fitted nor used for any decision: the fairest score
+        lines += _error_rows(
+            f"test-log errors ({res.test_before.n_windows} windows, logs never fitted)", res.test_before, res.test_after
+        )
+    lines.append("")
+    lines += _parameter_rows(res)
+    lines += [f"note: {n}" for n in res.notes]
+    return "\n".join(lines)
+
+
+def _effect_rows(res) -> list[str]:
+    """The effects table and its verdict lines (none, inconsistent, second parameters, cable laws)."""
+    lines = [
         f"{'effect':<18}{'joint':<7}{'coefficient':>13}{'± 95 %':>11}  {'unit':<15}{'held-out gain':>14}"
         f"{'z':>7}  verdict"
-    )
+    ]
     for e in res.effects:
         verdict = "SIGNIFICANT" if e.significant else e.status.upper() if e.status == "inconsistent" else e.status
         if e.significant and not e.resolved:
@@ -51,20 +70,13 @@ def format_table(res) -> str:
             lines.append(f"-> {e.name}:{e.joint} {e.kind.second_parameter} {e.play:.3g}")
     for law in res.rotor_laws:  # Method step 11: which law of the joint's cable the data support
         lines.append(f"-> {law.joint}'s cable: {law.verdict}: {law.reason}")
-    lines.append("")
-    lines += _error_rows(
-        f"held-out errors ({res.error_before.n_windows} open-loop windows of {res.error_before.window_seconds} s)",
-        res.error_before,
-        res.error_after,
-    )
-    if res.test_before is not None:
-        # the test logs (``test=``) are never fitted nor used for any decision: the fairest score
-        lines += _error_rows(
-            f"test-log errors ({res.test_before.n_windows} windows, logs never fitted)", res.test_before, res.test_after
-        )
-    lines.append("")
+    return lines
+
+
+def _parameter_rows(res) -> list[str]:
+    """The fitted parameters, before -> after with their intervals, and the input dynamics."""
     fixed = f"; fixed: {res.fixed}" if res.fixed else ""
-    lines.append(f"fitted parameters (before -> after ± 95 % interval){fixed}")
+    lines = [f"fitted parameters (before -> after ± 95 % interval){fixed}"]
     for k in res.parameters_before:
         lines.append(
             f"  {k:<10}{res.parameters_before[k]:>13.5g} -> {res.parameters_after[k]:<13.5g}"
@@ -77,9 +89,7 @@ def format_table(res) -> str:
             f"  {name:<10}{0.0:>13.5g} -> {res.input_dynamics.seconds:<13.5g}"
             f"{_pm(None if ev is None else ev.interval):<11}s"
         )
-    for n in res.notes:
-        lines.append(f"note: {n}")
-    return "\n".join(lines)
+    return lines
 
 
 def _pm(interval) -> str:
@@ -237,7 +247,9 @@ def _rms(x) -> float:
 def _joint_labels(res):
     """Per joint: name, position unit, residual unit (∫ torque dt or ∫ force dt per interval)."""
     spec = get_spec(res.system)
-    return [(j, "rad" if a else "m", "N·m·s" if a else "N·s") for j, a in zip(spec.joint_names, spec.angular)]
+    return [
+        (j, "rad" if a else "m", "N·m·s" if a else "N·s") for j, a in zip(spec.joint_names, spec.angular, strict=True)
+    ]
 
 
 def _after_label(res) -> str:
@@ -311,7 +323,7 @@ def _window_predictions(res, segs):
     # make_windows starts windows at 0, L, 2L, ... of each segment, in segment order
     first = {i: int(np.argmax(win.segment == i)) for i in np.unique(win.segment)}
     starts = [(w - first[i]) * L for w, i in enumerate(win.segment)]
-    t = np.stack([segs[i].t[s : s + L + 1] for i, s in zip(win.segment, starts)])
+    t = np.stack([segs[i].t[s : s + L + 1] for i, s in zip(win.segment, starts, strict=True)])
     return meas, preds[0], preds[1], t, [segs[i].name for i in win.segment]
 
 
@@ -349,7 +361,7 @@ def _plot_prediction_windows(res, segs, kind: str):
     err, err_after = (np.sqrt(np.mean((p - meas) ** 2, axis=(1, 2))) for p in (pb, pa))
     picked, tags = _pick_windows(err)
     axes = fig.subplots(len(joints), len(picked), squeeze=False)
-    for c, (w, tag) in enumerate(zip(picked, tags)):
+    for c, (w, tag) in enumerate(zip(picked, tags, strict=True)):
         for j, (name, qunit, _) in enumerate(joints):
             ax = axes[j, c]
             ax.plot(t[w], meas[w, :, j], "k-", lw=1.6, label="measured")

@@ -71,7 +71,9 @@ def _rest_windows(q_j: np.ndarray, length: int) -> list[tuple[int, int]]:
     back from each run's end: the force that held the joint is largest just before it broke away."""
     change = np.flatnonzero(np.diff(q_j) != 0) + 1
     bounds = np.concatenate([[0], change, [q_j.size]])
-    return [(k, k + length) for s, e in zip(bounds[:-1], bounds[1:]) for k in range(e - length, s - 1, -length)]
+    return [
+        (k, k + length) for s, e in zip(bounds[:-1], bounds[1:], strict=True) for k in range(e - length, s - 1, -length)
+    ]
 
 
 def rest_bound(
@@ -166,7 +168,7 @@ def stop_excursions(
         assert tr.qd is not None
         a = free_acceleration_along(layout, theta, tr.q, tr.qd, tr.u, tr.dt, j)
         interior = value_runs(tr.q[:, j])[1:-1]  # a run at either end may go on outside the log
-        for s, e in zip(interior[:-1], interior[1:]):
+        for s, e in zip(interior[:-1], interior[1:], strict=True):
             if e - s >= min_samples:
                 out.append(Stop(tr.name, int(s), int(e - s), free_excursion(a[s:e], tr.dt) / count))
     return out

@@ -41,8 +41,7 @@ from ..measured import estimate_velocities
 from ..simulate import rk4_zoh_step
 from ..systems import get_spec
 from . import _fit
-from ._drift import REST_LAWS, RestDrift
-from ._drift import _runs_within as _drift_runs
+from ._drift import REST_LAWS, RestDrift, _runs_within as _drift_runs
 from ._library import Candidate, is_physical, non_physical
 from ._problem import free_columns
 from ._rests import _holding
@@ -122,7 +121,7 @@ def neutral_paths(trajs, j: int, play: float, starts=None) -> dict[str, tuple[np
     trajectory; None: the history's, :func:`carried_starts`)."""
     starts = carried_starts(trajs, j, play) if starts is None else starts
     out = {}
-    for tr, rho in zip(trajs, starts):
+    for tr, rho in zip(trajs, starts, strict=True):
         q = np.asarray(tr.q[:, j], float)
         out[tr.name] = (np.asarray(tr.t), play_operator(q, play, q[0] + play * float(rho)))
     return out
@@ -133,7 +132,7 @@ def carried_starts(trajs, j: int, play: float, first: float = 0.0) -> np.ndarray
     trajectory's at ρ ``first`` (0: a log starts with the joint resting on its neutral), each
     next one's where the last left it, dragged by a hand that carried the joint between them."""
     out, r = [first], None
-    for tr, nxt in zip(trajs[:-1], trajs[1:]):
+    for tr, nxt in zip(trajs[:-1], trajs[1:], strict=True):
         q = np.asarray(tr.q[:, j], float)
         r = play_operator(q, play, q[0] + play * out[-1])[-1]
         q1 = float(nxt.q[0, j])
@@ -276,7 +275,7 @@ def fit_law(
         return th, (_with_first(ctx, z[nf] * k_scale, z[nf + 1], z[nf + 2]) if cable0 else (0.0, 0.0))
 
     def residuals(zs) -> np.ndarray:
-        ths, cables = zip(*map(unpack, zs))
+        ths, cables = zip(*map(unpack, zs), strict=True)
         r = (ctx.predictions(ths, cables, "fit") - ctx.win_fit.q[None]).reshape(len(zs), -1)
         return np.where(np.isfinite(r), r, 1e3)
 
@@ -365,7 +364,7 @@ def broke_away(ctx: Context, theta, min_rest: float = 0.2, flicker: int = 1) -> 
         q = np.asarray(tr.q[:, ctx.j], float)
         bounds = _drift_runs(q, flicker * count * 1.01)
         length = int(round(min_rest / tr.dt))
-        ends = [e - 1 for s, e in zip(bounds[:-1], bounds[1:]) if e - s >= length and e < q.size]
+        ends = [e - 1 for s, e in zip(bounds[:-1], bounds[1:], strict=True) if e - s >= length and e < q.size]
         if not ends:
             continue
         qd = np.asarray(estimate_velocities(tr).qd)  # the other joints' motion pushes on it too

@@ -23,8 +23,7 @@ import numpy as np
 from ..lagrangian import forward_dynamics, forward_dynamics_with_dry_friction, solve_mass_matrix
 from ..simulate import rollout_zoh
 from ..systems import get_spec
-from . import _finish, _fit
-from . import _trace as _trace_mod
+from . import _finish, _fit, _trace as _trace_mod
 from ._diagnose import DiagnosisSettings, diagnose
 from ._fit import InputDynamics
 from ._library import Candidate

@@ -9,9 +9,8 @@ import dataclasses
 import json
 import math
 import os
-from pathlib import Path
-
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import mujoco
 import numpy as np
