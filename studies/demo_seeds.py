@@ -23,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "demo_seeds"
 DOC = ROOT / "docs" / "learning.md"
 NAME = "demo-seeds"
+DEMO_CHECK = ROOT / "results" / "cpu_numerics" / "demo.json"
 
 
 def run_seed(seed: int) -> None:
@@ -61,10 +62,17 @@ def _numerics(docs: list[dict]) -> str:
     flags = seen.pop()
     if "--xla_cpu_max_isa=AVX2" not in flags:
         return f"native numerics (`XLA_FLAGS={flags}`): other machines may give other numbers"
-    return (
-        f"with furuta_gym's pinned numerics (`XLA_FLAGS={flags}`); that another machine gives these exact numbers "
-        'is shown at CI size only, not for the demo (docs/conventions.md, "Same numbers on every machine")'
-    )
+    return f"with furuta_gym's pinned numerics (`XLA_FLAGS={flags}`); {_other_machines()}"
+
+
+def _other_machines() -> str:
+    """What results/cpu_numerics/demo.json (studies/cpu_numerics.py --demo) shows of other machines."""
+    where = 'docs/conventions.md, "Same numbers on every machine"'
+    demo = json.loads(DEMO_CHECK.read_text()) if DEMO_CHECK.is_file() else None
+    if demo is None or not all(r["digest"] == demo["demo_seeds_row"] for r in demo["rows"]):
+        return f"that another machine gives these exact numbers is shown at CI size only, not for the demo ({where})"
+    emulated = demo["rows"][-1]["label"]
+    return f"the seed-0 run gives the same bits on an emulated {emulated} ({where})"
 
 
 def block(docs: list[dict]) -> str:
