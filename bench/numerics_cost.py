@@ -2,7 +2,7 @@
 on every machine").
 
 The same work in fresh processes, pinned (the default: ``--xla_cpu_max_isa=AVX2``, YNNPACK off,
-OpenBLAS's Haswell kernels) and native (``FURUTA_GYM_NATIVE_ISA=1``), alternated (pinned, native,
+OpenBLAS's Haswell kernels, XLA's thread count) and native (``FURUTA_GYM_NATIVE_ISA=1``), alternated (pinned, native,
 pinned, native) so that a shared machine's load falls on both alike; each quantity is the best of
 its processes:
 
@@ -69,6 +69,7 @@ def one_process() -> dict:
     furuta_gym.enable_x64()
     return {
         "xla_flags": furuta_gym.numerics()["xla_flags"],
+        "pjrt_nproc": furuta_gym.numerics()["pjrt_nproc"],
         "traj_epoch_s": epoch_time("traj", 64)["epoch_s"],
         "itau_epoch_s": epoch_time("itau", 64)["epoch_s"],
         "rollout_analytic": rollout_rate("analytic"),
@@ -95,6 +96,7 @@ def measure(rounds: int) -> dict:
     for mode, rs in runs.items():
         best[mode] = {
             "xla_flags": rs[0]["xla_flags"],
+            "pjrt_nproc": rs[0].get("pjrt_nproc"),
             "traj_epoch_s": min(r["traj_epoch_s"] for r in rs),
             "itau_epoch_s": min(r["itau_epoch_s"] for r in rs),
             "rollout_analytic": max(r["rollout_analytic"] for r in rs),
@@ -107,6 +109,16 @@ def measure(rounds: int) -> dict:
         "best": best,
         "runs": runs,
     }
+
+
+def _threads(pinned: dict) -> str:
+    if pinned.get("pjrt_nproc") is None:
+        return "XLA's thread count unpinned"
+    cores = os.cpu_count()
+    same = (
+        " (this machine's own count: the thread pin costs nothing here)" if str(cores) == pinned["pjrt_nproc"] else ""
+    )
+    return f"`PJRT_NPROC={pinned['pjrt_nproc']}`{same}"
 
 
 def section(res: dict) -> str:
@@ -139,8 +151,8 @@ def section(res: dict) -> str:
         "",
         "Fresh processes alternated pinned / native "
         f"({res['rounds']} of each; best of each), JAX persistent cache off. Pinned: furuta_gym's default, "
-        f"`XLA_FLAGS={p['xla_flags']}` and OpenBLAS's Haswell kernels; native: `FURUTA_GYM_NATIVE_ISA=1` "
-        "(XLA's own choice for this CPU, YNNPACK on). Each cell: the best process (in brackets the worst, the "
+        f"`XLA_FLAGS={p['xla_flags']}`, {_threads(p)} and OpenBLAS's Haswell kernels; native: "
+        "`FURUTA_GYM_NATIVE_ISA=1` (XLA's own choice for this CPU, YNNPACK on, a thread per core). Each cell: the best process (in brackets the worst, the "
         "shared machine's noise); the speed ratio is of the bests, pinned ÷ native (above 1: the pin is faster).",
         "",
         "| what | pinned | native | unit | speed ratio pinned / native |",
