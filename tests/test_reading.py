@@ -187,8 +187,9 @@ def test_train_and_evaluate_read_a_split_log_skipping_only_its_start(tmp_path, r
         system="furuta", column_map=None, sign=None, offset=None, units=None, time_unit=None,
         skip=0.5, velocity="zero_phase", cutoff=None, split=None,
     )  # fmt: skip
-    trajs, notes = prepared_logs([str(path)], args)
+    trajs, notes, measured = prepared_logs([str(path)], args)
     assert any("split into 2 pieces" in n for n in notes) and notes[0].startswith("velocities estimated")
+    assert measured  # no velocity columns: a measured log
     # 1 s elementary trajectories: 9 from the 9.5 s before the gap, 9 from the 9.8 s after it
     assert len(trajs) == 18
     assert trajs[0].t[0] == pytest.approx(0.5) and trajs[9].t[0] == pytest.approx(run1.t[GAP[-1] + 1])

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 __all__ = [
     "pairs",
@@ -21,6 +21,7 @@ __all__ = [
     "add_reading_arguments",
     "add_log_arguments",
     "prepared_logs",
+    "PreparedLogs",
     "QUBE_SKIP",
 ]
 
@@ -185,9 +186,17 @@ def add_log_arguments(parser: argparse.ArgumentParser, split_default: float | No
 ESTIMATED_NOTE = "velocities estimated"
 
 
-def prepared_logs(
-    paths, args, *, split: float | str | None = "measured", min_seconds: float = 0.0
-) -> tuple[list, list[str]]:
+class PreparedLogs(NamedTuple):
+    """What :func:`prepared_logs` gives: the trajectories, notes on what reading and preparing
+    them did, and whether they are measured logs (some carried no velocities, which were
+    estimated), not generated data."""
+
+    trajectories: list
+    notes: list[str]
+    measured: bool
+
+
+def prepared_logs(paths, args, *, split: float | str | None = "measured", min_seconds: float = 0.0) -> PreparedLogs:
     """Training / test trajectories of ``paths`` (:func:`furuta_gym.measured.prepare_log` per
     log; ``args`` carries the :func:`add_log_arguments` options and ``system``) and notes on what
     was estimated and what reading the logs did. ``split``: seconds per elementary trajectory,
@@ -231,7 +240,7 @@ def prepared_logs(
         notes.append(f"{short} piece(s) of split logs shorter than one trajectory after the skipped start: left out")
     if estimated:
         notes.insert(0, f"{ESTIMATED_NOTE} ({args.velocity}) for {len(estimated)} log(s)")
-    return out, notes
+    return PreparedLogs(out, notes, measured=bool(estimated))
 
 
 def _starts(trajs: list) -> dict[str, float]:

@@ -86,9 +86,8 @@ def run(args: argparse.Namespace) -> int:
     args.system = system = model.spec.name
     results = {}
     for path in args.data:
-        trajs, notes = prepared_logs([path], args, split=args.split, min_seconds=args.window or 0.0)
-        # estimated velocities mean a measured log: the analytic model is no ground truth there
-        measured = any(n.startswith("velocities estimated") for n in notes)
+        trajs, notes, measured = prepared_logs([path], args, split=args.split, min_seconds=args.window or 0.0)
+        # a measured log: the analytic model is no ground truth there
         physics = not args.no_physics and not measured
         metrics = _score(model, trajs, args, physics)
         if notes:

@@ -26,7 +26,7 @@ import json
 import numpy as np
 
 from ..systems import SYSTEMS
-from ._logs import ESTIMATED_NOTE, add_log_arguments, prepared_logs
+from ._logs import add_log_arguments, prepared_logs
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -225,14 +225,14 @@ def run(args: argparse.Namespace) -> int:
     hparams = model_hparams(args)
     if hparams and "springs" in hparams and model_kind(args.model).analytic_prior:
         raise ValueError("--learned-spring: APHYNITY's potential is its physics prior's; use --model dln or adln")
-    trajs, notes = prepared_logs(args.data, args)
-    forced = prepared_logs([args.forced], args, split=None)[0] if args.forced else None
+    trajs, notes, measured = prepared_logs(args.data, args)
+    forced = prepared_logs([args.forced], args, split=None).trajectories if args.forced else None
     data_info = _describe_data(args, trajs, notes)
     from ._cache import enable_compilation_cache
 
     enable_compilation_cache()  # compiling once per machine, not once per run
     free = not any(np.any(np.asarray(tr.u) != 0) for tr in trajs)
-    config = _config(args, free_release=free and any(n.startswith(ESTIMATED_NOTE) for n in notes))
+    config = _config(args, free_release=free and measured)
     try:
         model, history = train(
             args.model,
