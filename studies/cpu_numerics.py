@@ -183,6 +183,21 @@ def _affinity(cores: int | None):
     return (lambda: os.sched_setaffinity(0, cpus)) if cpus else None
 
 
+def _run_pinned(command: list[str], setting: tuple) -> None:
+    """``furuta-gym COMMAND`` in a fresh process, pinned, as one of :data:`QUICK_SETTINGS`."""
+    _label, cap, cores, blas, numpy_off = setting
+    proc = subprocess.run(
+        [sys.executable, "-m", "furuta_gym", *command],
+        env=_environment(True, cap, blas, numpy_off),
+        capture_output=True,
+        text=True,
+        timeout=7200,
+        preexec_fn=_affinity(cores),
+    )
+    if proc.returncode != 0:
+        raise RuntimeError(proc.stderr[-3000:])
+
+
 def run_reproduce_quick() -> dict:
     """``furuta-gym reproduce --quick`` (every model of both tables, scaled down) as each pinned
     setting of :data:`QUICK_SETTINGS`; the digest of each run's tables.csv and of every model's
@@ -191,17 +206,10 @@ def run_reproduce_quick() -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         for i, (label, cap, cores, blas, numpy_off) in enumerate(QUICK_SETTINGS):
             out = Path(tmp) / f"quick{i}"
-            cmd = [sys.executable, "-m", "furuta_gym", "reproduce", "--quick", "--out", str(out), "--no-figures"]
-            proc = subprocess.run(
-                [*cmd, "--no-progress"],
-                env=_environment(True, cap, blas, numpy_off),
-                capture_output=True,
-                text=True,
-                timeout=7200,
-                preexec_fn=_affinity(cores),
+            _run_pinned(
+                ["reproduce", "--quick", "--no-figures", "--no-progress", "--out", str(out)],
+                (label, cap, cores, blas, numpy_off),
             )
-            if proc.returncode != 0:
-                raise RuntimeError(proc.stderr[-3000:])
             metrics = {  # without "_seconds", the run's timings
                 str(p.relative_to(out / "runs")): hashlib.sha256(
                     json.dumps({k: v for k, v in json.loads(p.read_text()).items() if k != "_seconds"}).encode()
@@ -246,19 +254,9 @@ def run_demo() -> dict:
     demo-seeds row's (results/demo_seeds/seed0.json, made on this machine)."""
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for i, (label, cap, cores, blas, numpy_off) in enumerate(QUICK_SETTINGS):
-            out = Path(tmp) / f"demo{i}"
-            cmd = [sys.executable, "-m", "furuta_gym", "demo", "--no-progress", "--no-video", "--seed", "0"]
-            proc = subprocess.run(
-                [*cmd, "--out", str(out)],
-                env=_environment(True, cap, blas, numpy_off),
-                capture_output=True,
-                text=True,
-                timeout=3600,
-                preexec_fn=_affinity(cores),
-            )
-            if proc.returncode != 0:
-                raise RuntimeError(proc.stderr[-3000:])
+        for i, setting in enumerate(QUICK_SETTINGS):
+            out, label = Path(tmp) / f"demo{i}", setting[0]
+            _run_pinned(["demo", "--no-progress", "--no-video", "--seed", "0", "--out", str(out)], setting)
             summary = json.loads((out / "summary.json").read_text())
             rows.append({"label": label, "digest": _demo_digest(summary), "table": summary["table"]})
             print(label, rows[-1]["digest"], flush=True)
