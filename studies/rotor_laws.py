@@ -29,24 +29,11 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 from furuta_gym.diagnose import breakaway_rig, diagnose, measured_like, moving_rest_rig  # noqa: E402
+from rotor_laws_baseline import planted  # noqa: E402  the same record of the planted effects
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "rotor_laws"
 LAWS = {"moving_rest": moving_rest_rig, "breakaway": breakaway_rig, "none": lambda seed: []}
-
-
-def planted(effects) -> list[dict]:
-    return [
-        dict(
-            name=e.name,
-            joint=e.joint,
-            coefficient=e.coefficient,
-            reference=e.reference,
-            **({"play": e.play} if e.play else {}),
-            **({"stribeck_velocity": e.stribeck_velocity} if e.kind.is_dry_friction else {}),
-        )
-        for e in effects
-    ]
 
 
 def logs(releases: int, seconds: float) -> dict[str, dict]:
