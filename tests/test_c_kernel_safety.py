@@ -16,7 +16,15 @@ import numpy as np
 import pytest
 
 import furuta_gym  # noqa: F401  (registers the envs, enables float64)
-from furuta_gym._ckernel import CKernel, CKernelError, CKernelWarning, c_compiler, cache as kernel_cache, translate
+from furuta_gym._ckernel import (
+    CKernel,
+    CKernelError,
+    CKernelWarning,
+    c_compiler,
+    cache as kernel_cache,
+    primitive_params,
+    translate,
+)
 from furuta_gym.envs import _backends
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler on PATH")
@@ -248,7 +256,7 @@ def test_reduce_precision_is_refused_unless_it_is_the_identity(cache):
 
 
 def test_a_parameter_value_the_translation_lacks_is_refused(cache, monkeypatch):
-    monkeypatch.setitem(translate._PARAMS, "tanh", {})  # as if 'accuracy' were a new parameter
+    monkeypatch.setitem(primitive_params._PARAMS, "tanh", {})  # as if 'accuracy' were a new parameter
     with pytest.raises(CKernelError, match=r"does not implement 'tanh' with accuracy=None"):
         CKernel(lambda v: jnp.tanh(v), V)
     with pytest.raises(CKernelError, match=r"does not implement 'reshape' with dimensions"):

@@ -27,9 +27,11 @@ kept. POSIX only: on Windows, or without a working compiler, the callers take XL
 jaxpr the translation does not know (a new primitive or parameter, a structure from a newer JAX)
 is a :class:`CKernelTranslationError`, on which an env takes XLA with one warning.
 
-The package's parts: :mod:`.translate` (a jaxpr to C source), :mod:`.cache` (the compiler and the
-on-disk cache of compiled libraries) and :mod:`.kernel` (:class:`CKernel`: trace, translate,
-build, check against XLA, call). The env uses only the names exported here.
+The package's parts: :mod:`.translate` (a jaxpr to C source: the jaxpr walk, on
+:mod:`.c_syntax`, :mod:`.primitive_params`, :mod:`.c_writer` and one ``ops_*`` module per family
+of primitives), :mod:`.cache` (the compiler and the on-disk cache of compiled libraries) and
+:mod:`.kernel` (:class:`CKernel`: trace, translate, build, check against XLA, call). The env uses
+only the names exported here.
 """
 
 from .cache import c_compiler
