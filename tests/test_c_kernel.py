@@ -13,7 +13,7 @@ import pytest
 
 import furuta_gym
 from furuta_gym._ckernel import CKernel, CKernelError, c_compiler
-from furuta_gym.envs import _backends
+from furuta_gym.envs import _model_backend
 from furuta_gym.models import make_model
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler on PATH")
@@ -200,7 +200,7 @@ def test_kernel_argument_errors():
 
 def test_without_a_compiler_auto_falls_back_to_xla_and_c_says_why(monkeypatch):
     monkeypatch.setenv("CC", "/nonexistent/cc")
-    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    monkeypatch.setattr(_model_backend, "_C_KERNEL_CACHE", {})
     env = gym.make(NMSD_ID, dynamics="analytic")
     backend = env.unwrapped.backend
     assert backend.kernel == "xla" and "C compiler" in backend.kernel_fallback
@@ -250,7 +250,7 @@ def test_a_step_too_large_for_the_stack_is_refused_and_auto_takes_xla(monkeypatc
     from furuta_gym._ckernel import translate
 
     monkeypatch.setattr(translate, "MAX_STACK_BYTES", 4096)
-    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    monkeypatch.setattr(_model_backend, "_C_KERNEL_CACHE", {})
     with pytest.raises(CKernelError, match=r"MiB of intermediates"):
         CKernel(lambda w, v: jnp.tanh(jnp.outer(v, v) @ jnp.ones((4, 200))), W, V)
     backend = gym.make(FURUTA_ID, dynamics=_dynamics("furuta", "dln")).unwrapped.backend
@@ -260,7 +260,7 @@ def test_a_step_too_large_for_the_stack_is_refused_and_auto_takes_xla(monkeypatc
 def test_a_failing_compiler_is_one_clear_error_and_auto_takes_xla(monkeypatch, tmp_path):
     monkeypatch.setenv("CC", "false")  # a "compiler" that always fails
     monkeypatch.setenv("FURUTA_GYM_CACHE", str(tmp_path))  # nothing cached to fall back on
-    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    monkeypatch.setattr(_model_backend, "_C_KERNEL_CACHE", {})
     with pytest.raises(CKernelError, match="the C compiler .*false failed on the generated kernel"):
         CKernel(lambda v: v * 2.0, V)
     backend = gym.make(NMSD_ID, dynamics="analytic").unwrapped.backend
@@ -271,7 +271,7 @@ def test_auto_tries_the_c_translation_once_per_model_structure(monkeypatch):
     """With domain randomisation every reset rebuilds the step for new parameters: a model whose
     step C cannot take must fall back without tracing and translating it again each time."""
     monkeypatch.setenv("CC", "/nonexistent/cc")
-    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    monkeypatch.setattr(_model_backend, "_C_KERNEL_CACHE", {})
     attempts = []
     original = CKernel.__init__
 

@@ -9,7 +9,7 @@ import pytest
 
 import furuta_gym  # noqa: F401  (registers the envs)
 from furuta_gym._ckernel import CKernel, CKernelTranslationError, CKernelWarning, c_compiler, translate
-from furuta_gym.envs import Actuation, Episode, _backends
+from furuta_gym.envs import Actuation, Episode, _model_backend
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler on PATH")
 
@@ -20,7 +20,7 @@ ACTIONS = np.random.default_rng(3).uniform(-5, 5, (60, 1))
 @pytest.fixture(autouse=True)
 def fresh_kernels(monkeypatch):
     """No compiled or refused step carried over from another test."""
-    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    monkeypatch.setattr(_model_backend, "_C_KERNEL_CACHE", {})
 
 
 def _run(env):

@@ -25,7 +25,7 @@ from furuta_gym._ckernel import (
     primitive_params,
     translate,
 )
-from furuta_gym.envs import _backends
+from furuta_gym.envs import _model_backend
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler on PATH")
 
@@ -43,7 +43,7 @@ def cache(monkeypatch, tmp_path):
     (tmp_path / "tmp").mkdir()
     monkeypatch.setattr(kernel_cache.tempfile, "tempdir", str(tmp_path / "tmp"))
     monkeypatch.setattr(kernel_cache, "_VERIFIED", set())
-    monkeypatch.setattr(_backends, "_C_KERNEL_CACHE", {})
+    monkeypatch.setattr(_model_backend, "_C_KERNEL_CACHE", {})
     return tmp_path / "cache" / "furuta_gym" / "c_kernels"
 
 

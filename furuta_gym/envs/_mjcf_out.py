@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from ..effects import Effect, MujocoForm
-from ._backends import MujocoBackend, mjcf_text
+from ._mujoco_backend import MujocoBackend, mjcf_text
 from ._plant import PLANT_TEXT
 from ._settings import Plant
 
