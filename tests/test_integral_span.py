@@ -112,7 +112,8 @@ def test_reproduce_sums_the_integral_residual_of_its_L_prop_runs_only():
 
 def test_reproduce_can_train_on_velocities_estimated_offline_and_records_it():
     from furuta_gym.data import Trajectory
-    from furuta_gym.training.reproduce import ReproduceConfig, _training_data, run_settings
+    from furuta_gym.training._reproduce_data import _training_data
+    from furuta_gym.training.reproduce import ReproduceConfig, run_settings
 
     t = np.arange(200) * 0.01
     q = np.stack([np.sin(2 * t), 0.5 * np.cos(3 * t)], axis=1)

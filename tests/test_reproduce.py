@@ -183,7 +183,8 @@ def test_parallel_jobs_give_the_sequential_models_and_a_seed_spread(tiny_run, tm
 
 
 def test_a_pool_starts_the_longest_models_first():
-    from furuta_gym.training.reproduce import EXPECTED_SECONDS, PAPER_PAIRS, _longest_first
+    from furuta_gym.training._reproduce_executors import _longest_first
+    from furuta_gym.training.reproduce import EXPECTED_SECONDS, PAPER_PAIRS
 
     for quick in (True, False):
         config = ReproduceConfig(quick=quick)
@@ -307,7 +308,7 @@ def test_cli_seeds_0_1_2_write_mean_and_spread_beside_the_paper(tiny_run, tmp_pa
 
 
 def test_the_main_claim_is_counted_seed_by_seed_with_several_seeds():
-    from furuta_gym.training.reproduce import _summary_lines
+    from furuta_gym.training._reproduce_tables import _summary_lines
 
     cfg = ReproduceConfig(systems=("furuta",), pairs=(("dln", "traj"), ("dln", "prop")), seeds=(0, 1, 2))
     good = {m: -2.0 for m in METRIC_COLUMNS["furuta"]}
@@ -385,12 +386,8 @@ def test_full_run_gives_single_l_prop_models_their_own_quadrature_and_overrides_
     other run (the baselines, whose Furuta scale fit takes the rule too, the other models,
     --quick, an own schedule) keeps REPRODUCE_QUADRATURE, --quadrature sets every run's, and the
     run record says which model used what."""
-    from furuta_gym.training.reproduce import (
-        FULL_PROP_QUADRATURE,
-        REPRODUCE_QUADRATURE,
-        _write_run_record,
-        training_config,
-    )
+    from furuta_gym.training._reproduce_run_record import _write_run_record
+    from furuta_gym.training.reproduce import FULL_PROP_QUADRATURE, REPRODUCE_QUADRATURE, training_config
 
     full = ReproduceConfig()
     assert FULL_PROP_QUADRATURE
@@ -519,7 +516,8 @@ def test_cli_executor_options_and_what_a_ray_worker_is_told():
 
 def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys():
     """A run trained with a model option records it, so it is never reused for the default model."""
-    from furuta_gym.training.reproduce import _default_hparams, same_settings
+    from furuta_gym.training._reproduce_one_model import _default_hparams
+    from furuta_gym.training.reproduce import same_settings
 
     default = _default_hparams("furuta", "adln")
     odd = _default_hparams("furuta", "adln", {"odd_in_velocity": True})
@@ -593,8 +591,8 @@ def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path, system, fi
 def test_a_validation_run_fits_the_furuta_scale_on_its_own_forced_set_and_a_test_run_on_the_test_one():
     """The scale-fit set each split's run takes (the Furuta's; the N-MSD fits none): a name that
     the generated data do not have would leave the scale unfitted."""
+    from furuta_gym.training._reproduce_data import _training_data
     from furuta_gym.training.datagen import DATASET_NAMES, VALIDATION_NAMES
-    from furuta_gym.training.reproduce import _training_data
 
     data = {name: [name] for name in (*DATASET_NAMES["furuta"], *VALIDATION_NAMES["furuta"])}
     for split, expected in (("test", "scale_fit"), ("validation", "val_scale_fit")):
