@@ -18,6 +18,10 @@ at every step (it is cheap), L_traj on a minibatch of windows.
 multiplying the learned Lagrangian and τ_NC by one constant: the scale is unidentifiable. Pass
 one forced trajectory (``forced_trajs``) and the scale is fitted after training by least squares
 (:func:`fit_scale`; the integral residual Z̄ − s·Ā is linear in s), as the paper does.
+
+The parts: :mod:`._train_config` (:class:`TrainConfig`), :mod:`._train_step` (the optimiser
+step of a loss, compiled) and :mod:`._scale_fit` (:func:`fit_scale`); here are the stages, the
+epochs and blocks, and the run directory a run writes and resumes from.
 """
 
 from __future__ import annotations
@@ -37,218 +41,43 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 from tqdm.auto import tqdm
 
 from .._x64 import ensure_x64
 from ..data import Trajectory
-from ..lagrangian import QUADRATURE_RULES, QuadratureRule, integral_terms
 from ..models import make_model
 from ..systems import get_spec
-from . import _step_cache, checkpoint as ckpt
+from . import checkpoint as ckpt
 from ._itau_block import CAPACITY as BLOCK_CAPACITY, ItauBlock
+from ._scale_fit import ScaleFit, ScaleFitWarning, fit_scale
+from ._train_config import AUGMENTATION_WEIGHT, TrainConfig
+from ._train_step import _all_finite, _build_optimizer, _make_step, _step_function, training_step
 from .consistency import check_potential_shape, warn_data_coverage, warn_potential_shape
 from .free_dynamics import has_free_motion, warn_free_dynamics
-from .loss_kinds import INTEGRAL_ONLY, LOSS_KINDS, TRAJECTORY_TERM, StepSettings, loss_kind
-from .losses import (
-    AUGMENTATION_PARTS,
-    NORMALIZATIONS,
-    Normalization,
-    Windows,
-    make_windows,
-    resolve_normalization,
-    span_sum,
-)
-from .recipe import PAPER_SCHEDULE, RECIPE
+from .loss_kinds import INTEGRAL_ONLY, LOSS_KINDS, TRAJECTORY_TERM, loss_kind
+from .losses import Windows, make_windows, resolve_normalization
 
-__all__ = ["TrainConfig", "train", "training_step", "fit_scale", "data_hash", "LOSSES", "ScaleFit"]
+__all__ = [
+    "TrainConfig",
+    "train",
+    "training_step",
+    "fit_scale",
+    "data_hash",
+    "LOSSES",
+    "ScaleFit",
+    "ScaleFitWarning",
+    "AUGMENTATION_WEIGHT",
+]
 
 #: the built-in losses' names (:data:`.loss_kinds.LOSS_KINDS`: what each is made of)
 LOSSES = tuple(LOSS_KINDS)
 #: wall time aimed at per block of L_Iτ-alone epochs (between two writes of the training state)
 BLOCK_SECONDS = 2.0
-#: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
-#: TrainConfig.augmentation_weight is None: the recipe's (furuta_gym.training.recipe).
-AUGMENTATION_WEIGHT = {
-    (s, k): row.augmentation_weight
-    for (s, k, loss), row in RECIPE.items()
-    if loss_kind(loss).proposed and row.augmentation_weight is not None
-}
 STATE_FILE = "train_state.eqx"
 HISTORY_FILE = "history.jsonl"
 MODEL_FILE = "model.eqx"
 #: the physical check of the trained model's free motion (:mod:`.free_dynamics`), beside the model
 FREE_DYNAMICS_FILE = "free_dynamics.json"
-
-
-class ScaleFitWarning(UserWarning):
-    """The overall-scale fit on the forced trajectory failed; the trained model is kept unscaled."""
-
-
-@dataclasses.dataclass(frozen=True)
-class TrainConfig:
-    """Hyper-parameters of a training run.
-
-    ``epochs[k]`` epochs are run with prediction horizon ``horizons[k]`` (an ``int`` is a number
-    of samples, a ``float`` seconds; ``None``: a stage of L_Iτ alone, with the ``"prop"`` loss —
-    no ODE solve, so thousands of epochs cost what tens of trajectory epochs do; the reproduction
-    starts every L_prop run with one). The defaults are a short run a 2-core CPU finishes in
-    minutes; :meth:`paper` gives the paper's recipe (50 k + 10 k epochs Furuta, 5 k + 1 k N-MSD,
-    full batch), which costs hours on a CPU.
-
-    ``learning_rate`` Adam's step, one value or one per stage (an L_Iτ-alone stage tolerates a
-    larger step than the trajectory stages after it). ``cosine_decay_to`` within each stage the
-    step follows a cosine from the stage's rate down to this fraction of it at the stage's last
-    epoch (1, the default: constant; over a whole N-MSD L_Iτ stage the decay slowed the fit
-    more than it steadied it, docs/reproduce.md). ``keep_best_itau`` a full-batch stage of L_Iτ alone
-    hands the next stage the parameters of its lowest loss, not its last: its loss is exact (no
-    minibatch noise) and at a large step it jumps by 10-100x from epoch to epoch, so the last
-    epoch is a draw (N-MSD DeLaN at 1e-2: 1.4e-4 at its last epoch, 2.1e-6 twenty epochs
-    before). ``batch_size`` trajectory windows per step
-    (``None``: all windows, one step per epoch);
-    ``lambda_traj`` λ in L_aph / L_prop; ``lambda_step`` APHYNITY's dual-ascent step τ₂ (λ ← λ +
-    τ₂·L_traj after every epoch; ``None``: 1000 for ``"aph"``, 0 — a fixed λ — otherwise);
-    ``quadrature`` "trapezoid" (paper) | "simpson" | "hermite" (the paper's intervals, the motion
-    between samples resolved from the measured q and q̇:
-    :func:`~furuta_gym.lagrangian.interval_quadrature`); ``normalize`` see
-    :mod:`furuta_gym.training.losses`; ``integral_window`` samples per L_Iτ window
-    (trajectories are tiled into windows overlapping by one sample); ``integral_batch_size``
-    L_Iτ windows per step (``None``: all). ``augmentation_weight`` μ of the minimum-norm term
-    μ·P_a that L_prop / L_Iτ add for models with a data-driven force F_a (APHYNITY, augmented
-    DeLaN; :func:`~furuta_gym.training.losses.integral_loss_terms`): ``None`` means
-    :data:`AUGMENTATION_WEIGHT` of the system and model kind (0 for models without F_a); 0 turns it off.
-    ``augmentation_part`` what P_a measures: ``"beyond_linear"`` F_a without its linear viscous
-    term W·q̇ (the same as all of F_a for a model without W), ``"full"`` all of F_a.
-    ``resolution_tolerance`` (rad or m; ``None``: off, the paper's unweighted sum) weights each
-    L_Iτ interval by 1 / (1 + (e / tolerance)²), e = |∫q̇ dt − Δq| over the interval, which the
-    data give without any model (:func:`~furuta_gym.training.losses.resolution_weights`). Where
-    the sampling under-resolves the motion the true model's residual is quadrature error of the
-    size of e; unweighted, the few such intervals (a pendulum whirling at 30 rad/s at 100 Hz)
-    make most of L_Iτ's floor, and a flexible model bends its physics to fit that error.
-    ``integral_span`` (1: the paper) quadrature intervals summed into one L_Iτ residual
-    (:func:`~furuta_gym.training.losses.span_sum`): the same equation over a longer interval, so
-    an error in the estimated velocities, which enters at the interval's ends, weighs less
-    against the physics' impulse.
-    ``fast_compile`` compiles the steps with a trajectory loss (an ODE solve: L_traj, L_aph and
-    L_prop's stages after the L_Iτ-alone one) with XLA's backend optimisation level 0: such a
-    step compiles faster and runs slower, and results agree to rounding, not bit for bit. Worth it only for a few hundred trajectory steps, whose time is mostly
-    compiling (``furuta-gym reproduce --quick``); an L_Iτ-alone step compiles in seconds and runs
-    thousands of epochs, so it keeps the optimised code.
-    """
-
-    epochs: tuple[int, ...] = (100, 20)
-    horizons: tuple[int | float | None, ...] = (2, 1.0)
-    learning_rate: float | tuple[float, ...] = 1e-3
-    cosine_decay_to: float = 1.0
-    keep_best_itau: bool = True
-    weight_decay: float = 1e-5
-    batch_size: int | None = 256
-    lambda_traj: float = 1.0
-    lambda_step: float | None = None
-    quadrature: QuadratureRule = "trapezoid"
-    normalize: Normalization = "auto"
-    integral_window: int = 101
-    integral_batch_size: int | None = None
-    augmentation_weight: float | None = None
-    augmentation_part: str = "beyond_linear"
-    resolution_tolerance: float | None = None
-    integral_span: int = 1
-    rtol: float = 1e-3
-    atol: float = 1e-6
-    max_steps: int = 4096
-    grad_clip: float | None = 10.0
-    fast_compile: bool = False
-    seed: int = 0
-    checkpoint_every: int = 50
-    progress: bool = True
-
-    def __post_init__(self):
-        self._check_schedule()
-        self._check_loss()
-        self._check_batches()
-
-    def _check_schedule(self) -> None:
-        """Stages, learning rates and their decay (epochs and rates stored as tuples)."""
-        object.__setattr__(self, "epochs", tuple(int(e) for e in self.epochs))
-        object.__setattr__(self, "horizons", tuple(self.horizons))
-        if len(self.epochs) != len(self.horizons):
-            raise ValueError(f"epochs {self.epochs} and horizons {self.horizons} must have one entry per stage")
-        if isinstance(self.learning_rate, (tuple, list)):
-            object.__setattr__(self, "learning_rate", tuple(float(r) for r in self.learning_rate))
-            if len(self.learning_rate) != len(self.epochs):
-                raise ValueError(
-                    f"learning_rate {self.learning_rate} must be one value or one per stage ({len(self.epochs)} stages)"
-                )
-        rates = self.learning_rate if isinstance(self.learning_rate, tuple) else (self.learning_rate,)
-        if not all(float(r) > 0 for r in rates):
-            raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
-        if not 0 < self.cosine_decay_to <= 1:
-            raise ValueError(f"cosine_decay_to must be in (0, 1], got {self.cosine_decay_to!r}")
-        if any(e < 0 for e in self.epochs):
-            raise ValueError(f"epochs must be non-negative, got {self.epochs}")
-
-    def _check_loss(self) -> None:
-        """The loss's quadrature, normalisation and augmentation penalty."""
-        if self.quadrature not in QUADRATURE_RULES:
-            raise ValueError(f"quadrature must be one of {QUADRATURE_RULES}, got {self.quadrature!r}")
-        if self.normalize not in NORMALIZATIONS:
-            raise ValueError(f"normalize must be one of {NORMALIZATIONS}, got {self.normalize!r}")
-        if self.augmentation_part not in AUGMENTATION_PARTS:
-            raise ValueError(f"augmentation_part must be one of {AUGMENTATION_PARTS}, got {self.augmentation_part!r}")
-        if self.augmentation_weight is not None and not self.augmentation_weight >= 0:
-            raise ValueError(f"augmentation_weight must be non-negative or None, got {self.augmentation_weight!r}")
-
-    def _check_batches(self) -> None:
-        """How the windows are cut and batched."""
-        if self.resolution_tolerance is not None and not float(self.resolution_tolerance) > 0:
-            raise ValueError(f"resolution_tolerance must be positive or None, got {self.resolution_tolerance!r}")
-        if not (isinstance(self.integral_span, (int, np.integer)) and self.integral_span >= 1):
-            raise ValueError(f"integral_span must be a positive integer, got {self.integral_span!r}")
-        if self.integral_span > 1 and self.resolution_tolerance is not None:
-            raise ValueError("integral_span > 1 and resolution_tolerance cannot be combined")
-        if self.batch_size is not None and self.batch_size < 1:
-            raise ValueError(f"batch_size must be positive or None, got {self.batch_size}")
-
-    def stage_learning_rate(self, stage: int) -> float:
-        """Adam's step at the start of ``stage`` (0-based)."""
-        if isinstance(self.learning_rate, tuple):
-            return self.learning_rate[stage]
-        return float(self.learning_rate)
-
-    def epoch_learning_rate(self, epoch: int) -> float:
-        """Adam's step in ``epoch`` (0-based, counted over all stages): the stage's rate, cosine
-        decayed to ``cosine_decay_to`` times it at the stage's last epoch."""
-        if not 0 <= epoch < self.total_epochs:
-            raise ValueError(f"epoch {epoch} is outside the {self.total_epochs} epochs of this config")
-        bounds = np.cumsum(self.epochs)
-        stage = int(np.searchsorted(bounds, epoch, side="right"))
-        rate = self.stage_learning_rate(stage)
-        if self.cosine_decay_to == 1.0 or self.epochs[stage] < 2:
-            return rate
-        progress = (epoch - (bounds[stage] - self.epochs[stage])) / (self.epochs[stage] - 1)
-        end = self.cosine_decay_to
-        return rate * (end + (1.0 - end) * 0.5 * (1.0 + math.cos(math.pi * progress)))
-
-    @property
-    def total_epochs(self) -> int:
-        return sum(self.epochs)
-
-    @classmethod
-    def for_system(cls, system: str, **overrides) -> "TrainConfig":
-        """CPU-friendly defaults with the paper's horizons (1 s Furuta, 2 s N-MSD)."""
-        base: dict[str, Any] = dict(horizons=PAPER_SCHEDULE[get_spec(system).name]["horizons"])
-        base.update(overrides)
-        return cls(**base)
-
-    @classmethod
-    def paper(cls, system: str, **overrides) -> "TrainConfig":
-        """The paper's recipe: 2-step stage then the long horizon, full batch (appendix A.2)."""
-        base: dict[str, Any] = dict(**PAPER_SCHEDULE[get_spec(system).name], batch_size=None, checkpoint_every=500)
-        base.update(overrides)
-        return cls(**base)
-
-    def to_json(self) -> dict:
-        return dataclasses.asdict(self)
 
 
 #: TrainConfig fields a resumed run may change: how long it runs and what it prints or saves.
@@ -293,185 +122,6 @@ def _horizon_samples(h, dt: float) -> int:
     if steps < 1:
         raise ValueError(f"horizon {h!r} is shorter than one sample (dt = {dt})")
     return steps
-
-
-@dataclasses.dataclass
-class ScaleFit:
-    """Result of :func:`fit_scale`: the factor applied and the relative residual before/after."""
-
-    factor: float
-    relative_residual_before: float
-    relative_residual_after: float
-
-    def to_json(self) -> dict:
-        return dataclasses.asdict(self)
-
-
-# jitted (model as an argument): traced op by op, the few hundred primitives of one model's terms
-# would be compiled one by one, at every fit
-_integral_terms_jit = eqx.filter_jit(integral_terms)
-
-
-def fit_scale(model, trajs: Sequence[Trajectory], rule: QuadratureRule = "trapezoid", span: int = 1):
-    """Fit the overall scale of a learned model's (L, τ_NC) on forced trajectories.
-
-    The integral residual of the model with its Lagrangian and τ_NC multiplied by s is Z̄ − s·Ā
-    (τ_u is known and not scaled), so s = ⟨Z̄, Ā⟩ / ⟨Ā, Ā⟩ by least squares. Returns
-    ``(model_with_scale, ScaleFit)``. Needs a nonzero input in ``trajs``.
-
-    ``span``: Z̄ and Ā summed over that many consecutive intervals first, as L_Iτ's
-    (:func:`~furuta_gym.training.losses.span_sum`). Ā holds the momentum at the interval ends,
-    so an error in estimated velocities is an error in the regressor, which biases s towards
-    zero (regression dilution); over a longer interval that error weighs less against Ā.
-    """
-    ensure_x64()
-    As, Zs = [], []
-    for tr in trajs:
-        if tr.qd is None:
-            raise ValueError(f"trajectory {tr.name!r} has no velocities; the scale fit needs q̇")
-        terms = _integral_terms_jit(
-            model, jnp.asarray(tr.q), jnp.asarray(tr.qd), jnp.asarray(tr.u).reshape(len(tr), -1), tr.dt, rule
-        )
-        As.append(np.asarray(span_sum(terms.A, span)))
-        Zs.append(np.asarray(span_sum(terms.Z, span)))
-    A = np.concatenate(As).ravel()
-    Z = np.concatenate(Zs).ravel()
-    if not np.any(np.concatenate([np.asarray(tr.u).ravel() for tr in trajs]) != 0):
-        raise ValueError("the scale fit needs a forced trajectory (nonzero input u); got u ≡ 0")
-    denom = _dot(A, A)
-    if not np.isfinite(denom) or denom == 0.0:
-        raise ValueError("the scale fit failed: the model's integral terms are zero or not finite")
-    s = _dot(Z, A) / denom
-    if not s > 0:
-        raise ValueError(
-            f"the scale fit gave a non-positive scale {s:.3g}: the model does not explain the "
-            "forced trajectory's input (wrong sign convention of u?)"
-        )
-    zn = math.sqrt(_dot(Z, Z))
-    before = math.sqrt(_dot(Z - A, Z - A)) / zn
-    after = math.sqrt(_dot(Z - s * A, Z - s * A)) / zn
-    return model.with_scale(model.scale * s), ScaleFit(s, before, after)
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """⟨a, b⟩ rounded once (``math.fsum`` of the products): a BLAS dot sums in an order set by
-    the kernels it picks for the CPU, so the scale, and every number after it, would differ
-    between machines in the last bits (docs/conventions.md, "Same numbers on every machine")."""
-    return math.fsum((a * b).tolist())
-
-
-def _tree_where(ok, new, old):
-    return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, old)
-
-
-def _all_finite(tree) -> jnp.ndarray:
-    leaves = jax.tree_util.tree_leaves(eqx.filter(tree, eqx.is_inexact_array))
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(l)) for l in leaves]))
-
-
-def _build_optimizer(model, config: TrainConfig):
-    trainable = model.trainable()
-    decay_mask = model.decayed()
-    params, _ = eqx.partition(model, trainable)
-    mask = eqx.filter(decay_mask, trainable)  # same structure as params (None where not trainable)
-    # unit step: the step function multiplies the update by the stage's learning rate, so stages
-    # with different rates share one optimiser state and one compiled step
-    adam = optax.adamw(1.0, weight_decay=config.weight_decay, mask=mask)
-    opt = optax.chain(optax.clip_by_global_norm(config.grad_clip), adam) if config.grad_clip else adam
-    # _make_step may store a step traced with this optimiser on disk: record what defines it
-    _step_cache.register_optimizer(
-        opt,
-        f"adamw lr=1 (scaled per step) wd={config.weight_decay!r} "
-        f"clip={config.grad_clip!r} mask={_step_cache.array_digest(mask)}",
-    )
-    return opt, trainable, params
-
-
-def _step_function(
-    static, optimizer, loss: str, config: TrainConfig, normalization: Normalization, augmentation_weight: float = 0.0
-):
-    """The optimiser step of ``loss``, not yet compiled: ``step(params, opt_state, traj_windows,
-    integral_windows, lam, learning_rate) -> (params, opt_state, terms, ok)``."""
-    kind = loss_kind(loss)
-    settings = StepSettings(
-        trajectory=dict(rtol=config.rtol, atol=config.atol, max_steps=config.max_steps),
-        integral=dict(
-            rule=config.quadrature,
-            augmentation_part=config.augmentation_part,
-            resolution_tolerance=config.resolution_tolerance,
-            span=config.integral_span,
-        ),
-        normalization=normalization,
-        augmentation_weight=augmentation_weight,
-    )
-
-    def step(params, opt_state, traj_b: Windows | None, int_b: Windows | None, lam, learning_rate):
-        def objective(p):
-            return kind.objective(eqx.combine(p, static), traj_b, int_b, lam, settings)
-
-        (value, terms), grads = eqx.filter_value_and_grad(objective, has_aux=True)(params)
-        ok = jnp.isfinite(value) & _all_finite(grads)
-        updates, new_opt = optimizer.update(grads, opt_state, params)
-        updates = jax.tree_util.tree_map(lambda u: learning_rate * u, updates)
-        new_params = eqx.apply_updates(params, updates)
-        params = _tree_where(ok, new_params, params)
-        opt_state = _tree_where(ok, new_opt, opt_state)
-        return params, opt_state, terms, ok
-
-    return step
-
-
-def _make_step(
-    static, optimizer, loss: str, config: TrainConfig, normalization: Normalization, augmentation_weight: float = 0.0
-):
-    """:func:`_step_function` compiled (and, with JAX's persistent cache on, stored traced)."""
-    step = _step_function(static, optimizer, loss, config, normalization, augmentation_weight)
-    # level 0 skips LLVM's optimisations: a third less compile time for a slower step. Only
-    # the steps with an ODE solve: an L_Iτ step compiles in seconds and runs many epochs
-    fast = config.fast_compile and loss_kind(loss).uses_trajectory
-    compiler_options = {"xla_backend_optimization_level": 0} if fast else None
-    # equinox's overloads leave out the jax.jit keywords it passes on
-    live_step = eqx.filter_jit(step, compiler_options=compiler_options)  # pyright: ignore[reportCallIssue]
-    # with JAX's persistent compilation cache enabled, a later process loads the traced step from
-    # disk instead of tracing it again (seconds for L_traj); see _step_cache
-    cache_dir = _step_cache.step_cache_dir()
-    described = _step_cache.optimizer_description(optimizer)
-    if cache_dir is not None and described is not None:
-        key = {
-            "loss": loss,
-            "normalization": normalization,
-            "config": repr(config),
-            "augmentation_weight": repr(float(augmentation_weight)),
-            "optimizer": described,
-            "static": _step_cache.array_digest(static),
-        }
-        # JAX takes compiler options on an outermost jit only: the step is exported without them
-        # and the stored computation compiled with them
-        return _step_cache.ExportedStep(
-            live_step,
-            key,
-            cache_dir,
-            compiler_options=compiler_options,
-            export_step=eqx.filter_jit(step) if compiler_options else None,
-        )
-    return live_step
-
-
-def training_step(
-    model, config: TrainConfig, loss: str, normalization: Normalization = "momentum", augmentation_weight: float = 0.0
-):
-    """One optimiser step of ``loss`` for ``model``, built as :func:`train` builds it, with its
-    starting parameters and optimiser state: ``(step, params, opt_state)``.
-
-    ``step(params, opt_state, traj_windows, integral_windows, lam, learning_rate)`` returns
-    ``(params, opt_state, losses, ok)``; ``loss`` is one of :data:`LOSSES` (``"itau"``: L_Iτ alone,
-    ``traj_windows`` None). For benchmarks and experiments that time or probe the step itself."""
-    if loss not in LOSS_KINDS:  # the registry as it is now: a loss defined after import counts
-        raise ValueError(f"loss: expected one of {tuple(LOSS_KINDS)}, got {loss!r}")
-    optimizer, trainable, params = _build_optimizer(model, config)
-    _, static = eqx.partition(model, trainable)
-    step = _make_step(static, optimizer, loss, config, normalization, augmentation_weight)
-    return step, params, optimizer.init(params)
 
 
 def _read_history(path: Path, epochs: int) -> list[dict]:
