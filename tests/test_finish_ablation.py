@@ -31,3 +31,38 @@ def test_soft_friction_loss_creeps_where_karnopp_holds():
     assert np.all(np.abs(held) < 1e-6 * abs(free[0]))
     # the constraint supplies only the impedance's share of the holding force: the rest moves it
     assert 0.5 * (1 - MUJOCO_IMPEDANCE) < soft[0] / free[0] < 2.0 * (1 - MUJOCO_IMPEDANCE)
+
+
+def _segment(name, t0, n, dt=0.002):
+    from furuta_gym.diagnose._fit import Segment
+
+    t = t0 + dt * np.arange(n)
+    q = np.stack([t, -t], axis=1)
+    return Segment(name, t, q, np.ones_like(q), t[:, None].copy(), dt, 0, False)
+
+
+def test_window_placements_start_where_named():
+    from furuta_gym.diagnose._fit import InputDynamics
+    from furuta_gym.diagnose.finish_ablation import log_starts, placed_windows
+
+    # a log whose first sample is at 0.5 s, trimmed 0.05 s; its second segment starts 2.154 s later
+    segs = [_segment("run01[0]", 0.55, 1077), _segment("run01[1]", 2.704, 1077)]
+    starts = log_starts(segs, 0.05)
+    assert starts == {"run01": 0.5}
+    first = lambda win, k: np.round((win.x0[win.segment == k, 0] - 0.5) / 0.002).astype(int)  # noqa: E731
+    own = placed_windows(segs, 50, InputDynamics(), "segments", starts)
+    grid = placed_windows(segs, 50, InputDynamics(), "grid", starts)
+    every = placed_windows(segs, 50, InputDynamics(), "starts", starts)
+    # the segments' own: back to back from each segment's first sample (25 and 1102 on the log)
+    assert first(own, 0)[:2].tolist() == [25, 75] and first(own, 1)[:2].tolist() == [1102, 1152]
+    assert len(own.x0) == 2 * 21
+    # on the log's grid: multiples of 50 samples from the log's first sample, inside each segment
+    assert first(grid, 0)[:2].tolist() == [50, 100] and first(grid, 1)[:2].tolist() == [1150, 1200]
+    assert np.all(first(grid, 0) % 50 == 0) and np.all(first(grid, 1) % 50 == 0)
+    assert len(grid.x0) == 21 + 20
+    # every 10 ms (5 samples) of the log
+    assert first(every, 0)[:3].tolist() == [25, 30, 35] and first(every, 1)[:2].tolist() == [1105, 1110]
+    assert len(every.x0) == 206 + 205
+    # each window's measured positions follow its start
+    k = 7
+    assert np.allclose(grid.q[k, 0], grid.x0[k, :2] + [0.002, -0.002])

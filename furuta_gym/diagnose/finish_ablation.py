@@ -6,8 +6,11 @@ touching any test data, the diagnosis' segments are split into folds as the diag
 (every third segment of a log; fold 2 is its held-out set), and a variant of the refit is fitted
 on the other folds and scored on each fold in turn (:func:`run_variant`). A variant changes one
 thing: the dry-friction law of the predictor (``friction_law``), the input delay refitted with the
-rest, J1b freed to the rigid-body boundary, the refit's data (one fold), its evaluations or its
-start. ``studies/head_to_head_ablation.py`` runs them on the head-to-head's fit runs.
+rest, J1b freed to the rigid-body boundary, the refit's data (one fold, or its windows placed
+otherwise: :data:`PLACEMENTS`), its evaluations or its start. Every variant is scored on the held-out
+fold's windows under each placement, since where a 0.1 s window starts changes its error (the
+shipped runs' input steps every 0.1 s). ``studies/head_to_head_ablation.py`` runs them on the
+head-to-head's fit runs.
 """
 
 from __future__ import annotations
@@ -28,13 +31,29 @@ from ._diagnose import DiagnosisSettings, diagnose
 from ._fit import InputDynamics
 from ._library import Candidate
 
-__all__ = ["Variant", "diagnose_with_context", "fold_of", "friction_law", "refit_start", "run_variant", "summarise"]
+__all__ = [
+    "PLACEMENTS",
+    "Variant",
+    "diagnose_with_context",
+    "fold_of",
+    "friction_law",
+    "log_starts",
+    "placed_windows",
+    "refit_start",
+    "run_variant",
+    "summarise",
+]
 
 FOLDS = 3
 #: the delay grid around the refit's value (s), and the margin kept off a body boundary
 DELAY_STEPS = np.array([-0.5e-3, -0.25e-3, 0.25e-3, 0.5e-3])
 BOUNDARY_MARGIN = 0.01
 RULE = DiagnosisSettings()  # its rule for a gain judges a variant against the current finish
+#: where a segment's windows start: back to back from the segment's first sample (the
+#: diagnosis'), on its log's back-to-back grid from the log's first sample (the head-to-head's
+#: scoring and mujoco.sysid's fit), or every ``STARTS_EVERY`` s of the log (every phase alike)
+PLACEMENTS = ("segments", "grid", "starts")
+STARTS_EVERY = 0.01
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,6 +68,7 @@ class Variant:
     # or "nominal" (the datasheet's lumped values) or "given" (``given(context, start)`` -> (θ, input dynamics))
     start: str = "diagnosis"
     refit: bool = True  # False: the start itself scored (e.g. another tool's fit in this predictor)
+    placement: str = "segments"  # where the refit's windows start (:data:`PLACEMENTS`)
 
 
 def diagnose_with_context(data, system: str, **kwargs):
@@ -157,6 +177,39 @@ def _windows(segments, length: int, dyn) -> _fit.Windows:
     return win
 
 
+def _log_name(segment) -> str:
+    return segment.name.rsplit("[", 1)[0]
+
+
+def log_starts(segments, trim_seconds: float) -> dict[str, float]:
+    """Each log's first sample time: its first segment starts ``trim_seconds`` after it."""
+    out: dict[str, float] = {}
+    for s in segments:
+        out[_log_name(s)] = min(out.get(_log_name(s), np.inf), float(s.t[0]) - trim_seconds)
+    return out
+
+
+def placed_windows(segments, length: int, dyn, placement: str, starts: dict[str, float]) -> _fit.Windows:
+    """``length``-step windows inside each segment, starting as ``placement`` says
+    (:data:`PLACEMENTS`; ``starts``: each log's first sample time, :func:`log_starts`)."""
+    if placement == "segments":
+        return _windows(segments, length, dyn)
+    if placement not in PLACEMENTS:
+        raise ValueError(f"placement: expected one of {PLACEMENTS}, got {placement!r}")
+    x0, us, qs, idx = [], [], [], []
+    for i, s in enumerate(segments):
+        step = length if placement == "grid" else max(1, int(round(STARTS_EVERY / s.dt)))
+        first = int(round((s.t[0] - starts[_log_name(s)]) / s.dt))  # the segment's sample on its log
+        u = dyn.apply(s.u, s.dt)
+        for a in range((-first) % step, s.q.shape[0] - length, step):
+            x0.append(np.concatenate([s.q[a], s.qd[a]]))
+            us.append(u[a : a + length])
+            qs.append(s.q[a + 1 : a + length + 1])
+            idx.append(i)
+    assert x0, "every segment holds a window"
+    return _fit.Windows(np.array(x0), np.array(us), np.array(qs), np.array(idx), segments[0].dt, length)
+
+
 def refit_start(fx, res):
     """The finish's start: the diagnosed θ with its inconsistent effects and every joint's
     Coulomb friction at their tested values, the candidates it frees and its input dynamics."""
@@ -219,7 +272,8 @@ def _restoring(fx, settings):
 
 
 def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
-    """Refit on the ``train`` segments as the variant says; per-window squared errors on ``held``."""
+    """Refit on the ``train`` segments as the variant says; per-window squared errors on ``held``
+    under each placement of its windows (``sums``: the diagnosis' own, ``sums_<placement>``)."""
     start, chosen, dyn = refit_start(fx, res)
     if variant.start == "given":
         assert given is not None, f"{variant.name}: a given start needs ``given``"
@@ -227,7 +281,8 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
     elif variant.start == "nominal":
         nb = len(fx.layout.base)
         start[:nb] = np.where([i in fx.fixed_idx for i in range(nb)], start[:nb], fx.layout.nominal()[:nb])
-    win = _windows(train, fx.L, dyn)
+    starts = log_starts(fx.segs, fx.settings.trim_seconds)
+    win = placed_windows(train, fx.L, dyn, variant.placement, starts)
     settings = fx.settings
     if variant.max_nfev is not None:
         fx.settings = dataclasses.replace(settings, oe_max_nfev=variant.max_nfev)
@@ -240,9 +295,14 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
             theta, chosen, _, _ = _finish._refit(fx, start, chosen, dyn, win)
         if variant.refit_delay:
             theta, chosen, dyn = refit_delay(fx, theta, chosen, dyn, train)
-        sums = _fit.window_square_sums(fx.layout, theta, _windows(held, fx.L, dyn), fx.substeps)
+        sums = {
+            "sums" if p == "segments" else f"sums_{p}": _fit.window_square_sums(
+                fx.layout, theta, placed_windows(held, fx.L, dyn, p, starts), fx.substeps
+            )
+            for p in PLACEMENTS
+        }
     return {
-        "sums": sums,
+        **sums,
         "theta": {name: float(theta[i]) for i, name in enumerate(fx.layout.base)},
         "effects": {c.key: float(theta[fx.layout.index(c.key)]) for c in chosen if not c.kind.input_dynamics},
         "delay": dyn.seconds,
@@ -260,10 +320,12 @@ def run_variant(fx, res, variant: Variant, given=None) -> dict:
         others = [(k + 1) % FOLDS] if variant.one_fold else [m for m in range(FOLDS) if m != k]
         train = [s for m in others for s in folds[m]]
         per_fold.append(fit_and_score(fx, res, variant, train, folds[k], given))
+    listed = lambda f: {k: v.tolist() if k.startswith("sums") else v for k, v in f.items()}  # noqa: E731
     return {
         "name": variant.name,
         "label": variant.label,
-        "per_fold": [{**{k: v for k, v in f.items() if k != "sums"}, "sums": f["sums"].tolist()} for f in per_fold],
+        "placement": variant.placement,
+        "per_fold": [listed(f) for f in per_fold],
         "wall_seconds": round(time.perf_counter() - t0, 1),
     }
 
@@ -274,11 +336,20 @@ def rmse(sums, length: int, n: int) -> float:
     return float(np.sqrt(sums.sum() / (sums.size * length * n)))
 
 
+def _pooled(doc: dict, key: str) -> dict[str, np.ndarray]:
+    return {
+        v: np.concatenate([f[key] for f in r["per_fold"]])
+        for v, r in doc["variants"].items()
+        if all(key in f for f in r["per_fold"])
+    }
+
+
 def summarise(doc: dict, length: int, n: int) -> None:
     """Pooled held-out RMSE, fold 2's (the finish's own held-out windows) and the change against
     the current finish, with the diagnosis' rule for a gain (relative drop of the sum of squares,
-    t of per-window log ratios)."""
-    pooled = {v: np.concatenate([f["sums"] for f in r["per_fold"]]) for v, r in doc["variants"].items()}
+    t of per-window log ratios); the same on the held-out windows of each other placement
+    (``by_placement``)."""
+    pooled = _pooled(doc, "sums")
     base = pooled.get("current")
     for v, r in doc["variants"].items():
         r["heldout_rmse"] = rmse(pooled[v], length, n)
@@ -287,3 +358,13 @@ def summarise(doc: dict, length: int, n: int) -> None:
             ev = _trace_mod.Evidence.of_sums(base, pooled[v])
             r["vs_current"] = {"improvement": float(ev.improvement), "z_score": float(ev.z)}
             r["passes_rule"] = bool(ev.passes(RULE.min_improvement, RULE.z_threshold))
+    for placement in PLACEMENTS[1:]:
+        pooled = _pooled(doc, f"sums_{placement}")
+        base = pooled.get("current")
+        for v, sums in pooled.items():
+            entry = {"heldout_rmse": rmse(sums, length, n), "windows": int(sums.size)}
+            if base is not None and v != "current":
+                ev = _trace_mod.Evidence.of_sums(base, sums)
+                entry |= {"improvement": float(ev.improvement), "z_score": float(ev.z)}
+                entry["passes_rule"] = bool(ev.passes(RULE.min_improvement, RULE.z_threshold))
+            doc["variants"][v].setdefault("by_placement", {})[placement] = entry
