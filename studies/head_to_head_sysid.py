@@ -114,14 +114,16 @@ def physical(params) -> dict:
     return {name: float(params[name].value[0]) * PARAMETERS[name][0] for name in params.keys()}
 
 
-def windows_for_sysid(trajs, window: float, every: int = 1):
-    """(x0, u with the sample before each window first, measured angles) of back-to-back windows."""
-    x0, us, xs = prediction_windows(trajs, window)
+def windows_for_sysid(trajs, window: float, every: int = 1, stride: float | None = None):
+    """(x0, u with the sample before each window first, measured angles) of back-to-back windows
+    (or one every ``stride`` s)."""
+    x0, us, xs = prediction_windows(trajs, window, stride)
     n = us.shape[1]
+    step = n if stride is None else max(1, int(round(stride / trajs[0].dt)))
     before = []
     for tr in trajs:  # the input sample before each window: as prediction_windows cuts them
         u = np.asarray(tr.u, float).reshape(len(tr), -1)
-        before += [u[max(a - 1, 0)] for a in range(0, len(tr) - n, n)]
+        before += [u[max(a - 1, 0)] for a in range(0, len(tr) - n, step)]
     u_ext = np.concatenate([np.asarray(before)[:, None], us], axis=1)
     keep = slice(None, None, every)
     return x0[keep], u_ext[keep], xs[keep, :, :2]

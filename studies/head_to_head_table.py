@@ -61,12 +61,21 @@ def _mrad(v: float, bold: bool = False) -> str:
     return f"**{1e3 * v:.2f}**" if bold else f"{1e3 * v:.2f}"
 
 
+def _every_phase(d: dict, best: float | None) -> str:
+    e = d.get("every_phase")
+    return " – |" if e is None else f" {_mrad(e['position_rmse'], e['position_rmse'] == best)} |"
+
+
 def score_table(docs: list[dict]) -> str:
     nominal = next(d for d in docs if d["name"] == "nominal")["position_rmse"]
     best = min(d["position_rmse"] for d in docs)
+    phased = [d["every_phase"]["position_rmse"] for d in docs if "every_phase" in d]
+    best_phased = min(phased) if phased else None
+    extra = (" windows every 10 ms, both angles (mrad) |", "---|") if phased else ("", "")
     rows = [
-        "| model | fitted on | α (mrad) | β (mrad) | both angles (mrad) | vs nominal | α̇, β̇ (rad/s) | fit wall time (s) |",
-        "|---|---|---|---|---|---|---|---|",
+        "| model | fitted on | α (mrad) | β (mrad) | both angles (mrad) | vs nominal | α̇, β̇ (rad/s) | fit wall time (s) |"
+        + extra[0],
+        "|---|---|---|---|---|---|---|---|" + extra[1],
     ]
     for d in docs:
         r = d["rmse"]
@@ -75,9 +84,24 @@ def score_table(docs: list[dict]) -> str:
         rows.append(
             f"| {d['label']}{diverged} | {_runs(d['fit_runs'])} | {_mrad(r['alpha'])} | {_mrad(r['beta'])} "
             f"| {_mrad(d['position_rmse'], d['position_rmse'] == best)} | {nominal / d['position_rmse']:.2f}× "
-            f"| {r['alpha_dot']:.3f}, {r['beta_dot']:.3f} | {wall} |"
+            f"| {r['alpha_dot']:.3f}, {r['beta_dot']:.3f} | {wall} |" + (_every_phase(d, best_phased) if phased else "")
         )
     return "\n".join(rows)
+
+
+def every_phase_sentence(docs: list[dict]) -> str:
+    """The ranking on windows starting every 10 ms, when the rows were scored so."""
+    phased = sorted((d for d in docs if "every_phase" in d), key=lambda d: d["every_phase"]["position_rmse"])
+    if len(phased) < 2:
+        return ""
+    first, second = phased[0], phased[1]
+    return (
+        f" The last column scores the same fits, not refitted, on {first['every_phase']['n_windows']} windows of "
+        f"the same runs starting every {1e3 * first['every_phase']['stride_seconds']:g} ms (every point of the runs' "
+        f"0.1 s input cycle alike; `diagnose_head_to_head.py --every-phase`): lowest **{first['label']}** "
+        f"({_mrad(first['every_phase']['position_rmse'])} mrad), then {second['label']} "
+        f"({_mrad(second['every_phase']['position_rmse'])} mrad)."
+    )
 
 
 def sysid_table(doc: dict) -> str:
@@ -248,7 +272,7 @@ def block() -> str:
         score_table(docs),
         "",
         f"Lowest error on the unseen runs: **{first['label']}** ({_mrad(first['position_rmse'])} mrad), then "
-        f"{second['label']} ({_mrad(second['position_rmse'])} mrad). {findings(docs)}",
+        f"{second['label']} ({_mrad(second['position_rmse'])} mrad).{every_phase_sentence(docs)} {findings(docs)}",
     ]
     lines += [
         "",

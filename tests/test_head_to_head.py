@@ -120,6 +120,22 @@ def test_every_row_is_scored_like_window_errors():
     assert ours["n_windows"] == theirs["n_windows"]
 
 
+def test_every_phase_windows_start_every_stride_with_the_input_before_each():
+    """``--every-phase`` scores windows starting every 10 ms (5 samples), each carrying the input
+    sample before it for the MuJoCo rollout's delay, as the back-to-back windows do."""
+    h2h, hsysid = _experiment()
+    run = [_simulated_run(seconds=0.6)]
+    u = np.asarray(run[0].u, float)
+    x0, u_ext, q = hsysid.windows_for_sysid(run, h2h.WINDOW, stride=h2h.EVERY_PHASE)
+    x0_b, u_ext_b, _ = hsysid.windows_for_sysid(run, h2h.WINDOW)
+    assert len(x0) == len(range(0, len(run[0]) - 50, 5)) == 51 and len(x0_b) == 6
+    assert np.allclose(x0[10], x0_b[1]) and np.allclose(u_ext[10], u_ext_b[1])  # sample 50 in both
+    assert np.allclose(u_ext[3, 0], u[14]) and np.allclose(u_ext[3, 1:], u[15:65])
+    assert np.allclose(q[3], run[0].q[15:66])
+    every = h2h.score_field(h2h.lagrangian_field(Furuta()), run, stride=h2h.EVERY_PHASE)
+    assert every["n_windows"] == 51 and every["position_rmse"] < 1e-9  # the log's own model
+
+
 def test_sysid_recovers_a_motor_gain_and_an_input_delay_on_simulated_windows():
     """mujoco.sysid on the MJCF (a tiny fit: two parameters, one second of windows) finds the
     gain and delay of a log our nominal model made; its MuJoCo rollout matches ours."""
