@@ -255,12 +255,12 @@ class Context:
 
 
 def fit_law(
-    ctx: Context, theta0, effects: list[Candidate], cable0: tuple | None, max_nfev: int, most: dict | None = None
+    ctx: Context, theta0, effects: list[Candidate], cable0: tuple | None, max_nfev: int, bounds: dict | None = None
 ):
     """Output-error fit of θ's free entries (the effects' and the declared model's) and, given
     ``cable0`` (:meth:`Context.cable`), the cable's stiffness, second parameter and each
     trajectory's first neutral (ρ ∈ [−1, 1]: where in the play of its first sample; the history
-    before a log is unknown); ``most``: {effect key: its largest value}; returns (θ, cable)."""
+    before a log is unknown); ``bounds``: {effect key: (its least, its largest value)}; returns (θ, cable)."""
     layout = ctx.layout
     # the declared model's parameters stay at the start's: the windows where the joint moves, all
     # that tells the laws apart, are few (a release moves the rotor for a second or two)
@@ -280,11 +280,17 @@ def fit_law(
         return np.where(np.isfinite(r), r, 1e3)
 
     z0 = theta0[free] / scale[free]
-    lower = np.where(np.arange(layout.size) < len(layout.base), 0.0, -np.inf)[free] / scale[free]
+    # a base parameter and an effect that only one sign makes physical are not fitted past zero
+    positive = [
+        i < len(layout.base) or layout.candidates[i - len(layout.base)].kind.physically_positive
+        for i in range(layout.size)
+    ]
+    lower = np.where(positive, 0.0, -np.inf)[free] / scale[free]
     upper = np.full(nf, np.inf)
-    for key, value in (most or {}).items():
+    for key, (least, value) in (bounds or {}).items():
         i = int(np.flatnonzero(np.flatnonzero(free) == layout.index(key))[0])
         upper[i] = max(value, 1e-12) / scale[layout.index(key)]
+        lower[i] = min(least, 0.99 * value) / scale[layout.index(key)]
     if cable0:
         lo, hi = EFFECT_KINDS[_memory_kind(ctx).name].second_bounds
         z0 = np.concatenate([z0, [1.0, cable0[1], cable0[2]]])
@@ -351,30 +357,87 @@ def _cleared(ctx: Context, theta) -> np.ndarray:
     return out
 
 
-def broke_away(ctx: Context, theta, min_rest: float = 0.2, flicker: int = 1) -> float | None:
-    """The least force (N·m or N) that moved the joint off a rest, under θ: at the last sample of
-    each run of ``min_rest`` s within ``flicker`` counts that the joint left (a released rotor
-    left its first sample's rest), the force friction would have had to hold; the breakaway was
-    at most that. None: no rest was left. Read from the logs, not the windows, whose trimmed
-    starts leave out the releases themselves."""
+def holding_forces(ctx: Context, theta, cable: tuple | None = None) -> list[np.ndarray]:
+    """Per trajectory, the force (N·m or N) friction would balance to hold the joint still at each
+    sample under θ and a cable with memory (:meth:`Context.cable`; None: none): the model's
+    inverse dynamics with the joint's velocity and acceleration zero, less the input, plus the
+    cable's pull from its neutral (the play operator over the log)."""
     holding = _holding(ctx.layout, ctx.j)
-    count = ctx.fx.resolution.get(ctx.joint, 0.0)
-    at = {k: [] for k in ("q", "qd", "qdd", "u")}
+    paths = neutral_paths(ctx.trajs, ctx.j, cable[1], _starts(cable)) if cable and cable[0] else None
+    out = []
     for tr in ctx.trajs:
-        q = np.asarray(tr.q[:, ctx.j], float)
-        bounds = _drift_runs(q, flicker * count * 1.01)
-        length = int(round(min_rest / tr.dt))
-        ends = [e - 1 for s, e in zip(bounds[:-1], bounds[1:], strict=True) if e - s >= length and e < q.size]
-        if not ends:
-            continue
         qd = np.asarray(estimate_velocities(tr).qd)  # the other joints' motion pushes on it too
         qdd = np.gradient(qd, tr.dt, axis=0)
-        for key, x in (("q", tr.q), ("qd", qd), ("qdd", qdd), ("u", np.asarray(tr.u, float))):
-            at[key].append(np.asarray(x)[ends])
-    if not at["q"]:
-        return None
-    args = [jnp.asarray(np.concatenate(at[key])) for key in ("q", "qd", "qdd", "u")]
-    return float(np.min(np.abs(np.asarray(holding(jnp.asarray(theta), *args)))))
+        args = [jnp.asarray(x) for x in (tr.q, qd, qdd, np.asarray(tr.u, float))]
+        f = np.asarray(holding(jnp.asarray(theta), *args))
+        if paths is not None:
+            f = f + cable[0] * (np.asarray(tr.q[:, ctx.j]) - paths[tr.name][1])
+        out.append(f)
+    return out
+
+
+def broke_away(
+    ctx: Context, theta, cable=None, min_rest: float = 0.2, flicker: int = 1, first_rest: float = 0.01, span=0.05
+) -> float | None:
+    """The least force (N·m or N) that moved the joint off a rest, under θ (and ``cable``); the
+    breakaway was at most that. A rest: a run of ``min_rest`` s within ``flicker`` counts that
+    the joint left, or a trajectory's first run of ``first_rest`` s (a released joint starts at
+    rest: a moving one passes a count sooner). Each rest's force is the largest the joint felt
+    over the last ``span`` s before it left: the other joints' pull, from estimated
+    accelerations, is read with noise, and a noisy least would put the bound below the breakaway
+    (it is an upper bound: a larger reading only loosens it). None: no rest was left. Read from
+    the logs, not the windows, whose trimmed starts leave out the releases themselves."""
+    tolerance = flicker * ctx.fx.resolution.get(ctx.joint, 0.0) * 1.01
+    out = []
+    for tr, f in zip(ctx.trajs, holding_forces(ctx, theta, cable), strict=True):
+        q = np.asarray(tr.q[:, ctx.j], float)
+        out += [float(np.abs(f[a:b]).max()) for a, b in _left_rests(q, tr.dt, tolerance, min_rest, first_rest, span)]
+    return min(out) if out else None
+
+
+def _settled(ctx: Context, theta, theta0, bounds: dict):
+    """``theta`` with its breakaway at most the geometric middle of the rests' bracket (the value
+    least far, in ratio, from any the rests allow): the windows push it up, towards holding every
+    stop (a predicted pendulum started from a velocity read through quantisation shakes a rotor
+    that the real one kept still, and a larger breakaway keeps it still), so a fit above the
+    middle says no more than that the rotor was held."""
+    c = _joint_effects(ctx)
+    s, i = ctx.layout.index(c["breakaway"].key), ctx.layout.index(c["sliding"].key)
+    least, most = bounds.get(c["breakaway"].key, (0.0, np.inf))
+    if not (np.isfinite(most) and least > 0):
+        return theta
+    out = np.array(theta, dtype=float)
+    out[s] = min(out[s], np.sqrt((least + theta0[i]) * (most + theta0[i])) - theta0[i])
+    return out
+
+
+def held_still(ctx: Context, theta, cable=None, min_rest: float = 0.2, flicker: int = 1) -> float:
+    """The largest force (N·m or N) a rest held, under θ (and ``cable``): over each run of
+    ``min_rest`` s within ``flicker`` counts, the median of the force friction balanced (the
+    other joints' pull, read with noise, averages out); 0 without a rest. The breakaway was at
+    least that."""
+    tolerance = flicker * ctx.fx.resolution.get(ctx.joint, 0.0) * 1.01
+    out = [0.0]
+    for tr, f in zip(ctx.trajs, holding_forces(ctx, theta, cable), strict=True):
+        bounds = _drift_runs(np.asarray(tr.q[:, ctx.j], float), tolerance)
+        runs = zip(bounds[:-1], bounds[1:], strict=True)
+        out += [abs(float(np.median(f[a:b]))) for a, b in runs if b - a >= int(round(min_rest / tr.dt))]
+    return max(out)
+
+
+def _left_rests(q, dt: float, tolerance: float, min_rest: float, first_rest: float, span: float, moved: int = 4):
+    """(start, end) of the last ``span`` s of each rest of ``q`` that the joint left (see
+    :func:`broke_away`): moving on by ``moved`` tolerances within 2·``span`` s. A joint held by a
+    soft friction (MuJoCo's, a real joint's) creeps a count under a load below its breakaway and
+    rests again: that rest was not broken."""
+    bounds = _drift_runs(q, tolerance)
+    n = int(round(span / dt))
+    out = []
+    for k, (s, e) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+        least = first_rest if k == 0 else min_rest
+        if e - s >= int(round(least / dt)) and np.any(np.abs(q[e : e + 2 * n] - q[e - 1]) >= moved * tolerance):
+            out.append((max(s, e - n), e))
+    return out
 
 
 def _start_breakaway(ctx: Context, theta, held: float):
@@ -390,11 +453,16 @@ def _start_breakaway(ctx: Context, theta, held: float):
         i = ctx.layout.index(c[key].key)
         th[i] = max(th[i], 2.0 * scale[i])
     coulomb, s = th[ctx.layout.index(c["sliding"].key)], ctx.layout.index(c["breakaway"].key)
+    bounds = _breakaway_bound(ctx, th)
+    least, most = bounds[c["breakaway"].key]
+    deltas = [max(coulomb, held - coulomb)] + [m * coulomb for m in _BREAKAWAY_GRID]
+    deltas += [np.sqrt(max(least, coulomb) * most)] if np.isfinite(most) else []
     starts = []
-    for delta in [max(coulomb, held - coulomb)] + [m * coulomb for m in _BREAKAWAY_GRID]:
-        th[s] = delta
+    for delta in deltas:
+        th[s] = float(np.clip(delta, least, most))
         starts += _with_nominal_base(ctx, th)
-    return starts[_best_start(ctx, starts, [(0.0, 0.0)] * len(starts))], effects + [c["breakaway"]]
+    best = starts[_best_start(ctx, starts, [(0.0, 0.0)] * len(starts))]
+    return best, effects + [c["breakaway"]], bounds
 
 
 def _physical_base(ctx: Context, theta_ee, theta):
@@ -455,8 +523,9 @@ def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int) -
     """Both laws fitted on the joint (module docstring) and judged against ``theta``."""
     base = ctx.predictions([theta], [(0.0, 0.0)], "val")[0]
     out = {}
-    th0, effects = _start_breakaway(ctx, theta, held)
-    fits = {LAWS[1]: (effects, fit_law(ctx, th0, effects, None, max_nfev, _breakaway_bound(ctx, th0)))}
+    th0, effects, bounds = _start_breakaway(ctx, theta, held)
+    fitted = fit_law(ctx, th0, effects, None, max_nfev, bounds)
+    fits = {LAWS[1]: (effects, (_settled(ctx, fitted[0], th0, bounds), fitted[1]))}
     th0, effects, cable0 = _start_moving(ctx, th0, max(spring_k, 2.0 * _typical_spring(ctx)))
     fits[LAWS[0]] = (effects, fit_law(ctx, th0, effects, cable0, max_nfev))
     for law, (effects, (th, cable)) in fits.items():
@@ -468,16 +537,18 @@ def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int) -
     return out
 
 
-def _breakaway_bound(ctx: Context, theta) -> dict:
-    """{the stiction's key: its largest ΔF}: the joint's breakaway at most the least force that
-    moved it off a rest (:func:`broke_away`, under the start's cable), less its Coulomb level; the
-    windows alone bound it only from below (a stiction that held every stop they show fits them
-    as well as the right one)."""
+def _breakaway_bound(ctx: Context, theta, cable=None) -> dict:
+    """{the stiction's key: (its least, its largest ΔF)}: the joint's breakaway at least the
+    largest force a rest held (:func:`held_still`) and at most the least force that moved it off
+    a rest (:func:`broke_away`), both under the start's cable, less its Coulomb level; the windows
+    alone say little between the two (a stiction that held every stop they show fits them as well
+    as the right one)."""
     c = _joint_effects(ctx)
-    most = broke_away(ctx, theta)
+    most, coulomb = broke_away(ctx, theta, cable), theta[ctx.layout.index(c["sliding"].key)]
+    least = held_still(ctx, theta, cable) - coulomb
     if most is None:
-        return {}
-    return {c["breakaway"].key: most - theta[ctx.layout.index(c["sliding"].key)]}
+        return {c["breakaway"].key: (max(least, 0.0), np.inf)}
+    return {c["breakaway"].key: (min(max(least, 0.0), most - coulomb), most - coulomb)}
 
 
 def _typical_spring(ctx: Context) -> float:
