@@ -28,6 +28,7 @@ distinct, both are reported and the better predictor is kept, "cannot be told ap
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from typing import Any
 
 import jax
@@ -41,7 +42,7 @@ from ..measured import estimate_velocities
 from ..simulate import rk4_zoh_step
 from ..systems import get_spec
 from . import _fit
-from ._drift import REST_LAWS, RestDrift, _runs_within as _drift_runs
+from ._drift import REST_LAWS, RestDrift, _runs_within as _drift_runs, rest_drift
 from ._library import Candidate, is_physical, non_physical
 from ._problem import free_columns
 from ._rests import _holding
@@ -458,11 +459,27 @@ def _start_breakaway(ctx: Context, theta, held: float):
     deltas = [max(coulomb, held - coulomb)] + [m * coulomb for m in _BREAKAWAY_GRID]
     deltas += [np.sqrt(max(least, coulomb) * most)] if np.isfinite(most) else []
     starts = []
-    for delta in deltas:
+    for delta, rest in itertools.product(deltas, _rest_starts(ctx, th)):
         th[s] = float(np.clip(delta, least, most))
+        if "rest" in c:
+            th[ctx.layout.index(c["rest"].key)] = rest
         starts += _with_nominal_base(ctx, th)
     best = starts[_best_start(ctx, starts, [(0.0, 0.0)] * len(starts))]
     return best, effects + [c["breakaway"]], bounds
+
+
+def _rest_starts(ctx: Context, theta) -> list[float]:
+    """The fixed cable's rest (its constant force) to start from: the equation-error fit's, and
+    the middle of the span of the log's rests (a neutral whose friction holds the rotor keeps
+    every rest within ±F_s/k of it; the equation error, which leaves rests out, can put it far
+    off)."""
+    c = _joint_effects(ctx)
+    if "rest" not in c:
+        return [0.0]
+    k, own = theta[ctx.layout.index(c["cable"].key)], theta[ctx.layout.index(c["rest"].key)]
+    count = ctx.fx.resolution.get(ctx.joint, 2 * np.pi / 2048)
+    rests = [r.position for r in rest_drift(ctx.trajs, ctx.layout.system, ctx.joint, flicker=1, count=count).rests]
+    return [own] + ([k * 0.5 * (min(rests) + max(rests))] if rests else [])
 
 
 def _physical_base(ctx: Context, theta_ee, theta):
