@@ -457,7 +457,7 @@ def _start_breakaway(ctx: Context, theta, held: float):
     bounds = _breakaway_bound(ctx, th)
     least, most = bounds[c["breakaway"].key]
     deltas = [max(coulomb, held - coulomb)] + [m * coulomb for m in _BREAKAWAY_GRID]
-    deltas += [np.sqrt(max(least, coulomb) * most)] if np.isfinite(most) else []
+    deltas += [np.sqrt(max(least, coulomb) * most)] if np.isfinite(most) and most > 0 else []
     starts = []
     for delta, rest in itertools.product(deltas, _rest_starts(ctx, th)):
         th[s] = float(np.clip(delta, least, most))
