@@ -416,3 +416,23 @@ def test_the_docs_table_of_the_rotor_laws_grid_is_generated_from_its_results():
         assert sum(table.rotor(table._found(d))["cable"] == other for d in by_law[law]) <= 1
     # every log the step kept a law on gained held-out: the step never made prediction worse
     assert all(table.ratio(d) >= 1.0 for d in docs)
+
+
+def test_the_breakaways_upper_bound_reads_releases_and_left_rests_but_not_a_one_count_creep():
+    """broke_away's rests (Method step 11): a release (a first run of 10 ms that the rotor then
+    leaves), a rest of 0.2 s left by several counts; not a creep of a count or two under a soft
+    friction, after which the rotor rests again, nor a rest that lasts to the log's end."""
+    from furuta_gym.diagnose._rotor_laws import _left_rests
+
+    dt, count = 0.002, 2 * np.pi / 2048
+    tol = 1.01 * count
+    release = np.concatenate([np.zeros(10), count * np.arange(1, 41) ** 2 / 20])  # from rest, accelerating
+    stay = np.full(200, release[-1])
+    creep = np.full(200, release[-1] + 2 * count)  # out of the rest's count, at rest again
+    away = creep[-1] + 2 * count * np.arange(1, 41)  # left by many counts
+    q = np.concatenate([release, stay, creep, away, np.full(200, away[-1])])
+    spans = _left_rests(q, dt, tol, 0.2, 0.01, 0.05)
+    passed = int(np.argmax(np.abs(q - q[0]) > tol))  # the release's run ends a count away
+    assert [e for _, e in spans] == [passed, 50 + 200 + 200]  # and the rest after the creep
+    assert all(e - s <= 25 for s, e in spans)  # the last 50 ms of each
+    assert _left_rests(np.zeros(400), dt, tol, 0.2, 0.01, 0.05) == []  # never left
