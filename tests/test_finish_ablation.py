@@ -42,8 +42,8 @@ def _segment(name, t0, n, dt=0.002):
 
 
 def test_window_placements_start_where_named():
+    from furuta_gym.diagnose._finish import log_starts, placed_windows
     from furuta_gym.diagnose._fit import InputDynamics
-    from furuta_gym.diagnose.finish_ablation import log_starts, placed_windows
 
     # a log whose first sample is at 0.5 s, trimmed 0.05 s; its second segment starts 2.154 s later
     segs = [_segment("run01[0]", 0.55, 1077), _segment("run01[1]", 2.704, 1077)]
@@ -66,3 +66,20 @@ def test_window_placements_start_where_named():
     # each window's measured positions follow its start
     k = 7
     assert np.allclose(grid.q[k, 0], grid.x0[k, :2] + [0.002, -0.002])
+
+
+def test_the_finish_refits_on_as_many_windows_as_back_to_back_drawn_from_every_start():
+    """The prediction-first refit's windows: the count the segments hold back to back, drawn from
+    the windows starting every 10 ms, so their starts spread over every phase of a 0.1 s cycle
+    where back-to-back windows of these two segments start at two phases only."""
+    from furuta_gym.diagnose._finish import refit_windows
+    from furuta_gym.diagnose._fit import InputDynamics
+
+    segs = [_segment("run01[0]", 0.55, 1077), _segment("run01[1]", 2.704, 1077)]
+    fx = types.SimpleNamespace(L=50, segs=segs, settings=types.SimpleNamespace(trim_seconds=0.05))
+    win = refit_windows(fx, segs, InputDynamics())
+    assert win.x0.shape == (42, 4) and win.us.shape == (42, 50, 1)
+    phases = np.round((win.x0[:, 0] - 0.5) / 0.002).astype(int) % 50
+    assert set(phases.tolist()) <= set(range(0, 50, 5)) and len(set(phases.tolist())) >= 8
+    again = refit_windows(fx, segs, InputDynamics())
+    assert np.array_equal(again.x0, win.x0)  # one fixed draw

@@ -9,6 +9,13 @@ by the diagnosis' rule for a gain (``min_improvement`` of the sum of squares, pe
 ratios' t ≥ ``z_threshold``).
 The diagnosis' report (effects, evidence, intervals, errors) is not touched: the finish is
 recorded beside it (:class:`PredictionFinish`).
+
+The refit's windows start at every point of a window-long cycle: one after another in each fit
+segment with a ``STARTS_EVERY`` gap between them (:func:`placed_windows`, ``"staggered"``). A
+0.1 s window's error depends on where it starts in a periodic input (the shipped runs' input steps
+every 0.1 s), and windows back to back from each segment's first sample start at a few points of
+such a cycle only, which the refit then favours (docs/diagnose.md, "What separates
+prediction-first from sysid"). The held-out windows stay the diagnosis' own.
 """
 
 from __future__ import annotations
@@ -24,10 +31,26 @@ from . import _fit, _trace as _trace_mod
 from ._library import Candidate, is_physical
 from ._problem import free_columns
 
-__all__ = ["FINISHES", "PredictionFinish", "prediction_finish"]
+__all__ = [
+    "FINISHES",
+    "PLACEMENTS",
+    "STARTS_EVERY",
+    "PredictionFinish",
+    "log_starts",
+    "placed_windows",
+    "prediction_finish",
+]
 
 #: ``diagnose(finish=...)``: the report alone, or the report and a plant refitted for prediction
 FINISHES = ("report", "prediction")
+#: where a segment's windows start: back to back from the segment's first sample (the
+#: diagnosis'), on its log's back-to-back grid from the log's first sample (the head-to-head's
+#: scoring and mujoco.sysid's fit), or every ``STARTS_EVERY`` s of the log (every phase alike)
+PLACEMENTS = ("segments", "grid", "starts")
+STARTS_EVERY = 0.01
+#: ... or one after another with a ``STARTS_EVERY`` gap between them, so that their starts move
+#: through every point of a cycle of the window's length without overlapping (the refit's)
+STAGGERED = "staggered"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,10 +102,60 @@ class PredictionFinish:
                 f"prediction-first finish: {'kept' if self.kept else 'not kept'} — {self.reason}",
                 f"  held-out windows of the fit logs ({self.heldout_windows} × {self.window_seconds:g} s), "
                 f"position RMSE: {rmse}",
-                f"  refitted by output error on {self.fit_windows} fit-set windows; added: "
+                f"  refitted by output error on {self.fit_windows} fit-set windows (starting anywhere); added: "
                 f"{', '.join(self.added) or 'nothing'}; left out (wrong sign): {', '.join(self.left_out) or 'nothing'}",
             )
         )
+
+
+def _log_name(segment) -> str:
+    return segment.name.rsplit("[", 1)[0]
+
+
+def log_starts(segments, trim_seconds: float) -> dict[str, float]:
+    """Each log's first sample time: its first segment starts ``trim_seconds`` after it."""
+    out: dict[str, float] = {}
+    for s in segments:
+        out[_log_name(s)] = min(out.get(_log_name(s), np.inf), float(s.t[0]) - trim_seconds)
+    return out
+
+
+def placed_windows(segments, length: int, dyn, placement: str, starts: dict[str, float]) -> _fit.Windows:
+    """``length``-step windows inside each segment, starting as ``placement`` says
+    (:data:`PLACEMENTS`; ``starts``: each log's first sample time, :func:`log_starts`)."""
+    if placement not in PLACEMENTS + (STAGGERED,):
+        raise ValueError(f"placement: expected one of {PLACEMENTS + (STAGGERED,)}, got {placement!r}")
+    if placement == "segments":
+        win = _fit.make_windows(segments, length, dyn)
+        assert win is not None, "every segment holds a window"
+        return win
+    x0, us, qs, idx = [], [], [], []
+    for i, s in enumerate(segments):
+        gap = max(1, int(round(STARTS_EVERY / s.dt)))
+        step = {"grid": length, "starts": gap, STAGGERED: length + gap}[placement]
+        first = int(round((s.t[0] - starts[_log_name(s)]) / s.dt))  # the segment's sample on its log
+        u = dyn.apply(s.u, s.dt)
+        for a in range((-first) % step, s.q.shape[0] - length, step):
+            x0.append(np.concatenate([s.q[a], s.qd[a]]))
+            us.append(u[a : a + length])
+            qs.append(s.q[a + 1 : a + length + 1])
+            idx.append(i)
+    assert x0, "every segment holds a window"
+    return _fit.Windows(np.array(x0), np.array(us), np.array(qs), np.array(idx), segments[0].dt, length)
+
+
+def drawn(win: _fit.Windows, count: int | None) -> _fit.Windows:
+    """``count`` of the windows drawn at random (as ``make_windows`` draws), or all of them."""
+    if count is None or win.x0.shape[0] <= count:
+        return win
+    keep = np.sort(np.random.default_rng(0).choice(win.x0.shape[0], count, replace=False))
+    return _fit.Windows(win.x0[keep], win.us[keep], win.q[keep], win.segment[keep], win.dt, win.length)
+
+
+def refit_windows(fx, segments, dyn) -> _fit.Windows:
+    """The refit's windows: one after another in each segment with a :data:`STARTS_EVERY` gap
+    between them, from each log's grid (module docstring)."""
+    return placed_windows(segments, fx.L, dyn, STAGGERED, log_starts(fx.segs, fx.settings.trim_seconds))
 
 
 def _extra_candidates(layout, result) -> list[tuple[Candidate, float]]:
@@ -192,7 +265,7 @@ def prediction_finish(fx, result) -> PredictionFinish:
         start[layout.index(c.key)] = coefficient
         if any(c == Candidate(e.name, e.joint) for e in result.inconsistent):
             with_inconsistent[layout.index(c.key)] = coefficient
-    fit_win = _fit.make_windows(fx.fit_segs, fx.L, dyn)
+    fit_win = refit_windows(fx, fx.fit_segs, dyn)
     held_win = _fit.make_windows(fx.held_segs, fx.L, dyn)
     theta, chosen, left_out, improved = _refit(fx, start, found + [c for c, _ in extra], dyn, fit_win)
     # the diagnosed plant is scored with its own input dynamics, the other two with the refit's

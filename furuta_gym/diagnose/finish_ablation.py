@@ -28,11 +28,13 @@ from ..simulate import rollout_zoh
 from ..systems import get_spec
 from . import _finish, _fit, _trace as _trace_mod
 from ._diagnose import DiagnosisSettings, diagnose
+from ._finish import PLACEMENTS, STARTS_EVERY, drawn, log_starts, placed_windows
 from ._fit import InputDynamics
 from ._library import Candidate
 
 __all__ = [
     "PLACEMENTS",
+    "STARTS_EVERY",
     "Variant",
     "diagnose_with_context",
     "fold_of",
@@ -49,11 +51,6 @@ FOLDS = 3
 DELAY_STEPS = np.array([-0.5e-3, -0.25e-3, 0.25e-3, 0.5e-3])
 BOUNDARY_MARGIN = 0.01
 RULE = DiagnosisSettings()  # its rule for a gain judges a variant against the current finish
-#: where a segment's windows start: back to back from the segment's first sample (the
-#: diagnosis'), on its log's back-to-back grid from the log's first sample (the head-to-head's
-#: scoring and mujoco.sysid's fit), or every ``STARTS_EVERY`` s of the log (every phase alike)
-PLACEMENTS = ("segments", "grid", "starts")
-STARTS_EVERY = 0.01
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,6 +66,7 @@ class Variant:
     start: str = "diagnosis"
     refit: bool = True  # False: the start itself scored (e.g. another tool's fit in this predictor)
     placement: str = "segments"  # where the refit's windows start (:data:`PLACEMENTS`)
+    max_windows: int | None = None  # the refit on this many of them, drawn at random (None: all)
 
 
 def diagnose_with_context(data, system: str, **kwargs):
@@ -170,46 +168,6 @@ def friction_law(law):
         _fit._predictor = original
 
 
-def _windows(segments, length: int, dyn) -> _fit.Windows:
-    """The segments' windows (the diagnosis cut every segment to hold at least one)."""
-    win = _fit.make_windows(segments, length, dyn)
-    assert win is not None, "every segment holds a window"
-    return win
-
-
-def _log_name(segment) -> str:
-    return segment.name.rsplit("[", 1)[0]
-
-
-def log_starts(segments, trim_seconds: float) -> dict[str, float]:
-    """Each log's first sample time: its first segment starts ``trim_seconds`` after it."""
-    out: dict[str, float] = {}
-    for s in segments:
-        out[_log_name(s)] = min(out.get(_log_name(s), np.inf), float(s.t[0]) - trim_seconds)
-    return out
-
-
-def placed_windows(segments, length: int, dyn, placement: str, starts: dict[str, float]) -> _fit.Windows:
-    """``length``-step windows inside each segment, starting as ``placement`` says
-    (:data:`PLACEMENTS`; ``starts``: each log's first sample time, :func:`log_starts`)."""
-    if placement == "segments":
-        return _windows(segments, length, dyn)
-    if placement not in PLACEMENTS:
-        raise ValueError(f"placement: expected one of {PLACEMENTS}, got {placement!r}")
-    x0, us, qs, idx = [], [], [], []
-    for i, s in enumerate(segments):
-        step = length if placement == "grid" else max(1, int(round(STARTS_EVERY / s.dt)))
-        first = int(round((s.t[0] - starts[_log_name(s)]) / s.dt))  # the segment's sample on its log
-        u = dyn.apply(s.u, s.dt)
-        for a in range((-first) % step, s.q.shape[0] - length, step):
-            x0.append(np.concatenate([s.q[a], s.qd[a]]))
-            us.append(u[a : a + length])
-            qs.append(s.q[a + 1 : a + length + 1])
-            idx.append(i)
-    assert x0, "every segment holds a window"
-    return _fit.Windows(np.array(x0), np.array(us), np.array(qs), np.array(idx), segments[0].dt, length)
-
-
 def refit_start(fx, res):
     """The finish's start: the diagnosed θ with its inconsistent effects and every joint's
     Coulomb friction at their tested values, the candidates it frees and its input dynamics."""
@@ -222,17 +180,18 @@ def refit_start(fx, res):
     return start, found + [c for c, _ in extra], dyn
 
 
-def refit_delay(fx, theta, chosen, dyn, train):
+def refit_delay(fx, theta, chosen, dyn, windows):
     """The delay on a grid about ``dyn`` by the training windows' error at θ, then θ refitted at
-    the best one (the finish holds the delay; here it moves with the rest)."""
+    the best one (the finish holds the delay; here it moves with the rest). ``windows(d)``: the
+    training windows under input dynamics ``d``."""
     if dyn.kind == "none":
         return theta, chosen, dyn
     grid = [dyn] + [InputDynamics(dyn.kind, dyn.seconds + s) for s in DELAY_STEPS]
-    sums = [_fit.window_square_sums(fx.layout, theta, _windows(train, fx.L, d), fx.substeps).sum() for d in grid]
+    sums = [_fit.window_square_sums(fx.layout, theta, windows(d), fx.substeps).sum() for d in grid]
     best = grid[int(np.argmin(sums))]
     if best == dyn:
         return theta, chosen, dyn
-    theta, chosen, _, _ = _finish._refit(fx, theta, chosen, best, _windows(train, fx.L, best))
+    theta, chosen, _, _ = _finish._refit(fx, theta, chosen, best, windows(best))
     return theta, chosen, best
 
 
@@ -282,7 +241,8 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
         nb = len(fx.layout.base)
         start[:nb] = np.where([i in fx.fixed_idx for i in range(nb)], start[:nb], fx.layout.nominal()[:nb])
     starts = log_starts(fx.segs, fx.settings.trim_seconds)
-    win = placed_windows(train, fx.L, dyn, variant.placement, starts)
+    windows = lambda d: drawn(placed_windows(train, fx.L, d, variant.placement, starts), variant.max_windows)  # noqa: E731
+    win = windows(dyn)
     settings = fx.settings
     if variant.max_nfev is not None:
         fx.settings = dataclasses.replace(settings, oe_max_nfev=variant.max_nfev)
@@ -294,7 +254,7 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
         else:
             theta, chosen, _, _ = _finish._refit(fx, start, chosen, dyn, win)
         if variant.refit_delay:
-            theta, chosen, dyn = refit_delay(fx, theta, chosen, dyn, train)
+            theta, chosen, dyn = refit_delay(fx, theta, chosen, dyn, windows)
         sums = {
             "sums" if p == "segments" else f"sums_{p}": _fit.window_square_sums(
                 fx.layout, theta, placed_windows(held, fx.L, dyn, p, starts), fx.substeps
@@ -318,7 +278,7 @@ def run_variant(fx, res, variant: Variant, given=None) -> dict:
     per_fold, t0 = [], time.perf_counter()
     for k in range(FOLDS):
         others = [(k + 1) % FOLDS] if variant.one_fold else [m for m in range(FOLDS) if m != k]
-        train = [s for m in others for s in folds[m]]
+        train = [s for s in fx.segs if fold_of(s) in others]  # in the diagnosis' order, as the finish's
         per_fold.append(fit_and_score(fx, res, variant, train, folds[k], given))
     listed = lambda f: {k: v.tolist() if k.startswith("sums") else v for k, v in f.items()}  # noqa: E731
     return {
