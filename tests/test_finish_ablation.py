@@ -68,18 +68,20 @@ def test_window_placements_start_where_named():
     assert np.allclose(grid.q[k, 0], grid.x0[k, :2] + [0.002, -0.002])
 
 
-def test_the_finish_refits_on_as_many_windows_as_back_to_back_drawn_from_every_start():
-    """The prediction-first refit's windows: the count the segments hold back to back, drawn from
-    the windows starting every 10 ms, so their starts spread over every phase of a 0.1 s cycle
-    where back-to-back windows of these two segments start at two phases only."""
+def test_the_finish_refits_on_windows_that_follow_one_another_with_a_gap():
+    """The prediction-first refit's windows: one after another with a 10 ms gap from each log's
+    first sample, so they never overlap and their starts move through every 10 ms point of a
+    0.1 s cycle, where back-to-back windows of these two segments start at two points only."""
     from furuta_gym.diagnose._finish import refit_windows
     from furuta_gym.diagnose._fit import InputDynamics
 
     segs = [_segment("run01[0]", 0.55, 1077), _segment("run01[1]", 2.704, 1077)]
     fx = types.SimpleNamespace(L=50, segs=segs, settings=types.SimpleNamespace(trim_seconds=0.05))
     win = refit_windows(fx, segs, InputDynamics())
-    assert win.x0.shape == (42, 4) and win.us.shape == (42, 50, 1)
-    phases = np.round((win.x0[:, 0] - 0.5) / 0.002).astype(int) % 50
-    assert set(phases.tolist()) <= set(range(0, 50, 5)) and len(set(phases.tolist())) >= 8
-    again = refit_windows(fx, segs, InputDynamics())
-    assert np.array_equal(again.x0, win.x0)  # one fixed draw
+    assert win.x0.shape == (19 + 18, 4) and win.us.shape == (37, 50, 1)
+    start = np.round((win.x0[:, 0] - 0.5) / 0.002).astype(int)  # each start's sample on the log
+    assert start[:3].tolist() == [55, 110, 165] and start[19:21].tolist() == [1155, 1210]
+    assert sorted(set((start % 50).tolist())) == list(range(0, 50, 5))
+    assert np.all(np.diff(start[:19]) == 55) and np.all(np.diff(start[19:]) == 55)
+    back_to_back = {k % 50 for k in (25, 1102)}
+    assert len(back_to_back) == 2
