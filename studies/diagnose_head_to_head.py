@@ -403,7 +403,7 @@ def score_row(doc: dict, folder: Path, test, stride: float | None) -> dict:
     if name in SYSID_ROWS:
         x0, u_ext, _ = hsysid.windows_for_sysid(test, WINDOW, stride=stride)
         _, _, xs = prediction_windows(test, WINDOW, stride)
-        return score(hsysid.predictor(hsysid.from_physical(doc["parameters"]))(x0, u_ext, test[0].dt), xs)
+        return score(hsysid.predictor_from_values(doc["parameters"])(x0, u_ext, test[0].dt), xs)
     if name == "nominal":
         return score_field(lagrangian_field(Furuta()), test, stride=stride)
     if name in BASELINES:

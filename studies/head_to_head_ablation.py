@@ -26,6 +26,12 @@ of runs 1–10 only** (runs 11–15 are never read):
   smooth tanh(q̇/ε) law with ε = 0.05 rad/s, each in the refit and its scoring.
 * **J1b**: the sin²β inertia is held at the datasheet value (the diagnosis' fit gave values no
   rigid bodies have); freed, and held at the rigid-body boundary it crosses if it does.
+* **window placement**: the finish cuts its windows back to back from each 2 s segment's first
+  sample, so their starts fall anywhere in the runs' 0.1 s input cycle (the runs' input steps
+  every 0.1 s); the head-to-head scores, and mujoco.sysid fits, back-to-back windows from each
+  run's first sample, which all start at the same point of that cycle. The refit on windows
+  placed on that grid, and on windows starting every 10 ms; every variant is scored on the
+  held-out folds under each placement.
 * **the fit itself**: run to convergence, and started from the datasheet's values or from
   mujoco.sysid's own fit (mapped onto the lumped parameters, :func:`sysid_start`; it fitted
   every window of runs 1–10, so its rows are not held out), and sysid's values scored as they are.
@@ -44,6 +50,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import re
 import time
 from pathlib import Path
 
@@ -55,7 +62,13 @@ furuta_gym.enable_x64()
 
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
 from furuta_gym.diagnose import InputDynamics  # noqa: E402
-from furuta_gym.diagnose.finish_ablation import Variant, diagnose_with_context, run_variant, summarise  # noqa: E402
+from furuta_gym.diagnose.finish_ablation import (  # noqa: E402
+    STARTS_EVERY,
+    Variant,
+    diagnose_with_context,
+    run_variant,
+    summarise,
+)
 from furuta_gym.systems import get_spec  # noqa: E402
 
 FIT_RUNS = list(range(1, 11))
@@ -66,7 +79,8 @@ SYSID = Path(__file__).resolve().parents[1] / "results" / "head_to_head" / "sysi
 VARIANTS = {
     v.name: v
     for v in (
-        Variant("current", "prediction-first as committed (refit on two folds)"),
+        # the finish until this ablation: the refit on each segment's own back-to-back windows
+        Variant("current", "prediction-first until now (refit on each segment's back-to-back windows)"),
         # the keep rule's split: how much the refit gains from its windows
         Variant("one_fold", "refit on one fold only (half the windows)", one_fold=True),
         Variant("converged", "output error run to convergence (60 evaluations, not 15)", max_nfev=60),
@@ -79,6 +93,36 @@ VARIANTS = {
         Variant("mujoco_friction", "dry friction as MuJoCo's soft friction loss (creeps)", law=("mujoco", 0.0)),
         Variant("tanh", "dry friction tanh(q̇/0.05 rad/s) (smooth)", law=("tanh", 0.05)),
         Variant("j1b_20ms", "J1b freed and dry friction relaxed over 20 ms", free_j1b=True, law=("karnopp", 0.02)),
+        # where the windows start: the head-to-head's (and sysid's) grid, or every 10 ms
+        Variant("grid", "refit on windows on each run's back-to-back grid (as sysid and the score)", placement="grid"),
+        Variant("starts", "refit on windows starting every 10 ms (every phase of the input cycle)", placement="starts"),
+        Variant(
+            "staggered",
+            "prediction-first now: refit on windows one after another with a 10 ms gap (every start of a cycle)",
+            placement="staggered",
+        ),
+        Variant(
+            "starts_sampled",
+            "refit on 1260 of the windows starting every 10 ms (drawn at random)",
+            placement="starts",
+            max_windows=1260,
+        ),
+        Variant(
+            "starts_sampled_10ms",
+            "the same, dry friction relaxed over 10 ms",
+            placement="starts",
+            max_windows=1260,
+            law=("karnopp", 0.01),
+        ),
+        Variant(
+            "starts_sampled_all",
+            "the same, with the input delay refitted and J1b freed",
+            placement="starts",
+            max_windows=1260,
+            law=("karnopp", 0.01),
+            refit_delay=True,
+            free_j1b=True,
+        ),
         # sysid's own values (fitted on every window of runs 1-10, so every fold was seen)
         Variant("sysid_start", "refit started from mujoco.sysid's fit", start="given"),
         Variant(
@@ -132,28 +176,9 @@ def sysid_start(fx, start, values: dict | None = None):
 
 
 def mujoco_predict(hsysid, values: dict, x0, u_ext, dt: float) -> np.ndarray:
-    """States (W, L + 1, 4) of the sysid fit's MJCF rolled out by MuJoCo: ``head_to_head_sysid``'s
-    predictor with its terms written by its own writers, without ``mujoco.sysid`` (whose optional
-    dependencies this environment may lack)."""
-    import mujoco  # the [sysid] extra's
-    from mujoco import rollout as mj_rollout
-
-    spec = hsysid.furuta_spec()
-    for name, value in values.items():
-        write = hsysid.PARAMETERS[name][4]
-        if write is not None:
-            write(spec, value)
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    full = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    starts = np.empty((len(x0), mujoco.mj_stateSize(model, full)))
-    for k, x in enumerate(x0):
-        mujoco.mj_resetData(model, data)
-        data.qpos[:], data.qvel[:] = x[:2], x[2:]
-        mujoco.mj_getState(model, data, starts[k], full)
-    ctrl = np.stack([InputDynamics("delay", values.get("input_delay", 0.0)).apply(u, dt)[1:] for u in u_ext])
-    state, _ = mj_rollout.rollout(model, data, starts, ctrl)
-    return np.concatenate([x0[:, None, :], np.asarray(state)[:, :, 1:5]], axis=1)
+    """States (W, L + 1, 4) of the sysid fit's MJCF rolled out by MuJoCo (``head_to_head_sysid``'s
+    predictor of its SI values, without ``mujoco.sysid``)."""
+    return hsysid.predictor_from_values(values)(x0, u_ext, dt)
 
 
 def sysid_plant(values: dict):
@@ -182,33 +207,85 @@ def sysid_plant(values: dict):
     return Plant(effects=effects, lumped=lumped, system="furuta", source="mujoco.sysid's fit, mapped")
 
 
+def windows_with_input_before(runs, stride: float | None = None):
+    """``prediction_windows`` of ``runs`` (one every ``stride`` s, default back to back) and each
+    window's input with the sample before it first (what the MuJoCo rollout delays from)."""
+    from furuta_gym.measured import prediction_windows
+
+    x0, us, xs = prediction_windows(runs, WINDOW, stride)
+    n, dt = us.shape[1], runs[0].dt
+    step = n if stride is None else max(1, int(round(stride / dt)))
+    before = []
+    for tr in runs:
+        u = np.asarray(tr.u, float).reshape(len(tr), -1)
+        before += [u[max(a - 1, 0)] for a in range(0, len(tr) - n, step)]
+    return x0, np.concatenate([np.asarray(before)[:, None], us], axis=1), xs
+
+
+def _in_sample_scores(h2h, hsysid, plants: dict, sysid: dict, runs, stride: float | None) -> dict:
+    """Position RMSE of sysid rolled out by MuJoCo and of each furuta-gym plant on ``runs``."""
+    x0, u_ext, xs = windows_with_input_before(runs, stride)
+    out = {"sysid": h2h.score(mujoco_predict(hsysid, sysid, x0, u_ext, runs[0].dt), xs)["position_rmse"]}
+    for name, plant in plants.items():
+        x0, us, xs = prediction_windows_of(h2h, plant, runs, stride)
+        base = h2h.LumpedSystem.of("furuta", plant.lumped)
+        field = h2h.lagrangian_field(base, [e for e in plant.effects if not e.kind.on_input], runs[0].dt)
+        out[name] = h2h.score(h2h.predict_field(field, x0, us, runs[0].dt), xs)["position_rmse"]
+    return {**out, "n_windows": int(len(x0))}
+
+
+def prediction_windows_of(h2h, plant, runs, stride: float | None):
+    """The windows a plant is scored on: its input delay applied from each run's own samples."""
+    from furuta_gym.measured import prediction_windows
+
+    return prediction_windows(h2h.with_input(runs, h2h.input_dynamics(plant.effects)), WINDOW, stride)
+
+
 def in_sample(results: Path) -> dict:
     """The committed sysid (MJCF terms) and prediction-first plants on runs 1–10 themselves, with
-    the head-to-head's scoring (back-to-back windows of whole runs, sysid rolled out by MuJoCo):
-    both were fitted on these runs (sysid on every window, the finish on two thirds), so this
-    says whether the gap is there already on the data both fitted, no reading of runs 11–15."""
+    the head-to-head's scoring (back-to-back windows of whole runs, sysid rolled out by MuJoCo),
+    and with windows starting every 10 ms (``every_phase``): both were fitted on these runs
+    (sysid on every back-to-back window, the finish on two thirds of its segments' windows), so
+    this says whether the gap is there already on the data both fitted; no reading of runs 11–15."""
     import diagnose_head_to_head as h2h  # the head-to-head's scoring (its module imports MuJoCo's sysid helpers)
     import head_to_head_sysid as hsysid
     from furuta_gym.envs import Plant
-    from furuta_gym.measured import prediction_windows
 
     sysid = json.loads((results / "sysid.json").read_text())["parameters"]
-    ours = Plant.from_json(
-        json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]["plant"]
-    )
-
-    def scores(runs) -> dict:
-        x0, _, xs = prediction_windows(runs, WINDOW)
-        _, u_ext, _ = hsysid.windows_for_sysid(runs, WINDOW)
-        return {
-            "sysid": h2h.score(mujoco_predict(hsysid, sysid, x0, u_ext, runs[0].dt), xs)["position_rmse"],
-            "sysid_in_furuta_gym": h2h.score_plant(sysid_plant(sysid), runs)["position_rmse"],
-            "prediction_first": h2h.score_plant(ours, runs)["position_rmse"],
-            "n_windows": int(len(x0)),
-        }
-
+    plants = {
+        "sysid_in_furuta_gym": sysid_plant(sysid),
+        "prediction_first": Plant.from_json(
+            json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]["plant"]
+        ),
+    }
     fit = h2h.load_runs(FIT_RUNS)
-    return {**scores(fit), "per_run": {str(k): scores([tr]) for k, tr in zip(FIT_RUNS, fit, strict=True)}}
+    return {
+        **_in_sample_scores(h2h, hsysid, plants, sysid, fit, None),
+        "per_run": {
+            str(k): _in_sample_scores(h2h, hsysid, plants, sysid, [tr], None)
+            for k, tr in zip(FIT_RUNS, fit, strict=True)
+        },
+        "every_phase": _in_sample_scores(h2h, hsysid, plants, sysid, fit, STARTS_EVERY),
+    }
+
+
+def dump(doc: dict) -> str:
+    """The result file's text: per-window sums to 5 significant digits, each list on one line.
+    Windows starting every 10 ms are ten times as many: their sums are kept for the current
+    finish only, which later variants are compared with (each variant's comparison is kept in
+    its ``by_placement``; the summaries keep their full precision)."""
+    for name, r in doc["variants"].items():
+        for fold in r["per_fold"]:
+            if name != "current":
+                fold.pop("sums_starts", None)
+            for key in [k for k in fold if k.startswith("sums")]:
+                fold[key] = [float(f"{x:.5g}") for x in fold[key]]
+    text = json.dumps(doc, indent=1, default=float)
+    number = r"-?(?:[0-9.]+(?:[eE][-+]?[0-9]+)?|Infinity)"
+    return (
+        re.sub(rf"\[\s*({number}(?:,\s*{number})*)\s*\]", lambda m: "[" + re.sub(r"\s+", "", m.group(1)) + "]", text)
+        + "\n"
+    )
 
 
 def main() -> None:
@@ -222,10 +299,13 @@ def main() -> None:
         ap.error(f"--variants: unknown {unknown}; expected some of {list(VARIANTS)}")
     out = Path(args.out)
     doc = json.loads(out.read_text()) if out.is_file() else {"variants": {}}
+    for name, r in doc["variants"].items():  # labels are the code's (a variant's meaning can be renamed)
+        if name in VARIANTS:
+            r["label"] = VARIANTS[name].label
     if args.in_sample:
         doc["in_sample"] = in_sample(Path(__file__).resolve().parents[1] / "results" / "head_to_head")
         print(doc["in_sample"])
-        return out.write_text(json.dumps(doc, indent=1, default=float) + "\n") and None
+        return out.write_text(dump(doc)) and None
     res, fx, wall = diagnose_with_context(
         load_qube_closed_loop(FIT_RUNS, skip_seconds=SKIP), "furuta", window=WINDOW, oe_max_windows=OE_WINDOWS
     )
@@ -243,7 +323,7 @@ def main() -> None:
             machine=f"{platform.node()} {platform.processor() or platform.machine()}",
             date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         )
-        out.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+        out.write_text(dump(doc))
         r = doc["variants"][name]
         print(f"{r['label']:60s} held-out {r['heldout_rmse'] * 1e3:.3f} mrad {r.get('vs_current', '')}", flush=True)
 

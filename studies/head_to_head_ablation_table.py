@@ -21,31 +21,57 @@ DOC = ROOT / "docs" / "diagnose.md"
 NAME = "head-to-head-ablation"
 
 
+def _change(versus: dict | None) -> str:
+    return "–" if versus is None else f"{-100 * versus['improvement']:+.1f} % (t {-versus['z_score']:+.1f})"
+
+
+def _placed(r: dict, placement: str) -> str:
+    """The held-out error and change on the windows of another placement ("–" if not scored)."""
+    entry = r.get("by_placement", {}).get(placement)
+    if entry is None:
+        return "– | –"
+    return f"{1e3 * entry['heldout_rmse']:.3f} | {_change(entry if 'improvement' in entry else None)}"
+
+
 def _row(r: dict) -> str:
     folds = r["per_fold"]
-    versus = r.get("vs_current")
-    change = "–" if versus is None else f"{-100 * versus['improvement']:+.1f} % (t {-versus['z_score']:+.1f})"
     delays = ", ".join(f"{v:g}" for v in sorted({round(1e3 * f["delay"], 3) for f in folds}))
     j1b = ", ".join(f"{1e6 * f['theta']['J1b']:.1f}" for f in folds)
     return (
-        f"| {r['label']} | {sum(len(f['sums']) for f in folds)} | {folds[0]['train_windows'] or '– (not refitted)'} "
-        f"| **{1e3 * r['heldout_rmse']:.3f}** | {1e3 * r['fold_rmse'][2]:.3f} | {change} "
-        f"| {delays} | {j1b} |"
+        f"| {r['label']} | {folds[0]['train_windows'] or '– (not refitted)'} "
+        f"| **{1e3 * r['heldout_rmse']:.3f}** | {1e3 * r['fold_rmse'][2]:.3f} | {_change(r.get('vs_current'))} "
+        f"| {_placed(r, 'grid')} | {_placed(r, 'starts')} | {delays} | {j1b} |"
     )
 
 
-def body(doc: dict | None = None) -> str:
-    doc = doc or json.loads(RESULTS.read_text())
+def _windows_sentence(doc: dict) -> str:
+    """How many held-out windows each placement has (the same for every variant)."""
+    current = doc["variants"].get("current") or next(iter(doc["variants"].values()))
+    counts = {"segments": sum(len(f["sums"]) for f in current["per_fold"])}
+    counts |= {p: e["windows"] for p, e in current.get("by_placement", {}).items()}
+    return (
+        f"Held-out windows: {counts['segments']} cut back to back from each segment's first sample (the finish's "
+        f"own, as the diagnosis cuts them), {counts.get('grid', '–')} on each run's back-to-back grid from its first "
+        f"sample (the head-to-head's scoring and mujoco.sysid's fit: every window starts at the same point of the "
+        f"runs' 0.1 s input cycle), {counts.get('starts', '–')} starting every 10 ms (every point of that cycle "
+        "alike). "
+    )
+
+
+def body(given: dict | None = None) -> str:
+    doc: dict = json.loads(RESULTS.read_text()) if given is None else given
     rows = [
-        "| variant | held-out windows | windows per refit | held-out error, both angles (mrad) "
-        "| fold 2 only (mrad) | change of the sum of squares vs current | input delay (ms) | J1b per fold (1e-6 kg m²) |",
-        "|---|---|---|---|---|---|---|---|",
+        "| variant | windows per refit | held-out error, both angles (mrad) | fold 2 only (mrad) "
+        "| change of the sum of squares vs current | on the score's grid (mrad) | change there "
+        "| starting every 10 ms (mrad) | change there | input delay (ms) | J1b per fold (1e-6 kg m²) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     rows += [_row(r) for r in doc["variants"].values()]
     finish = doc["finish_heldout_rmse"]
     ins = doc["in_sample"]
     runs = ins["per_run"].values()
     better = sum(r["sysid_in_furuta_gym"] < r["prediction_first"] for r in runs)
+    phases = ins.get("every_phase")
     in_sample = (
         f"On runs 1–10 themselves with the head-to-head's scoring ({ins['n_windows']} back-to-back windows; both "
         f"fits saw them): mujoco.sysid (MJCF terms) rolled out by MuJoCo {1e3 * ins['sysid']:.3f} mrad, the same "
@@ -53,6 +79,12 @@ def body(doc: dict | None = None) -> str:
         f"plant {1e3 * ins['prediction_first']:.3f}; sysid's values in furuta-gym's simulator predict better than "
         f"that plant on {better} of the {len(runs)} runs. "
     )
+    if phases is not None:
+        in_sample += (
+            f"With windows starting every 10 ms instead ({phases['n_windows']} windows): sysid by MuJoCo "
+            f"{1e3 * phases['sysid']:.3f} mrad, in furuta-gym's simulator {1e3 * phases['sysid_in_furuta_gym']:.3f}, "
+            f"the prediction-first plant {1e3 * phases['prediction_first']:.3f}. "
+        )
     return "\n".join(
         rows
         + [
@@ -60,7 +92,9 @@ def body(doc: dict | None = None) -> str:
             f"Runs {doc['fit_runs'][0]}–{doc['fit_runs'][-1]} only (runs 11–15 are not read): their 2 s segments in "
             f"{doc['folds']} folds (every third segment; fold 2 is the diagnosis' held-out set), each variant "
             f"refitted on the other folds and scored on each fold in turn, {doc['window_seconds']:g} s open-loop "
-            "windows from the measured state; position RMSE of both angles over every held-out window. The "
+            "windows from the measured state; position RMSE of both angles over every held-out window. "
+            + _windows_sentence(doc)
+            + "The "
             "diagnosis refitted (found "
             f"{', '.join(doc['found'])}) is fitted on folds 0 and 1, so fold 2 is held out from it and from the "
             "refit, folds 0 and 1 from the refit only. Change: the variant's pooled sum of squares against the "

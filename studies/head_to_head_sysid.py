@@ -249,3 +249,32 @@ def predictor(params):
         return np.concatenate([x0[:, None, :], np.asarray(state)[:, :, 1:5]], axis=1)
 
     return predict
+
+
+def predictor_from_values(values: dict):
+    """:func:`predictor` of a fit's SI ``values`` (its :func:`physical`), the terms written by
+    their own writers without ``mujoco.sysid`` (whose API comes with the ``[sysid]`` extra)."""
+    import mujoco
+    from mujoco import rollout as mj_rollout
+
+    spec = furuta_spec()
+    for name, value in values.items():
+        write = PARAMETERS[name][4]
+        if write is not None:
+            write(spec, value)
+    model = spec.compile()
+    delay = values.get("input_delay", 0.0)
+
+    def predict(x0, u_ext, dt):
+        data = mujoco.MjData(model)
+        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        starts = np.empty((len(x0), mujoco.mj_stateSize(model, full)))
+        for k, x in enumerate(x0):
+            mujoco.mj_resetData(model, data)
+            data.qpos[:], data.qvel[:] = x[:2], x[2:]
+            mujoco.mj_getState(model, data, starts[k], full)
+        ctrl = np.stack([InputDynamics("delay", delay).apply(u, dt)[1:] for u in u_ext])
+        state, _ = mj_rollout.rollout(model, data, starts, ctrl)
+        return np.concatenate([x0[:, None, :], np.asarray(state)[:, :, 1:5]], axis=1)
+
+    return predict

@@ -73,16 +73,30 @@ def test_head_to_head_ablation_table_matches_its_results():
 
 
 def test_head_to_head_ablation_prose_matches_its_results():
-    """docs/diagnose.md says no ablation of the prediction-first refit clears the diagnosis' rule
-    for a gain on the fit runs' held-out windows, and that the friction law's is the best refit."""
+    """docs/diagnose.md's reading of the ablation: the finish now refits on staggered windows,
+    which clears the diagnosis' rule for a gain on its own held-out windows and predicts better,
+    short of the rule, where the head to head scores and on windows starting every 10 ms; a refit
+    on the head-to-head's grid (as sysid fits) is better there and worse elsewhere; the relaxed
+    friction with the rest clears the rule on windows starting every 10 ms only; and on runs 1-10
+    the ranking of sysid and the prediction-first plant turns with where the windows start."""
     doc = json.loads((ROOT / "results" / "head_to_head" / "ablation.json").read_text())
-    variants = doc["variants"]
-    assert not any(v.get("passes_rule") for v in variants.values())
-    single = {k: v for k, v in variants.items() if k not in ("current", "j1b_20ms") and not k.startswith("sysid")}
-    best = min(single, key=lambda k: single[k]["heldout_rmse"])
-    assert variants[best]["per_fold"][0]["train_windows"] > 0 and best in (
-        "karnopp_10ms",
-        "karnopp_20ms",
-        "mujoco_friction",
-    )
-    assert variants["tanh"]["heldout_rmse"] > variants["current"]["heldout_rmse"]
+    v = doc["variants"]
+    assert v["staggered"]["passes_rule"]
+    for placement in ("grid", "starts"):
+        entry = v["staggered"]["by_placement"][placement]
+        assert entry["improvement"] > 0 and not entry["passes_rule"]
+    grid = v["grid"]["by_placement"]
+    assert grid["grid"]["passes_rule"] and grid["starts"]["improvement"] < -0.03
+    sysid = v["sysid_plant"]["by_placement"]
+    assert sysid["grid"]["improvement"] > 0.05 and sysid["starts"]["improvement"] < 0
+    combined = v["starts_sampled_all"]["by_placement"]
+    assert combined["starts"]["passes_rule"] and combined["grid"]["improvement"] < 0
+    models = ("one_fold", "converged", "nominal_start", "delay", "j1b", "karnopp_5ms", "karnopp_10ms")
+    models += ("karnopp_20ms", "mujoco_friction", "tanh")
+    best = max(models, key=lambda k: v[k]["by_placement"]["starts"]["improvement"])
+    assert best == "karnopp_10ms" and not v[best]["by_placement"]["starts"]["passes_rule"]
+    assert all(v["tanh"]["by_placement"][p]["improvement"] < 0 for p in ("grid", "starts"))
+    assert v["tanh"]["heldout_rmse"] > v["current"]["heldout_rmse"]
+    ins = doc["in_sample"]
+    assert ins["sysid"] < ins["prediction_first"]
+    assert ins["every_phase"]["prediction_first"] < ins["every_phase"]["sysid"]
