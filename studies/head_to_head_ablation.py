@@ -102,6 +102,21 @@ VARIANTS = {
             placement="staggered",
         ),
         Variant(
+            "staggered_delay_j1b",
+            "the finish now, with the input delay refitted and J1b freed",
+            placement="staggered",
+            refit_delay=True,
+            free_j1b=True,
+        ),
+        Variant(
+            "staggered_all",
+            "the finish now, with those and dry friction relaxed over 10 ms",
+            placement="staggered",
+            refit_delay=True,
+            free_j1b=True,
+            law=("karnopp", 0.01),
+        ),
+        Variant(
             "starts_sampled",
             "refit on 1260 of the windows starting every 10 ms (drawn at random)",
             placement="starts",

@@ -91,6 +91,10 @@ def test_head_to_head_ablation_prose_matches_its_results():
     assert sysid["grid"]["improvement"] > 0.05 and sysid["starts"]["improvement"] < 0
     combined = v["starts_sampled_all"]["by_placement"]
     assert combined["starts"]["passes_rule"] and combined["grid"]["improvement"] < 0
+    for name in ("staggered_all", "staggered_delay_j1b"):  # just short of the rule, better on the grid
+        staggered = v[name]["by_placement"]
+        assert 0.02 < staggered["starts"]["improvement"] < 0.03 and staggered["starts"]["z_score"] >= 3
+        assert not staggered["starts"]["passes_rule"] and staggered["grid"]["improvement"] > 0
     models = ("one_fold", "converged", "nominal_start", "delay", "j1b", "karnopp_5ms", "karnopp_10ms")
     models += ("karnopp_20ms", "mujoco_friction", "tanh")
     best = max(models, key=lambda k: v[k]["by_placement"]["starts"]["improvement"])
