@@ -436,3 +436,21 @@ def test_the_breakaways_upper_bound_reads_releases_and_left_rests_but_not_a_one_
     assert [e for _, e in spans] == [passed, 50 + 200 + 200]  # and the rest after the creep
     assert all(e - s <= 25 for s, e in spans)  # the last 50 ms of each
     assert _left_rests(np.zeros(400), dt, tol, 0.2, 0.01, 0.05) == []  # never left
+
+
+def test_a_sweep_of_the_fixed_cable_held_by_friction_finds_its_spring_and_no_moving_rest():
+    """Issue 64 item 3's sweeps, one log in CI (the grid's seed 104, results/rotor_laws): under
+    input the rests do not count and step 11 names no law on the sweeps, but the diagnosis finds
+    the fixed cable (its rest as a constant torque) with the rotor's friction, never a moving rest,
+    and predicts the held-out windows better."""
+    from furuta_gym.diagnose import diagnose
+
+    rig = breakaway_rig(104)
+    data = measured_like("furuta", rig, excitation="sticky_sweep", seed=104, n_trajectories=6, duration=10.0)
+    res = diagnose(data, "furuta")
+    (spring,) = _rotor(res.found, lambda k: k.absorbs_constant_force)
+    assert spring.coefficient == pytest.approx(rig[0].coefficient, rel=0.35)
+    assert not _rotor(res.found, lambda k: k.has_memory)
+    friction = sum(e.coefficient for e in _rotor(res.found, lambda k: k.is_dry_friction))
+    assert friction == pytest.approx(sum(e.coefficient for e in rig if e.kind.is_dry_friction), rel=0.5)
+    assert res.error_before.trajectory_rmse / res.error_after.trajectory_rmse >= 1.4
