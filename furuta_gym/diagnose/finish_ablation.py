@@ -27,10 +27,11 @@ from ..lagrangian import forward_dynamics, forward_dynamics_with_dry_friction, s
 from ..simulate import rollout_zoh
 from ..systems import get_spec
 from . import _finish, _fit, _trace as _trace_mod
-from ._diagnose import DiagnosisSettings, diagnose
+from ._diagnose import diagnose
 from ._finish import PLACEMENTS, STARTS_EVERY, drawn, log_starts, placed_windows
 from ._fit import InputDynamics
 from ._library import Candidate
+from ._settings import DiagnosisSettings
 
 __all__ = [
     "PLACEMENTS",
