@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+import furuta_gym
 from furuta_gym.training.reproduce import (
     METRIC_COLUMNS,
     ReproduceConfig,
@@ -57,6 +58,8 @@ def test_tiny_run_writes_tables_beside_the_paper(tiny_run):
     assert record["command"] == "pytest tiny" and record["machine"]["cpu_count"] >= 1
     if Path("/proc/cpuinfo").is_file():  # the host's CPU beyond its model name: numerics depend on it
         assert record["machine"]["cpu_id"].startswith("family ") and len(record["machine"]["cpu_flags_sha256"]) == 16
+    # the CPU numerics the run had: the pin, as the process applied it (docs/conventions.md)
+    assert record["machine"]["numerics"] == json.loads(json.dumps(furuta_gym.numerics()))
     assert record["seconds"]["nmsd/dln_prop/seed0"]["status"] == "trained"
     assert (out / "data" / "nmsd" / "manifest.json").exists()
 

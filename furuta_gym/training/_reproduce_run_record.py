@@ -12,7 +12,7 @@ import platform
 from pathlib import Path
 from typing import Any
 
-from .. import __version__
+from .. import __version__, numerics
 from ._reproduce_config import REPRODUCE_QUADRATURE, ReproduceConfig, epoch_schedule, training_config
 from .checkpoint import package_versions
 from .datagen import data_package_versions
@@ -23,11 +23,14 @@ def machine_info() -> dict[str, Any]:
     """The platform, Python, core count and CPU, as a run record notes them. Beside the CPU's model
     name, its family / model / stepping and a digest of its feature flags: XLA:CPU compiles for the
     host's features, and two hosts of one model name can round differently, which training
-    amplifies into other models (docs/reproduce.md, "Same code, another host")."""
+    amplifies into other models (docs/reproduce.md, "Same code, another host"). And the CPU
+    numerics the process ran with (:func:`furuta_gym.numerics`): pinned, two machines give the
+    same bits; a record says whether it was."""
     info: dict[str, Any] = {
         "platform": platform.platform(),
         "python": platform.python_version(),
         "cpu_count": os.cpu_count(),
+        "numerics": numerics(),
     }
     fields = {}
     try:
