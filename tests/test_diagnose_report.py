@@ -11,13 +11,13 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 from furuta_gym.diagnose import diagnose, measured_like  # noqa: E402
-from furuta_gym.diagnose._diagnose import EffectEvidence  # noqa: E402
 from furuta_gym.diagnose._report import (  # noqa: E402
     REPORT_FILES,
     _plot_residual_vs_effect,
     residual_series,
     write_figures,
 )
+from furuta_gym.diagnose._result import EffectEvidence  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
 
 SIZE = dict(n_trajectories=6, duration=5.0)

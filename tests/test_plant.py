@@ -435,9 +435,9 @@ def test_prediction_first_refit_holds_an_inconsistent_input_delay_at_its_tested_
     from types import SimpleNamespace
 
     from furuta_gym.diagnose import layout_for
-    from furuta_gym.diagnose._diagnose import EffectEvidence
     from furuta_gym.diagnose._finish import _extra_candidates, _refit_dynamics
     from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, InputDynamics
+    from furuta_gym.diagnose._result import EffectEvidence
 
     def evidence(name, joint, coefficient, status):
         return EffectEvidence(name, joint, coefficient, "", status == "selected", 0.2, 2.0, status)

@@ -7,13 +7,14 @@ refits and reports the held-out errors before and after; ``finish="prediction"``
 final model for prediction beside the report. See ``docs/diagnose.md``.
 """
 
-from ._diagnose import DiagnosisResult, EffectEvidence, ErrorSummary, diagnose
+from ._diagnose import diagnose
 from ._drift import REST_LAWS, Rest, RestDrift, rest_drift
 from ._finish import PredictionFinish
 from ._fit import InputDynamics
 from ._library import Candidate, LumpedModel, layout_for, nominal_base
 from ._report import write_figures as write_report_figures, write_json as write_report_json
 from ._rests import RestBound, Stop, held_at_rest, stop_excursions
+from ._result import DiagnosisResult, EffectEvidence, ErrorSummary
 from ._settings import DiagnosisSettings
 from ._synthetic import ClosedLoopBalancing, breakaway_rig, measured_like, moving_rest_rig, sticky_rig
 

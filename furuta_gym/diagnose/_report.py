@@ -1,4 +1,4 @@
-"""Reporting a :class:`~._diagnose.DiagnosisResult`: terminal table, JSON file, figures.
+"""Reporting a :class:`~._result.DiagnosisResult`: terminal table, JSON file, figures.
 
 Nothing here overwrites an existing file unless ``overwrite=True``.
 """
@@ -143,7 +143,7 @@ def write_figures(res, directory, overwrite: bool = False) -> list[Path]:
     * ``prediction_windows.png``: a few open-loop windows, measured positions vs both models;
     * ``residual_vs_effect.png``: the declared model's residual against the regressor of the
       strongest significant effect (or the top tested one);
-    * ``summary.txt``: :meth:`~._diagnose.DiagnosisResult.table`.
+    * ``summary.txt``: :meth:`~._result.DiagnosisResult.table`.
 
     Every target is checked before anything is written: no file is replaced unless ``overwrite``.
     """
