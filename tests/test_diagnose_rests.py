@@ -22,8 +22,9 @@ from furuta_gym.diagnose import (
     sticky_rig,
     stop_excursions,
 )
-from furuta_gym.diagnose._diagnose import _mark_unresolved, sensor_resolution
+from furuta_gym.diagnose._diagnose import _mark_unresolved
 from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment
+from furuta_gym.diagnose._prepare import _segments, prepare, sensor_resolution
 from furuta_gym.diagnose._rests import rest_bound
 from furuta_gym.diagnose._result import EffectEvidence
 from furuta_gym.systems import get_spec
@@ -172,12 +173,12 @@ def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:
     """The equation-error fit of the declared model with ``keys`` added, as the search fits it."""
     spec, notes = get_spec("furuta"), []
     layout = layout_for("furuta")
-    trajs, qds, resolved = _diagnose._prepare(data, spec, DiagnosisSettings(**settings), {}, notes)
+    trajs, qds, resolved = prepare(data, spec, DiagnosisSettings(**settings), {}, notes)
     fixed = _diagnose._anchor(spec, layout, None, True, notes)
     theta_fixed = layout.nominal()
     for k, v in fixed.items():
         theta_fixed[layout.index(k)] = v
-    segs = _diagnose._segments(trajs, qds, resolved)
+    segs = _segments(trajs, qds, resolved)
     fx = _diagnose._Fitter(spec, layout, segs, [], theta_fixed, {layout.index(k) for k in fixed}, resolved, notes)
     theta, _ = fx.fit_ee([c for c in layout.candidates if c.key in keys])
     return {k: float(theta[layout.index(k)]) for k in ["J1", *keys]}
