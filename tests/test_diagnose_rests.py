@@ -24,6 +24,7 @@ from furuta_gym.diagnose import (
 )
 from furuta_gym.diagnose._diagnose import _mark_unresolved
 from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment
+from furuta_gym.diagnose._fitter import _Fitter
 from furuta_gym.diagnose._prepare import _segments, prepare, sensor_resolution
 from furuta_gym.diagnose._rests import rest_bound
 from furuta_gym.diagnose._result import EffectEvidence
@@ -179,7 +180,7 @@ def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:
     for k, v in fixed.items():
         theta_fixed[layout.index(k)] = v
     segs = _segments(trajs, qds, resolved)
-    fx = _diagnose._Fitter(spec, layout, segs, [], theta_fixed, {layout.index(k) for k in fixed}, resolved, notes)
+    fx = _Fitter(spec, layout, segs, [], theta_fixed, {layout.index(k) for k in fixed}, resolved, notes)
     theta, _ = fx.fit_ee([c for c in layout.candidates if c.key in keys])
     return {k: float(theta[layout.index(k)]) for k in ["J1", *keys]}
 
