@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from .._x64 import ensure_x64
 from ..effects import (
@@ -25,6 +24,7 @@ from ..systems import get_spec
 from . import _finish, _fit, _intervals, _rotor_laws as _laws, _trace as _trace_mod
 from ._drift import rest_drift
 from ._fitter import _fit_declared, _Fitter, _prediction_evidence
+from ._input_search import DELAY, _search_input_dynamics
 from ._intervals import FitOrigin, Interval
 from ._library import (
     Candidate,
@@ -33,17 +33,12 @@ from ._library import (
     non_physical,
 )
 from ._prepare import _segments, _test_segments, prepare, sensor_resolution
-from ._problem import Problem, fit_equation_error, free_columns
+from ._problem import fit_equation_error, free_columns
 from ._result import DiagnosisResult, EffectEvidence, ErrorSummary
 from ._settings import DiagnosisSettings
 from ._stiction_search import _rest_bound, _stiction_by_prediction, _vetoed_with_stiction
 
 __all__ = ["diagnose"]
-
-
-# the input dynamics' candidate (a delay or a lag between the logged input and the plant, not
-# memoryless: applied to the input itself; which of the two is decided after it is accepted)
-DELAY = Candidate(INPUT_DYNAMICS_EFFECTS["delay"], "u")
 
 
 # ----------------------------------------------------------------------------- data preparation
@@ -76,60 +71,6 @@ def _in_span(prob, layout, free, candidate, fixed_idx) -> str | None:
     if rel < 1e-6:
         return "absorbed: a combination of the declared model's own regressors"
     return None
-
-
-def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputDynamics:
-    """A delay or a first-order lag between the logged input and the plant. Both share one
-    first-order signature (−d·u̇) in the linear test; each is fitted with the input transformed
-    exactly, on a grid of half samples up to 3× the linear estimate, and judged by how well the
-    refitted model predicts the validation windows (the equation error alone is biased on
-    closed-loop logs, where a long lag refitted with the inertias mimics the loop's phase). The
-    lag replaces the simpler delay only if it predicts significantly better."""
-    effects = [c for c in effects if c != DELAY]
-    free = free_columns(fx.layout, effects, fx.fixed_idx)
-    _, linear = fit_equation_error(fx.fit_prob, fx.layout, free, fx.theta_fixed, fx.weights, True)
-    dt = fx.segs[0].dt
-    bound = min(fx.settings.max_delay, max(3.0 * linear, 4.0 * dt))
-    grid = np.arange(0.5 * dt, bound + 1e-12, 0.5 * dt)
-
-    def sums(dyn):
-        fx.build(dyn, fx.fit_segs)
-        prob = Problem(fx.fit_segs, fx.c_input)
-        th, _ = fit_equation_error(prob, fx.layout, free, fx.theta_fixed, fx.weights, False)
-        return fx.validation_sums(th, dyn)
-
-    found = {}
-    for kind in ("delay", "lag"):
-        tried = [(sums(_fit.InputDynamics(kind, float(x))), float(x)) for x in grid]
-        best = min(tried, key=lambda p: p[0].sum())
-        # refine between the grid's neighbours of its best point
-        res = minimize_scalar(
-            lambda x, kind=kind: sums(_fit.InputDynamics(kind, x)).sum(),
-            method="bounded",
-            bounds=(max(0.0, best[1] - 0.5 * dt), best[1] + 0.5 * dt),
-            options={"xatol": 1e-5},
-        )
-        refined = (sums(_fit.InputDynamics(kind, float(res.x))), float(res.x))
-        found[kind] = refined if refined[0].sum() < best[0].sum() else best
-    ev = _prediction_evidence(found["delay"][0], found["lag"][0])
-    lag_wins = ev.passes(fx.settings.min_improvement, fx.settings.z_threshold)
-    dyn = _fit.InputDynamics("lag", found["lag"][1]) if lag_wins else _fit.InputDynamics("delay", found["delay"][1])
-    other = (
-        (INPUT_DYNAMICS_EFFECTS["delay"], found["delay"][1])
-        if lag_wins
-        else (INPUT_DYNAMICS_EFFECTS["lag"], found["lag"][1])
-    )
-    fx.alternative = (
-        f"{other[0]} {other[1]:.4g} s {'fits worse' if lag_wins else 'fits as well'} "
-        f"(validation gain of the lag over the delay {ev.improvement:.1%}, t {ev.z:.1f})"
-    )
-    fx.notes.append(f"input dynamics: {dyn.kind} {dyn.seconds:.4g} s; {fx.alternative}")
-    if dyn.seconds > 0.95 * fx.settings.max_delay:
-        fx.notes.append(
-            f"input {dyn.kind} estimate {dyn.seconds:.4g} s is at the search bound max_delay = "
-            f"{fx.settings.max_delay} s: it stands in for something else"
-        )
-    return dyn
 
 
 def _try_step(fx: _Fitter, accepted, dyn, sums, step):
