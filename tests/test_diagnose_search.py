@@ -230,7 +230,7 @@ def _confirm_with(monkeypatch, predicts_worse_unless, refit_coefficient=None):
     (accepted keys, evidence, the steps tried in order, the steps vetoed for predicting worse)."""
     from types import SimpleNamespace
 
-    from furuta_gym.diagnose import _diagnose
+    from furuta_gym.diagnose import _confirm
 
     tried = []
 
@@ -244,10 +244,10 @@ def _confirm_with(monkeypatch, predicts_worse_unless, refit_coefficient=None):
             theta[COEFFICIENT_ORDER.index(other)] = value
         return Evidence(0.1 if ok else -0.1, 5.0 if ok else -5.0, 40), theta, dyn, sums
 
-    monkeypatch.setattr(_diagnose, "_try_step", fake_try)
+    monkeypatch.setattr(_confirm, "_try_step", fake_try)
     steps = [_Step(SPRING), _Step(COM), _Step(COULOMB)]
     evidence = {c.key: SimpleNamespace(significant=True, status="selected", note="") for c in (SPRING, COM, COULOMB)}
-    accepted, _, _, vetoed = _diagnose._confirm(_FakeFitter(), steps, np.zeros(1), evidence)
+    accepted, _, _, vetoed = _confirm._confirm(_FakeFitter(), steps, np.zeros(1), evidence)
     return [c.key for c in accepted], evidence, tried, [[c.key for c in step.members] for step in vetoed]
 
 
