@@ -7,8 +7,8 @@ import types
 
 import pytest
 
-from furuta_gym.diagnose._diagnose import _with_rigid_bodies
 from furuta_gym.diagnose._intervals import Interval
+from furuta_gym.diagnose._rigid_body import _with_rigid_bodies
 from furuta_gym.models import system_definition
 
 NOMINAL = system_definition("furuta").lumped.nominal()
