@@ -13,36 +13,26 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .._x64 import ensure_x64
-from ..effects import (
-    INPUT_DYNAMICS_EFFECTS,
-    spring_rests,
-)
+from ..effects import INPUT_DYNAMICS_EFFECTS, spring_rests
 from ..lagrangian import AbstractLagrangianSystem
 from ..models import system_definition
 from ..models.checkpoint import load_model
 from ..systems import get_spec
-from . import _finish, _intervals, _rotor_laws as _laws, _trace as _trace_mod
+from . import _finish, _intervals, _trace as _trace_mod
+from ._cable_search import _cable_laws, _with_cable
 from ._confirm import _confirm
-from ._drift import rest_drift
 from ._fitter import _fit_declared, _Fitter
 from ._input_search import DELAY
 from ._intervals import FitOrigin, Interval
-from ._library import (
-    Candidate,
-    check_input_linear,
-    layout_for,
-)
+from ._library import Candidate, check_input_linear, layout_for
 from ._prepare import _segments, _test_segments, prepare, sensor_resolution
 from ._problem import fit_equation_error, free_columns
 from ._result import DiagnosisResult, EffectEvidence, ErrorSummary
 from ._rigid_body import _with_rigid_bodies
 from ._settings import DiagnosisSettings
-from ._stiction_search import _rest_bound, _stiction_by_prediction, _vetoed_with_stiction
+from ._stiction_search import _stiction_by_prediction, _vetoed_with_stiction
 
 __all__ = ["diagnose"]
-
-
-# ----------------------------------------------------------------------------- data preparation
 
 
 # ----------------------------------------------------------------------------- the loop
@@ -74,41 +64,6 @@ def _in_span(prob, layout, free, candidate, fixed_idx) -> str | None:
     return None
 
 
-# ----------------------------------------------------------------------------- the cable laws (issue 64)
-
-
-def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
-    """(spring, rests) of each joint where the two cable laws are tried (Method step 11): not loaded
-    by gravity (there gravity sets the rest), encoder-quantised, with a spring a law with memory
-    generalises and dry friction in the library, the spring not added and vetoed for predicting
-    worse, or removing ``inconsistent_gain`` of the held-out residual, or (a log without input,
-    whose rests no input holds) its rests naming a law (:func:`rest_drift`, read through a
-    one-count flicker), the spring added or not."""
-    gravity = system_definition(fx.spec.name).lumped.gravity_joints
-    out, comparer = [], None
-    for c in library:
-        friction = [d for d in library if d.joint == c.joint and d.kind.is_dry_friction]
-        if not (c.kind.absorbs_constant_force and _laws.memory_law_for(c.kind)) or len(friction) < 2:
-            continue
-        ev = evidence.get(c.key)
-        if (
-            c.joint in gravity
-            or c.joint not in fx.resolution
-            or (ev is not None and not ev.significant and ev.status in ("absorbed", "not identifiable", "equivalent"))
-        ):
-            continue
-        rests = rest_drift(trajs, fx.spec.name, c.joint, flicker=1, count=fx.resolution[c.joint])
-        named = not forced and rests.verdict in _laws.LAWS  # a spring added too may be the wrong law
-        if c in accepted and not named:
-            continue
-        if not (named or (ev is not None and ev.status == "not confirmed")):
-            comparer = comparer or fx.comparer()
-            if comparer.compare(accepted, [c]).improvement < fx.settings.inconsistent_gain:
-                continue
-        out.append((c, rests))
-    return out
-
-
 def _reported(fx: _Fitter, theta, accepted, dyn, ordered, after: ErrorSummary, cable, test_after):
     """(held-out errors after, intervals, their method): as fitted, or with a kept cable with
     memory (its evidence put first), whose errors are predicted with its moving neutral and whose
@@ -122,77 +77,6 @@ def _reported(fx: _Fitter, theta, accepted, dyn, ordered, after: ErrorSummary, c
     after = _with_cable(fx, after, cable, theta, fx.held_segs, fx.held_prob)
     none: dict[str, Interval | None] = {b: None for b in fx.layout.base}
     return after, none, None
-
-
-def _cable_owned(c: Candidate, joint: str) -> bool:
-    """Whether the cable laws refit ``c``: a spring, constant force or dry friction of ``joint``."""
-    return c.joint == joint and (c.kind.in_potential or c.kind.is_constant_force or c.kind.is_dry_friction)
-
-
-def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, forced):
-    """Method step 11 (:mod:`._rotor_laws`): on each joint of :func:`_cable_law_joints`, the
-    moving rest and the large breakaway fitted by prediction and told apart; the law the data
-    support (or the better of two that cannot be told apart) replaces the joint's spring and dry
-    friction. Returns (accepted, θ, the joints' reports, (context, cable, its evidence) of a cable
-    with memory kept, or None)."""
-    s, reports, kept_cable = fx.settings, [], None
-    rule = _laws.Rule(s.min_improvement, s.z_threshold, s.veto_t, rests_count=not forced)
-    for spring, rests in _cable_law_joints(fx, trajs, library, accepted, evidence, forced):
-        stays = [a for a in accepted if not _cable_owned(a, spring.joint)]
-        ctx = _laws.Context(fx, spring.joint, trajs, dyn, stays, max(1, s.start_iterations))
-        stiffness = float(fx.fit_ee(accepted + [spring])[0][fx.layout.index(spring.key)])
-        held = _rest_bound(fx, theta, dyn, spring.joint).held
-        fits = _laws.fit_laws(ctx, theta, stiffness, held, s.oe_max_nfev)
-        verdict, reason, kept, h2h = _laws.verdict(fits, rests, ctx.win_val.q, rule)
-        fx.notes.append(f"{spring.joint}: the cable laws (Method step 11): {verdict}: {reason}")
-        reports.append(_laws.RotorLaw(spring.joint, verdict, reason, rests, fits, kept, h2h))
-        if kept is None:
-            continue
-        f = fits[kept]
-        accepted, theta = ctx.others + f.effects, f.theta
-        why = f"the {kept} law (Method step 11: {verdict})"
-        if spring.key in evidence and evidence[spring.key].status == "not confirmed":
-            why += f"; it fixed {spring.key}, vetoed for predicting worse with the joint's friction as it was"
-            fx.notes.append(f"{spring.key}: vetoed, then fixed by the {kept} law (Method step 11)")
-        for c in f.effects:
-            evidence[c.key] = EffectEvidence(
-                c.name, c.joint, None, c.unit(fx.spec), True, f.evidence.improvement, f.evidence.z, "selected", why
-            )
-        if f.cable[0]:
-            kind = _laws.memory_law_for(spring.kind)
-            assert kind is not None
-            cable = EffectEvidence(
-                kind.name,
-                spring.joint,
-                f.cable[0],
-                spring.unit(fx.spec),
-                True,
-                f.evidence.improvement,
-                f.evidence.z,
-                "selected",
-                why,
-                play=f.cable[1],
-            )
-            kept_cable = (ctx, f.cable, cable)
-        else:
-            free = free_columns(fx.layout, accepted, fx.fixed_idx)
-            fx.record(theta, FitOrigin("output_error", theta, free, dyn, ctx.start_iterations))
-    return accepted, theta, reports, kept_cable
-
-
-def _with_cable(fx: _Fitter, summary: ErrorSummary, kept_cable, theta, segs, prob) -> ErrorSummary:
-    """``summary`` of ``segs`` with a kept cable with memory in the predictions and the residual."""
-    ctx, cable, _ = kept_cable
-    per, comb = _laws.window_errors(ctx, theta, cable, segs)
-    r = _laws.residual(ctx, theta, cable, prob)
-    names = fx.spec.joint_names
-    return dataclasses.replace(
-        summary,
-        trajectory_rmse=comb,
-        trajectory_rmse_per_joint={j: float(v) for j, v in zip(names, per, strict=True)},
-        residual_rms=float(np.sqrt(np.mean(r**2))),
-        residual_rms_per_joint={j: float(v) for j, v in zip(names, np.sqrt(np.mean(r**2, axis=0)), strict=True)},
-    )
 
 
 def _anchor(spec, layout, fixed, forced, notes):
