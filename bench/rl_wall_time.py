@@ -139,7 +139,8 @@ def section() -> str:
             "Training wall time (compilation included) and what the deterministic policy then does on the MuJoCo "
             "`FurutaSwingUp-v0` (return of 500; success: within 0.1 rad of upright for 2 s, as the control "
             "benchmarks score it, from `near_rest_starts(30, seed=0)`). PPO rows: one seed each, pinned to one "
-            "core with a one-thread XLA pool on the 2-core machine shared with other jobs "
+            "core (`taskset`) on the 2-core machine shared with other jobs, the learned-model rows in their "
+            "checkpoints' regeneration and the analytic ones earlier (results/README.md) "
             "(`studies/rl_from_learned_models.py`, results/rl_learned/; docs/rl.md has every row). SAC is "
             "not run at PPO's 6 M steps (a projection from its rate is below); the two are run side by side "
             "at the budgets of the second table.",

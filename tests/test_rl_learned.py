@@ -82,3 +82,29 @@ def test_docs_statements_on_sac_and_ppo_at_equal_budgets_hold_in_the_results():
     assert ppo_first >= 10 * sac_first
     assert ppo[ppo_first]["train_seconds"] < sac[sac_first]["train_seconds"]
     assert max(ppo) > max(sac)
+
+
+def test_docs_statements_on_policies_trained_in_learned_models_hold_in_the_results():
+    """docs/rl.md "Reading it": every L_prop policy succeeds from x0 = 0 and every start on the
+    nominal and `coulomb` plants; the DeLaN L_traj policies from none; each baseline's worst plant
+    is worse than any L_prop policy's worst, and its own-model return below every L_prop one."""
+    import json
+
+    rows = {p.stem: json.loads(p.read_text()) for p in (ROOT / "results" / "rl_learned").glob("*_seed0.json")}
+    if not rows:
+        pytest.skip("results/rl_learned not generated")
+    prop = [r for k, r in rows.items() if k.split("_")[1] == "prop"]
+    baselines = [r for k, r in rows.items() if k.startswith(("dln_traj", "adln_aph"))]
+    assert len(prop) == 4 and len(baselines) == 4
+    plants = ("nominal", "cable_spring", "coulomb")
+    for r in prop:
+        for plant in ("nominal", "coulomb"):
+            assert r["mujoco"][plant]["x0"]["success"] and r["mujoco"][plant]["seeded_success"] == 1.0
+    for r in (r for k, r in rows.items() if k.startswith("dln_traj")):
+        assert all(r["mujoco"][p]["seeded_success"] == 0.0 and not r["mujoco"][p]["x0"]["success"] for p in plants)
+
+    def worst(r):
+        return min(r["mujoco"][p]["seeded_success"] for p in plants)
+
+    assert max(map(worst, baselines)) < min(map(worst, prop))
+    assert max(r["model_return"] for r in baselines) < min(r["model_return"] for r in prop)
