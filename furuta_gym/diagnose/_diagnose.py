@@ -6,9 +6,8 @@ See :func:`diagnose` and ``docs/diagnose.md``.
 from __future__ import annotations
 
 import dataclasses
-import functools
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -126,22 +125,20 @@ def diagnose(
     ``significant`` were added), held-out (and test) errors before/after, fitted parameters, notes.
     """
     prediction = _check_finish(finish, model, settings, overrides)
-    once = functools.partial(
-        _diagnose_once,
+    request = _Request(
         data,
         system,
-        test=test,
-        reading=dict(column_map=column_map, signs=signs, offsets=offsets, units=units, time_unit=time_unit),
-        candidates=candidates,
-        model=model,
-        settings=settings,
+        test,
+        dict(column_map=column_map, signs=signs, offsets=offsets, units=units, time_unit=time_unit),
+        candidates,
+        model,
+        dataclasses.replace(settings or DiagnosisSettings(), **overrides),
         keep_fitter=prediction,
-        **overrides,
     )
-    result = once(fixed=fixed)
+    result = _diagnose_once(request, fixed)
     if model is not None:  # a learned model is kept as it is: no lumped bodies to check
         return result
-    result = _with_rigid_bodies(result, lambda held: once(fixed={**result.fixed, **held}))
+    result = _with_rigid_bodies(result, lambda held: _diagnose_once(request, {**result.fixed, **held}))
     if prediction:
         result.prediction = _finish.prediction_finish(result._fitter, result)
         result._fitter = None
@@ -163,33 +160,35 @@ def _check_finish(finish, model, settings, overrides) -> bool:
     return True
 
 
-def _diagnose_once(
-    data,
-    system: str,
-    *,
-    test=None,
-    reading: dict,
-    fixed: Mapping[str, float] | None = None,
-    candidates: Sequence[str] | None = None,
-    model=None,
-    settings: DiagnosisSettings | None = None,
-    keep_fitter: bool = False,
-    **overrides,
-) -> DiagnosisResult:
-    """One diagnosis with ``fixed`` as given (see :func:`diagnose`; ``reading``: how its logs are
-    read, keywords of :func:`furuta_gym.data.read_log`); ``keep_fitter``: its fitting context
-    stays on the result, for a finish."""
+@dataclasses.dataclass(frozen=True)
+class _Request:
+    """What :func:`diagnose` was asked, passed whole to each diagnosis it runs: the logs and how
+    they are read (``reading``: keywords of :func:`furuta_gym.data.read_log`), the library's
+    ``candidates``, a given ``model``, the settings with the overrides applied; ``keep_fitter``:
+    the fitting context stays on the result, for a finish."""
+
+    data: Any
+    system: str
+    test: Any
+    reading: dict
+    candidates: Sequence[str] | None
+    model: Any
+    settings: DiagnosisSettings
+    keep_fitter: bool = False
+
+
+def _diagnose_once(request: _Request, fixed: Mapping[str, float] | None) -> DiagnosisResult:
+    """One diagnosis with ``fixed`` as given (see :func:`diagnose`): the logs prepared and the
+    fitting context built, then :func:`_search`."""
     ensure_x64()
-    spec = get_spec(system)
-    layout = layout_for(spec.name, _given_model(model, spec))
+    spec = get_spec(request.system)
+    layout = layout_for(spec.name, _given_model(request.model, spec))
     notes: list[str] = []
-    trajs, qds, settings = prepare(
-        data, spec, dataclasses.replace(settings or DiagnosisSettings(), **overrides), reading, notes
-    )
+    trajs, qds, settings = prepare(request.data, spec, request.settings, request.reading, notes)
     if any(tr.qd is None for tr in trajs):
         notes.append(f"velocities estimated ({settings.velocity})")
     segs = _segments(trajs, qds, settings)
-    test_segs = _test_segments(test, spec, settings, reading, trajs[0].dt, notes)
+    test_segs = _test_segments(request.test, spec, settings, request.reading, trajs[0].dt, notes)
     u_all = np.concatenate([s.u[:, 0] for s in segs])
     forced = bool(np.std(u_all) > 1e-9 * max(1.0, np.abs(u_all).max()) and np.abs(u_all).max() > 0)
     fixed = _anchor(spec, layout, fixed, forced, notes)
@@ -199,6 +198,14 @@ def _diagnose_once(
         theta_fixed[layout.index(k)] = v
     fx = _Fitter(spec, layout, segs, test_segs, theta_fixed, fixed_idx, settings, notes)
     fx.resolution = sensor_resolution(trajs, spec)
+    return _search(fx, trajs, fixed, forced, request)
+
+
+def _search(fx: _Fitter, trajs, fixed: dict[str, float], forced: bool, request: _Request) -> DiagnosisResult:
+    """The declared model fitted, its residual traced to candidates, the steps confirmed or
+    vetoed, stiction and the cable laws searched, the verdict and the result."""
+    spec, layout, notes, settings = fx.spec, fx.layout, fx.notes, fx.settings
+    segs, test_segs, candidates, keep_fitter = fx.segs, fx.test_segs, request.candidates, request.keep_fitter
     th_before = _fit_declared(fx)
     before = fx.errors(th_before, fx.held_segs, fx.held_prob)
     test_before = fx.test_errors(th_before)
