@@ -1,6 +1,10 @@
 """The diagnosis loop: fit the declared model, take its residual, trace it to an effect, refit.
 
-See :func:`diagnose` and ``docs/diagnose.md``.
+Its steps, each in its module: log → prepared data (``_prepare``) → candidates and the trace's
+search (``_candidates``) → fit (``_fitter``; the refits that confirm the search's steps in
+``_confirm``, with ``_input_search``, ``_stiction_search`` and ``_cable_search``) → verdict
+(``_verdict``, ``_rigid_body``) → report (``_result``, ``_report``). See :func:`diagnose` and
+``docs/diagnose.md``.
 """
 
 from __future__ import annotations
@@ -31,9 +35,6 @@ from ._stiction_search import _stiction_by_prediction, _vetoed_with_stiction
 from ._verdict import _finish_evidence, _mark_unresolved, _reported
 
 __all__ = ["diagnose"]
-
-
-# ----------------------------------------------------------------------------- the loop
 
 
 def _anchor(spec, layout, fixed, forced, notes):
