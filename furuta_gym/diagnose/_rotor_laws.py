@@ -211,7 +211,7 @@ def square_sums(pred: np.ndarray, measured: np.ndarray) -> np.ndarray:
 
 @dataclasses.dataclass
 class Context:
-    """What the laws' fits share: the fitter (``_diagnose._Fitter``), the joint, the logs in
+    """What the laws' fits share: the fitter (``_fitter._Fitter``), the joint, the logs in
     recorded order, the input dynamics and the windows (output-error fit, validation)."""
 
     fx: Any  # the diagnosis's _Fitter (its module imports this one)
