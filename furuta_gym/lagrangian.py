@@ -242,7 +242,7 @@ def forward_dynamics(system: AbstractLagrangianSystem, q, qd, u) -> Float[Array,
 
 
 def forward_dynamics_with_dry_friction(
-    system: AbstractLagrangianSystem, limit: Float[Array, " n"], q, qd, u, relaxation: float
+    system: AbstractLagrangianSystem, limit: Float[Array, " n"], q, qd, u, relaxation: float, impedance: float = 1.0
 ) -> Float[Array, " n"]:
     """q̈ of ``system`` with dry friction added that can hold a joint at rest.
 
@@ -254,6 +254,8 @@ def forward_dynamics_with_dry_friction(
     form an explicit integrator can take at steps ≲ ``relaxation``). The sgn law instead chatters
     about q̇ = 0 and tanh(q̇/ε) lets the joint creep. Joints are resolved in turn, twice
     (Gauss–Seidel): exact with friction on one joint, close when several stick at once.
+    ``impedance`` < 1 applies that share of the holding force, as MuJoCo's soft friction loss
+    does, so a loaded joint creeps instead of sticking.
     """
     M = system.mass_matrix(q)
     free = solve_mass_matrix(M, _applied_force(system, q, qd, u))
@@ -264,7 +266,7 @@ def forward_dynamics_with_dry_friction(
     for _ in range(2):
         for j in range(n):
             others = free[j] + response[j] @ friction - response[j, j] * friction[j]
-            holding = (-qd[j] / relaxation - others) / response[j, j]
+            holding = impedance * (-qd[j] / relaxation - others) / response[j, j]
             friction = friction.at[j].set(jnp.clip(holding, -limit[j], limit[j]))
     return free + response @ friction
 

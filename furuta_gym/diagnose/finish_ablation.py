@@ -108,19 +108,9 @@ MUJOCO_RELAXATION, MUJOCO_IMPEDANCE = 0.95 * 0.02 / 2, 0.9
 
 def soft_friction_dynamics(model, limit, q, qd, u):
     """q̈ with MuJoCo's soft friction loss: the Karnopp law of
-    :func:`~furuta_gym.lagrangian.forward_dynamics_with_dry_friction` (Gauss–Seidel over the
-    joints) with its holding force scaled by the impedance and its relaxation MuJoCo's."""
-    M = model.mass_matrix(q)
-    free = forward_dynamics(model, q, qd, u)
-    n = free.shape[-1]
-    response = jnp.stack([solve_mass_matrix(M, e) for e in jnp.eye(n, dtype=free.dtype)], axis=1)
-    friction = jnp.zeros_like(free)
-    for _ in range(2):
-        for j in range(n):
-            others = free[j] + response[j] @ friction - response[j, j] * friction[j]
-            holding = MUJOCO_IMPEDANCE * (-qd[j] / MUJOCO_RELAXATION - others) / response[j, j]
-            friction = friction.at[j].set(jnp.clip(holding, -limit[j], limit[j]))
-    return free + response @ friction
+    :func:`~furuta_gym.lagrangian.forward_dynamics_with_dry_friction` with MuJoCo's relaxation
+    and its holding force scaled by MuJoCo's impedance."""
+    return forward_dynamics_with_dry_friction(model, limit, q, qd, u, MUJOCO_RELAXATION, MUJOCO_IMPEDANCE)
 
 
 def _law_field(layout, theta, law, n: int):
