@@ -162,14 +162,12 @@ VARIANTS = {
 MJCF_MASS, GRAVITY, MJCF_BACK_EMF = 0.024, 9.81, 2.1e-4
 
 
-def sysid_start(fx, start, values: dict | None = None):
-    """``start`` with mujoco.sysid's fitted MJCF terms as lumped values and effects (its
-    pendulum a point mass m at l with armature, its rotor inertia, arm, damping with the MJCF's
-    fixed back-EMF, friction loss as Coulomb friction, its spring and rest, its lateral centre
-    of mass as an angle), and its input delay."""
-    values = values or json.loads(SYSID.read_text())["parameters"]
+def sysid_rigid_body(values: dict) -> dict:
+    """mujoco.sysid's fitted MJCF terms as the lumped rigid-body and motor values: its pendulum a
+    point mass m at l with armature, its rotor inertia, arm, and damping with the MJCF's fixed
+    back-EMF."""
     m, r, l = MJCF_MASS, values["arm_length"], values["pendulum_com"]
-    lumped = {
+    return {
         "J1": values["rotor_inertia"] + m * r**2,
         "J1b": m * l**2,
         "Jc": m * r * l,
@@ -178,11 +176,21 @@ def sysid_start(fx, start, values: dict | None = None):
         "K": values["motor_gain"],
         "c_alpha": values["alpha_damping"] + MJCF_BACK_EMF,
         "c_beta": values["beta_damping"],
+    }
+
+
+def sysid_start(fx, start, values: dict | None = None):
+    """``start`` with mujoco.sysid's fitted terms as lumped values (:func:`sysid_rigid_body`) and
+    effects (friction loss as Coulomb friction, its spring and rest, its lateral centre of mass
+    as an angle), and its input delay."""
+    values = values or json.loads(SYSID.read_text())["parameters"]
+    lumped = {
+        **sysid_rigid_body(values),
         "coulomb_friction:alpha": values["alpha_frictionloss"],
         "coulomb_friction:beta": values["beta_frictionloss"],
         "spring:alpha": values["alpha_stiffness"],
         "constant_torque:alpha": values["alpha_stiffness"] * values["alpha_springref"],
-        "com_offset:beta": -np.arcsin(values["pendulum_com_lateral"] / l),
+        "com_offset:beta": -np.arcsin(values["pendulum_com_lateral"] / values["pendulum_com"]),
     }
     theta = np.array(start, dtype=float)
     for name, value in lumped.items():
@@ -201,17 +209,7 @@ def sysid_plant(values: dict):
     from furuta_gym.effects import Effect
     from furuta_gym.envs import Plant
 
-    m, r, l = MJCF_MASS, values["arm_length"], values["pendulum_com"]
-    lumped = {
-        "J1": values["rotor_inertia"] + m * r**2,
-        "J1b": m * l**2,
-        "Jc": m * r * l,
-        "J2": m * l**2 + values["pendulum_armature"],
-        "G": m * GRAVITY * l,
-        "c_alpha": values["alpha_damping"] + MJCF_BACK_EMF,
-        "c_beta": values["beta_damping"],
-        "K": values["motor_gain"],
-    }
+    l = values["pendulum_com"]
     effects = (
         Effect("coulomb_friction", "alpha", values["alpha_frictionloss"]),
         Effect("coulomb_friction", "beta", values["beta_frictionloss"]),
@@ -219,7 +217,7 @@ def sysid_plant(values: dict):
         Effect("com_offset", "beta", -float(np.arcsin(values["pendulum_com_lateral"] / l))),
         Effect("input_delay", "u", values["input_delay"]),
     )
-    return Plant(effects=effects, lumped=lumped, system="furuta", source="mujoco.sysid's fit, mapped")
+    return Plant(effects=effects, lumped=sysid_rigid_body(values), system="furuta", source="mujoco.sysid's fit, mapped")
 
 
 def windows_with_input_before(runs, stride: float | None = None):
