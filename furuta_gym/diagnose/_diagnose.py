@@ -1,7 +1,8 @@
 """The diagnosis loop: fit the declared model, take its residual, trace it to an effect, refit.
 
 Its steps, each in its module: log → prepared data (``_prepare``) → candidates and the trace's
-search (``_candidates``) → fit (``_fitter``; the refits that confirm the search's steps in
+search (``_candidates``) → fit (``_fitter``: equation error in ``_fit``, output error on open-loop
+windows in ``_windows``; the refits that confirm the search's steps in
 ``_confirm``, with ``_input_search``, ``_stiction_search`` and ``_cable_search``) → verdict
 (``_verdict``, ``_rigid_body``) → report (``_result``, ``_report``). See :func:`diagnose` and
 ``docs/diagnose.md``.

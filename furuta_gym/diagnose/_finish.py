@@ -27,7 +27,7 @@ import numpy as np
 from ..effects import Effect, can_join, merge_spring_rests
 from ..envs import Plant
 from ..models import system_definition
-from . import _fit, _trace as _trace_mod
+from . import _fit, _trace as _trace_mod, _windows
 from ._library import Candidate, is_physical
 from ._problem import free_columns
 
@@ -120,13 +120,13 @@ def log_starts(segments, trim_seconds: float) -> dict[str, float]:
     return out
 
 
-def placed_windows(segments, length: int, dyn, placement: str, starts: dict[str, float]) -> _fit.Windows:
+def placed_windows(segments, length: int, dyn, placement: str, starts: dict[str, float]) -> _windows.Windows:
     """``length``-step windows inside each segment, starting as ``placement`` says
     (:data:`PLACEMENTS`; ``starts``: each log's first sample time, :func:`log_starts`)."""
     if placement not in PLACEMENTS + (STAGGERED,):
         raise ValueError(f"placement: expected one of {PLACEMENTS + (STAGGERED,)}, got {placement!r}")
     if placement == "segments":
-        win = _fit.make_windows(segments, length, dyn)
+        win = _windows.make_windows(segments, length, dyn)
         assert win is not None, "every segment holds a window"
         return win
     x0, us, qs, idx = [], [], [], []
@@ -141,18 +141,18 @@ def placed_windows(segments, length: int, dyn, placement: str, starts: dict[str,
             qs.append(s.q[a + 1 : a + length + 1])
             idx.append(i)
     assert x0, "every segment holds a window"
-    return _fit.Windows(np.array(x0), np.array(us), np.array(qs), np.array(idx), segments[0].dt, length)
+    return _windows.Windows(np.array(x0), np.array(us), np.array(qs), np.array(idx), segments[0].dt, length)
 
 
-def drawn(win: _fit.Windows, count: int | None) -> _fit.Windows:
+def drawn(win: _windows.Windows, count: int | None) -> _windows.Windows:
     """``count`` of the windows drawn at random (as ``make_windows`` draws), or all of them."""
     if count is None or win.x0.shape[0] <= count:
         return win
     keep = np.sort(np.random.default_rng(0).choice(win.x0.shape[0], count, replace=False))
-    return _fit.Windows(win.x0[keep], win.us[keep], win.q[keep], win.segment[keep], win.dt, win.length)
+    return _windows.Windows(win.x0[keep], win.us[keep], win.q[keep], win.segment[keep], win.dt, win.length)
 
 
-def refit_windows(fx, segments, dyn) -> _fit.Windows:
+def refit_windows(fx, segments, dyn) -> _windows.Windows:
     """The refit's windows: one after another in each segment with a :data:`STARTS_EVERY` gap
     between them, from each log's grid (module docstring)."""
     return placed_windows(segments, fx.L, dyn, STAGGERED, log_starts(fx.segs, fx.settings.trim_seconds))
@@ -205,7 +205,7 @@ def _refit(fx, theta, chosen, dyn, win):
     s, chosen, left_out, improved = fx.settings, list(chosen), [], False
     for _ in range(len(chosen) + 1):
         free = free_columns(fx.layout, chosen, fx.fixed_idx)
-        theta, ok = _fit.oe_fit(fx.layout, theta, free, win, fx.substeps, s.oe_max_nfev, s.start_iterations)
+        theta, ok = _windows.oe_fit(fx.layout, theta, free, win, fx.substeps, s.oe_max_nfev, s.start_iterations)
         improved |= ok
         effects = _effects(fx.layout, theta, chosen, dyn)
         bad = [c for c, e in zip(chosen, effects, strict=True) if not can_join(e, effects)]
@@ -221,7 +221,7 @@ def _refit(fx, theta, chosen, dyn, win):
 
 def _heldout_sums(fx, thetas: dict, win) -> dict[str, np.ndarray]:
     """Per-window squared position errors on the held-out windows, as ``error_after`` scores them."""
-    return {k: _fit.window_square_sums(fx.layout, th, win, fx.substeps) for k, th in thetas.items()}
+    return {k: _windows.window_square_sums(fx.layout, th, win, fx.substeps) for k, th in thetas.items()}
 
 
 def _rigid_failure(system: str, theta, layout) -> str | None:
@@ -266,11 +266,11 @@ def prediction_finish(fx, result) -> PredictionFinish:
         if any(c == Candidate(e.name, e.joint) for e in result.inconsistent):
             with_inconsistent[layout.index(c.key)] = coefficient
     fit_win = refit_windows(fx, fx.fit_segs, dyn)
-    held_win = _fit.make_windows(fx.held_segs, fx.L, dyn)
+    held_win = _windows.make_windows(fx.held_segs, fx.L, dyn)
     theta, chosen, left_out, improved = _refit(fx, start, found + [c for c, _ in extra], dyn, fit_win)
     # the diagnosed plant is scored with its own input dynamics, the other two with the refit's
     sums = _heldout_sums(fx, {"with_inconsistent": with_inconsistent, "refit": theta}, held_win)
-    diagnosed_win = _fit.make_windows(fx.held_segs, fx.L, result.input_dynamics)
+    diagnosed_win = _windows.make_windows(fx.held_segs, fx.L, result.input_dynamics)
     sums = {**_heldout_sums(fx, {"diagnosed": result.theta_after}, diagnosed_win), **sums}
     baseline = min(("diagnosed", "with_inconsistent"), key=lambda k: sums[k].sum())
     ev = _trace_mod.Evidence.of_sums(sums[baseline], sums["refit"])

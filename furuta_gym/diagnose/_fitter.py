@@ -8,7 +8,7 @@ import numpy as np
 
 from ..data import DataError
 from ..models import system_definition
-from . import _fit, _trace as _trace_mod
+from . import _fit, _trace as _trace_mod, _windows
 from ._intervals import FitOrigin
 from ._library import Candidate, is_physical
 from ._problem import Problem, fit_equation_error, free_columns
@@ -35,8 +35,8 @@ class _Fitter:
         self.c_input = _fit.input_direction(layout, theta_fixed)
         self.weights = np.ones(spec.n_dof)
         self.build(_fit.NO_INPUT_DYNAMICS)
-        all_fit_win = _fit.make_windows(self.fit_segs, self.L)
-        if _fit.make_windows(self.held_segs, self.L) is None or all_fit_win is None:
+        all_fit_win = _windows.make_windows(self.fit_segs, self.L)
+        if _windows.make_windows(self.held_segs, self.L) is None or all_fit_win is None:
             raise DataError("too short: no complete open-loop window in the fit or held-out segments")
         # fit-set windows: a random subset drives the output-error fit, the rest validates effects
         order = np.random.default_rng(0).permutation(all_fit_win.x0.shape[0])
@@ -98,12 +98,12 @@ class _Fitter:
                 out[self.layout.base[j]] = float(t)
         return out
 
-    def fit_windows(self, dynamics, idx) -> _fit.Windows:
-        w = _fit.make_windows(self.fit_segs, self.L, dynamics)
-        return _fit.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
+    def fit_windows(self, dynamics, idx) -> _windows.Windows:
+        w = _windows.make_windows(self.fit_segs, self.L, dynamics)
+        return _windows.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
 
     def window_rmse(self, theta, win) -> float:
-        return _fit.window_errors(self.layout, theta, win, self.substeps, self.settings.start_iterations)[1]
+        return _windows.window_errors(self.layout, theta, win, self.substeps, self.settings.start_iterations)[1]
 
     def validation_rmse(self, theta, dynamics) -> float:
         return self.window_rmse(theta, self.fit_windows(dynamics, self.val_idx))
@@ -112,11 +112,11 @@ class _Fitter:
         """Per-window squared position errors on the fit-set validation windows."""
         win = self.fit_windows(dynamics, self.val_idx)
         start = self.settings.start_iterations if start_iterations is None else start_iterations
-        return _fit.window_square_sums(self.layout, theta, win, self.substeps, start)
+        return _windows.window_square_sums(self.layout, theta, win, self.substeps, start)
 
     def validation_predictions(self, theta, dynamics, start_iterations: int) -> np.ndarray:
         """(W, L, n): predicted positions of the fit-set validation windows."""
-        return _fit.predict_windows(
+        return _windows.predict_windows(
             self.layout, theta, self.fit_windows(dynamics, self.val_idx), self.substeps, start_iterations
         )
 
@@ -155,7 +155,7 @@ class _Fitter:
                 "the equation-error estimate was non-physical or predicted worse than the "
                 f"nominal model ({tag}); output error started from the nominal parameters"
             )
-        th, ok = _fit.oe_fit(
+        th, ok = _windows.oe_fit(
             self.layout,
             start,
             free,
@@ -179,9 +179,9 @@ class _Fitter:
 
     def errors(self, theta, segs, prob) -> ErrorSummary:
         r = prob.R @ theta
-        win = _fit.make_windows(segs, self.L, self.dynamics)
+        win = _windows.make_windows(segs, self.L, self.dynamics)
         assert win is not None  # the segments were cut to hold windows of this length
-        per_q, comb = _fit.window_errors(self.layout, theta, win, self.substeps)
+        per_q, comb = _windows.window_errors(self.layout, theta, win, self.substeps)
         names = self.spec.joint_names
         return ErrorSummary(
             trajectory_rmse=comb,

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.special import stdtrit
 
 from ..effects import INPUT_DYNAMICS_EFFECTS
-from . import _fit
+from . import _fit, _windows
 
 __all__ = [
     "Interval",
@@ -209,7 +209,7 @@ def _oe_problem(fx, origin: FitOrigin):
     win = fx.fit_windows(origin.dynamics, fx.oe_idx)
 
     def res(theta, w=win):
-        return _fit.window_residuals(fx.layout, theta, w, fx.substeps, origin.start_iterations)
+        return _windows.window_residuals(fx.layout, theta, w, fx.substeps, origin.start_iterations)
 
     theta = np.asarray(origin.theta, float)
     r = res(theta)

@@ -15,7 +15,7 @@ import numpy as np
 from ..effects import EFFECT_KINDS
 from ..models import system_definition
 from ..systems import get_spec
-from . import _fit
+from . import _fit, _windows
 from ._problem import Problem
 
 __all__ = ["format_table", "write_json", "write_figures"]
@@ -313,10 +313,10 @@ def _window_predictions(res, segs):
     substeps = system_definition(res.system).diagnosis_substeps
     preds = []
     for theta, dyn in ((res.theta_before, _fit.NO_INPUT_DYNAMICS), (res.theta_after, res.input_dynamics)):
-        win = _fit.make_windows(segs, L, dyn)
+        win = _windows.make_windows(segs, L, dyn)
         if win is None:
             return None
-        p = _fit.predict_windows(res.layout, theta, win, substeps)
+        p = _windows.predict_windows(res.layout, theta, win, substeps)
         preds.append(np.concatenate([win.x0[:, None, : p.shape[2]], p], axis=1))  # from the start state
     # start states and measured positions do not depend on the input dynamics: either win does
     meas = np.concatenate([win.x0[:, None, : p.shape[2]], win.q], axis=1)

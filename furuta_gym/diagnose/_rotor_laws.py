@@ -41,7 +41,7 @@ from ..lagrangian import forward_dynamics_with_dry_friction
 from ..measured import estimate_velocities
 from ..simulate import rk4_zoh_step
 from ..systems import get_spec
-from . import _fit
+from . import _fit, _windows
 from ._drift import REST_LAWS, RestDrift, _runs_within as _drift_runs, rest_drift
 from ._library import Candidate, is_physical, non_physical
 from ._problem import free_columns
@@ -142,7 +142,7 @@ def carried_starts(trajs, j: int, play: float, first: float = 0.0) -> np.ndarray
 
 
 def _window_neutrals(segs, length: int, paths) -> np.ndarray:
-    """Each window's starting neutral, in :func:`._fit.make_windows`' order."""
+    """Each window's starting neutral, in :func:`._windows.make_windows`' order."""
     out = []
     for s in segs:
         t, r = paths[s.name.rsplit("[", 1)[0]]
@@ -178,23 +178,23 @@ def _predictor(layout, dt: float, length: int, substeps: int, j: int, start_iter
 
             return jax.lax.scan(step, (jnp.concatenate([x[:n], v]), r0), u)[1]
 
-        return _fit._refined_positions(positions, x[n:], x, u, q_measured, start_iterations)
+        return _windows._refined_positions(positions, x[n:], x, u, q_measured, start_iterations)
 
     key = ("cable", j, start_iterations)
     return _fit._compiled("predict_law", layout, dt, length, substeps, *key, build=lambda: jax.jit(jax.vmap(one)))
 
 
-def predict(layout, thetas, cables, win: _fit.Windows, r0s, substeps: int, j: int, start_iterations: int):
+def predict(layout, thetas, cables, win: _windows.Windows, r0s, substeps: int, j: int, start_iterations: int):
     """(K, W, L, n) predictions under each (θ, cable, per-window neutrals) of ``thetas`` (K, P),
-    ``cables`` (K, 2), ``r0s`` (K, W), batched as :func:`._fit.predict_windows_at` does."""
+    ``cables`` (K, 2), ``r0s`` (K, W), batched as :func:`._windows.predict_windows_at` does."""
     fn = _predictor(layout, win.dt, win.length, substeps, j, start_iterations)
     thetas, cables, r0s = (np.asarray(a, dtype=float) for a in (thetas, cables, r0s))
     W = win.x0.shape[0]
     which, window = np.divmod(np.arange(len(thetas) * W), W)
     out = []
-    for s in range(0, which.size, _fit._BATCH):
-        real = np.arange(s, min(s + _fit._BATCH, which.size))
-        pad = np.concatenate([real, np.full(_fit._BATCH - real.size, real[-1])])
+    for s in range(0, which.size, _windows._BATCH):
+        real = np.arange(s, min(s + _windows._BATCH, which.size))
+        pad = np.concatenate([real, np.full(_windows._BATCH - real.size, real[-1])])
         k, w = which[pad], window[pad]
         args = (thetas[k], cables[k], win.x0[w], win.us[w], win.q[w], r0s[k, w])
         out.append(np.asarray(fn(*map(jnp.asarray, args)))[: real.size])
@@ -628,7 +628,7 @@ def window_errors(ctx: Context, theta, cable, segs) -> tuple[np.ndarray, float]:
     """Per-joint and combined RMS position error of the open-loop windows of ``segs`` (cut from
     ``ctx.trajs``) under θ and a cable with memory, each window from the neutral its history
     implies; measured start velocities, as the diagnosis's own errors are."""
-    win = _fit.make_windows(segs, ctx.fx.L, ctx.dyn)
+    win = _windows.make_windows(segs, ctx.fx.L, ctx.dyn)
     assert win is not None  # the segments were cut to hold windows of this length
     r0 = _window_neutrals(segs, ctx.fx.L, neutral_paths(ctx.trajs, ctx.j, cable[1], _starts(cable)))
     err = predict(ctx.layout, [theta], [cable[:2]], win, [r0], ctx.fx.substeps, ctx.j, 0)[0] - win.q

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _fit, _rests, _trace as _trace_mod
+from . import _rests, _trace as _trace_mod, _windows
 from ._fitter import _Fitter, _prediction_evidence, _square_sums
 from ._intervals import FitOrigin
 from ._library import Candidate, is_physical, non_physical
@@ -60,7 +60,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
 
     def refit(th0, effects):
         free = free_columns(fx.layout, effects, fx.fixed_idx)
-        th, ok = _fit.oe_fit(fx.layout, th0, free, win, fx.substeps, s.oe_max_nfev, start)
+        th, ok = _windows.oe_fit(fx.layout, th0, free, win, fx.substeps, s.oe_max_nfev, start)
         if ok:
             fx.record(th, FitOrigin("output_error", th, free, dyn, start))
         return th, fx.validation_predictions(th, dyn, start)
@@ -120,7 +120,7 @@ def _vetoed_with_stiction(fx: _Fitter, library, vetoed, accepted, theta, dyn, ev
         trial = accepted + list(step.members) + [c]
         free, bound = free_columns(fx.layout, trial, fx.fixed_idx), _rest_bound(fx, theta, dyn, c.joint)
         th0 = _stiction_start(fx, fx.fit_ee(accepted + list(step.members))[0], c, bound.held)
-        th, ok = _fit.oe_fit(fx.layout, th0, free, win, fx.substeps, fx.settings.oe_max_nfev, start)
+        th, ok = _windows.oe_fit(fx.layout, th0, free, win, fx.substeps, fx.settings.oe_max_nfev, start)
         before = _square_sums(fx.validation_predictions(theta, dyn, start), measured)
         ev = _prediction_evidence(before, _square_sums(fx.validation_predictions(th, dyn, start), measured))
         coef, members = float(th[fx.layout.index(c.key)]), ", ".join(m.key for m in step.members)

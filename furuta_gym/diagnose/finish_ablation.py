@@ -26,7 +26,7 @@ import numpy as np
 from ..lagrangian import forward_dynamics, forward_dynamics_with_dry_friction, solve_mass_matrix
 from ..simulate import rollout_zoh
 from ..systems import get_spec
-from . import _finish, _fit, _trace as _trace_mod
+from . import _finish, _fit, _trace as _trace_mod, _windows
 from ._diagnose import diagnose
 from ._finish import PLACEMENTS, STARTS_EVERY, drawn, log_starts, placed_windows
 from ._fit import InputDynamics
@@ -139,7 +139,7 @@ def friction_law(law):
     if law is None:
         yield
         return
-    original = _fit._predictor
+    original = _windows._predictor
 
     def predictor(layout, dt, length, substeps, start_iterations=0):
         assert start_iterations == 0, "the finish refits with start_iterations 0"
@@ -152,11 +152,11 @@ def friction_law(law):
         key = f"predict-{law[0]}-{law[1]}"
         return _fit._compiled(key, layout, dt, length, substeps, 0, build=lambda: jax.jit(jax.vmap(one)))
 
-    _fit._predictor = predictor
+    _windows._predictor = predictor
     try:
         yield
     finally:
-        _fit._predictor = original
+        _windows._predictor = original
 
 
 def refit_start(fx, res):
@@ -178,7 +178,7 @@ def refit_delay(fx, theta, chosen, dyn, windows):
     if dyn.kind == "none":
         return theta, chosen, dyn
     grid = [dyn] + [InputDynamics(dyn.kind, dyn.seconds + s) for s in DELAY_STEPS]
-    sums = [_fit.window_square_sums(fx.layout, theta, windows(d), fx.substeps).sum() for d in grid]
+    sums = [_windows.window_square_sums(fx.layout, theta, windows(d), fx.substeps).sum() for d in grid]
     best = grid[int(np.argmin(sums))]
     if best == dyn:
         return theta, chosen, dyn
@@ -247,7 +247,7 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
         if variant.refit_delay:
             theta, chosen, dyn = refit_delay(fx, theta, chosen, dyn, windows)
         sums = {
-            "sums" if p == "segments" else f"sums_{p}": _fit.window_square_sums(
+            "sums" if p == "segments" else f"sums_{p}": _windows.window_square_sums(
                 fx.layout, theta, placed_windows(held, fx.L, dyn, p, starts), fx.substeps
             )
             for p in PLACEMENTS
