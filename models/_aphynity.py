@@ -28,7 +28,7 @@ from ..lagrangian import SystemSpec
 from ..systems import get_spec
 from ._augmented import AbstractAugmentedSystem, ForceNetwork, force_hparams
 from ._definitions import SYSTEM_DEFINITIONS, system_definition
-from ._learned import freeze_hparams, system_defaults
+from ._learned import freeze_hparams, system_defaults, with_given
 
 __all__ = ["Aphynity", "LEARNABLE_PHYSICAL_PARAMETERS"]
 
@@ -68,10 +68,7 @@ class Aphynity(AbstractAugmentedSystem):
         hp["prior"] = ()  # overrides of nominal parameter values, e.g. (("mp", 0.03),)
         hp["prior_back_emf"] = False  # Furuta: keep −(kt·km/Rm)·α̇ in the prior's τ_u
         hp.update(force_hparams(spec, "aph"))
-        unknown = set(hparams) - set(hp)
-        if unknown:
-            raise ValueError(f"unknown APHYNITY hyper-parameters {sorted(unknown)}; known: {sorted(hp)}")
-        hp.update(hparams)
+        hp = with_given("APHYNITY", hp, hparams)
         definition = system_definition(spec)
         params = definition.parameters()
         overrides = dict(hp["prior"])

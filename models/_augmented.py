@@ -27,6 +27,7 @@ from ._learned import (
     feature_size,
     freeze_hparams,
     system_defaults,
+    with_given,
 )
 from ._system import first_joint_input
 
@@ -204,25 +205,9 @@ class AugmentedDeLaN(AbstractAugmentedSystem):
         hp.pop("damping_init")
         hp["force_hidden"] = hp["hidden"]
         hp.update(force_hparams(spec, "adln"))
-        unknown = set(hparams) - set(hp) - set(LEARNED_EXTRAS)
-        if unknown:
-            raise ValueError(
-                f"unknown augmented-DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + sorted(LEARNED_EXTRAS)}"
-            )
-        hp.update(hparams)
+        hp = with_given("augmented-DeLaN", hp, hparams, LEARNED_EXTRAS)
         kl, kf = jax.random.split(key)
-        act = hp.get("activation", "tanh")
-        self.lagrangian_nets = LagrangianNetworks(
-            spec,
-            key=kl,
-            hidden=tuple(hp["hidden"]),
-            mass_scale=hp["mass_scale"],
-            potential_scale=hp["potential_scale"],
-            position_scale=hp["position_scale"],
-            eps=hp.get("eps", 1e-3),
-            activation=act,
-            springs=tuple(hp.get("springs", ())),
-        )
+        self.lagrangian_nets = LagrangianNetworks.from_hparams(spec, hp, key=kl)
         self.force_net = ForceNetwork.from_hparams(spec, hp, hidden=hp["force_hidden"], key=kf)
         self.scale = jnp.asarray(1.0)
         self.spec = spec

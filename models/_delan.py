@@ -40,6 +40,7 @@ from ._learned import (
     feature_size,
     freeze_hparams,
     system_defaults,
+    with_given,
 )
 from ._system import first_joint_input
 
@@ -99,6 +100,21 @@ class LagrangianNetworks(eqx.Module):
         if self.springs:
             self.spring_log_stiffness = jnp.zeros(len(self.springs))
             self.spring_reference = jnp.zeros(len(self.springs))
+
+    @classmethod
+    def from_hparams(cls, spec: SystemSpec, hp: dict, *, key: PRNGKeyArray) -> "LagrangianNetworks":
+        """The networks a model's hyper-parameters ``hp`` describe (the optional ones defaulted)."""
+        return cls(
+            spec,
+            key=key,
+            hidden=tuple(hp["hidden"]),
+            mass_scale=hp["mass_scale"],
+            potential_scale=hp["potential_scale"],
+            position_scale=hp["position_scale"],
+            eps=hp.get("eps", 1e-3),
+            activation=hp.get("activation", "tanh"),
+            springs=tuple(hp.get("springs", ())),
+        )
 
     def cholesky_factor(self, q: Float[Array, " n"]) -> Float[Array, "n n"]:
         """Lower-triangular L(q) with diagonal softplus(·) + ε (> 0)."""
@@ -170,23 +186,8 @@ class DeLaN(AbstractLearnedSystem):
 
         spec = get_spec(system)
         hp = system_defaults(spec.name)
-        unknown = set(hparams) - set(hp) - set(LEARNED_EXTRAS)
-        if unknown:
-            raise ValueError(
-                f"unknown DeLaN hyper-parameters {sorted(unknown)}; known: {sorted(hp) + sorted(LEARNED_EXTRAS)}"
-            )
-        hp.update(hparams)
-        self.lagrangian_nets = LagrangianNetworks(
-            spec,
-            key=key,
-            hidden=tuple(hp["hidden"]),
-            mass_scale=hp["mass_scale"],
-            potential_scale=hp["potential_scale"],
-            position_scale=hp["position_scale"],
-            eps=hp.get("eps", 1e-3),
-            activation=hp.get("activation", "tanh"),
-            springs=tuple(hp.get("springs", ())),
-        )
+        hp = with_given("DeLaN", hp, hparams, LEARNED_EXTRAS)
+        self.lagrangian_nets = LagrangianNetworks.from_hparams(spec, hp, key=key)
         self.damping_ref = tuple(float(c) for c in hp["damping_init"])
         if len(self.damping_ref) != 2 or min(self.damping_ref) <= 0:
             raise ValueError(f"damping_init must be two positive numbers, got {hp['damping_init']!r}")

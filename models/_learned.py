@@ -55,6 +55,16 @@ def system_defaults(system: str) -> dict[str, Any]:
     return dict(SYSTEM_DEFAULTS[get_spec(system).name])
 
 
+def with_given(model: str, defaults: dict[str, Any], given: dict[str, Any], extras=()) -> dict[str, Any]:
+    """``defaults`` updated by the ``given`` hyper-parameters of a ``model`` (its name, for the
+    error), which may also name the optional ``extras``; one error lists what it does not know."""
+    unknown = set(given) - set(defaults) - set(extras)
+    if unknown:
+        known = sorted(defaults) + sorted(extras)
+        raise ValueError(f"unknown {model} hyper-parameters {sorted(unknown)}; known: {known}")
+    return {**defaults, **given}
+
+
 class MLP(eqx.Module):
     """A plain multilayer perceptron with a smooth activation (second derivatives are needed:
     the Coriolis force differentiates M, and training differentiates the dynamics again)."""
