@@ -74,6 +74,13 @@ def write_section(
     return status
 
 
+def publish(section: str, start: str, end: str, write: bool = True) -> int:
+    """Print a measured ``section`` and, with ``write``, put it into BENCHMARKS.md."""
+    print()
+    print(section)
+    return write_section(section, start, end) if write else 0
+
+
 def script_command(script: str) -> str:
     """How to run ``script`` (a ``__file__``) from the repository root."""
     path = Path(script).resolve()

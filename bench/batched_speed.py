@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _generated import machine, write_section
+from _generated import machine, publish
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -300,12 +300,7 @@ def main(argv=None) -> int:
         "this process used (all threads), which depends much less on the other users' load.",
         MARK_END,
     ]
-    section = "\n".join(lines)
-    print()
-    print(section)
-    if not args.no_write:
-        write_section(section, MARK_START, MARK_END)
-    return 0
+    return publish("\n".join(lines), MARK_START, MARK_END, write=not args.no_write)
 
 
 if __name__ == "__main__":

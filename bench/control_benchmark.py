@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _generated import write_section
+from _generated import publish
 
 ROOT = Path(__file__).resolve().parents[1]
 MARK_START = "<!-- control_benchmark:start -->"
@@ -232,10 +232,7 @@ def main(argv=None) -> int:
     n, n2 = args.episodes, args.extra_episodes
     if args.learned_only:
         learned_section = learned_rows(args, n, n2, evaluate_on_env, env_factory, starts, SwingUpLQR)
-        print(learned_section)
-        if not args.no_write:
-            write_section(learned_section, LEARNED_START, LEARNED_END)
-        return 0
+        return publish(learned_section, LEARNED_START, LEARNED_END, write=not args.no_write)
     run("swing-up + LQR (volts)", "analytic", "mujoco", ctrl, n)
     run("swing-up + LQR (volts)", "analytic", "mujoco cable_spring", ctrl, n, plant="cable_spring")
     run("swing-up + LQR (volts)", "analytic", "mujoco coulomb", ctrl, n, plant="coulomb")
@@ -292,12 +289,7 @@ def main(argv=None) -> int:
             "",
         ]
     lines.append(MARK_END)
-    section = "\n".join(lines)
-    print()
-    print(section)
-    if not args.no_write:
-        write_section(section, MARK_START, MARK_END)
-    return 0
+    return publish("\n".join(lines), MARK_START, MARK_END, write=not args.no_write)
 
 
 if __name__ == "__main__":

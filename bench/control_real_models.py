@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _generated import machine, write_section
+from _generated import machine, publish
 from control_benchmark import SECONDS, TABLE_HEADER, _row
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,11 +99,7 @@ def main(argv=None) -> int:
         *[f"- {x}" for x in notes],
         END,
     ]
-    section = "\n".join(lines)
-    print(section)
-    if not args.no_write:
-        write_section(section, START, END)
-    return 0
+    return publish("\n".join(lines), START, END, write=not args.no_write)
 
 
 if __name__ == "__main__":

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _generated import machine, write_section
+from _generated import machine, publish
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -153,12 +153,7 @@ def main(argv=None) -> int:
         "rates vary between runs; the ratios are measured side by side.",
         MARK_END,
     ]
-    section = "\n".join(lines)
-    print()
-    print(section)
-    if not args.no_write:
-        write_section(section, MARK_START, MARK_END)
-    return 0
+    return publish("\n".join(lines), MARK_START, MARK_END, write=not args.no_write)
 
 
 def make_cases(names=None) -> dict:

@@ -58,11 +58,11 @@ def _setup(loss: str, n_traj: int, batch_size):
 
     from furuta_gym.models import make_model
     from furuta_gym.training.losses import make_windows
-    from furuta_gym.training.train import TrainConfig, training_step
+    from furuta_gym.training.train import TrainSettings, training_step
 
     trajs = furuta_free_data(n_traj)
     model = make_model("furuta", "dln", jax.random.PRNGKey(0))
-    config = TrainConfig.for_system("furuta", batch_size=batch_size, progress=False)
+    config = TrainSettings.for_system("furuta", batch_size=batch_size, progress=False)
     step, params, opt_state = training_step(model, config, "itau" if loss == "itau" else "traj")
     if loss == "itau":
         w = make_windows(trajs, 100, stride=99, cover_end=True)

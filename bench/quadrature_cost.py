@@ -28,10 +28,10 @@ def make_step(kind: str, rule: str, trajs):
 
     from furuta_gym.models import make_model
     from furuta_gym.training.losses import make_windows
-    from furuta_gym.training.train import AUGMENTATION_WEIGHT, TrainConfig, training_step
+    from furuta_gym.training.train import AUGMENTATION_WEIGHT, TrainSettings, training_step
 
     model = make_model("furuta", kind, jax.random.PRNGKey(0))
-    config = TrainConfig.for_system("furuta", quadrature=rule, progress=False)
+    config = TrainSettings.for_system("furuta", quadrature=rule, progress=False)
     mu = AUGMENTATION_WEIGHT.get(("furuta", kind), 0.0)
     step, params, opt_state = training_step(model, config, "itau", augmentation_weight=mu)
     windows = make_windows(trajs, 101, stride=100, cover_end=True)
