@@ -26,6 +26,7 @@ from ..lagrangian import inverse_dynamics
 from ..measured import estimate_velocities
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
+from ._drift import _runs_within
 from ._fit import (
     NO_INPUT_DYNAMICS,
     InputDynamics,
@@ -37,7 +38,7 @@ from ._fit import (
 )
 from ._library import ParameterLayout
 
-__all__ = ["RestBound", "rest_bound", "held_at_rest", "Stop", "stop_excursions"]
+__all__ = ["RestBound", "rest_bound", "held_at_rest", "Stop", "stop_excursions", "breakaway_bracket"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,3 +173,90 @@ def stop_excursions(
             if e - s >= min_samples:
                 out.append(Stop(tr.name, int(s), int(e - s), free_excursion(a[s:e], tr.dt) / count))
     return out
+
+
+# ----------------------------------------------------------------------------- the breakaway's bracket
+
+
+def holding_forces(layout: ParameterLayout, j: int, trajectories: Sequence[Trajectory], theta) -> list[np.ndarray]:
+    """Per trajectory, the force (N·m or N) friction would balance to hold joint ``j`` still at
+    each sample under ``layout``/``theta``: the model's inverse dynamics with the joint's velocity
+    and acceleration zero, less the input (the other joints' motion, from estimated velocities
+    and accelerations, pushes on it too)."""
+    holding = _holding(layout, j)
+    out = []
+    for tr in trajectories:
+        qd = np.asarray(estimate_velocities(tr).qd)
+        qdd = np.gradient(qd, tr.dt, axis=0)
+        args = [jnp.asarray(x) for x in (tr.q, qd, qdd, np.asarray(tr.u, float))]
+        out.append(np.asarray(holding(jnp.asarray(theta), *args)))
+    return out
+
+
+def held_force(trajectories, forces, j: int, tolerance: float, min_rest: float) -> float:
+    """The largest force a rest held: over each run of ``min_rest`` s of joint ``j`` within
+    ``tolerance`` of its first value (an encoder flickering by a count under a resting joint does
+    not cut the rest), the median of ``forces`` (the other joints' pull, read with noise, averages
+    out); 0 without a rest. The breakaway was at least that."""
+    out = [0.0]
+    for tr, f in zip(trajectories, forces, strict=True):
+        bounds = _runs_within(np.asarray(tr.q[:, j], float), tolerance)
+        runs = zip(bounds[:-1], bounds[1:], strict=True)
+        out += [abs(float(np.median(f[a:b]))) for a, b in runs if b - a >= int(round(min_rest / tr.dt))]
+    return max(out)
+
+
+def moving_force(
+    trajectories, forces, j: int, tolerance: float, min_rest: float, first_rest: float, span: float
+) -> float | None:
+    """The least force that moved joint ``j`` off a rest: a run of ``min_rest`` s within
+    ``tolerance`` that the joint left, or a trajectory's first run of ``first_rest`` s (a released
+    joint starts at rest: a moving one passes a count sooner) (:func:`_left_rests`). Each rest's
+    force is the largest of ``forces`` over the last ``span`` s before it left: the other joints'
+    pull, from estimated accelerations, is read with noise, and a noisy least would put the bound
+    below the breakaway (it is an upper bound: a larger reading only loosens it). None: no rest
+    was left. The breakaway was at most that."""
+    out = []
+    for tr, f in zip(trajectories, forces, strict=True):
+        q = np.asarray(tr.q[:, j], float)
+        out += [float(np.abs(f[a:b]).max()) for a, b in _left_rests(q, tr.dt, tolerance, min_rest, first_rest, span)]
+    return min(out) if out else None
+
+
+def _left_rests(q, dt: float, tolerance: float, min_rest: float, first_rest: float, span: float, moved: int = 4):
+    """(start, end) of the last ``span`` s of each rest of ``q`` that the joint left (see
+    :func:`moving_force`): moving on by ``moved`` tolerances within 2·``span`` s. A joint held by a
+    soft friction (MuJoCo's, a real joint's) creeps a count under a load below its breakaway and
+    rests again: that rest was not broken."""
+    bounds = _runs_within(q, tolerance)
+    n = int(round(span / dt))
+    out = []
+    for k, (s, e) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+        least = first_rest if k == 0 else min_rest
+        if e - s >= int(round(least / dt)) and np.any(np.abs(q[e : e + 2 * n] - q[e - 1]) >= moved * tolerance):
+            out.append((max(s, e - n), e))
+    return out
+
+
+def breakaway_bracket(
+    trajectories: Sequence[Trajectory],
+    joint: str,
+    layout: ParameterLayout,
+    theta,
+    *,
+    count: float = 2 * np.pi / ENCODER_COUNTS_PER_REV,
+    flicker: int = 1,
+    min_rest: float = 0.2,
+) -> tuple[float, float | None]:
+    """(at least, at most) the breakaway of ``joint`` in measured ``trajectories`` under the model
+    ``layout``/``theta``, as Method step 11 reads it: the largest force a rest held
+    (:func:`held_force`) and the least that moved the joint off one (:func:`moving_force`; None:
+    no rest was left), each rest read through an encoder flicker of ``flicker`` counts of
+    ``count``."""
+    j = get_spec(layout.system).joint_names.index(joint)
+    forces = holding_forces(layout, j, trajectories, theta)
+    tolerance = flicker * count * 1.01
+    return (
+        held_force(trajectories, forces, j, tolerance, min_rest),
+        moving_force(trajectories, forces, j, tolerance, min_rest, 0.01, 0.05),
+    )

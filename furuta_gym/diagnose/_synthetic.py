@@ -47,7 +47,7 @@ from ..data import Trajectory
 from ..effects import ActuatorLag, Effect, WithEffects, actuator_lag_time
 from ..envs import MujocoBackend
 from ..models import SYSTEM_DEFINITIONS, analytic_model, system_definition
-from ..signals import chirp, quantize_encoder
+from ..signals import ENCODER_COUNTS_PER_REV, chirp, quantize_encoder
 from ..simulate import rk4_zoh_step, rollout_zoh
 
 __all__ = [
@@ -346,6 +346,7 @@ def measured_like(
     excitation: str | ClosedLoopBalancing = "chirp",
     quantize: bool = True,
     true_velocities: bool = False,
+    flicker: float = 0.0,
 ) -> list[Trajectory]:
     """Trajectories of the pinned model with ``effects`` added, as a sensor would log them.
 
@@ -367,7 +368,10 @@ def measured_like(
 
     ``quantize=False`` logs the Furuta's exact angles (and the balancing controller sees them):
     the same experiment without the encoder's resolution, to tell the sensor's limits from the
-    method's. ``true_velocities=True`` attaches the simulator's velocities as ``qd`` (no sensor
+    method's. ``flicker`` (Furuta, quantised): the rotor's encoder reads one count up on that
+    share of the samples, drawn apart from the other streams (issue 64 item 5: an encoder
+    flickering by a count under a resting rotor cuts every rest on one count short).
+    ``true_velocities=True`` attaches the simulator's velocities as ``qd`` (no sensor
     measures them: to tell what velocity estimation costs).
 
     ``input_delay`` is applied as the plant seeing the command ``round(d/dt)`` samples late,
@@ -384,6 +388,7 @@ def measured_like(
             f"{definition.title} has {list(definition.excitations)}"
         )
     rng = np.random.default_rng(seed)
+    flickers = np.random.default_rng([seed, 64])  # its own stream: the logs without it unchanged
     dt = definition.sample_period
     T = int(round(duration / dt)) + 1
     t = np.arange(T) * dt
@@ -407,6 +412,9 @@ def measured_like(
             q, qd = xs[:, : definition.spec.n_dof], xs[:, definition.spec.n_dof :]
             if definition.encoders:
                 q = sense(q)
+                if flicker and quantize:
+                    q = np.array(q)
+                    q[:, 0] += (2 * np.pi / ENCODER_COUNTS_PER_REV) * (flickers.random(len(q)) < flicker)
             else:
                 q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)
         qd = np.array(qd) if true_velocities else None

@@ -1,0 +1,204 @@
+"""Method step 11's two fits (issue 64): the large breakaway and the moving rest, each by output
+error on the output-error windows from the best of a grid of starts, judged against the model as
+diagnosed (:mod:`._rotor_verdict`)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..effects import EFFECT_KINDS
+from ._drift import rest_drift
+from ._library import Candidate, is_physical, non_physical
+from ._problem import free_columns
+from ._rotor_bracket import _breakaway_bound, _settled
+from ._rotor_context import (
+    Context,
+    _cleared,
+    _joint_effects,
+    _memory_kind,
+    _typical_spring,
+    _with_first,
+    ee_with_cable,
+)
+from ._rotor_verdict import LAWS, LawFit, _evidence
+
+_PLAY_GRID = (0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 0.8, 1.2, 1.6)  # the play's starts (rad or m)
+_FIRST_GRID = (-1.0, 0.0, 1.0)  # starts of ρ of the log's first neutral
+_BREAKAWAY_GRID = (1.0, 4.0, 9.0)  # starts of ΔF in Coulomb levels (a breakaway up to 10×)
+
+
+def fit_law(
+    ctx: Context, theta0, effects: list[Candidate], cable0: tuple | None, max_nfev: int, bounds: dict | None = None
+):
+    """Output-error fit of θ's free entries (the effects' and the declared model's) and, given
+    ``cable0`` (:meth:`Context.cable`), the cable's stiffness, second parameter and each
+    trajectory's first neutral (ρ ∈ [−1, 1]: where in the play of its first sample; the history
+    before a log is unknown); ``bounds``: {effect key: (its least, its largest value)}; returns (θ, cable)."""
+    layout = ctx.layout
+    # the declared model's parameters stay at the start's: the windows where the joint moves, all
+    # that tells the laws apart, are few (a release moves the rotor for a second or two)
+    free = free_columns(layout, effects, set(range(len(layout.base))))
+    scale = np.where(free, np.maximum(np.abs(theta0), layout.typical_scale() * 1e-2), 1.0)
+    nf = int(free.sum())
+    k_scale = max(cable0[0], 1e-6) if cable0 else 1.0
+
+    def unpack(z):
+        th = theta0.copy()
+        th[free] = z[:nf] * scale[free]
+        return th, (_with_first(ctx, z[nf] * k_scale, z[nf + 1], z[nf + 2]) if cable0 else (0.0, 0.0))
+
+    def residuals(zs) -> np.ndarray:
+        ths, cables = zip(*map(unpack, zs), strict=True)
+        r = (ctx.predictions(ths, cables, "fit") - ctx.win_fit.q[None]).reshape(len(zs), -1)
+        return np.where(np.isfinite(r), r, 1e3)
+
+    z0 = theta0[free] / scale[free]
+    # a base parameter and an effect that only one sign makes physical are not fitted past zero
+    positive = [
+        i < len(layout.base) or layout.candidates[i - len(layout.base)].kind.physically_positive
+        for i in range(layout.size)
+    ]
+    lower = np.where(positive, 0.0, -np.inf)[free] / scale[free]
+    upper = np.full(nf, np.inf)
+    for key, (least, value) in (bounds or {}).items():
+        i = int(np.flatnonzero(np.flatnonzero(free) == layout.index(key))[0])
+        upper[i] = max(value, 1e-12) / scale[layout.index(key)]
+        lower[i] = min(least, 0.99 * value) / scale[layout.index(key)]
+    if cable0:
+        lo, hi = EFFECT_KINDS[_memory_kind(ctx).name].second_bounds
+        z0 = np.concatenate([z0, [1.0, cable0[1], cable0[2]]])
+        lower = np.concatenate([lower, [0.0, lo, -1.0]])
+        upper = np.concatenate([upper, [np.inf, hi, 1.0]])
+    z0 = np.clip(z0, lower + 1e-9, upper - 1e-9)
+
+    def jac(z):
+        h = 1e-6 * np.maximum(1.0, np.abs(z))
+        r = residuals([z] + [z + step for step in np.diag(h)])
+        return (r[1:] - r[0]).T / h
+
+    sol = least_squares(
+        lambda z: residuals([z])[0],
+        z0,
+        jac=jac,  # pyright: ignore[reportArgumentType]
+        method="trf",
+        bounds=(lower, upper),
+        max_nfev=max_nfev,
+        x_scale="jac",
+    )
+    return unpack(sol.x)
+
+
+def _start_breakaway(ctx: Context, theta, held: float):
+    """The fixed cable's start: the equation-error spring and rest, the Coulomb level at least its
+    typical size, on that fit's base or the nominal one, ΔF what the rests held above it, or 1,
+    4 or 9 Coulomb levels; the one that predicts the output-error windows best (a fit from a
+    small ΔF can stay in a minimum without it)."""
+    c = _joint_effects(ctx)
+    effects = [c[k] for k in ("cable", "rest", "sliding") if k in c]
+    th = _physical_base(ctx, ctx.fx.fit_ee(ctx.others + effects)[0], theta)
+    scale = ctx.layout.typical_scale()
+    for key in ("cable", "sliding"):
+        i = ctx.layout.index(c[key].key)
+        th[i] = max(th[i], 2.0 * scale[i])
+    coulomb, s = th[ctx.layout.index(c["sliding"].key)], ctx.layout.index(c["breakaway"].key)
+    bounds = _breakaway_bound(ctx, th)
+    least, most = bounds[c["breakaway"].key]
+    deltas = [max(coulomb, held - coulomb)] + [m * coulomb for m in _BREAKAWAY_GRID]
+    deltas += [np.sqrt(max(least, coulomb) * most)] if np.isfinite(most) and most > 0 else []
+    starts = []
+    for delta, rest in itertools.product(deltas, _rest_starts(ctx, th)):
+        th[s] = float(np.clip(delta, least, most))
+        if "rest" in c:
+            th[ctx.layout.index(c["rest"].key)] = rest
+        starts += _with_nominal_base(ctx, th)
+    best = starts[_best_start(ctx, starts, [(0.0, 0.0)] * len(starts))]
+    return best, effects + [c["breakaway"]], bounds
+
+
+def _rest_starts(ctx: Context, theta) -> list[float]:
+    """The fixed cable's rest (its constant force) to start from: the equation-error fit's, and
+    the middle of the span of the log's rests (a neutral whose friction holds the rotor keeps
+    every rest within ±F_s/k of it; the equation error, which leaves rests out, can put it far
+    off)."""
+    c = _joint_effects(ctx)
+    if "rest" not in c:
+        return [0.0]
+    k, own = theta[ctx.layout.index(c["cable"].key)], theta[ctx.layout.index(c["rest"].key)]
+    count = ctx.fx.resolution.get(ctx.joint, 2 * np.pi / 2048)
+    rests = [r.position for r in rest_drift(ctx.trajs, ctx.layout.system, ctx.joint, flicker=1, count=count).rests]
+    return [own] + ([k * 0.5 * (min(rests) + max(rests))] if rests else [])
+
+
+def _physical_base(ctx: Context, theta_ee, theta):
+    """``theta_ee`` (an equation-error fit with the cable's spring) if physical, else its effects on
+    ``theta``'s base: a diagnosis without the cable may leave the rotor's inertia far off, and the
+    output-error fits start where the cable is already in."""
+    if is_physical(ctx.layout, theta_ee):
+        return np.array(theta_ee, dtype=float)
+    return np.where(np.arange(theta_ee.size) < len(ctx.layout.base), theta, theta_ee)
+
+
+def _start_moving(ctx: Context, theta, stiffness: float):
+    """The moving rest's start, the one of a grid that predicts the output-error windows best
+    (the play and the log's first neutral make the fit's landscape rugged): each play of a grid,
+    the log's first neutral at either end of its play or in its middle, and either the equation-
+    error fit with the cable's column (its stiffness; ``theta``'s base and ``stiffness`` where
+    that fit is not physical) or the nominal base with stiffnesses of 1, 2 and 4× the typical
+    (a log without input leaves the rotor's equation without a scale: its equation error may put
+    both the inertia and the stiffness far off). Its dry friction is Coulomb friction, at least its
+    typical size: beside a rest that moves, a breakaway above it is not identified (fitted free,
+    ΔF took any value up to holding every stop where it happened, or turned negative)."""
+    c = _joint_effects(ctx)
+    i = ctx.layout.index(c["sliding"].key)
+    scale, typical = ctx.layout.typical_scale(), _typical_spring(ctx)
+    starts, cables = [], []
+    for w in _PLAY_GRID:
+        th, k = ee_with_cable(ctx, [c["sliding"]], w)
+        th = _physical_base(ctx, _cleared(ctx, th), theta)
+        th[i] = max(th[i] if is_physical(ctx.layout, th) else 0.0, 2.0 * scale[i])
+        nominal = _with_nominal_base(ctx, th)[1]
+        for start, k_start in [(th, k if k > 0 else stiffness)] + [(nominal, m * typical) for m in (1.0, 2.0, 4.0)]:
+            for rho in _FIRST_GRID:
+                starts.append(start)
+                cables.append(_with_first(ctx, k_start, w, rho))
+    best = _best_start(ctx, starts, cables)
+    return starts[best], [c["sliding"]], cables[best]
+
+
+def _with_nominal_base(ctx: Context, theta) -> list[np.ndarray]:
+    """``theta`` and ``theta`` on the declared model's nominal base (as the diagnosis's own
+    output-error fits may start: an equation-error fit of a log whose law it lacks, or of one
+    resting most of the time, can leave the inertias far off)."""
+    nominal = np.array(theta, dtype=float)
+    nb = len(ctx.layout.base)
+    free = np.array([i not in ctx.fx.fixed_idx for i in range(nb)])
+    nominal[:nb] = np.where(free, ctx.layout.nominal()[:nb], theta[:nb])
+    return [np.array(theta, dtype=float), nominal]
+
+
+def _best_start(ctx: Context, starts, cables) -> int:
+    """Index of the start that predicts the output-error windows best."""
+    pred = ctx.predictions(starts, cables, "fit")
+    costs = np.sum((pred - ctx.win_fit.q[None]) ** 2, axis=(1, 2, 3))
+    return int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
+
+
+def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int) -> dict[str, LawFit]:
+    """Both laws fitted on the joint (module docstring) and judged against ``theta``."""
+    base = ctx.predictions([theta], [(0.0, 0.0)], "val")[0]
+    out = {}
+    th0, effects, bounds = _start_breakaway(ctx, theta, held)
+    fitted = fit_law(ctx, th0, effects, None, max_nfev, bounds)
+    fits = {LAWS[1]: (effects, (_settled(ctx, fitted[0], th0, bounds), fitted[1]))}
+    th0, effects, cable0 = _start_moving(ctx, th0, max(spring_k, 2.0 * _typical_spring(ctx)))
+    fits[LAWS[0]] = (effects, fit_law(ctx, th0, effects, cable0, max_nfev))
+    for law, (effects, (th, cable)) in fits.items():
+        pred = ctx.predictions([th], [cable], "val")[0]
+        physical = bool(is_physical(ctx.layout, th) and not non_physical(ctx.layout, th, effects))
+        physical = physical and bool(cable[0] > 0 if law == LAWS[0] else True)
+        ev = _evidence(base, pred, ctx.win_val.q)
+        out[law] = LawFit(law, th, tuple(float(x) for x in cable), effects, pred, ev, physical)
+    return out
