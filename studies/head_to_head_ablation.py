@@ -35,6 +35,12 @@ of runs 1–10 only** (runs 11–15 are never read):
 * **the fit itself**: run to convergence, and started from the datasheet's values or from
   mujoco.sysid's own fit (mapped onto the lumped parameters, :func:`sysid_start`; it fitted
   every window of runs 1–10, so its rows are not held out), and sysid's values scored as they are.
+* **the start velocity**: the refit with each training window's start velocity refitted under
+  the plant too (3 Gauss-Newton steps on the window's own positions), a fit freed of the
+  velocity estimate's error; scored, like every variant, from the measured start state.
+* **in sample** (``--oe-in-sample``, :func:`oe_in_sample`): whether the finish's output-error fit
+  reaches the optimum of its own family, started from sysid's values and on sysid's objective,
+  and how much of each window's error its start velocity carries.
 
 The folds, the variants' refits and the friction laws are
 ``furuta_gym.diagnose.finish_ablation``; here are the variants, the head-to-head's fit runs and
@@ -43,6 +49,7 @@ the table into docs/diagnose.md.
 
     python studies/head_to_head_ablation.py [--variants a,b] [--out results/head_to_head/ablation.json]
     python studies/head_to_head_ablation.py --in-sample   # the committed plants on runs 1–10 themselves
+    python studies/head_to_head_ablation.py --oe-in-sample   # the finish's refit and sysid's values on runs 1–10 (oe_in_sample)
 """
 
 from __future__ import annotations
@@ -137,6 +144,12 @@ VARIANTS = {
             law=("karnopp", 0.01),
             refit_delay=True,
             free_j1b=True,
+        ),
+        Variant(
+            "staggered_refined_starts",
+            "the finish now, each training window's start velocity refitted with the plant (3 steps)",
+            placement="staggered",
+            start_iterations=3,
         ),
         # sysid's own values (fitted on every window of runs 1-10, so every fold was seen)
         Variant("sysid_start", "refit started from mujoco.sysid's fit", start="given"),
@@ -282,6 +295,90 @@ def in_sample(results: Path) -> dict:
     }
 
 
+#: Gauss-Newton steps on each window's start velocity in :func:`oe_in_sample`'s decomposition
+REFINE_STEPS = 3
+#: its windows starting at every point of the cycle: one every 30 ms (15 samples, a third of those
+#: starting every 10 ms; 15 and the cycle's 50 samples share 5, so every 10 ms point of the
+#: cycle is a start, alike)
+PHASE_STRIDE = 0.03
+
+
+def _run_windows(h2h, runs, dyn, stride: float | None):
+    """The head-to-head's windows of ``runs`` (whole runs, velocities on the whole log) as the
+    diagnosis' output-error windows, under input dynamics ``dyn``."""
+    from furuta_gym.diagnose import _windows
+    from furuta_gym.measured import prediction_windows
+
+    x0, us, xs = prediction_windows(h2h.with_input(runs, dyn), WINDOW, stride)
+    n = get_spec("furuta").n_dof
+    return _windows.Windows(x0, us, xs[:, 1:, :n], np.zeros(len(x0), int), runs[0].dt, us.shape[1])
+
+
+def oe_in_sample(fx, res) -> dict:
+    """Does the finish's output-error fit reach the optimum of its own family? In sample on runs
+    1–10, all of whose windows mujoco.sysid fitted: the finish's refit (its start, free set and
+    staggered windows of the fit folds) and mujoco.sysid's values (:func:`sysid_start`, its input
+    delay) on the finish's objective and on the head-to-head's scoring; the refit started from
+    sysid's values; the same refit on sysid's own objective (every back-to-back window of runs
+    1–10) from either start. Then where the error comes from: each window's start velocity
+    refined by ``REFINE_STEPS`` Gauss-Newton steps on the window's own positions under the plant
+    (an oracle: it reads the positions it is scored on), so what is left is the model's error and
+    the encoder's; the encoder's count alone as a uniform quantisation error. Scored with the
+    head-to-head's 4 RK4 substeps; fitted with the diagnosis'."""
+    import diagnose_head_to_head as h2h
+    from furuta_gym.diagnose import _finish, _windows
+    from furuta_gym.diagnose._library import Candidate
+    from furuta_gym.diagnose.finish_ablation import refit_start
+    from furuta_gym.signals import ENCODER_COUNTS_PER_REV
+
+    fit = h2h.load_runs(FIT_RUNS)
+    start, chosen, dyn = refit_start(fx, res)
+    chosen += [c for c in (Candidate("spring", "alpha"),) if c not in chosen]  # sysid fits a spring
+    sysid, sysid_dyn = sysid_start(fx, start)
+
+    def rmse(theta, win, refine: int = 0) -> float:
+        ss = _windows.window_square_sums(fx.layout, theta, win, h2h.SUBSTEPS, refine)
+        return float(np.sqrt(ss.sum() / (ss.size * win.q[0].size)))
+
+    def refit(theta, d, win):
+        return _finish._refit(fx, theta, chosen, d, win)[0]
+
+    finish_win = {d: _finish.refit_windows(fx, fx.fit_segs, d) for d in (dyn, sysid_dyn)}
+    ours = refit(start, dyn, finish_win[dyn])
+    from_sysid = refit(sysid, sysid_dyn, finish_win[sysid_dyn])
+    grid = {d: _run_windows(h2h, fit, d, None) for d in (dyn, sysid_dyn)}
+    phases = {d: _run_windows(h2h, fit, d, PHASE_STRIDE) for d in (dyn, sysid_dyn)}
+    plants = {"prediction_first": (ours, dyn), "sysid": (sysid, sysid_dyn)}
+    lumped = lambda th: {b: float(th[i]) for i, b in enumerate(fx.layout.base)}  # noqa: E731
+    return {
+        "finish_objective": {k: rmse(th, finish_win[d]) for k, (th, d) in plants.items()},
+        "grid": {k: rmse(th, grid[d]) for k, (th, d) in plants.items()},
+        "from_sysid": {
+            "finish_objective": rmse(from_sysid, finish_win[sysid_dyn]),
+            "grid": rmse(from_sysid, grid[sysid_dyn]),
+            "lumped": lumped(from_sysid),
+        },
+        "grid_fit": {
+            "from_sysid": rmse(refit(sysid, sysid_dyn, grid[sysid_dyn]), grid[sysid_dyn]),
+            "from_finish_start": rmse(refit(start, sysid_dyn, grid[sysid_dyn]), grid[sysid_dyn]),
+        },
+        "phases": {k: rmse(th, phases[d]) for k, (th, d) in plants.items()},
+        "refined_start": {
+            "grid": {k: rmse(th, grid[d], REFINE_STEPS) for k, (th, d) in plants.items()},
+            "phases": {k: rmse(th, phases[d], REFINE_STEPS) for k, (th, d) in plants.items()},
+        },
+        "quantisation_rmse": 2 * np.pi / ENCODER_COUNTS_PER_REV / np.sqrt(12),
+        "free": [c.key for c in chosen],
+        "windows": {
+            "finish_objective": int(finish_win[dyn].x0.shape[0]),
+            "grid": int(grid[dyn].x0.shape[0]),
+            "phases": int(phases[dyn].x0.shape[0]),
+        },
+        "phase_stride": PHASE_STRIDE,
+        "refine_steps": REFINE_STEPS,
+    }
+
+
 def dump(doc: dict) -> str:
     """The result file's text: per-window sums to 5 significant digits, each list on one line.
     Windows starting every 10 ms are ten times as many: their sums are kept for the current
@@ -306,6 +403,11 @@ def main() -> None:
     ap.add_argument("--out", default="results/head_to_head/ablation.json")
     ap.add_argument("--variants", default=",".join(VARIANTS), help=f"comma list of {list(VARIANTS)}")
     ap.add_argument("--in-sample", action="store_true", help="only the committed plants scored on runs 1–10")
+    ap.add_argument(
+        "--oe-in-sample",
+        action="store_true",
+        help="only the finish's refit and sysid's values on runs 1–10's own windows (oe_in_sample)",
+    )
     args = ap.parse_args()
     names = args.variants.split(",")
     if unknown := [v for v in names if v not in VARIANTS]:
@@ -323,6 +425,10 @@ def main() -> None:
         load_qube_closed_loop(FIT_RUNS, skip_seconds=SKIP), "furuta", window=WINDOW, oe_max_windows=OE_WINDOWS
     )
     print(f"diagnosis and finish: {wall:.0f} s; {res.prediction.reason}", flush=True)
+    if args.oe_in_sample:
+        doc["oe_in_sample"] = oe_in_sample(fx, res)
+        print(doc["oe_in_sample"])
+        return out.write_text(dump(doc)) and None
     for name in names:
         doc["variants"][name] = run_variant(fx, res, VARIANTS[name], given=sysid_start)
         doc["variants"] = {k: doc["variants"][k] for k in VARIANTS if k in doc["variants"]}

@@ -58,6 +58,31 @@ def _windows_sentence(doc: dict) -> str:
     )
 
 
+def _oe_in_sample(doc: dict) -> str:
+    """The sentences of ``head_to_head_ablation.py --oe-in-sample`` ("" before it was run)."""
+    o = doc.get("oe_in_sample")
+    if o is None:
+        return ""
+    m = lambda x: f"{1e3 * x:.3f}"  # noqa: E731
+    pf, sy = "prediction_first", "sysid"
+    w, refined = o["windows"], o["refined_start"]
+    return (
+        f"The finish's output-error fit on runs 1–10 (free: {', '.join(o['free'])}; fitted with the diagnosis' "
+        f"substeps, scored with the head-to-head's 4): on its own objective ({w['finish_objective']} staggered "
+        f"windows of folds 0 and 1) its refit scores {m(o['finish_objective'][pf])} mrad and sysid's values "
+        f"{m(o['finish_objective'][sy])}; started from sysid's values it ends at {m(o['from_sysid']['finish_objective'])} "
+        f"there and moves from {m(o['grid'][sy])} to {m(o['from_sysid']['grid'])} on the head-to-head's "
+        f"{w['grid']} back-to-back windows (the refit from its own start: {m(o['grid'][pf])}). The same refit on "
+        f"sysid's objective (those {w['grid']} windows) reaches {m(o['grid_fit']['from_sysid'])} from sysid's values "
+        f"and {m(o['grid_fit']['from_finish_start'])} from its own start. Each window's start velocity refined by "
+        f"{o['refine_steps']} Gauss-Newton steps on its own positions (an oracle), back-to-back windows: the refit "
+        f"{m(refined['grid'][pf])}, sysid's values {m(refined['grid'][sy])} (unrefined {m(o['grid'][pf])}, "
+        f"{m(o['grid'][sy])}); {w['phases']} windows starting every {1e3 * o['phase_stride']:g} ms (every 10 ms point of the cycle alike): "
+        f"{m(refined['phases'][pf])} and {m(refined['phases'][sy])} (unrefined {m(o['phases'][pf])}, "
+        f"{m(o['phases'][sy])}); the encoder's count alone, as uniform rounding: {m(o['quantisation_rmse'])} mrad. "
+    )
+
+
 def body(given: dict | None = None) -> str:
     doc: dict = json.loads(RESULTS.read_text()) if given is None else given
     rows = [
@@ -105,8 +130,10 @@ def body(given: dict | None = None) -> str:
             "lumped parameters: its pendulum a point mass with armature, friction loss as Coulomb friction, the "
             "MJCF's back-EMF in the rotor damping): every fold was in its fit. "
             + in_sample
+            + _oe_in_sample(doc)
             + f"{doc['machine']}, {doc['date']}. From `python studies/head_to_head_ablation.py && python "
-            "studies/head_to_head_ablation.py --in-sample && python studies/head_to_head_ablation_table.py`.",
+            "studies/head_to_head_ablation.py --in-sample && python studies/head_to_head_ablation.py --oe-in-sample && "
+            "python studies/head_to_head_ablation_table.py`.",
         ]
     )
 

@@ -68,6 +68,8 @@ class Variant:
     refit: bool = True  # False: the start itself scored (e.g. another tool's fit in this predictor)
     placement: str = "segments"  # where the refit's windows start (:data:`PLACEMENTS`)
     max_windows: int | None = None  # the refit on this many of them, drawn at random (None: all)
+    # Gauss-Newton steps on each training window's start velocity in the refit (scored without)
+    start_iterations: int = 0
 
 
 def diagnose_with_context(data, system: str, **kwargs):
@@ -235,8 +237,12 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
     windows = lambda d: drawn(placed_windows(train, fx.L, d, variant.placement, starts), variant.max_windows)  # noqa: E731
     win = windows(dyn)
     settings = fx.settings
-    if variant.max_nfev is not None:
-        fx.settings = dataclasses.replace(settings, oe_max_nfev=variant.max_nfev)
+    if variant.max_nfev is not None or variant.start_iterations:
+        fx.settings = dataclasses.replace(
+            settings,
+            oe_max_nfev=variant.max_nfev or settings.oe_max_nfev,
+            start_iterations=variant.start_iterations,
+        )
     with friction_law(variant.law), _restoring(fx, settings):
         if not variant.refit:
             theta = start
