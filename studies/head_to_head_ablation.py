@@ -322,9 +322,11 @@ def oe_in_sample(fx, res) -> dict:
     sysid's values; the same refit on sysid's own objective (every back-to-back window of runs
     1–10) from either start. Then where the error comes from: each window's start velocity
     refined by ``REFINE_STEPS`` Gauss-Newton steps on the window's own positions under the plant
-    (an oracle: it reads the positions it is scored on), so what is left is the model's error and
-    the encoder's; the encoder's count alone as a uniform quantisation error. Scored with the
-    head-to-head's 4 RK4 substeps; fitted with the diagnosis'."""
+    (an oracle: it reads the positions it is scored on; a start velocity also takes up much of an
+    error that grows like t², as a force's does), and each plant's RMS error at each step of the
+    windows (``profile``: an error of the start velocity grows like t, one of the force like t²);
+    the encoder's count alone as a uniform quantisation error. Scored with the head-to-head's 4
+    RK4 substeps; fitted with the diagnosis'."""
     import diagnose_head_to_head as h2h
     from furuta_gym.diagnose import _finish, _windows
     from furuta_gym.diagnose._library import Candidate
@@ -339,6 +341,11 @@ def oe_in_sample(fx, res) -> dict:
     def rmse(theta, win, refine: int = 0) -> float:
         ss = _windows.window_square_sums(fx.layout, theta, win, h2h.SUBSTEPS, refine)
         return float(np.sqrt(ss.sum() / (ss.size * win.q[0].size)))
+
+    def profile(theta, win) -> list[float]:
+        """RMS position error of both angles at each step of the windows."""
+        err = _windows.predict_windows(fx.layout, theta, win, h2h.SUBSTEPS) - win.q
+        return [float(x) for x in np.sqrt(np.mean(err**2, axis=(0, 2)))]
 
     def refit(theta, d, win):
         return _finish._refit(fx, theta, chosen, d, win)[0]
@@ -366,6 +373,10 @@ def oe_in_sample(fx, res) -> dict:
         "refined_start": {
             "grid": {k: rmse(th, grid[d], REFINE_STEPS) for k, (th, d) in plants.items()},
             "phases": {k: rmse(th, phases[d], REFINE_STEPS) for k, (th, d) in plants.items()},
+        },
+        "profile": {
+            "grid": {k: profile(th, grid[d]) for k, (th, d) in plants.items()},
+            "phases": {k: profile(th, phases[d]) for k, (th, d) in plants.items()},
         },
         "quantisation_rmse": 2 * np.pi / ENCODER_COUNTS_PER_REV / np.sqrt(12),
         "free": [c.key for c in chosen],

@@ -12,6 +12,8 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
 from _generated import block_main  # noqa: E402
 
@@ -58,6 +60,35 @@ def _windows_sentence(doc: dict) -> str:
     )
 
 
+def error_shares(profile, dt: float, quantisation: float) -> dict[str, float]:
+    """Shares of a window's mean squared error: the encoder's rounding (``quantisation``², held),
+    and a part growing like t² (a start velocity's error, a·t) and one like t⁴ (a force's,
+    b·t²), a² and b² fitted to the mean square at each step (least squares)."""
+    ms = np.asarray(profile, dtype=float) ** 2
+    t = dt * np.arange(1, ms.size + 1)
+    basis = np.stack([t**2, t**4], axis=1)
+    (a2, b2), *_ = np.linalg.lstsq(basis, ms - quantisation**2, rcond=None)
+    parts = {"velocity": a2 * np.mean(t**2), "force": b2 * np.mean(t**4), "rounding": quantisation**2}
+    total = sum(parts.values())
+    return {k: float(v / total) for k, v in parts.items()}
+
+
+def _shares_sentence(o: dict, dt: float) -> str:
+    pct = lambda x: f"{100 * x:.0f} %"  # noqa: E731
+    out = []
+    for placement, words in (("grid", "back-to-back"), ("phases", "starting every 30 ms")):
+        for plant, name in (("prediction_first", "the refit"), ("sysid", "sysid's values")):
+            sh = error_shares(o["profile"][placement][plant], dt, o["quantisation_rmse"])
+            out.append(
+                f"{name} on the windows {words}: {pct(sh['velocity'])} like t, {pct(sh['force'])} like t², "
+                f"{pct(sh['rounding'])} rounding"
+            )
+    return (
+        "Each plant's mean squared error over a window's steps fitted as the encoder's rounding plus a part "
+        "growing like t (a start velocity's error) and one like t² (a force's): " + "; ".join(out) + ". "
+    )
+
+
 def _oe_in_sample(doc: dict) -> str:
     """The sentences of ``head_to_head_ablation.py --oe-in-sample`` ("" before it was run)."""
     o = doc.get("oe_in_sample")
@@ -75,11 +106,17 @@ def _oe_in_sample(doc: dict) -> str:
         f"{w['grid']} back-to-back windows (the refit from its own start: {m(o['grid'][pf])}). The same refit on "
         f"sysid's objective (those {w['grid']} windows) reaches {m(o['grid_fit']['from_sysid'])} from sysid's values "
         f"and {m(o['grid_fit']['from_finish_start'])} from its own start. Each window's start velocity refined by "
-        f"{o['refine_steps']} Gauss-Newton steps on its own positions (an oracle), back-to-back windows: the refit "
+        f"{o['refine_steps']} Gauss-Newton steps on its own positions (an oracle that also takes up much of an error growing like t²), back-to-back windows: "
+        f"the refit "
         f"{m(refined['grid'][pf])}, sysid's values {m(refined['grid'][sy])} (unrefined {m(o['grid'][pf])}, "
         f"{m(o['grid'][sy])}); {w['phases']} windows starting every {1e3 * o['phase_stride']:g} ms (every 10 ms point of the cycle alike): "
         f"{m(refined['phases'][pf])} and {m(refined['phases'][sy])} (unrefined {m(o['phases'][pf])}, "
         f"{m(o['phases'][sy])}); the encoder's count alone, as uniform rounding: {m(o['quantisation_rmse'])} mrad. "
+        + (
+            _shares_sentence(o, doc["window_seconds"] / len(next(iter(o["profile"]["grid"].values()))))
+            if "profile" in o
+            else ""
+        )
     )
 
 
