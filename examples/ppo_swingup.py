@@ -29,17 +29,17 @@ import numpy as np
 
 import furuta_gym
 from furuta_gym.envs import Plant, functional
-from furuta_gym.rl import GymnasiumPolicy, PPOConfig, episode_returns, train_ppo
+from furuta_gym.rl import GymnasiumPolicy, PPOSettings, episode_returns, train_ppo
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 SWINGUP = "furuta_gym/FurutaSwingUp-v0"
-#: PPO's settings for the swing-up (PPOConfig defaults, more copies and steps)
-CONFIG = PPOConfig(total_timesteps=6_000_000, num_envs=256, num_steps=128)
+#: PPO's settings for the swing-up (PPOSettings defaults, more copies and steps)
+CONFIG = PPOSettings(total_timesteps=6_000_000, num_envs=256, num_steps=128)
 BALANCE_STEPS = 100  # the last 2 s at 50 Hz
 UPRIGHT_TOLERANCE = 0.2  # rad from upright
 
 
-def train(dynamics: str, config: PPOConfig, seed: int, randomize: float | None):
+def train(dynamics: str, config: PPOSettings, seed: int, randomize: float | None):
     """(policy, per-update returns, wall seconds including compilation)."""
     env, params = functional.make(SWINGUP, dynamics=dynamics, plant=Plant(randomize=randomize) if randomize else None)
     run = eqx.filter_jit(lambda key: train_ppo(env, params, config, key))
@@ -92,7 +92,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--out", type=Path, default=None, help="write the results (JSON) and the policy beside them")
     args = parser.parse_args(argv)
     furuta_gym.enable_x64()
-    config = PPOConfig(**{**CONFIG.__dict__, "total_timesteps": args.steps})
+    config = PPOSettings(**{**CONFIG.__dict__, "total_timesteps": args.steps})
     policy, returns, wall, model_return = train(args.dynamics, config, args.seed, args.randomize)
     print(
         f"trained {args.steps:,} steps in {wall:.0f} s; training return {returns[-3:].mean():.1f}, "

@@ -10,7 +10,7 @@ Six stages on small embedded defaults, each with its own progress bar:
 5. diagnose a measured-like log of a plant variant with an undeclared cable spring;
 6. print one summary table and write figures, a short video and ``summary.json``.
 
-:class:`DemoConfig` holds the sizes; :meth:`DemoConfig.tiny` is the setting the CI test uses.
+:class:`DemoSettings` holds the sizes; :meth:`DemoSettings.tiny` is the setting the CI test uses.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
+from ._deprecated import deprecated_names
 from ._numerics import numerics
 from ._x64 import ensure_x64
 from .controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
@@ -35,13 +36,13 @@ from .effects import Effect
 from .models import Furuta
 from .training.datagen import FurutaRecipe, generate_datasets, write_datasets
 from .training.metrics import FORCE_TERMS, energy_error, force_decomposition_errors
-from .training.train import TrainConfig, train
+from .training.train import TrainSettings, train
 
-__all__ = ["DemoConfig", "run_demo"]
+__all__ = ["DemoSettings", "run_demo"]
 
 
 @dataclasses.dataclass(frozen=True)
-class DemoConfig:
+class DemoSettings:
     """Sizes of the demo. Defaults finish in a few minutes on a 2-core CPU."""
 
     seed: int = 0
@@ -57,7 +58,7 @@ class DemoConfig:
     video: bool = True
 
     @classmethod
-    def tiny(cls) -> "DemoConfig":
+    def tiny(cls) -> "DemoSettings":
         """The smallest meaningful run (CI): every stage, minimal sizes."""
         return cls(
             n_train=8,
@@ -80,7 +81,7 @@ def _bar(total: int, desc: str, enabled: bool):
 
 
 def run_demo(
-    out_dir: str | Path, config: DemoConfig | None = None, *, progress: bool = True, overwrite: bool = False
+    out_dir: str | Path, config: DemoSettings | None = None, *, progress: bool = True, overwrite: bool = False
 ) -> dict:
     """Run the six stages, writing everything under ``out_dir``; returns the summary dict.
 
@@ -91,7 +92,7 @@ def run_demo(
     matplotlib.use("Agg")
 
     ensure_x64()
-    cfg = config or DemoConfig()
+    cfg = config or DemoSettings()
     out = Path(out_dir)
     if (out / "summary.json").exists() and not overwrite:
         raise FileExistsError(f"{out}: holds a previous demo (summary.json); choose another --out or pass --overwrite")
@@ -124,7 +125,7 @@ def run_demo(
     return summary
 
 
-def _generate(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> dict:
+def _generate(cfg: DemoSettings, out: Path, progress: bool, overwrite: bool) -> dict:
     """1. A small Furuta training set (and a held-out trajectory) from the MuJoCo ground truth."""
     with _bar(1, "1/6 generate data (MuJoCo)", progress) as bar:
         recipe = dataclasses.replace(
@@ -141,10 +142,10 @@ def _generate(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> di
     return datasets
 
 
-def _train(cfg: DemoConfig, out: Path, datasets: dict, loss: str, progress: bool, overwrite: bool):
+def _train(cfg: DemoSettings, out: Path, datasets: dict, loss: str, progress: bool, overwrite: bool):
     """2. A DeLaN trained with ``loss`` on the demo's data."""
     schedule = {"epochs": cfg.epochs} | ({"horizons": cfg.horizons} if cfg.horizons is not None else {})
-    tc = TrainConfig.for_system("furuta", **schedule, seed=cfg.seed, progress=progress, checkpoint_every=10**9)
+    tc = TrainSettings.for_system("furuta", **schedule, seed=cfg.seed, progress=progress, checkpoint_every=10**9)
     run_dir = out / "models" / f"dln_{loss}"
     if run_dir.exists() and overwrite:
         shutil.rmtree(run_dir)
@@ -171,7 +172,7 @@ def _free_run(dynamics, x0, steps: int, seed: int) -> np.ndarray:
     return xs
 
 
-def _swap_into_env(cfg: DemoConfig, models: dict, progress: bool):
+def _swap_into_env(cfg: DemoSettings, models: dict, progress: bool):
     """3. Each learned model as the env's dynamics against MuJoCo, from a held-out start of the
     training distribution (angles ~ U(−π, π), velocities ~ U(−5, 5)), run free at 500 Hz:
     in-distribution generalisation. Returns (times, states per backend, RMSE per loss)."""
@@ -210,7 +211,7 @@ def _physics_vs_truth(models: dict, datasets: dict) -> dict:
     return physics
 
 
-def _control(cfg: DemoConfig, model, progress: bool):
+def _control(cfg: DemoSettings, model, progress: bool):
     """4. Swing-up + LQR designed on ``model``, run on MuJoCo from rest and seeded starts near it."""
     with _bar(2, "4/6 swing-up + LQR from the learned model on MuJoCo", progress) as bar:
         ctrl = SwingUpLQR.from_model(model)
@@ -235,7 +236,7 @@ def _control(cfg: DemoConfig, model, progress: bool):
     }
 
 
-def _diagnose_log(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -> dict:
+def _diagnose_log(cfg: DemoSettings, out: Path, progress: bool, overwrite: bool) -> dict:
     """5. A measured-like log of a plant with an undeclared rotor cable spring, diagnosed."""
     with _bar(1, "5/6 diagnose a log with an undeclared cable spring", progress) as bar:
         log = measured_like(
@@ -265,7 +266,7 @@ def _diagnose_log(cfg: DemoConfig, out: Path, progress: bool, overwrite: bool) -
     }
 
 
-def _report(cfg: DemoConfig, out: Path, t_fine, tracks, record, progress: bool) -> str | None:
+def _report(cfg: DemoSettings, out: Path, t_fine, tracks, record, progress: bool) -> str | None:
     """6. Figures and (optionally) the swing-up video; returns the video's path, why it was
     skipped, or None."""
     video = None
@@ -401,3 +402,6 @@ def _video(path, xs, fps: int = 30):
     with warnings.catch_warnings():  # ffmpeg runs as a subprocess; JAX's fork warning is moot
         warnings.filterwarnings("ignore", message="os.fork", category=RuntimeWarning)
         imageio.mimsave(path, frames, fps=fps, macro_block_size=1)
+
+
+__getattr__ = deprecated_names(__name__)

@@ -27,8 +27,10 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ._deprecated import deprecated_names
+
 __all__ = [
-    "PPOConfig",
+    "PPOSettings",
     "Policy",
     "ObservationNormalizer",
     "ActorCritic",
@@ -41,7 +43,7 @@ _NET_DTYPE = jnp.float32  # networks in float32: the env's physics stays float64
 
 
 @dataclasses.dataclass(frozen=True)
-class PPOConfig:
+class PPOSettings:
     """PPO's settings (PureJaxRL's names); ``total_timesteps`` env steps in all."""
 
     total_timesteps: int = 1_000_000
@@ -145,7 +147,7 @@ class _Runner(NamedTuple):
     key: Array
 
 
-def _collect(env, params, config: PPOConfig, static, runner: _Runner):
+def _collect(env, params, config: PPOSettings, static, runner: _Runner):
     """``num_steps`` steps of every copy; the transitions and the returns of finished episodes."""
     space = env.action_space(params)
     low, high = jnp.asarray(space.low, _NET_DTYPE), jnp.asarray(space.high, _NET_DTYPE)
@@ -187,7 +189,7 @@ def _collect(env, params, config: PPOConfig, static, runner: _Runner):
     return runner, batch, returns / jnp.maximum(count, 1), count
 
 
-def _advantages(batch: _Transition, config: PPOConfig):
+def _advantages(batch: _Transition, config: PPOSettings):
     """GAE over the rollout; a truncation bootstraps from the final observation's value."""
 
     def back(carry, t: _Transition):
@@ -199,7 +201,7 @@ def _advantages(batch: _Transition, config: PPOConfig):
     return adv, adv + batch.value
 
 
-def _loss(net: ActorCritic, batch: _Transition, adv, target, config: PPOConfig):
+def _loss(net: ActorCritic, batch: _Transition, adv, target, config: PPOSettings):
     log_prob = jax.vmap(net.log_prob)(batch.obs, batch.action)
     ratio = jnp.exp(log_prob - batch.log_prob)
     adv = (adv - adv.mean()) / (adv.std() + 1e-8)
@@ -210,7 +212,7 @@ def _loss(net: ActorCritic, batch: _Transition, adv, target, config: PPOConfig):
     return actor + config.vf_coef * critic - config.ent_coef * net.entropy()
 
 
-def _update(runner: _Runner, static, batch, adv, target, optimizer, config: PPOConfig) -> _Runner:
+def _update(runner: _Runner, static, batch, adv, target, optimizer, config: PPOSettings) -> _Runner:
     """``update_epochs`` passes over the rollout in shuffled minibatches."""
     size = config.num_envs * config.num_steps
     flat = jax.tree_util.tree_map(lambda a: a.reshape(size, *a.shape[2:]), (batch, adv, target))
@@ -236,13 +238,13 @@ def _update(runner: _Runner, static, batch, adv, target, optimizer, config: PPOC
     return runner._replace(net=net, opt_state=opt_state, key=key)
 
 
-def _optimizer(config: PPOConfig):
+def _optimizer(config: PPOSettings):
     steps = config.num_updates * config.update_epochs * config.num_minibatches
     rate = optax.linear_schedule(config.learning_rate, 0.0, steps) if config.anneal_lr else config.learning_rate
     return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.adam(rate, eps=1e-5))
 
 
-def train_ppo(env, params, config: PPOConfig, key: PRNGKeyArray):
+def train_ppo(env, params, config: PPOSettings, key: PRNGKeyArray):
     """Train from scratch; returns ``(policy, metrics)``, ``metrics["return"][i]`` the mean
     return of the episodes that ended during update ``i`` (NaN-free: 0 when none did) and
     ``metrics["episodes"][i]`` how many. Pure in ``key``: jit it with ``env`` and ``config``
@@ -313,3 +315,6 @@ class GymnasiumPolicy:
 
     def __call__(self, obs) -> np.ndarray:
         return np.asarray(self._act(jnp.asarray(obs)), dtype=self.dtype)
+
+
+__getattr__ = deprecated_names(__name__)

@@ -3,8 +3,8 @@
 :class:`Sensors` says how a true state (q, q̇) becomes a measured one: joint positions quantised
 (encoder counts on angles, a resolution on other joints), Gaussian noise, and the velocity either
 exact or estimated by the paper's derivative filter on the measured positions. The envs
-(``sensors=Sensors(...)``), the data generation (:mod:`furuta_gym.training.datagen`, whose
-``SensorOptions`` builds one) and the controllers' closed-loop rollouts
+(``sensors=Sensors(...)``), the data generation (:mod:`furuta_gym.training.datagen`,
+``generate(..., sensor=Sensors(...), sensor_rate_hz=...)``) and the controllers' closed-loop rollouts
 (``closed_loop(..., sensor=Sensors(...))``) read the same object; each applies it with the
 arithmetic its setting needs (NumPy step by step, over a whole log, or inside a JAX scan) through
 the one quantiser (:func:`furuta_gym.signals.quantize_joints`) and the one filter

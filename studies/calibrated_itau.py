@@ -55,9 +55,9 @@ CELLS = (
 
 
 def _config(sensor: str):
-    from furuta_gym.training.reproduce import ReproduceConfig
+    from furuta_gym.training.reproduce import ReproduceSettings
 
-    return ReproduceConfig(plant=str(PLANT), sensor=sensor, systems=("furuta",))
+    return ReproduceSettings(plant=str(PLANT), sensor=sensor, systems=("furuta",))
 
 
 def _data(sensor: str):
@@ -78,9 +78,9 @@ def _data(sensor: str):
 
 
 def _train_config(sensor: str, span: int, epochs: int):
-    from furuta_gym.training.reproduce import training_config
+    from furuta_gym.training.reproduce import training_settings
 
-    recipe = training_config("furuta", _config(sensor), 0, "prop", "dln")
+    recipe = training_settings("furuta", _config(sensor), 0, "prop", "dln")
     rate = recipe.learning_rate[0] if isinstance(recipe.learning_rate, tuple) else recipe.learning_rate
     return dataclasses.replace(
         recipe, epochs=(epochs,), horizons=(None,), learning_rate=rate, integral_span=span, progress=False

@@ -99,10 +99,10 @@ def designs():
     """(name, model) pairs: the plant's own model, the nominal one, each trained checkpoint."""
     from furuta_gym.models import analytic_model
     from furuta_gym.training.checkpoint import load_model
-    from furuta_gym.training.reproduce import ReproduceConfig, truth_model
+    from furuta_gym.training.reproduce import ReproduceSettings, truth_model
 
     out = [
-        ("plant model", truth_model("furuta", ReproduceConfig(plant=str(PLANT)))),
+        ("plant model", truth_model("furuta", ReproduceSettings(plant=str(PLANT)))),
         ("nominal analytic", analytic_model("furuta")),
     ]
     for kind, loss in PAIRS:
@@ -163,15 +163,15 @@ def itau_stage(run: Path) -> dict:
     from furuta_gym.lagrangian import forward_dynamics
     from furuta_gym.models import make_model
     from furuta_gym.models.checkpoint import load_training_state
-    from furuta_gym.training import TrainConfig, training_step
-    from furuta_gym.training.reproduce import ReproduceConfig, truth_model
+    from furuta_gym.training import TrainSettings, training_step
+    from furuta_gym.training.reproduce import ReproduceSettings, truth_model
 
     cfg = json.loads((run / "reproduce_config.json").read_text())
     tuples = lambda d: {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}  # noqa: E731
     skeleton = make_model("furuta", cfg["model"], jax.random.PRNGKey(0), **tuples(cfg["model_hparams"]))
-    _, _, opt_state = training_step(skeleton, TrainConfig(**tuples(cfg["train"])), "itau")  # the state's skeleton
+    _, _, opt_state = training_step(skeleton, TrainSettings(**tuples(cfg["train"])), "itau")  # the state's skeleton
     model, _, header = load_training_state(run / "train_state.eqx", skeleton, opt_state)
-    truth = truth_model("furuta", ReproduceConfig(plant=str(PLANT)))
+    truth = truth_model("furuta", ReproduceSettings(plant=str(PLANT)))
     states = np.random.default_rng(0).uniform([-3, -3, -5, -5], [3, 3, 5, 5], (20, 4))
 
     def stiffness(m) -> list[float]:

@@ -75,9 +75,9 @@ MODEL_EFFECTS = {
 
 def config():
     """The protocol's offline-velocity DeLaN L_prop run (``reproduce_offline``)."""
-    from furuta_gym.training.reproduce import ReproduceConfig
+    from furuta_gym.training.reproduce import ReproduceSettings
 
-    return ReproduceConfig(
+    return ReproduceSettings(
         systems=("furuta",),
         pairs=(("dln", "prop"),),
         plant=str(PLANT),
@@ -313,14 +313,14 @@ def study_model(rig: Rig, kept: tuple, windows, tcfg) -> dict:
 
 
 def main(argv=None) -> int:
-    from furuta_gym.training.reproduce import machine_info, training_config
+    from furuta_gym.training.reproduce import machine_info, training_settings
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=OUT, help=f"folder of {RESULT_NAME} and of the data cache")
     args = ap.parse_args(argv)
     cfg, t0 = config(), time.perf_counter()
     trajs, meta = training_releases(args.out / CACHE_NAME, cfg)
-    tcfg = training_config("furuta", cfg, 0, "prop", "dln")
+    tcfg = training_settings("furuta", cfg, 0, "prop", "dln")
     windows = loss_windows(trajs, tcfg)
     rig = Rig.load(cfg.plant)
     doc = {

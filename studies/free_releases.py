@@ -46,7 +46,7 @@ from furuta_gym.envs import MujocoBackend, Plant  # noqa: E402
 from furuta_gym.measured import prepare_log, window_errors  # noqa: E402
 from furuta_gym.models import Furuta  # noqa: E402
 from furuta_gym.signals import quantize_encoder  # noqa: E402
-from furuta_gym.training import TrainConfig, check_potential_shape, fit_scale, train  # noqa: E402
+from furuta_gym.training import TrainSettings, check_potential_shape, fit_scale, train  # noqa: E402
 from furuta_gym.training.free_dynamics import model_frequencies  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -75,7 +75,7 @@ class Variant:
     quadrature: str = "simpson"
     span: int = 1
     lam: float = 1e-3
-    extra: tuple = ()  # further TrainConfig fields as (name, value)
+    extra: tuple = ()  # further TrainSettings fields as (name, value)
     hparams: tuple = ()
     baseline: str = "traj"  # the L_traj row it is compared with, seed by seed (same data)
 
@@ -358,7 +358,7 @@ def cpu_name() -> str:
 
 def run(v: Variant, seed: int, out: Path) -> dict:
     pieces, test, forced, effects = dataset(v, seed)
-    config = TrainConfig.for_system(
+    config = TrainSettings.for_system(
         "furuta",
         epochs=v.epochs,
         horizons=v.horizons,

@@ -162,7 +162,7 @@ def span_findings(docs: dict[str, list[dict]], baseline: list[dict]) -> str:
         )
     return (
         (
-            " L_Iτ summed over longer intervals (`TrainConfig.integral_span`), everything else as the real runs: "
+            " L_Iτ summed over longer intervals (`TrainSettings.integral_span`), everything else as the real runs: "
             + "; ".join(parts)
             + "."
         )

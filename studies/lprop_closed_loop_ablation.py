@@ -172,9 +172,9 @@ def _pieces(runs, split):
 
 def config_for(cell: Cell, seed: int):
     """The reproduction's DeLaN L_prop recipe (quadrature, L_Iτ learning rate), its L_Iτ stage only."""
-    from furuta_gym.training.reproduce import ReproduceConfig, training_config
+    from furuta_gym.training.reproduce import ReproduceSettings, training_settings
 
-    base = training_config("furuta", ReproduceConfig(progress=False), seed, "prop", "dln")
+    base = training_settings("furuta", ReproduceSettings(progress=False), seed, "prop", "dln")
     lr = base.learning_rate[0] if isinstance(base.learning_rate, tuple) else base.learning_rate
     # snapshots at multiples of SHORT / 4, so a long run has one at the short budget
     return dataclasses.replace(

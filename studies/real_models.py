@@ -9,7 +9,7 @@ The 15 MIT-licensed closed-loop runs shipped in ``furuta_gym.datasets`` (upright
   that model plus the effects it found (``model_after``; input dynamics, which have no
   memoryless Lagrangian form, are left out and said so).
 * **DeLaN / augmented DeLaN** with L_prop and with their baselines (L_traj / L_aph): the
-  reproduction's recipe for each model (``furuta_gym.training.reproduce.training_config``: stage
+  reproduction's recipe for each model (``furuta_gym.training.reproduce.training_settings``: stage
   structure, learning rates, λ, μ, quadrature), its epochs cut to a training budget of about
   ten minutes per model on this machine (:data:`SCHEDULES`), and the long horizon 0.1 s instead
   of 1 s (an open-loop second of an upright pendulum diverges whatever the model). Trained on
@@ -70,7 +70,7 @@ SCHEDULES = {
 #: the simulated ablation (studies/lprop_closed_loop_ablation.py, cells g/h): per interval the
 #: encoder's counts, through the estimated velocities, all but hide gravity from the loss
 SPAN = 25
-#: learned models: name -> (kind, loss, TrainConfig changes to the recipe)
+#: learned models: name -> (kind, loss, TrainSettings changes to the recipe)
 LEARNED = {
     "dln_prop": ("dln", "prop", {}),
     "dln_traj": ("dln", "traj", {}),
@@ -120,11 +120,11 @@ def load_data():
 
 
 def recipe_config(kind: str, loss: str, budget: float, **changes):
-    """The reproduction's TrainConfig for (kind, loss), epochs cut to :data:`SCHEDULES` × budget
+    """The reproduction's TrainSettings for (kind, loss), epochs cut to :data:`SCHEDULES` × budget
     and the long horizon to :data:`WINDOW`, with ``changes``."""
-    from furuta_gym.training.reproduce import ReproduceConfig, training_config
+    from furuta_gym.training.reproduce import ReproduceSettings, training_settings
 
-    base = training_config("furuta", ReproduceConfig(progress=False), 0, loss, kind)
+    base = training_settings("furuta", ReproduceSettings(progress=False), 0, loss, kind)
     epochs = tuple(max(1, round(e * budget)) for e in SCHEDULES[(kind, loss)])
     horizons = tuple(WINDOW if isinstance(h, float) else h for h in base.horizons)
     # snapshots for the validation choice: a dozen over the run, each trajectory epoch of the

@@ -84,7 +84,7 @@ def run_ppo(budgets: list[int], seed: int, doc: dict, path: Path, force: bool) -
     import jax
 
     import furuta_gym
-    from furuta_gym.rl import GymnasiumPolicy, PPOConfig
+    from furuta_gym.rl import GymnasiumPolicy, PPOSettings
 
     furuta_gym.enable_x64()
     doc.update(
@@ -93,7 +93,7 @@ def run_ppo(budgets: list[int], seed: int, doc: dict, path: Path, force: bool) -
     for budget in budgets:
         if str(budget) in doc["budgets"] and not force:
             continue
-        config = PPOConfig(**{**CONFIG.__dict__, "total_timesteps": budget})
+        config = PPOSettings(**{**CONFIG.__dict__, "total_timesteps": budget})
         policy, _, wall, own = train("analytic", False, config, seed)
         scores = _scores(lambda env, policy=policy: GymnasiumPolicy(policy, env.action_space), budget == budgets[-1])
         taken = config.num_updates * config.num_envs * config.num_steps  # whole updates only

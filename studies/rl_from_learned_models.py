@@ -44,7 +44,7 @@ import numpy as np
 import furuta_gym
 from furuta_gym.controllers import episode_metrics, near_rest_starts
 from furuta_gym.envs import Plant, functional
-from furuta_gym.rl import GymnasiumPolicy, PPOConfig, episode_returns, train_ppo
+from furuta_gym.rl import GymnasiumPolicy, PPOSettings, episode_returns, train_ppo
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,7 +61,7 @@ MODELS = {
 }
 PLANTS = (None, "cable_spring", "coulomb")
 #: examples/ppo_swingup.py's settings: 6 M env steps, 256 copies × 128 steps per update
-CONFIG = PPOConfig(total_timesteps=6_000_000, num_envs=256, num_steps=128)
+CONFIG = PPOSettings(total_timesteps=6_000_000, num_envs=256, num_steps=128)
 SPREAD = 0.1  # relative spread of the randomised parameters (the example's --randomize 0.1)
 STARTS, STARTS_SEED = 30, 0
 BALANCE_STEPS, BALANCE_TOLERANCE = 100, 0.2  # the example's check: last 2 s at 50 Hz within 0.2 rad
@@ -101,7 +101,7 @@ def training_env(model: str, randomize: bool):
     return env, env.default_params
 
 
-def train(model: str, randomize: bool, config: PPOConfig, seed: int):
+def train(model: str, randomize: bool, config: PPOSettings, seed: int):
     """(policy, last training returns, wall seconds with compilation, deterministic return on
     the nominal training model)."""
     env, params = training_env(model, randomize)
@@ -181,7 +181,7 @@ def main(argv=None) -> int:
         print(f"{path} exists (--force to train again)")
         return 0
     furuta_gym.enable_x64()
-    config = PPOConfig(**{**CONFIG.__dict__, "total_timesteps": args.steps})
+    config = PPOSettings(**{**CONFIG.__dict__, "total_timesteps": args.steps})
     policy, returns, wall, own = train(args.model, args.randomize, config, args.seed)
     print(f"{args.model}: {args.steps:,} steps in {wall:.0f} s; return on its own model {own:.1f}", flush=True)
     randomization = None

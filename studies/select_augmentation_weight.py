@@ -3,7 +3,7 @@ validation data: never on the test sets the reproduction reports.
 
 Each candidate μ trains the model with the full reproduction recipe (the same training data,
 seed 0, the same epochs as ``furuta-gym reproduce``) as a *validation* run
-(``ReproduceConfig(split="validation")``): the Furuta scale is fitted on ``val_scale_fit`` and the
+(``ReproduceSettings(split="validation")``): the Furuta scale is fitted on ``val_scale_fit`` and the
 model predicts the validation datasets only (``generate_validation``: their own excitation and
 initial states, no sample following a test trajectory; docs/reproduce.md) — no test set is
 generated, scored or stored. The criterion is what a user could measure on held-out data: the
@@ -30,9 +30,9 @@ DIVERGED_SCORE = 2.0
 
 def _config(system: str, kind: str, weight: float):
     """The validation run of one candidate μ."""
-    from furuta_gym.training.reproduce import ReproduceConfig
+    from furuta_gym.training.reproduce import ReproduceSettings
 
-    return ReproduceConfig(
+    return ReproduceSettings(
         systems=(system,),
         pairs=((kind, "prop"),),
         split="validation",

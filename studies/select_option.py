@@ -71,11 +71,11 @@ def _config(
 ):
     """The reproduction config of one candidate: ``where`` is "train" or "model"; model seeds
     0 … ``seeds`` − 1, or the tuple given; ``quick``: as ``furuta-gym reproduce --quick`` trains."""
-    from furuta_gym.training.reproduce import ReproduceConfig
+    from furuta_gym.training.reproduce import ReproduceSettings
 
     override = {name: value}
     seeds = tuple(range(seeds)) if isinstance(seeds, int) else tuple(seeds)
-    return ReproduceConfig(
+    return ReproduceSettings(
         quick=quick,
         systems=(system,),
         pairs=((kind, "prop"),),
@@ -193,13 +193,13 @@ def _seed_columns(score: dict, pair: dict | None, seeds: int) -> str:
 
 def _arguments(argv) -> argparse.Namespace:
     from furuta_gym.cli.reproduce import add_executor_arguments
-    from furuta_gym.training.reproduce import ReproduceConfig
+    from furuta_gym.training.reproduce import ReproduceSettings
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--system", required=True, choices=("furuta", "nmsd"))
     parser.add_argument("--kinds", nargs="+", default=["dln", "aph", "adln"], choices=("dln", "aph", "adln"))
     option = parser.add_mutually_exclusive_group(required=True)
-    option.add_argument("--train", nargs="+", metavar=("NAME", "VALUE"), help="a TrainConfig field and its values")
+    option.add_argument("--train", nargs="+", metavar=("NAME", "VALUE"), help="a TrainSettings field and its values")
     option.add_argument("--model", nargs="+", metavar=("NAME", "VALUE"), help="a model option and its values")
     parser.add_argument(
         "--reuse",
@@ -227,7 +227,7 @@ def _arguments(argv) -> argparse.Namespace:
     if args.seeds < 1:
         parser.error(f"--seeds must be at least 1, got {args.seeds}")
     try:  # where the candidates train, checked as the reproduction checks its own
-        args.workers = ReproduceConfig(
+        args.workers = ReproduceSettings(
             systems=(args.system,),
             jobs=args.jobs,
             executor=args.executor,

@@ -1,5 +1,5 @@
 """L_prop's minimum-norm term for models with a data-driven force F_a (APHYNITY, augmented DeLaN):
-P_a = Σ‖∫M̂⁻¹F_a dt‖² / Σ‖Δq̇‖², weighted by μ = ``TrainConfig.augmentation_weight``."""
+P_a = Σ‖∫M̂⁻¹F_a dt‖² / Σ‖Δq̇‖², weighted by μ = ``TrainSettings.augmentation_weight``."""
 
 import jax
 import jax.numpy as jnp
@@ -10,7 +10,7 @@ from _simulated import nmsd_chirp_segments
 from furuta_gym.lagrangian import interval_difference, interval_integral
 from furuta_gym.models import make_model
 from furuta_gym.training.losses import integral_loss, integral_loss_terms, make_windows, proposed_loss
-from furuta_gym.training.train import TrainConfig, train
+from furuta_gym.training.train import TrainSettings, train
 
 
 @pytest.fixture(scope="module")
@@ -78,8 +78,8 @@ def test_share_with_the_hermite_rule_integrates_at_its_interior_nodes(segments):
 
 def test_weight_on_a_model_without_augmentation_or_negative_is_refused(segments):
     with pytest.raises(ValueError, match="augmentation_weight must be non-negative"):
-        TrainConfig(augmentation_weight=-1.0)
-    cfg = TrainConfig.for_system("nmsd", epochs=(1,), horizons=(None,), augmentation_weight=1e-3, progress=False)
+        TrainSettings(augmentation_weight=-1.0)
+    cfg = TrainSettings.for_system("nmsd", epochs=(1,), horizons=(None,), augmentation_weight=1e-3, progress=False)
     with pytest.raises(ValueError, match="augmentation_weight=0.001.*'dln'.*only aph and adln"):
         train("dln", "nmsd", "prop", segments, cfg)
 
@@ -94,7 +94,7 @@ def test_the_weight_moves_a_spring_force_out_of_the_network_into_the_prior(segme
     runs = {}
     for mu in (0.0, 0.1):
         model, history = train(
-            "aph", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", augmentation_weight=mu, **cfg), hparams=hp
+            "aph", "nmsd", "prop", segments, TrainSettings.for_system("nmsd", augmentation_weight=mu, **cfg), hparams=hp
         )
         k1 = float(model.physical_parameters["k1"])
         runs[mu] = (k1, history[-1])
@@ -251,10 +251,10 @@ def test_default_weight_is_on_for_both_augmented_kinds_and_zero_turns_it_off(seg
 
     assert set(AUGMENTATION_WEIGHT) == {(s, k) for s in ("furuta", "nmsd") for k in ("adln", "aph")}
     assert all(w > 0 for w in AUGMENTATION_WEIGHT.values())
-    cfg = TrainConfig.for_system(
+    cfg = TrainSettings.for_system(
         "nmsd", epochs=(2,), horizons=(None,), quadrature="simpson", progress=False, checkpoint_every=0
     )
-    off = TrainConfig.for_system(
+    off = TrainSettings.for_system(
         "nmsd",
         epochs=(2,),
         horizons=(None,),
@@ -294,4 +294,4 @@ def test_share_beyond_linear_leaves_the_viscous_term_free(segments):
     _, beyond0 = integral_loss_terms(model, w, with_augmentation=True, augmentation_part="beyond_linear")
     assert float(beyond0) == pytest.approx(float(full0), rel=1e-12)  # W starts at zero
     with pytest.raises(ValueError, match="augmentation_part must be one of"):
-        TrainConfig(augmentation_part="linear")
+        TrainSettings(augmentation_part="linear")

@@ -11,7 +11,7 @@ import pytest
 from furuta_gym.effects import Effect
 from furuta_gym.envs import Plant
 from furuta_gym.training.datagen import MujocoGroundTruth
-from furuta_gym.training.reproduce import ReproduceConfig, load_paper_table, reproduce, truth_model
+from furuta_gym.training.reproduce import ReproduceSettings, load_paper_table, reproduce, truth_model
 
 CHIRP_T = np.arange(0, 0.5 + 1e-9, 0.01)
 
@@ -50,7 +50,7 @@ def rig_run(tmp_path_factory):
     )
     path = root / "diagnosis.json"
     path.write_text(json.dumps({"plant": plant.to_json()}))
-    config = ReproduceConfig(
+    config = ReproduceSettings(
         quick=True,
         systems=("furuta",),
         pairs=(("dln", "traj"),),
@@ -95,7 +95,7 @@ def test_a_rig_run_refuses_data_of_another_sensor_and_compares_physics_with_the_
     assert (
         abs(
             float(truth.potential(q))
-            - float(truth_model("furuta", ReproduceConfig()).potential(q))
+            - float(truth_model("furuta", ReproduceSettings()).potential(q))
             - 0.5 * 8e-4 * 0.5**2
         )
         < 1e-12

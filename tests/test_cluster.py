@@ -19,13 +19,13 @@ import pytest
 ray = pytest.importorskip("ray")
 
 from furuta_gym.training import checkpoint as ckpt  # noqa: E402
-from furuta_gym.training.reproduce import ReproduceConfig, reproduce  # noqa: E402
+from furuta_gym.training.reproduce import ReproduceSettings, reproduce  # noqa: E402
 
 # Only L_Iτ epochs (no trajectory stage to compile), enough of them that a worker can be killed
 # while it trains (they run in compiled blocks of about two seconds after a first short one);
 # two seeds, so both workers train at once.
 EPOCHS = 400
-CONFIG = ReproduceConfig(
+CONFIG = ReproduceSettings(
     quick=True,
     systems=("nmsd",),
     pairs=(("dln", "prop"),),

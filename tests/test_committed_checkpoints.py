@@ -57,8 +57,8 @@ def test_a_committed_reproduction_run_is_todays_recipe(path):
     not followed by training that model again fails here, not silently in the published tables."""
     import json
 
-    from furuta_gym.training.reproduce import ReproduceConfig, run_settings, same_settings
+    from furuta_gym.training.reproduce import ReproduceSettings, run_settings, same_settings
 
     system, (kind, loss) = path.parts[-4], path.parts[-3].split("_")
     saved = json.loads((path.parent / "reproduce_config.json").read_text())
-    assert same_settings(saved, run_settings(system, kind, loss, 0, ReproduceConfig())), path.parent
+    assert same_settings(saved, run_settings(system, kind, loss, 0, ReproduceSettings())), path.parent

@@ -20,7 +20,7 @@ from furuta_gym.models import Furuta, make_model
 from furuta_gym.simulate import rollout_zoh
 from furuta_gym.training import _step_cache, losses as losses_module
 from furuta_gym.training.losses import make_windows, trajectory_loss
-from furuta_gym.training.train import TrainConfig, _build_optimizer, _make_step, train
+from furuta_gym.training.train import TrainSettings, _build_optimizer, _make_step, train
 
 DT = 0.01
 HOST_CALLBACK_MARKERS = ("callback", "xla_ffi_python")
@@ -93,7 +93,7 @@ def test_trajectory_loss_gradient_equals_the_previous_formulation(furuta_free, m
 
 def test_a_solve_hitting_max_steps_is_a_non_finite_loss_the_nan_guard_skips(furuta_free, tmp_path):
     model = make_model("furuta", "dln", jax.random.PRNGKey(4), hidden=(4, 4))
-    config = TrainConfig.for_system(
+    config = TrainSettings.for_system(
         "furuta", epochs=(1,), horizons=(5,), batch_size=None, max_steps=1, progress=False, checkpoint_every=0
     )
     windows = make_windows(furuta_free, 6, stride=5)
@@ -112,7 +112,7 @@ def test_a_solve_hitting_max_steps_is_a_non_finite_loss_the_nan_guard_skips(furu
 def itau_step(furuta_free):
     """A live (jitted) L_Iτ training step and its arguments; L_Iτ keeps the compiles short."""
     model = make_model("furuta", "dln", jax.random.PRNGKey(5), hidden=(4, 4))
-    config = TrainConfig.for_system("furuta", progress=False)
+    config = TrainSettings.for_system("furuta", progress=False)
     optimizer, trainable, params = _build_optimizer(model, config)
     _, static = eqx.partition(model, trainable)
     step = _make_step(static, optimizer, "itau", config, "momentum")
@@ -225,7 +225,7 @@ def test_training_commands_turn_the_cache_on_where_asked_and_never_when_told_not
 
 
 def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported(furuta_free, tmp_path, monkeypatch):
-    """``TrainConfig.fast_compile`` (XLA optimisation level 0 for the trajectory-loss steps, used
+    """``TrainSettings.fast_compile`` (XLA optimisation level 0 for the trajectory-loss steps, used
     by ``reproduce --quick``): the live jitted step carries the options, the step is still
     exported to the disk cache (a nested jit may not carry them, which once made every export
     fail and fall back) and agrees with the optimised step to rounding."""
@@ -236,7 +236,7 @@ def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported
     traj_windows = make_windows(furuta_free, 3, stride=7)
     outputs = []
     for fast in (False, True):
-        config = TrainConfig.for_system("furuta", progress=False, fast_compile=fast)
+        config = TrainSettings.for_system("furuta", progress=False, fast_compile=fast)
         optimizer, trainable, params = _build_optimizer(model, config)
         _, static = eqx.partition(model, trainable)
         args = (params, optimizer.init(params), traj_windows, windows, jnp.asarray(1.0), jnp.asarray(1e-3))
@@ -262,7 +262,7 @@ def test_fast_compile_steps_compute_what_the_optimised_ones_do_live_and_exported
             np.testing.assert_allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), rtol=1e-10, atol=1e-14)
     assert float(reference[2]["traj"]) > 0 and float(reference[2]["itau"]) > 0
     # a stage of L_Iτ alone keeps the optimised code: it runs thousands of cheap-to-compile steps
-    config = TrainConfig.for_system("furuta", progress=False, fast_compile=True)
+    config = TrainSettings.for_system("furuta", progress=False, fast_compile=True)
     optimizer, trainable, params = _build_optimizer(model, config)
     _, static = eqx.partition(model, trainable)
     itau = _make_step(static, optimizer, "itau", config, "momentum")

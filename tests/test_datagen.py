@@ -7,14 +7,15 @@ import pytest
 
 from furuta_gym.cli import main
 from furuta_gym.data import load_trajectories
+from furuta_gym.sensors import Sensors
 from furuta_gym.signals import ENCODER_COUNTS_PER_REV, chirp
 from furuta_gym.training.datagen import (
     DATASET_NAMES,
     AnalyticGroundTruth,
     FurutaRecipe,
     NMSDRecipe,
-    SensorOptions,
     generate_datasets,
+    read_sensor_record,
     write_datasets,
 )
 
@@ -138,10 +139,14 @@ def test_round_trip_through_the_loader(tmp_path, furuta_tiny):
 def test_quantisation_and_noise(furuta_gt, furuta_tiny):
     step = 2 * np.pi / ENCODER_COUNTS_PER_REV
     quant = generate_datasets(
-        "furuta", recipe=TINY_FURUTA, ground_truth=furuta_gt, seed=3, sensor=SensorOptions(quantize=True)
+        "furuta",
+        recipe=TINY_FURUTA,
+        ground_truth=furuta_gt,
+        seed=3,
+        sensor=Sensors(encoder_counts=ENCODER_COUNTS_PER_REV),
     )
     noisy = generate_datasets(
-        "furuta", recipe=TINY_FURUTA, ground_truth=furuta_gt, seed=3, sensor=SensorOptions(noise_std=0.01)
+        "furuta", recipe=TINY_FURUTA, ground_truth=furuta_gt, seed=3, sensor=Sensors(measurement_noise=(0.01, 0.0))
     )
     q_exact = np.concatenate([tr.q for tr in furuta_tiny["test_free"]])
     q_quant = np.concatenate([tr.q for tr in quant["test_free"]])
@@ -153,13 +158,13 @@ def test_quantisation_and_noise(furuta_gt, furuta_tiny):
     np.testing.assert_array_equal(quant["test_free"][0].qd, furuta_tiny["test_free"][0].qd)
     err = np.concatenate([tr.q for tr in noisy["train"]]) - np.concatenate([tr.q for tr in furuta_tiny["train"]])
     assert 0.009 < np.std(err) < 0.011 and abs(np.mean(err)) < 0.002
-    with pytest.raises(ValueError, match="quantize"):
-        generate_datasets("nmsd", small=True, ground_truth=_zeros_ground_truth, sensor=SensorOptions(quantize=True))
+    with pytest.raises(ValueError, match="no angular joint"):
+        generate_datasets("nmsd", small=True, ground_truth=_zeros_ground_truth, sensor=Sensors(encoder_counts=2048))
 
 
 def test_filtered_velocities_lag_like_the_papers_filter(furuta_gt, furuta_tiny):
     filt = generate_datasets(
-        "furuta", recipe=TINY_FURUTA, ground_truth=furuta_gt, seed=3, sensor=SensorOptions(velocity="filter")
+        "furuta", recipe=TINY_FURUTA, ground_truth=furuta_gt, seed=3, sensor=Sensors(velocity="filter")
     )
     for a, b in zip(filt["test_free"], furuta_tiny["test_free"], strict=True):
         np.testing.assert_array_equal(a.q, b.q)  # positions unchanged
@@ -177,9 +182,9 @@ def test_filtered_velocities_lag_like_the_papers_filter(furuta_gt, furuta_tiny):
 
 def test_bad_options_are_clear_errors():
     with pytest.raises(ValueError, match="velocity"):
-        SensorOptions(velocity="magic")
+        Sensors(velocity="magic")
     with pytest.raises(ValueError, match="sensor_rate_hz"):
-        SensorOptions(sensor_rate_hz=250.0)
+        generate_datasets("nmsd", small=True, ground_truth=_zeros_ground_truth, sensor_rate_hz=250.0)
     with pytest.raises(ValueError, match="recipe for nmsd"):
         generate_datasets("nmsd", recipe=TINY_FURUTA, ground_truth=_zeros_ground_truth)
     with pytest.raises(ValueError, match="unknown system"):
@@ -202,7 +207,8 @@ def test_generate_cli_writes_loader_ready_files_and_never_overwrites(tmp_path, c
     ]
     assert main(argv) == 0
     manifest = json.loads((out / "manifest.json").read_text())
-    assert manifest["ground_truth"] == "analytic" and manifest["sensor"]["noise_std"] == 0.001
+    assert manifest["ground_truth"] == "analytic" and manifest["sensor"]["measurement_noise"] == [0.001, 0.0]
+    assert read_sensor_record(manifest["sensor"]) == (Sensors(measurement_noise=(0.001, 0.0)), 500.0)
     for name in DATASET_NAMES["nmsd"]:
         trajs = load_trajectories(out / f"{name}.csv", "nmsd", require_velocities=True)
         assert trajs and all(len(tr) > 100 for tr in trajs)

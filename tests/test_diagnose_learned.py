@@ -85,13 +85,13 @@ def test_a_model_trained_on_the_coulomb_plant_cannot_express_the_friction_and_ge
     """Fine-tuned on data of the plant with Coulomb friction, the DeLaN turns part of it into
     viscous damping (all it can express); the diagnosis adds the rest as Coulomb friction."""
     from furuta_gym.signals import zero_phase_velocity
-    from furuta_gym.training.train import TrainConfig, train
+    from furuta_gym.training.train import TrainSettings, train
 
     coulomb = [Effect("coulomb_friction", "p", 1.0)]
     data = measured_like("nmsd", coulomb, seed=5, **NMSD_LOG)
     with_v = [Trajectory(tr.t, tr.q, tr.u, zero_phase_velocity(tr.q, tr.dt, cutoff_hz=8.0), tr.name) for tr in data]
     base = load_model(NMSD_DLN)
-    config = TrainConfig(epochs=(150,), horizons=(None,), learning_rate=1e-3, progress=False, batch_size=None)
+    config = TrainSettings(epochs=(150,), horizons=(None,), learning_rate=1e-3, progress=False, batch_size=None)
     model, history = train("dln", "nmsd", "prop", with_v, config, model=base)
     assert history[-1]["itau"] < history[0]["itau"]
     assert float(model.damping[0]) > float(base.damping[0])  # friction partly absorbed as viscous

@@ -1,4 +1,4 @@
-"""L_Iτ over longer intervals (``TrainConfig.integral_span``;
+"""L_Iτ over longer intervals (``TrainSettings.integral_span``;
 :func:`furuta_gym.training.losses.span_sum`): the same equation, summed over consecutive
 quadrature intervals, so that the estimated velocities' error weighs less against the physics."""
 
@@ -10,7 +10,7 @@ from furuta_gym.lagrangian import integral_residual, momentum
 from furuta_gym.measured import prepare_log
 from furuta_gym.models import Furuta, FurutaParameters
 from furuta_gym.training.losses import integral_loss, make_windows, span_sum
-from furuta_gym.training.train import TrainConfig
+from furuta_gym.training.train import TrainSettings
 
 
 def test_span_sum_groups_consecutive_intervals_with_a_shorter_last_group():
@@ -63,9 +63,9 @@ def test_a_longer_span_lets_the_loss_see_gravity_through_encoder_counts(balancin
 
 def test_span_is_checked():
     with pytest.raises(ValueError, match="integral_span"):
-        TrainConfig(integral_span=0)
+        TrainSettings(integral_span=0)
     with pytest.raises(ValueError, match="integral_span"):
-        TrainConfig(integral_span=2, resolution_tolerance=1e-3)
+        TrainSettings(integral_span=2, resolution_tolerance=1e-3)
     with pytest.raises(ValueError, match="span"):
         integral_loss(Furuta(), _tiny_windows(), span=0)
 
@@ -100,20 +100,20 @@ def test_the_scale_fit_over_a_longer_span_is_not_diluted_by_velocity_noise():
 
 
 def test_reproduce_sums_the_integral_residual_of_its_L_prop_runs_only():
-    from furuta_gym.training.reproduce import ReproduceConfig, training_config
+    from furuta_gym.training.reproduce import ReproduceSettings, training_settings
 
-    config = ReproduceConfig(systems=("furuta",), integral_span=10)
-    assert training_config("furuta", config, 0, "prop", "dln").integral_span == 10
-    assert training_config("furuta", config, 0, "traj", "dln").integral_span == 1
-    assert training_config("furuta", ReproduceConfig(), 0, "prop", "dln").integral_span == 1
+    config = ReproduceSettings(systems=("furuta",), integral_span=10)
+    assert training_settings("furuta", config, 0, "prop", "dln").integral_span == 10
+    assert training_settings("furuta", config, 0, "traj", "dln").integral_span == 1
+    assert training_settings("furuta", ReproduceSettings(), 0, "prop", "dln").integral_span == 1
     with pytest.raises(ValueError, match="integral_span must be a positive integer"):
-        ReproduceConfig(integral_span=0)
+        ReproduceSettings(integral_span=0)
 
 
 def test_reproduce_can_train_on_velocities_estimated_offline_and_records_it():
     from furuta_gym.data import Trajectory
     from furuta_gym.training._reproduce_data import _training_data
-    from furuta_gym.training.reproduce import ReproduceConfig, run_settings
+    from furuta_gym.training.reproduce import ReproduceSettings, run_settings
 
     t = np.arange(200) * 0.01
     q = np.stack([np.sin(2 * t), 0.5 * np.cos(3 * t)], axis=1)
@@ -122,17 +122,17 @@ def test_reproduce_can_train_on_velocities_estimated_offline_and_records_it():
         "train": [Trajectory(t, q, np.zeros((200, 1)), lagged)],
         "scale_fit": [Trajectory(t, q, np.ones((200, 1)), lagged)],
     }
-    offline = ReproduceConfig(systems=("furuta",), training_velocities="zero_phase")
+    offline = ReproduceSettings(systems=("furuta",), training_velocities="zero_phase")
     train, forced = _training_data("furuta", data, offline)
     exact = np.stack([2 * np.cos(2 * t), -1.5 * np.sin(3 * t)], axis=1)
     inner = slice(20, -20)  # away from the filter's ends
     for trajs in (train, forced):
         assert np.max(np.abs(trajs[0].qd[inner] - exact[inner])) < 0.2 * np.max(np.abs(lagged - exact))
-    assert _training_data("furuta", data, ReproduceConfig(systems=("furuta",)))[0][0].qd is lagged
+    assert _training_data("furuta", data, ReproduceSettings(systems=("furuta",)))[0][0].qd is lagged
     assert run_settings("furuta", "dln", "prop", 0, offline)["training_velocities"] == "zero_phase"
-    assert "training_velocities" not in run_settings("furuta", "dln", "prop", 0, ReproduceConfig())
+    assert "training_velocities" not in run_settings("furuta", "dln", "prop", 0, ReproduceSettings())
     with pytest.raises(ValueError, match="training_velocities must be one of"):
-        ReproduceConfig(training_velocities="filter")
+        ReproduceSettings(training_velocities="filter")
 
 
 def test_reproduce_command_line_names_the_span_and_the_training_velocities():

@@ -20,7 +20,7 @@ from furuta_gym.diagnose._library import nominal_base
 from furuta_gym.effects import Effect
 from furuta_gym.models import NMSD, LumpedSystem
 from furuta_gym.training.losses import _integral_parts, integral_loss, make_windows
-from furuta_gym.training.train import TrainConfig
+from furuta_gym.training.train import TrainSettings
 
 furuta_gym.enable_x64()
 RIG = [Effect("spring", "alpha", 2e-3), Effect("coulomb_friction", "alpha", 5e-4)]
@@ -64,4 +64,4 @@ def test_the_normalisation_is_named_on_the_command_line_and_checked():
     _, default = config_from_args(build_parser().parse_args(["reproduce"]))
     assert default.train_overrides is None
     with pytest.raises(ValueError, match="normalize must be one of .*joint_momentum"):
-        TrainConfig(normalize="per_joint")  # type: ignore[arg-type]
+        TrainSettings(normalize="per_joint")  # type: ignore[arg-type]

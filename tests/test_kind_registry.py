@@ -14,7 +14,7 @@ import furuta_gym
 from _simulated import nmsd_chirp_segments
 from furuta_gym.cli import train as cli_train
 from furuta_gym.models import MODEL_KINDS, AbstractLearnedSystem, make_model, model_kind
-from furuta_gym.training import TrainConfig, make_windows, training_step
+from furuta_gym.training import TrainSettings, make_windows, training_step
 from furuta_gym.training.loss_kinds import INTEGRAL_ONLY, LOSS_KINDS, PROPOSED_LOSS, LossKind, loss_kind
 from furuta_gym.training.train import LOSSES
 
@@ -110,7 +110,7 @@ def test_a_new_loss_is_one_class():
 
     try:
         model = make_model("nmsd", "dln", jax.random.PRNGKey(0), hidden=(8, 8))
-        config = TrainConfig(progress=False, fast_compile=True)
+        config = TrainSettings(progress=False, fast_compile=True)
         step, params, opt_state = training_step(model, config, "test_twice")
         windows = make_windows(nmsd_chirp_segments(1.0)[:2], 3)
         _, _, terms, ok = step(params, opt_state, windows, None, jnp.asarray(0.0), jnp.asarray(1e-3))

@@ -74,7 +74,7 @@ def test_training_moves_the_spring():
     from furuta_gym.diagnose import measured_like
     from furuta_gym.effects import Effect
     from furuta_gym.training.losses import make_windows
-    from furuta_gym.training.train import TrainConfig, training_step
+    from furuta_gym.training.train import TrainSettings, training_step
 
     data = measured_like(
         "furuta",
@@ -88,7 +88,7 @@ def test_training_moves_the_spring():
     )
     windows = make_windows(data, 21, stride=20, cover_end=True)
     model = make_model("furuta", "dln", 0, hidden=(8, 8), springs=("alpha",))
-    step, params, opt_state = training_step(model, TrainConfig(progress=False), "itau")
+    step, params, opt_state = training_step(model, TrainSettings(progress=False), "itau")
     for _ in range(5):
         params, opt_state, losses, ok = step(params, opt_state, None, windows, jnp.asarray(0.0), jnp.asarray(1e-2))
         assert bool(ok)

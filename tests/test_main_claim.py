@@ -8,7 +8,7 @@ after the scale fit on the forced ``scale_fit`` trajectory). L_prop must beat L_
 margin, and must explain the forces at all (its errors well below the forces' own size), so a
 broken L_Iτ fails here.
 
-Settings: the reproduction's own (:func:`~furuta_gym.training.reproduce.training_config`,
+Settings: the reproduction's own (:func:`~furuta_gym.training.reproduce.training_settings`,
 ``quick=True``) on the small recipe (data seed 0, analytic ground truth), with short schedules:
 L_traj 8 epochs of 2-step predictions (48 steps); L_prop its first stage only, 2000 epochs of
 L_Iτ alone at the reproduction's step — the stage every L_prop run of the reproduction starts
@@ -31,12 +31,12 @@ import pytest
 from furuta_gym.models import analytic_model
 from furuta_gym.training.datagen import generate_datasets
 from furuta_gym.training.metrics import FORCE_TERMS, force_decomposition_errors
-from furuta_gym.training.reproduce import ReproduceConfig, training_config
+from furuta_gym.training.reproduce import ReproduceSettings, training_settings
 from furuta_gym.training.train import train
 
 SYSTEM, KIND, SEED = "furuta", "dln", 0
 TEST_SETS = ("test_free", "test_forced")
-CONFIG = ReproduceConfig(
+CONFIG = ReproduceSettings(
     quick=True,
     systems=(SYSTEM,),
     pairs=((KIND, "traj"), (KIND, "prop")),
@@ -58,7 +58,7 @@ def runs():
     truth = analytic_model(SYSTEM)
     out = {}
     for loss in ("traj", "prop"):
-        config = training_config(SYSTEM, CONFIG, SEED, loss, KIND)
+        config = training_settings(SYSTEM, CONFIG, SEED, loss, KIND)
         model, history = train(KIND, SYSTEM, loss, data["train"], config, forced_trajs=data["scale_fit"])
         errors = {name: force_decomposition_errors(model, data[name], truth) for name in TEST_SETS}
         out[loss] = {"errors": errors, "history": history}

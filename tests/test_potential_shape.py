@@ -18,7 +18,7 @@ from furuta_gym.lagrangian import AbstractLagrangianSystem, SystemSpec
 from furuta_gym.models import NMSD, Furuta, furuta_lumped, make_model, system_definition
 from furuta_gym.simulate import simulate
 from furuta_gym.training import PotentialShapeWarning, check_potential_shape, warn_potential_shape
-from furuta_gym.training.train import TrainConfig, train
+from furuta_gym.training.train import TrainSettings, train
 
 
 class _Scaled(AbstractLagrangianSystem):
@@ -120,7 +120,7 @@ def furuta_free():
 
 
 def _train_briefly(model, data, out):
-    config = TrainConfig(epochs=(2,), horizons=(None,), learning_rate=1e-9, progress=False, checkpoint_every=1)
+    config = TrainSettings(epochs=(2,), horizons=(None,), learning_rate=1e-9, progress=False, checkpoint_every=1)
     return train("dln", "furuta", "prop", data, config, out, model=model)
 
 

@@ -15,13 +15,13 @@ import pytest
 import furuta_gym
 from furuta_gym.training.reproduce import (
     METRIC_COLUMNS,
-    ReproduceConfig,
+    ReproduceSettings,
     build_tables,
     load_paper_table,
     reproduce,
 )
 
-TINY = ReproduceConfig(
+TINY = ReproduceSettings(
     quick=True,
     systems=("nmsd",),
     pairs=(("dln", "prop"),),
@@ -70,7 +70,7 @@ def test_rerun_reuses_finished_models_and_refuses_other_settings(tiny_run):
     paths = reproduce(out, TINY, command="again", log=logs.append)
     record = json.loads(paths["run.json"].read_text())
     assert record["seconds"]["nmsd/dln_prop/seed0"]["status"] == "reused"
-    other = ReproduceConfig(**{**TINY.__dict__, "prop_epochs": {"nmsd": (20, 2, 0)}})
+    other = ReproduceSettings(**{**TINY.__dict__, "prop_epochs": {"nmsd": (20, 2, 0)}})
     with pytest.raises(ValueError, match="other settings"):
         reproduce(out, other, log=logs.append)
     # a model trained with another architecture is not reused either; a record from before the
@@ -190,7 +190,7 @@ def test_a_pool_starts_the_longest_models_first():
     from furuta_gym.training.reproduce import EXPECTED_SECONDS, PAPER_PAIRS
 
     for quick in (True, False):
-        config = ReproduceConfig(quick=quick)
+        config = ReproduceSettings(quick=quick)
         tasks = [(s, k, l, seed) for s in config.systems for k, l in PAPER_PAIRS for seed in (0, 1)]
         table = EXPECTED_SECONDS["quick" if quick else "full"]
         assert set(table) == {t[:3] for t in tasks}  # every model of the run has an estimate
@@ -203,7 +203,7 @@ def test_a_pool_starts_the_longest_models_first():
     # the full run's longest are the Furuta augmented DeLaN's L_prop (the Hermite rule, 24 000 L_Iτ
     # epochs) and the N-MSD DeLaN's, not the Furuta runs started first before (two seeds each: the
     # first four tasks)
-    longest = {t[:3] for t in _longest_first(tasks, ReproduceConfig())[:4]}
+    longest = {t[:3] for t in _longest_first(tasks, ReproduceSettings())[:4]}
     assert longest == {("furuta", "adln", "prop"), ("nmsd", "dln", "prop")}
 
 
@@ -227,7 +227,7 @@ def test_evaluate_cli_on_the_trained_checkpoint(tiny_run, tmp_path):
 
 
 def test_table_conventions_na_x_and_seed_spread():
-    cfg = ReproduceConfig(systems=("furuta",), pairs=(("dln", "prop"), ("aph", "aph")), seeds=(0, 1, 2))
+    cfg = ReproduceSettings(systems=("furuta",), pairs=(("dln", "prop"), ("aph", "aph")), seeds=(0, 1, 2))
     good = {m: -2.0 for m in METRIC_COLUMNS["furuta"]}
     results = {
         ("furuta", "dln", "prop"): [
@@ -313,7 +313,7 @@ def test_cli_seeds_0_1_2_write_mean_and_spread_beside_the_paper(tiny_run, tmp_pa
 def test_the_main_claim_is_counted_seed_by_seed_with_several_seeds():
     from furuta_gym.training._reproduce_tables import _summary_lines
 
-    cfg = ReproduceConfig(systems=("furuta",), pairs=(("dln", "traj"), ("dln", "prop")), seeds=(0, 1, 2))
+    cfg = ReproduceSettings(systems=("furuta",), pairs=(("dln", "traj"), ("dln", "prop")), seeds=(0, 1, 2))
     good = {m: -2.0 for m in METRIC_COLUMNS["furuta"]}
     prop = [{label: {**good, "inertial": v} for label in ("Free", "Forced")} for v in (-3.0, -2.5, -1.0)]
     traj = [{label: {**good, "inertial": -2.0} for label in ("Free", "Forced")}] * 3
@@ -321,7 +321,7 @@ def test_the_main_claim_is_counted_seed_by_seed_with_several_seeds():
     lines = "\n".join(_summary_lines(rows, cfg))
     # the mean (-2.17) holds, on two of the three seeds
     assert "inertial -2.17 vs -2.00 (holds; on 2 of 3 seeds)" in lines
-    one = ReproduceConfig(systems=("furuta",), pairs=cfg.pairs)
+    one = ReproduceSettings(systems=("furuta",), pairs=cfg.pairs)
     lines = "\n".join(
         _summary_lines(
             build_tables({("furuta", "dln", "prop"): prop[:1], ("furuta", "dln", "traj"): traj[:1]}, one), one
@@ -332,30 +332,30 @@ def test_the_main_claim_is_counted_seed_by_seed_with_several_seeds():
 
 def test_config_rejects_pairs_the_paper_does_not_report():
     with pytest.raises(ValueError, match="not one the paper reports"):
-        ReproduceConfig(pairs=(("dln", "aph"),))
+        ReproduceSettings(pairs=(("dln", "aph"),))
     with pytest.raises(ValueError, match="unknown system"):
-        ReproduceConfig(systems=("cartpole",))
+        ReproduceSettings(systems=("cartpole",))
 
 
 def test_full_run_gives_single_models_a_longer_itau_stage_and_overrides_win():
-    from furuta_gym.training.reproduce import FULL_PROP_EPOCHS, training_config
+    from furuta_gym.training.reproduce import FULL_PROP_EPOCHS, training_settings
 
-    full = ReproduceConfig()
-    adln = training_config("furuta", full, 0, "prop", "adln")
-    dln = training_config("furuta", full, 0, "prop", "dln")
+    full = ReproduceSettings()
+    adln = training_settings("furuta", full, 0, "prop", "adln")
+    dln = training_settings("furuta", full, 0, "prop", "dln")
     assert adln.epochs == (24000, *FULL_PROP_EPOCHS["furuta"][1:])
     assert dln.epochs == (12000, *FULL_PROP_EPOCHS["furuta"][1:])
-    assert training_config("furuta", full, 0, "prop", "aph").epochs == FULL_PROP_EPOCHS["furuta"]
-    assert training_config("nmsd", full, 0, "prop", "adln").epochs == FULL_PROP_EPOCHS["nmsd"]
-    assert training_config("nmsd", full, 0, "prop", "dln").epochs == (8000, *FULL_PROP_EPOCHS["nmsd"][1:])
+    assert training_settings("furuta", full, 0, "prop", "aph").epochs == FULL_PROP_EPOCHS["furuta"]
+    assert training_settings("nmsd", full, 0, "prop", "adln").epochs == FULL_PROP_EPOCHS["nmsd"]
+    assert training_settings("nmsd", full, 0, "prop", "dln").epochs == (8000, *FULL_PROP_EPOCHS["nmsd"][1:])
     # the baselines, --quick and an explicit schedule are not touched
     assert (
-        training_config("furuta", full, 0, "aph", "adln").epochs
-        == training_config("furuta", full, 0, "aph", "aph").epochs
+        training_settings("furuta", full, 0, "aph", "adln").epochs
+        == training_settings("furuta", full, 0, "aph", "aph").epochs
     )
-    assert training_config("furuta", ReproduceConfig(quick=True), 0, "prop", "adln").epochs == (300, 4, 1)
-    own = ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})
-    assert training_config("furuta", own, 0, "prop", "adln").epochs == (50, 2, 1)
+    assert training_settings("furuta", ReproduceSettings(quick=True), 0, "prop", "adln").epochs == (300, 4, 1)
+    own = ReproduceSettings(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})
+    assert training_settings("furuta", own, 0, "prop", "adln").epochs == (50, 2, 1)
 
 
 def test_full_run_fine_tunes_at_smaller_steps_where_the_recipe_says_so():
@@ -363,9 +363,9 @@ def test_full_run_fine_tunes_at_smaller_steps_where_the_recipe_says_so():
     at FULL_PROP_FINETUNE_LEARNING_RATE after the L_Iτ stage's own rate; the N-MSD DeLaN and
     augmented DeLaN, the baselines, --quick, an explicit schedule and an explicit learning_rate
     keep what they had."""
-    from furuta_gym.training.reproduce import FULL_PROP_FINETUNE_LEARNING_RATE, training_config
+    from furuta_gym.training.reproduce import FULL_PROP_FINETUNE_LEARNING_RATE, training_settings
 
-    full = ReproduceConfig()
+    full = ReproduceSettings()
     for system, kind, itau_step in (
         ("furuta", "adln", 1e-3),
         ("furuta", "dln", 1e-3),
@@ -374,14 +374,14 @@ def test_full_run_fine_tunes_at_smaller_steps_where_the_recipe_says_so():
     ):
         step = FULL_PROP_FINETUNE_LEARNING_RATE[(system, kind)]
         assert step < 1e-3
-        assert training_config(system, full, 0, "prop", kind).learning_rate == (itau_step, step, step)
-    assert training_config("nmsd", full, 0, "prop", "adln").learning_rate == (1e-2, 1e-3, 1e-3)
-    assert training_config("furuta", full, 0, "aph", "adln").learning_rate == 1e-3
-    assert training_config("furuta", ReproduceConfig(quick=True), 0, "prop", "adln").learning_rate == 1e-3
-    own = ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})
-    assert training_config("furuta", own, 0, "prop", "adln").learning_rate == 1e-3
-    rate = ReproduceConfig(train_overrides={"learning_rate": 3e-3})
-    assert training_config("furuta", rate, 0, "prop", "adln").learning_rate == 3e-3
+        assert training_settings(system, full, 0, "prop", kind).learning_rate == (itau_step, step, step)
+    assert training_settings("nmsd", full, 0, "prop", "adln").learning_rate == (1e-2, 1e-3, 1e-3)
+    assert training_settings("furuta", full, 0, "aph", "adln").learning_rate == 1e-3
+    assert training_settings("furuta", ReproduceSettings(quick=True), 0, "prop", "adln").learning_rate == 1e-3
+    own = ReproduceSettings(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)})
+    assert training_settings("furuta", own, 0, "prop", "adln").learning_rate == 1e-3
+    rate = ReproduceSettings(train_overrides={"learning_rate": 3e-3})
+    assert training_settings("furuta", rate, 0, "prop", "adln").learning_rate == 3e-3
 
 
 def test_full_run_gives_single_l_prop_models_their_own_quadrature_and_overrides_win(tmp_path):
@@ -390,28 +390,28 @@ def test_full_run_gives_single_l_prop_models_their_own_quadrature_and_overrides_
     --quick, an own schedule) keeps REPRODUCE_QUADRATURE, --quadrature sets every run's, and the
     run record says which model used what."""
     from furuta_gym.training._reproduce_run_record import _write_run_record
-    from furuta_gym.training.reproduce import FULL_PROP_QUADRATURE, REPRODUCE_QUADRATURE, training_config
+    from furuta_gym.training.reproduce import FULL_PROP_QUADRATURE, REPRODUCE_QUADRATURE, training_settings
 
-    full = ReproduceConfig()
+    full = ReproduceSettings()
     assert FULL_PROP_QUADRATURE
     for (system, kind), rule in FULL_PROP_QUADRATURE.items():
         assert rule != REPRODUCE_QUADRATURE
-        assert training_config(system, full, 0, "prop", kind).quadrature == rule
+        assert training_settings(system, full, 0, "prop", kind).quadrature == rule
         for loss in ("traj", "aph"):
-            assert training_config(system, full, 0, loss, kind).quadrature == REPRODUCE_QUADRATURE
+            assert training_settings(system, full, 0, loss, kind).quadrature == REPRODUCE_QUADRATURE
         for other in (
-            ReproduceConfig(quick=True),
-            ReproduceConfig(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)}),
+            ReproduceSettings(quick=True),
+            ReproduceSettings(prop_epochs={"furuta": (50, 2, 1), "nmsd": (50, 2, 1)}),
         ):
-            assert training_config(system, other, 0, "prop", kind).quadrature == REPRODUCE_QUADRATURE
-        forced = ReproduceConfig(train_overrides={"quadrature": "trapezoid"})
-        assert training_config(system, forced, 0, "prop", kind).quadrature == "trapezoid"
+            assert training_settings(system, other, 0, "prop", kind).quadrature == REPRODUCE_QUADRATURE
+        forced = ReproduceSettings(train_overrides={"quadrature": "trapezoid"})
+        assert training_settings(system, forced, 0, "prop", kind).quadrature == "trapezoid"
     untouched = [
         (s, k) for s in ("furuta", "nmsd") for k in ("dln", "aph", "adln") if (s, k) not in FULL_PROP_QUADRATURE
     ]
     assert untouched
     for system, kind in untouched:
-        assert training_config(system, full, 0, "prop", kind).quadrature == REPRODUCE_QUADRATURE
+        assert training_settings(system, full, 0, "prop", kind).quadrature == REPRODUCE_QUADRATURE
     record = json.loads(_write_run_record(tmp_path / "run.json", full, "test", {}, {}).read_text())
     assert record["quadrature"] == REPRODUCE_QUADRATURE
     assert record["quadrature_by_model"] == {f"{s}/{k}": r for (s, k), r in FULL_PROP_QUADRATURE.items()}
@@ -422,17 +422,17 @@ def test_full_run_gives_single_l_prop_models_their_own_quadrature_and_overrides_
 def test_runs_record_the_augmentation_weight_they_used():
     """μ is written into each L_prop run's settings (not left to a None default), per system and
     kind; an explicit override wins; models without F_a and the baselines carry none."""
-    from furuta_gym.training.reproduce import training_config
+    from furuta_gym.training.reproduce import training_settings
     from furuta_gym.training.train import AUGMENTATION_WEIGHT
 
-    full = ReproduceConfig()
+    full = ReproduceSettings()
     for (system, kind), mu in AUGMENTATION_WEIGHT.items():
-        assert training_config(system, full, 0, "prop", kind).augmentation_weight == mu
+        assert training_settings(system, full, 0, "prop", kind).augmentation_weight == mu
     assert AUGMENTATION_WEIGHT[("furuta", "adln")] != AUGMENTATION_WEIGHT[("nmsd", "adln")]
-    assert training_config("furuta", full, 0, "prop", "dln").augmentation_weight is None
-    assert training_config("furuta", full, 0, "aph", "adln").augmentation_weight is None
-    own = ReproduceConfig(train_overrides={"augmentation_weight": 0.5})
-    assert training_config("furuta", own, 0, "prop", "adln").augmentation_weight == 0.5
+    assert training_settings("furuta", full, 0, "prop", "dln").augmentation_weight is None
+    assert training_settings("furuta", full, 0, "aph", "adln").augmentation_weight is None
+    own = ReproduceSettings(train_overrides={"augmentation_weight": 0.5})
+    assert training_settings("furuta", own, 0, "prop", "adln").augmentation_weight == 0.5
 
 
 def test_run_records_compare_within_their_form_and_a_later_setting_as_its_default():
@@ -441,7 +441,7 @@ def test_run_records_compare_within_their_form_and_a_later_setting_as_its_defaul
     hyper-parameter it lacks makes it another model."""
     from furuta_gym.training.reproduce import RUN_RECORD_SCHEMA, run_settings, same_settings
 
-    current = run_settings("furuta", "adln", "prop", 0, ReproduceConfig())
+    current = run_settings("furuta", "adln", "prop", 0, ReproduceSettings())
     assert current["schema"] == RUN_RECORD_SCHEMA == 1
     unversioned = {k: v for k, v in current.items() if k != "schema"}
     assert same_settings(unversioned, current)
@@ -458,14 +458,14 @@ def test_run_records_compare_within_their_form_and_a_later_setting_as_its_defaul
 def test_cli_quadrature_reaches_every_run_and_the_default_is_the_recipe():
     from furuta_gym.cli import build_parser
     from furuta_gym.cli.reproduce import config_from_args
-    from furuta_gym.training.reproduce import REPRODUCE_QUADRATURE, training_config
+    from furuta_gym.training.reproduce import REPRODUCE_QUADRATURE, training_settings
 
     parser = build_parser()
     _, config = config_from_args(parser.parse_args(["reproduce", "--quadrature", "hermite", "--system", "furuta"]))
     for kind, loss in config.pairs:  # L_Iτ and, for the Furuta, every run's scale fit
-        assert training_config("furuta", config, 0, loss, kind).quadrature == "hermite"
+        assert training_settings("furuta", config, 0, loss, kind).quadrature == "hermite"
     _, default = config_from_args(parser.parse_args(["reproduce"]))
-    assert training_config("nmsd", default, 0, "prop", "dln").quadrature == REPRODUCE_QUADRATURE
+    assert training_settings("nmsd", default, 0, "prop", "dln").quadrature == REPRODUCE_QUADRATURE
     with pytest.raises(SystemExit):
         parser.parse_args(["reproduce", "--quadrature", "boole"])
 
@@ -494,9 +494,9 @@ def test_cli_executor_options_and_what_a_ray_worker_is_told():
     _, default = config_from_args(parser.parse_args(["reproduce"]))
     assert (default.executor, default.address) == ("local", None)  # the local pool stays the default
     with pytest.raises(ValueError, match="executor"):
-        ReproduceConfig(executor="dask")
+        ReproduceSettings(executor="dask")
     with pytest.raises(ValueError, match="needs executor='ray'"):
-        ReproduceConfig(address="auto")
+        ReproduceSettings(address="auto")
     # a task's threads follow its CPU request; the node's other XLA flags and the caches stay,
     # after the thread setting, and a word XLA would stop reading at (not a -- flag) is dropped
     env = worker_env(
@@ -537,11 +537,11 @@ def test_model_overrides_reach_the_recorded_architecture_and_refuse_unknown_keys
 def test_quick_runs_compile_their_steps_fast_and_full_runs_do_not():
     """--quick trains a few hundred steps per model, so its steps are compiled unoptimised
     (``fast_compile``); the full run's are not."""
-    from furuta_gym.training.reproduce import training_config
+    from furuta_gym.training.reproduce import training_settings
 
     for kind, loss in (("dln", "traj"), ("adln", "prop"), ("aph", "aph")):
-        assert training_config("furuta", ReproduceConfig(quick=True), 0, loss, kind).fast_compile
-        assert not training_config("furuta", ReproduceConfig(), 0, loss, kind).fast_compile
+        assert training_settings("furuta", ReproduceSettings(quick=True), 0, loss, kind).fast_compile
+        assert not training_settings("furuta", ReproduceSettings(), 0, loss, kind).fast_compile
 
 
 @pytest.mark.parametrize(
@@ -563,7 +563,7 @@ def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path, system, fi
     """A selection run (split="validation") trains on the same training data, fits the Furuta scale
     on val_scale_fit and scores the validation sets only: no test file, no test label, no paper
     value; its runs record the split, so a test run never reuses them (and vice versa)."""
-    config = ReproduceConfig(
+    config = ReproduceSettings(
         quick=True,
         systems=(system,),
         pairs=(("dln", "prop"),),
@@ -588,7 +588,7 @@ def test_a_validation_run_never_writes_or_scores_a_test_set(tmp_path, system, fi
     with pytest.raises(ValueError, match="split='validation' .this run: 'test'."):
         reproduce(tmp_path, dataclasses.replace(config, split="test"), log=lambda msg: None)
     with pytest.raises(ValueError, match="split must be one of"):
-        ReproduceConfig(split="train")
+        ReproduceSettings(split="train")
 
 
 def test_a_validation_run_fits_the_furuta_scale_on_its_own_forced_set_and_a_test_run_on_the_test_one():
@@ -599,13 +599,13 @@ def test_a_validation_run_fits_the_furuta_scale_on_its_own_forced_set_and_a_test
 
     data = {name: [name] for name in (*DATASET_NAMES["furuta"], *VALIDATION_NAMES["furuta"])}
     for split, expected in (("test", "scale_fit"), ("validation", "val_scale_fit")):
-        config = ReproduceConfig(systems=("furuta",), split=split)
+        config = ReproduceSettings(systems=("furuta",), split=split)
         assert _training_data("furuta", data, config)[1] == [expected]
     del data["val_scale_fit"]
     with pytest.raises(ValueError, match="furuta validation data: no 'val_scale_fit' set to fit the scale on"):
-        _training_data("furuta", data, ReproduceConfig(systems=("furuta",), split="validation"))
+        _training_data("furuta", data, ReproduceSettings(systems=("furuta",), split="validation"))
     nmsd = {name: [name] for name in (*DATASET_NAMES["nmsd"], *VALIDATION_NAMES["nmsd"])}
-    assert _training_data("nmsd", nmsd, ReproduceConfig(systems=("nmsd",), split="validation"))[1] is None
+    assert _training_data("nmsd", nmsd, ReproduceSettings(systems=("nmsd",), split="validation"))[1] is None
 
 
 def _decision_log_rows() -> list[str]:

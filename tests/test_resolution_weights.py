@@ -1,5 +1,5 @@
 """L_Iτ weighted by how well the sampling resolves each interval's motion
-(``TrainConfig.resolution_tolerance``; :func:`furuta_gym.training.losses.resolution_weights`)."""
+(``TrainSettings.resolution_tolerance``; :func:`furuta_gym.training.losses.resolution_weights`)."""
 
 import jax
 import numpy as np
@@ -10,7 +10,7 @@ from furuta_gym.lagrangian import quadrature_consistency
 from furuta_gym.models import NMSD, Furuta, FurutaParameters, make_model
 from furuta_gym.simulate import simulate
 from furuta_gym.training.losses import integral_loss_terms, make_windows, resolution_weights
-from furuta_gym.training.train import TrainConfig, train
+from furuta_gym.training.train import TrainSettings, train
 
 DT = 0.01
 
@@ -88,7 +88,7 @@ def test_weighted_itau_stays_scale_free_on_free_data(furuta_data):
 
 def test_tolerance_must_be_positive():
     with pytest.raises(ValueError, match="resolution_tolerance must be positive or None, got 0"):
-        TrainConfig(resolution_tolerance=0.0)
+        TrainSettings(resolution_tolerance=0.0)
     tr = _whirl(NMSD(), [0.5, 0.0], seconds=0.5)
     with pytest.raises(ValueError, match="resolution_tolerance must be positive or None, got -1"):
         integral_loss_terms(NMSD(), make_windows([tr], 11, stride=10), resolution_tolerance=-1.0)
@@ -96,7 +96,7 @@ def test_tolerance_must_be_positive():
 
 def test_training_with_the_weighting_records_it_and_lowers_itau(tmp_path):
     trs = [_whirl(NMSD(), [a, b], seconds=1.0) for a, b in [(0.8, 0.0), (-0.5, 2.0), (0.2, -3.0)]]
-    cfg = TrainConfig.for_system(
+    cfg = TrainSettings.for_system(
         "nmsd",
         epochs=(30,),
         horizons=(None,),

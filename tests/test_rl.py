@@ -16,10 +16,10 @@ import equinox as eqx
 
 import furuta_gym  # noqa: F401  (registers the envs)
 from furuta_gym.envs import functional
-from furuta_gym.rl import GymnasiumPolicy, PPOConfig, episode_returns, train_ppo
+from furuta_gym.rl import GymnasiumPolicy, PPOSettings, episode_returns, train_ppo
 
 SWINGUP = "furuta_gym/FurutaSwingUp-v0"
-SHORT = PPOConfig(total_timesteps=196_608, num_envs=128, num_steps=128)
+SHORT = PPOSettings(total_timesteps=196_608, num_envs=128, num_steps=128)
 #: seeds 0-4 of SHORT, 32 evaluation episodes each: the random policy returns 14.6, the trained
 #: deterministic policies 84-117 (5.8-8.0 times as much); the full example run returns 466
 MARGIN = 4.0
@@ -63,7 +63,7 @@ def test_the_policy_runs_on_the_gymnasium_mujoco_env_through_the_adapter(trained
 def test_ppo_trains_on_a_gymnax_env_unchanged():
     gymnax = pytest.importorskip("gymnax")
     env, params = gymnax.make("Pendulum-v1")
-    config = PPOConfig(total_timesteps=8192, num_envs=16, num_steps=64, num_minibatches=4)
+    config = PPOSettings(total_timesteps=8192, num_envs=16, num_steps=64, num_minibatches=4)
     policy, metrics = eqx.filter_jit(lambda key: train_ppo(env, params, config, key))(jax.random.PRNGKey(0))
     obs, _ = env.reset(jax.random.PRNGKey(1), params)
     assert policy(obs).shape == (1,) and np.all(np.isfinite(np.asarray(metrics["return"])))

@@ -11,7 +11,8 @@ from furuta_gym.envs import EnvArgumentError, FurutaEnv, Sensors
 from furuta_gym.models import Furuta
 from furuta_gym.signals import ENCODER_COUNTS_PER_REV
 from furuta_gym.systems import get_spec
-from furuta_gym.training.datagen import FurutaRecipe, SensorOptions, generate_datasets
+from furuta_gym.training import datagen
+from furuta_gym.training.datagen import FurutaRecipe, generate_datasets
 
 FURUTA, NMSD = get_spec("furuta"), get_spec("nmsd")
 
@@ -19,11 +20,6 @@ FURUTA, NMSD = get_spec("furuta"), get_spec("nmsd")
 def test_one_type_across_the_layers():
     assert Sensors is spine.Sensors and EnvArgumentError is spine.SettingsError
     assert Sensor() == Sensors.qube() == Sensors(encoder_counts=ENCODER_COUNTS_PER_REV, velocity="filter")
-    options = SensorOptions(quantize=True, noise_std=0.01, velocity="filter", filter_omega0=80.0)
-    assert options.sensors == Sensors(
-        encoder_counts=2048, measurement_noise=(0.01, 0.0), velocity="filter", filter_omega0=80.0
-    )
-    assert SensorOptions().sensors.exact and SensorOptions().is_exact and not options.is_exact
     env = FurutaEnv(sensors=Sensors(encoder_counts=1024, measurement_noise=(0.0, 1e-3)))
     # what the batched envs read of their template, from its settings
     np.testing.assert_array_equal(env.encoder_steps, [2 * np.pi / 1024] * 2)
@@ -52,7 +48,8 @@ def _moving_ground_truth(x0s, t, us):
 
 
 def test_the_data_generation_measures_with_the_same_type():
-    """A Sensors given to the generator measures as the SensorOptions that describe it, bit for bit."""
+    """The generators take the one sensor model; the options object they took before (its old name
+    still served, deprecated) measures as the Sensors it describes, bit for bit."""
     recipe = FurutaRecipe(
         n_train=2,
         n_test_free=1,
@@ -61,7 +58,9 @@ def test_the_data_generation_measures_with_the_same_type():
         test_forced_duration=1.0,
         scale_fit_duration=1.0,
     )
-    options = SensorOptions(quantize=True, noise_std=1e-3, velocity="filter")
+    with pytest.warns(DeprecationWarning, match="furuta_gym.sensors.Sensors"):
+        options = datagen.SensorOptions(quantize=True, noise_std=1e-3, velocity="filter")
+    assert options.sensors == Sensors.qube(measurement_noise=(1e-3, 0.0))
     kw = dict(recipe=recipe, ground_truth=_moving_ground_truth, seed=4)
     a = generate_datasets("furuta", sensor=options, **kw)
     b = generate_datasets("furuta", sensor=options.sensors, **kw)

@@ -18,7 +18,7 @@ from furuta_gym.training.losses import (
     make_windows,
     trajectory_loss,
 )
-from furuta_gym.training.train import TrainConfig, fit_scale, train, training_step
+from furuta_gym.training.train import TrainSettings, fit_scale, train, training_step
 
 DT = 0.01
 
@@ -97,7 +97,7 @@ def test_every_loss_gradient_is_finite_and_matches_finite_differences(nmsd_data)
 
 def test_short_nmsd_training_with_l_prop_lowers_losses_and_held_out_error(nmsd_data, tmp_path):
     train_set, held_out = nmsd_data
-    config = TrainConfig(
+    config = TrainSettings(
         epochs=(16,),
         horizons=(2,),
         learning_rate=1e-2,
@@ -126,7 +126,7 @@ def test_training_step_lowers_its_loss_and_refuses_an_unknown_one(nmsd_data):
     is one clear error."""
     train_set, _ = nmsd_data
     model = make_model("nmsd", "dln", jax.random.PRNGKey(0), hidden=(8, 8))
-    step, params, opt_state = training_step(model, TrainConfig(progress=False), "itau")
+    step, params, opt_state = training_step(model, TrainSettings(progress=False), "itau")
     windows = make_windows(train_set, 11, stride=10, cover_end=True)
     lam, lr = jnp.asarray(0.0), jnp.asarray(3e-3)
     first = None
@@ -136,13 +136,13 @@ def test_training_step_lowers_its_loss_and_refuses_an_unknown_one(nmsd_data):
         first = float(losses["itau"]) if first is None else first
     assert float(losses["itau"]) < 0.8 * first  # 20 steps halve it; a broken step leaves it
     with pytest.raises(ValueError, match="loss: expected one of"):
-        training_step(model, TrainConfig(progress=False), "l2")
+        training_step(model, TrainSettings(progress=False), "l2")
 
 
 def _itau_config(**kw):
     base = dict(epochs=(4,), horizons=(2,), learning_rate=5e-3, progress=False, integral_batch_size=3)
     base.update(kw)
-    return TrainConfig(**base)
+    return TrainSettings(**base)
 
 
 def test_resume_continues_the_same_optimiser_state(nmsd_data, tmp_path):

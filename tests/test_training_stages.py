@@ -12,7 +12,7 @@ import pytest
 
 from _simulated import nmsd_chirp_segments
 from furuta_gym.models import make_model
-from furuta_gym.training.train import TrainConfig, _integral_windows, train, training_step
+from furuta_gym.training.train import TrainSettings, _integral_windows, train, training_step
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +21,7 @@ def segments():
 
 
 def test_an_itau_stage_then_prop_stages(segments, tmp_path):
-    cfg = TrainConfig.for_system(
+    cfg = TrainSettings.for_system(
         "nmsd",
         epochs=(30, 2),
         horizons=(None, 2),
@@ -43,7 +43,7 @@ def test_an_itau_stage_then_prop_stages(segments, tmp_path):
 
 
 def test_a_stage_without_horizon_needs_the_integral_loss(segments):
-    cfg = TrainConfig.for_system("nmsd", epochs=(1, 1), horizons=(None, 2), progress=False)
+    cfg = TrainSettings.for_system("nmsd", epochs=(1, 1), horizons=(None, 2), progress=False)
     with pytest.raises(ValueError, match="L_Iτ alone.*'traj'"):
         train("dln", "nmsd", "traj", segments, cfg)
 
@@ -51,9 +51,9 @@ def test_a_stage_without_horizon_needs_the_integral_loss(segments):
 def test_learning_rate_per_stage(segments):
     """One rate per stage: a second stage at a vanishing rate leaves the first stage's model."""
     with pytest.raises(ValueError, match="one value or one per stage"):
-        TrainConfig(epochs=(1, 1), horizons=(None, 2), learning_rate=(1e-3,))
+        TrainSettings(epochs=(1, 1), horizons=(None, 2), learning_rate=(1e-3,))
     with pytest.raises(ValueError, match="must be positive"):
-        TrainConfig(epochs=(1,), horizons=(2,), learning_rate=(0.0,))
+        TrainSettings(epochs=(1,), horizons=(2,), learning_rate=(0.0,))
     base = dict(horizons=(None, None), quadrature="simpson", progress=False, checkpoint_every=0)
     hp = dict(hidden=(8, 8))
     two, _ = train(
@@ -61,7 +61,7 @@ def test_learning_rate_per_stage(segments):
         "nmsd",
         "prop",
         segments,
-        TrainConfig.for_system("nmsd", epochs=(5, 5), learning_rate=(1e-2, 1e-15), **base),
+        TrainSettings.for_system("nmsd", epochs=(5, 5), learning_rate=(1e-2, 1e-15), **base),
         hparams=hp,
     )
     one, _ = train(
@@ -69,7 +69,7 @@ def test_learning_rate_per_stage(segments):
         "nmsd",
         "prop",
         segments,
-        TrainConfig.for_system("nmsd", epochs=(5, 0), learning_rate=1e-2, **base),
+        TrainSettings.for_system("nmsd", epochs=(5, 0), learning_rate=1e-2, **base),
         hparams=hp,
     )
     fast, _ = train(
@@ -77,7 +77,7 @@ def test_learning_rate_per_stage(segments):
         "nmsd",
         "prop",
         segments,
-        TrainConfig.for_system("nmsd", epochs=(5, 5), learning_rate=1e-2, **base),
+        TrainSettings.for_system("nmsd", epochs=(5, 5), learning_rate=1e-2, **base),
         hparams=hp,
     )
     a, b, c = (np.asarray(m.lagrangian_nets.potential_net.layers[0].weight) for m in (two, one, fast))
@@ -89,7 +89,7 @@ def test_cosine_decay_within_each_stage(segments):
     """Each stage's step falls from its rate to cosine_decay_to × rate along a cosine, and a stage
     restarts at its own rate; the training loop uses that step (a last epoch decayed to nothing
     leaves the model of the epoch before)."""
-    cfg = TrainConfig(epochs=(5, 3), horizons=(None, 2), learning_rate=(1e-2, 1e-3), cosine_decay_to=0.01)
+    cfg = TrainSettings(epochs=(5, 3), horizons=(None, 2), learning_rate=(1e-2, 1e-3), cosine_decay_to=0.01)
     rates = [cfg.epoch_learning_rate(e) for e in range(8)]
     np.testing.assert_allclose(
         rates,
@@ -105,11 +105,11 @@ def test_cosine_decay_within_each_stage(segments):
         ],
         rtol=1e-12,
     )
-    constant = TrainConfig(epochs=(5, 3), horizons=(None, 2), learning_rate=(1e-2, 1e-3))
+    constant = TrainSettings(epochs=(5, 3), horizons=(None, 2), learning_rate=(1e-2, 1e-3))
     assert [constant.epoch_learning_rate(e) for e in range(8)] == [1e-2] * 5 + [1e-3] * 3
     for bad in (0.0, 1.5, -0.1):
         with pytest.raises(ValueError, match="cosine_decay_to must be in"):
-            TrainConfig(epochs=(1,), horizons=(2,), cosine_decay_to=bad)
+            TrainSettings(epochs=(1,), horizons=(2,), cosine_decay_to=bad)
     with pytest.raises(ValueError, match="outside the 8 epochs"):
         cfg.epoch_learning_rate(8)
 
@@ -127,11 +127,11 @@ def test_cosine_decay_within_each_stage(segments):
         "nmsd",
         "prop",
         segments,
-        TrainConfig.for_system("nmsd", epochs=(2,), cosine_decay_to=1e-15, **base),
+        TrainSettings.for_system("nmsd", epochs=(2,), cosine_decay_to=1e-15, **base),
         hparams=hp,
     )
-    one, _ = train("dln", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", epochs=(1,), **base), hparams=hp)
-    two, _ = train("dln", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", epochs=(2,), **base), hparams=hp)
+    one, _ = train("dln", "nmsd", "prop", segments, TrainSettings.for_system("nmsd", epochs=(1,), **base), hparams=hp)
+    two, _ = train("dln", "nmsd", "prop", segments, TrainSettings.for_system("nmsd", epochs=(2,), **base), hparams=hp)
     a, b, c = (np.asarray(m.lagrangian_nets.potential_net.layers[0].weight) for m in (decayed, one, two))
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     assert np.max(np.abs(c - b)) > 1e-4
@@ -151,14 +151,14 @@ def test_a_full_batch_itau_stage_hands_on_its_lowest_loss_iterate(segments):
     of its lowest recorded loss (bit for bit the model after that many epochs), not the last."""
     hp = dict(hidden=(8, 8))
     best, history = train(
-        "dln", "nmsd", "prop", segments, TrainConfig.for_system("nmsd", epochs=(12,), **SPIKY), hparams=hp
+        "dln", "nmsd", "prop", segments, TrainSettings.for_system("nmsd", epochs=(12,), **SPIKY), hparams=hp
     )
     last, history_last = train(
         "dln",
         "nmsd",
         "prop",
         segments,
-        TrainConfig.for_system("nmsd", epochs=(12,), keep_best_itau=False, **SPIKY),
+        TrainSettings.for_system("nmsd", epochs=(12,), keep_best_itau=False, **SPIKY),
         hparams=hp,
     )
     totals = [h["total"] for h in history]
@@ -172,7 +172,7 @@ def test_a_full_batch_itau_stage_hands_on_its_lowest_loss_iterate(segments):
         "nmsd",
         "prop",
         segments,
-        TrainConfig.for_system("nmsd", epochs=(after,), keep_best_itau=False, **SPIKY),
+        TrainSettings.for_system("nmsd", epochs=(after,), keep_best_itau=False, **SPIKY),
         hparams=hp,
     )
     np.testing.assert_array_equal(_weights(best), _weights(reference))
@@ -188,7 +188,7 @@ def test_resuming_mid_stage_keeps_the_best_iterate(segments, tmp_path, monkeypat
     from furuta_gym.training import checkpoint as ckpt
 
     hp = dict(hidden=(8, 8))
-    cfg = TrainConfig.for_system("nmsd", epochs=(12,), **SPIKY)
+    cfg = TrainSettings.for_system("nmsd", epochs=(12,), **SPIKY)
     straight, h_straight = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "a", hparams=hp)
     saves = {"n": 0}
     original = ckpt.save_training_state
@@ -225,7 +225,7 @@ def test_a_one_epoch_itau_stage_keeps_its_step_when_it_lowered_the_loss(segments
         "nmsd",
         "prop",
         segments,
-        TrainConfig.for_system("nmsd", epochs=(1,), learning_rate=1e-3, **cfg),
+        TrainSettings.for_system("nmsd", epochs=(1,), learning_rate=1e-3, **cfg),
         hparams=hp,
     )
     plain, _ = train(
@@ -233,7 +233,7 @@ def test_a_one_epoch_itau_stage_keeps_its_step_when_it_lowered_the_loss(segments
         "nmsd",
         "prop",
         segments,
-        TrainConfig.for_system("nmsd", epochs=(1,), learning_rate=1e-3, keep_best_itau=False, **cfg),
+        TrainSettings.for_system("nmsd", epochs=(1,), learning_rate=1e-3, keep_best_itau=False, **cfg),
         hparams=hp,
     )
     assert history[-1]["best_after_epoch"] == 1 and history[-1]["best_total"] < history[-1]["total"]
@@ -246,7 +246,7 @@ def test_itau_epochs_in_compiled_blocks_are_the_per_epoch_steps(segments, tmp_pa
     run equals those steps taken one by one (to rounding), and a run stopped between two blocks
     and resumed equals a run never stopped bit for bit, whatever lengths its blocks had."""
     hp = dict(hidden=(8, 8))
-    cfg = TrainConfig.for_system("nmsd", epochs=(11,), keep_best_itau=False, **{**SPIKY, "learning_rate": 1e-2})
+    cfg = TrainSettings.for_system("nmsd", epochs=(11,), keep_best_itau=False, **{**SPIKY, "learning_rate": 1e-2})
     blocked, history = train("dln", "nmsd", "prop", segments, cfg, out_dir=tmp_path / "a", hparams=hp)
     assert [h["steps"] for h in history] == [1] * 11 and len({h["total"] for h in history}) == 11
 

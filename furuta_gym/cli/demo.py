@@ -23,9 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from ..demo import DemoConfig, run_demo
+    from ..demo import DemoSettings, run_demo
 
-    cfg = DemoConfig.tiny() if args.tiny else DemoConfig()
+    cfg = DemoSettings.tiny() if args.tiny else DemoSettings()
     cfg = dataclasses.replace(cfg, seed=args.seed, video=cfg.video and not args.no_video)
     run_demo(args.out, cfg, progress=not args.no_progress, overwrite=args.overwrite)
     return 0

@@ -45,13 +45,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..training.datagen import SensorOptions, generate
+    from ..sensors import Sensors
+    from ..signals import ENCODER_COUNTS_PER_REV
+    from ..systems import get_spec
+    from ..training.datagen import generate
 
-    sensor = SensorOptions(
-        quantize=args.quantize,
-        noise_std=args.noise,
+    if args.velocity_noise and args.velocity == "filter":
+        raise ValueError("--velocity-noise applies to exact velocities, not --velocity filter")
+    spec = get_spec(args.system)
+    if args.quantize and not any(spec.angular):
+        raise ValueError(
+            f"--quantize: {spec.name} has no encoder angles to quantise (its joints are {spec.joint_names})"
+        )
+    sensor = Sensors(
+        encoder_counts=ENCODER_COUNTS_PER_REV if args.quantize else None,
+        measurement_noise=(args.noise, args.velocity_noise),
         velocity=args.velocity,
-        velocity_noise_std=args.velocity_noise,
     )
     paths = generate(
         args.system,

@@ -168,14 +168,14 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _train_overrides(args) -> dict | None:
-    """The TrainConfig fields the command line sets for every run (None: the recipe's)."""
+    """The TrainSettings fields the command line sets for every run (None: the recipe's)."""
     chosen = {"quadrature": args.quadrature, "normalize": args.itau_normalization}
     return {k: v for k, v in chosen.items() if v} or None
 
 
 def config_from_args(args: argparse.Namespace):
-    """``(output folder, ReproduceConfig)`` of parsed ``furuta-gym reproduce`` arguments."""
-    from ..training.reproduce import PAPER_PAIRS, ReproduceConfig
+    """``(output folder, ReproduceSettings)`` of parsed ``furuta-gym reproduce`` arguments."""
+    from ..training.reproduce import PAPER_PAIRS, ReproduceSettings
 
     jobs = args.jobs if args.jobs is not None else max(1, min(os.cpu_count() or 1, 8))
     if jobs < 1:
@@ -198,7 +198,7 @@ def config_from_args(args: argparse.Namespace):
             pairs.append((kind, loss))
         pairs = tuple(p for p in PAPER_PAIRS if p in set(pairs))  # the paper's row order
     out = Path(args.out) if args.out else Path("results") / ("reproduce_quick" if args.quick else "reproduce")
-    config = ReproduceConfig(
+    config = ReproduceSettings(
         quick=args.quick,
         seeds=seeds,
         data_seed=args.seed,

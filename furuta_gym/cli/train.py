@@ -87,6 +87,21 @@ def model_hparams(args: argparse.Namespace) -> dict | None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_run_arguments(parser)
+    _add_recipe_arguments(parser)
+    parser.add_argument("--checkpoint-every", type=int, help="model snapshot every N epochs")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_log_arguments(
+        parser,
+        None,
+        "cut each log into elementary trajectories of this many seconds (0: keep whole); default: "
+        "logs without velocities (measured) are cut as the paper cuts its experimental data, 1 s "
+        "Furuta (2 s N-MSD), and generated data carrying velocities are kept whole",
+    )
+
+
+def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """What is trained on what, and where it goes."""
     parser.add_argument("--system", required=True, choices=sorted(SYSTEMS))
     parser.add_argument(
         "--model", required=True, choices=["dln", "aph", "adln"], help="DeLaN, APHYNITY or augmented DeLaN"
@@ -113,6 +128,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
+
+
+def _add_recipe_arguments(parser: argparse.ArgumentParser) -> None:
+    """The training settings (default: the reproduction's recipe for the system)."""
     parser.add_argument(
         "--paper", action="store_true", help="the paper's recipe (50k+10k / 5k+1k epochs, full batch): hours on a CPU"
     )
@@ -149,15 +168,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hidden", type=_ints, help="MLP widths, e.g. 16,16")
     add_learned_spring_argument(parser)
     parser.add_argument("--seed", type=int, help="random seed (weights, shuffling)")
-    parser.add_argument("--checkpoint-every", type=int, help="model snapshot every N epochs")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_log_arguments(
-        parser,
-        None,
-        "cut each log into elementary trajectories of this many seconds (0: keep whole); default: "
-        "logs without velocities (measured) are cut as the paper cuts its experimental data, 1 s "
-        "Furuta (2 s N-MSD), and generated data carrying velocities are kept whole",
-    )
 
 
 def _describe_data(args, trajs, notes) -> dict:
@@ -179,12 +189,12 @@ def _describe_data(args, trajs, notes) -> dict:
 
 
 def _config(args, free_release: bool = False):
-    """The TrainConfig the options ask for; on measured free releases (``free_release``: logs
+    """The TrainSettings the options ask for; on measured free releases (``free_release``: logs
     whose velocities were estimated, no input anywhere) L_prop without ``--lambda`` takes the
     free-release λ."""
     from ..training.loss_kinds import loss_kind
     from ..training.recipe import FREE_RELEASE_LAMBDA
-    from ..training.train import TrainConfig
+    from ..training.train import TrainSettings
 
     overrides = {}
     for name, key in [
@@ -210,7 +220,7 @@ def _config(args, free_release: bool = False):
         overrides["lambda_traj"] = FREE_RELEASE_LAMBDA
         print(f"measured free releases: L_prop with λ = {FREE_RELEASE_LAMBDA:g} (--lambda to choose; docs/learning.md)")
     overrides["progress"] = not args.no_progress
-    make = TrainConfig.paper if args.paper else TrainConfig.for_system
+    make = TrainSettings.paper if args.paper else TrainSettings.for_system
     return make(args.system, **overrides)
 
 

@@ -1,5 +1,6 @@
 """Training learned Lagrangian models: data generation, losses, the training loop, checkpoints, metrics."""
 
+from .._deprecated import deprecated_names
 from .checkpoint import CheckpointError, load_model, read_header, save_model
 from .consistency import (
     DataCoverageWarning,
@@ -20,7 +21,7 @@ from .losses import (
     proposed_loss,
     trajectory_loss,
 )
-from .train import ScaleFit, ScaleFitWarning, TrainConfig, data_hash, fit_scale, train, training_step
+from .train import ScaleFit, ScaleFitWarning, TrainSettings, data_hash, fit_scale, train, training_step
 
 __all__ = [
     "CheckpointError",
@@ -49,8 +50,11 @@ __all__ = [
     "training_step",
     "ScaleFit",
     "ScaleFitWarning",
-    "TrainConfig",
+    "TrainSettings",
     "data_hash",
     "fit_scale",
     "train",
 ]
+
+
+__getattr__ = deprecated_names(__name__)

@@ -20,11 +20,11 @@ from ..effects import WithEffects
 from ..envs import Plant
 from ..models import LumpedSystem, analytic_model, system_definition
 from ..signals import zero_phase_velocity
-from ._reproduce_config import SCALE_FIT_SET, SENSORS, ReproduceConfig
+from ._reproduce_settings import SCALE_FIT_SET, SENSORS, ReproduceSettings
 from .datagen import MujocoGroundTruth, data_package_versions, generate
 
 
-def _datasets(system: str, out: Path, config: ReproduceConfig):
+def _datasets(system: str, out: Path, config: ReproduceSettings):
     """Generate (or reuse) the datasets of ``system`` under ``out/data/<system>``."""
     folder = out / "data" / system
     manifest = folder / "manifest.json"
@@ -54,12 +54,12 @@ def _datasets(system: str, out: Path, config: ReproduceConfig):
     return data, meta
 
 
-def _plant_json(config: ReproduceConfig) -> dict | None:
+def _plant_json(config: ReproduceSettings) -> dict | None:
     """The plant of ``config`` as JSON (what a data manifest records), or None."""
     return None if config.plant is None else json.loads(json.dumps(Plant.load(config.plant).to_json()))
 
 
-def _generate_data(system: str, folder: Path, config: ReproduceConfig) -> None:
+def _generate_data(system: str, folder: Path, config: ReproduceSettings) -> None:
     """Write the run's datasets of ``system`` to ``folder`` (with ``config``'s plant and sensor)."""
     truth = config.ground_truth
     if config.plant is not None:
@@ -81,7 +81,7 @@ def _generate_data(system: str, folder: Path, config: ReproduceConfig) -> None:
         path.write_text(json.dumps(meta, indent=2) + "\n")
 
 
-def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[str], config: ReproduceConfig) -> None:
+def _regenerate_data(system: str, folder: Path, meta: dict, missing: Sequence[str], config: ReproduceSettings) -> None:
     """Re-create data files a manifest lists but the folder lacks (a committed run keeps the
     manifest, not the CSVs): the data are seeded, so they must come out byte for byte as
     recorded; anything else is an error, never a silent change of the data under the models."""
@@ -113,7 +113,7 @@ def _version_differences(meta: dict) -> str:
     return "generated with " + ", ".join(diff) if diff else "same package versions as recorded"
 
 
-def _training_data(system: str, data: dict, config: ReproduceConfig):
+def _training_data(system: str, data: dict, config: ReproduceSettings):
     """``(training trajectories, scale-fit trajectories or None)`` as the run trains on them."""
     forced = None
     if system_definition(system).scale_fit_on_forced_data:
@@ -130,7 +130,7 @@ def _training_data(system: str, data: dict, config: ReproduceConfig):
     return offline(data["train"]), None if forced is None else offline(forced)
 
 
-def _worker_inputs(system: str, out: Path, config: ReproduceConfig):
+def _worker_inputs(system: str, out: Path, config: ReproduceSettings):
     """``(datasets, ground-truth model)`` of ``system`` in a worker process, read from what the
     parent generated under ``out``."""
     enable_x64()  # the parent already chose float64 (and said so): no second warning
@@ -138,7 +138,7 @@ def _worker_inputs(system: str, out: Path, config: ReproduceConfig):
     return data, truth_model(system, config)
 
 
-def truth_model(system: str, config: ReproduceConfig):
+def truth_model(system: str, config: ReproduceSettings):
     """What the physics columns compare with: the pinned analytic model, or the plant's model
     (its lumped parameters with its memoryless effects)."""
     if config.plant is None:

@@ -14,9 +14,9 @@ from typing import Any, Iterator
 
 from . import _ray_sweep, _reproduce_figures
 from ._labels import LOSS_LABELS, MODEL_LABELS
-from ._reproduce_config import ReproduceConfig
 from ._reproduce_data import _worker_inputs
 from ._reproduce_one_model import _run_task
+from ._reproduce_settings import ReproduceSettings
 
 #: Seconds one model takes (training + evaluation, one seed), as a full and a --quick run on a
 #: 2-core machine measured them (their run.json). Only the order in which a pool of jobs starts
@@ -54,13 +54,13 @@ EXPECTED_SECONDS = {
 }
 
 
-def _longest_first(tasks, config: ReproduceConfig) -> list:
+def _longest_first(tasks, config: ReproduceSettings) -> list:
     """``tasks`` in the order a pool should start them: longest expected first (ties: as given)."""
     table = EXPECTED_SECONDS["quick" if config.quick else "full"]
     return sorted(tasks, key=lambda t: -table.get(t[:3], 0))
 
 
-def _figures_task(system: str, out: Path, config: ReproduceConfig, data=None, truth=None):
+def _figures_task(system: str, out: Path, config: ReproduceSettings, data=None, truth=None):
     """The figures of one system (also the body of a worker process): ``(paths | error text,
     seconds)``. A failure is returned, not raised: figures must never lose the tables."""
     t0 = time.perf_counter()
@@ -74,7 +74,7 @@ def _figures_task(system: str, out: Path, config: ReproduceConfig, data=None, tr
     return result, round(time.perf_counter() - t0, 1)
 
 
-def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log) -> Iterator[tuple[str, Any, Any]]:
+def _run_all(tasks, out: Path, config: ReproduceSettings, loaded: dict, log) -> Iterator[tuple[str, Any, Any]]:
     """Yield ``("model", task, (metrics, seconds, status))`` for every task, ``config.jobs`` at a
     time (or as Ray schedules them), and with ``config.figures`` ``("figures", system, (paths |
     error, seconds))`` once per system, made as soon as that system's last model is done (in the
@@ -94,7 +94,7 @@ def _run_all(tasks, out: Path, config: ReproduceConfig, loaded: dict, log) -> It
         yield from _drain(executor, tasks, executor.folder(out), worker_config, report)
 
 
-def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, report):
+def _run_in_process(tasks, out: Path, config: ReproduceSettings, loaded: dict, report):
     """:func:`_run_all` one model after the other in this process, on the data it has loaded."""
     for task in tasks:
         system, kind, loss, seed = task
@@ -106,7 +106,7 @@ def _run_in_process(tasks, out: Path, config: ReproduceConfig, loaded: dict, rep
             yield "figures", system, _figures_task(system, out, config, loaded[system]["data"], loaded[system]["truth"])
 
 
-def require_executor(config: ReproduceConfig) -> None:
+def require_executor(config: ReproduceSettings) -> None:
     """Raise the ImportError :func:`worker_pool` would, before any work: ``executor="ray"`` without
     Ray installed (one line naming the ``[cluster]`` extra)."""
     if config.executor == "ray":
@@ -114,7 +114,7 @@ def require_executor(config: ReproduceConfig) -> None:
 
 
 @contextlib.contextmanager
-def worker_pool(config: ReproduceConfig) -> Iterator[Any]:
+def worker_pool(config: ReproduceSettings) -> Iterator[Any]:
     """The workers that train ``config``'s models, behind one interface: ``submit(fn, args,
     name)`` → a handle, ``first_done(handles)`` → the finished ones, ``result(handle)``, and
     ``folder(out)``: ``out`` as the workers must see it. A local pool of ``config.jobs`` processes,
@@ -151,7 +151,7 @@ class _PoolExecutor:
         return handle.result()
 
 
-def _drain(executor, tasks, out: Path, config: ReproduceConfig, report):
+def _drain(executor, tasks, out: Path, config: ReproduceSettings, report):
     """:func:`_run_all` on workers: every model submitted longest first, each system's figures
     submitted once its last model is done; events yielded as they finish."""
     left: dict[str, int] = {}

@@ -11,11 +11,11 @@ from typing import Any
 import jax
 
 from ..models import make_model, model_kind
-from ._reproduce_config import EVALUATION_SETS, FAILED, METRIC_COLUMNS, ReproduceConfig, training_config
 from ._reproduce_data import _training_data, _worker_inputs
+from ._reproduce_settings import EVALUATION_SETS, FAILED, METRIC_COLUMNS, ReproduceSettings, training_settings
 from .checkpoint import load_model, read_header
 from .metrics import evaluate_model, metrics_to_json
-from .train import MODEL_FILE, STATE_FILE, TrainConfig, train
+from .train import MODEL_FILE, STATE_FILE, TrainSettings, train
 
 #: The form of a run record (``reproduce_config.json``); a record without the key is form 1.
 #: A training setting added later whose default does what runs did before it needs nothing (the
@@ -24,11 +24,11 @@ from .train import MODEL_FILE, STATE_FILE, TrainConfig, train
 RUN_RECORD_SCHEMA = 1
 
 
-def run_settings(system: str, kind: str, loss: str, seed: int, config: ReproduceConfig) -> dict:
+def run_settings(system: str, kind: str, loss: str, seed: int, config: ReproduceSettings) -> dict:
     """What a run directory's ``reproduce_config.json`` records for this run — its training
     settings (the progress bar aside) and architecture — in JSON's own form (lists, not tuples),
     so it compares with a saved record as it is."""
-    train = training_config(system, config, seed, loss, kind).to_json()
+    train = training_settings(system, config, seed, loss, kind).to_json()
     train.pop("progress", None)
     settings = {
         "schema": RUN_RECORD_SCHEMA,
@@ -52,7 +52,7 @@ def same_settings(saved: dict, current: dict) -> bool:
     counts as its default (it was added later, with a default that keeps what runs did)."""
     if saved.get("schema", 1) != current.get("schema", 1):
         return False
-    defaults = json.loads(json.dumps(TrainConfig().to_json()))
+    defaults = json.loads(json.dumps(TrainSettings().to_json()))
     saved = {k: v for k, v in saved.items() if k != "schema"}
     current = {k: v for k, v in current.items() if k != "schema"}
     saved["train"] = dict(saved.get("train", {}))
@@ -78,21 +78,36 @@ def _default_hparams(system: str, kind: str, overrides: dict | None = None) -> d
     return json.loads(json.dumps(dict(model.hparams), default=str))
 
 
-def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceConfig, truth):
+def _check_saved_settings(run_dir: Path, cfg_json: dict) -> None:
+    """Refuse a run folder whose recorded settings (``reproduce_config.json``) are not these."""
+    cfg_path, model_path = run_dir / "reproduce_config.json", run_dir / MODEL_FILE
+    if not cfg_path.exists():
+        return
+    saved = json.loads(cfg_path.read_text())
+    if "model_hparams" not in saved and model_path.exists():
+        # a record from before the architecture was recorded: the checkpoint's header knows it
+        saved["model_hparams"] = json.loads(json.dumps(read_header(model_path).get("hparams", {}), default=str))
+    if not same_settings(saved, cfg_json):
+        raise ValueError(f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out")
+
+
+def _failed_metrics(system: str, config: ReproduceSettings, error: str) -> dict[str, Any]:
+    """A failed model's metrics: recorded, never hidden, every cell of it reads "fail" in the tables."""
+    metrics: dict[str, Any] = {
+        label: {m: FAILED for m in METRIC_COLUMNS[system]} for label in EVALUATION_SETS[config.split][system]
+    }
+    metrics["_error"] = error
+    return metrics
+
+
+def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceSettings, truth):
     """Train (or resume / reuse) one model and evaluate it; returns its metrics dict."""
     metrics_path = run_dir / "metrics.json"
     model_path = run_dir / MODEL_FILE
-    tcfg = training_config(system, config, seed, loss, kind)
+    tcfg = training_settings(system, config, seed, loss, kind)
     cfg_json = run_settings(system, kind, loss, seed, config)
     cfg_path = run_dir / "reproduce_config.json"
-    if cfg_path.exists():
-        saved = json.loads(cfg_path.read_text())
-        if "model_hparams" not in saved and model_path.exists():
-            # a record from before the architecture was recorded: the checkpoint's header knows it
-
-            saved["model_hparams"] = json.loads(json.dumps(read_header(model_path).get("hparams", {}), default=str))
-        if not same_settings(saved, cfg_json):
-            raise ValueError(f"{run_dir}: holds a run with other settings ({cfg_path}); choose another --out")
+    _check_saved_settings(run_dir, cfg_json)
     if metrics_path.exists():
         metrics = json.loads(metrics_path.read_text())
         if model_path.exists() or "_error" in metrics:
@@ -124,11 +139,7 @@ def _run_one(system, kind, loss, seed, data, run_dir: Path, config: ReproduceCon
         except (ValueError, FloatingPointError, RuntimeError) as exc:  # e.g. a failed scale fit
             error = f"{type(exc).__name__}: {exc}"
         if error is not None:
-            # recorded, never hidden: every cell of this model reads "fail" in the tables
-            metrics: dict[str, Any] = {
-                label: {m: FAILED for m in METRIC_COLUMNS[system]} for label in EVALUATION_SETS[config.split][system]
-            }
-            metrics["_error"] = error
+            metrics = _failed_metrics(system, config, error)
             metrics_path.write_text(json.dumps(metrics, indent=1) + "\n")
             return metrics, time.perf_counter() - t0, "failed"
         model = load_model(model_path, expected_system=system)

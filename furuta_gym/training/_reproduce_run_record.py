@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__, numerics
-from ._reproduce_config import REPRODUCE_QUADRATURE, ReproduceConfig, epoch_schedule, training_config
+from ._reproduce_settings import REPRODUCE_QUADRATURE, ReproduceSettings, epoch_schedule, training_settings
 from .checkpoint import package_versions
 from .datagen import data_package_versions
 from .loss_kinds import loss_kind
@@ -51,7 +51,7 @@ def machine_info() -> dict[str, Any]:
     return info
 
 
-def _prop_epochs_by_model(config: ReproduceConfig) -> dict[str, list[int]]:
+def _prop_epochs_by_model(config: ReproduceSettings) -> dict[str, list[int]]:
     """``{"system/kind": schedule}`` of the L_prop runs whose schedule is not their system's."""
     out = {}
     for system in config.systems:
@@ -63,19 +63,19 @@ def _prop_epochs_by_model(config: ReproduceConfig) -> dict[str, list[int]]:
     return out
 
 
-def _quadrature_by_model(config: ReproduceConfig) -> dict[str, str]:
+def _quadrature_by_model(config: ReproduceSettings) -> dict[str, str]:
     """``{"system/kind": rule}`` of the L_prop runs whose L_Iτ rule is not the run's."""
     default = (config.train_overrides or {}).get("quadrature", REPRODUCE_QUADRATURE)
     out = {}
     for system in config.systems:
         for kind, loss in config.pairs:
-            rule = training_config(system, config, 0, loss, kind).quadrature
+            rule = training_settings(system, config, 0, loss, kind).quadrature
             if rule != default:
                 out[f"{system}/{kind}"] = rule
     return out
 
 
-def _write_run_record(path: Path, config: ReproduceConfig, command, timings, data_meta) -> Path:
+def _write_run_record(path: Path, config: ReproduceSettings, command, timings, data_meta) -> Path:
 
     record = {
         "command": command,

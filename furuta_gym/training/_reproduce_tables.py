@@ -13,7 +13,7 @@ import numpy as np
 
 from ..models import model_kind, system_definition
 from ._labels import LOSS_LABELS, MODEL_LABELS
-from ._reproduce_config import EVALUATION_SETS, FAILED, METRIC_COLUMNS, PHYSICS_METRICS, ReproduceConfig
+from ._reproduce_settings import EVALUATION_SETS, FAILED, METRIC_COLUMNS, PHYSICS_METRICS, ReproduceSettings
 from .datagen import system_data
 from .loss_kinds import PROPOSED_LOSS, loss_kind
 
@@ -63,7 +63,7 @@ def _aggregate(values: Sequence[Any]) -> tuple[str, float | None, float | None, 
     return text, mean, std, diverged + failed
 
 
-def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[dict]:
+def build_tables(results: dict[tuple, list], config: ReproduceSettings) -> list[dict]:
     """One row per (system, test set, model, loss, metric): ours (text, mean, std) and paper."""
     paper = load_paper_table() if config.split == "test" else {}  # no paper value for validation
     rows = []
@@ -103,7 +103,7 @@ def build_tables(results: dict[tuple, list], config: ReproduceConfig) -> list[di
     return rows
 
 
-def _paper_metric(metric: str, config: ReproduceConfig) -> str:
+def _paper_metric(metric: str, config: ReproduceSettings) -> str:
     """The paper's column for ``metric``: on a plant (a calibrated rig), a state's error sits beside
     the paper's experimental column (``exp_<state>``); physics columns have no experimental value."""
     if config.plant is None:
@@ -152,7 +152,7 @@ _METRIC_HEADERS = {
 }
 
 
-def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_meta) -> Path:
+def _write_markdown(path: Path, rows: list[dict], config: ReproduceSettings, data_meta) -> Path:
 
     lines = [
         "# Reproduction of Tables 1 and 2 (simulated systems)",
@@ -202,7 +202,7 @@ def _write_markdown(path: Path, rows: list[dict], config: ReproduceConfig, data_
     return path
 
 
-def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
+def _summary_lines(rows: list[dict], config: ReproduceSettings) -> list[str]:
     out = ["## Summary", ""]
     prop = [r for r in rows if loss_kind(r["loss"]).proposed and r["better_or_equal"] in ("yes", "no")]
     if prop:
@@ -218,7 +218,7 @@ def _summary_lines(rows: list[dict], config: ReproduceConfig) -> list[str]:
     return out
 
 
-def _main_claim_lines(rows: list[dict], config: ReproduceConfig, system: str) -> list[str]:
+def _main_claim_lines(rows: list[dict], config: ReproduceSettings, system: str) -> list[str]:
     """The summary's lines on ``system``'s main claim, metric by metric (none without a claim)."""
     claim = system_data(system).main_claim
     if claim is None:

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import optax
 
 from . import _step_cache
-from ._train_config import TrainConfig
+from ._train_settings import TrainSettings
 from .loss_kinds import LOSS_KINDS, StepSettings, loss_kind
 from .losses import Normalization, Windows
 
@@ -24,7 +24,7 @@ def _all_finite(tree) -> jnp.ndarray:
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(l)) for l in leaves]))
 
 
-def _build_optimizer(model, config: TrainConfig):
+def _build_optimizer(model, config: TrainSettings):
     trainable = model.trainable()
     decay_mask = model.decayed()
     params, _ = eqx.partition(model, trainable)
@@ -43,7 +43,7 @@ def _build_optimizer(model, config: TrainConfig):
 
 
 def _step_function(
-    static, optimizer, loss: str, config: TrainConfig, normalization: Normalization, augmentation_weight: float = 0.0
+    static, optimizer, loss: str, config: TrainSettings, normalization: Normalization, augmentation_weight: float = 0.0
 ):
     """The optimiser step of ``loss``, not yet compiled: ``step(params, opt_state, traj_windows,
     integral_windows, lam, learning_rate) -> (params, opt_state, terms, ok)``."""
@@ -77,7 +77,7 @@ def _step_function(
 
 
 def _make_step(
-    static, optimizer, loss: str, config: TrainConfig, normalization: Normalization, augmentation_weight: float = 0.0
+    static, optimizer, loss: str, config: TrainSettings, normalization: Normalization, augmentation_weight: float = 0.0
 ):
     """:func:`_step_function` compiled (and, with JAX's persistent cache on, stored traced)."""
     step = _step_function(static, optimizer, loss, config, normalization, augmentation_weight)
@@ -113,7 +113,7 @@ def _make_step(
 
 
 def training_step(
-    model, config: TrainConfig, loss: str, normalization: Normalization = "momentum", augmentation_weight: float = 0.0
+    model, config: TrainSettings, loss: str, normalization: Normalization = "momentum", augmentation_weight: float = 0.0
 ):
     """One optimiser step of ``loss`` for ``model``, built as :func:`train` builds it, with its
     starting parameters and optimiser state: ``(step, params, opt_state)``.

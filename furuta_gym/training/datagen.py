@@ -30,8 +30,8 @@ true model reproduces its own data to the solver tolerance. Ground truth: the Mu
 (``assets/*.xml``) when its backend is available, else the analytic model with tight tolerances
 (they agree to ~1e-6); the manifest records which one was used.
 
-Sensors (the one sensor model, :class:`furuta_gym.sensors.Sensors`, given as such or through
-:class:`SensorOptions`; applied at ``sensor_rate_hz`` = 500 Hz, then subsampled to 100 Hz): encoder
+Sensors (the one sensor model, :class:`furuta_gym.sensors.Sensors`, the envs' and the
+controllers'; applied at ``sensor_rate_hz`` = 500 Hz, then subsampled to 100 Hz): encoder
 quantisation (Furuta, 2048 counts/rev), Gaussian position noise, and velocities either exact or
 from the paper's derivative filter F(s) = ω0²s/(s² + 2ξω0s + ω0²), ω0 = 100, ξ = 0.8, warmed up on
 a constant-velocity history ending at x0 (so no start-up transient).
@@ -55,6 +55,7 @@ import numpy as np
 from scipy.spatial import KDTree
 
 from .. import __version__, ensure_x64
+from .._deprecated import deprecated_names
 from .._versions import installed_versions
 from ..data import Trajectory, save_trajectories
 from ..envs import MujocoBackend
@@ -72,7 +73,9 @@ __all__ = [
     "DATA_RATE_HZ",
     "NMSDRecipe",
     "FurutaRecipe",
-    "SensorOptions",
+    "SENSOR_RATE_HZ",
+    "sensor_record",
+    "read_sensor_record",
     "GroundTruth",
     "AnalyticGroundTruth",
     "MujocoGroundTruth",
@@ -114,48 +117,33 @@ def recipe_for(system: str, small: bool = False):
     return cls.small() if small else cls()
 
 
-@dataclasses.dataclass(frozen=True)
-class SensorOptions:
-    """How the generated states are "measured": a sensor model (:attr:`sensors`, the envs' and
-    the controllers' :class:`~furuta_gym.sensors.Sensors`) and the rate it samples at. Its fields
-    are the datasets' manifests' record of it (``"sensor"``).
+#: the rate the generators' sensor model samples at by default (the QUBE's), Hz
+SENSOR_RATE_HZ = 500.0
 
-    ``quantize``: round angles to the encoder resolution (Furuta only; the N-MSD has no encoder).
-    ``noise_std``: Gaussian noise on positions (rad or m), per sensor sample.
-    ``velocity``: ``"exact"`` (simulated velocities, as the paper's simulated data) or
-    ``"filter"`` (the paper's derivative filter on the measured positions, as its experiments).
-    ``velocity_noise_std``: Gaussian noise added to exact velocities (rad/s or m/s).
-    ``sensor_rate_hz``: rate at which quantisation, noise and the filter act (QUBE: 500 Hz); the
-    data are subsampled from it to 100 Hz.
-    """
+
+@dataclasses.dataclass(frozen=True)
+class _SensorOptions:
+    """The data generators' sensor settings before they took the one sensor model
+    (:class:`~furuta_gym.sensors.Sensors`) and a ``sensor_rate_hz``: served under their old
+    name, ``SensorOptions``, with a DeprecationWarning, and read from old manifests
+    (:func:`read_sensor_record`). Fields: ``quantize`` (angles to ``counts_per_rev``),
+    ``noise_std`` / ``velocity_noise_std`` (position / exact-velocity noise), ``velocity``,
+    ``filter_omega0``, ``filter_xi`` and ``sensor_rate_hz``."""
 
     quantize: bool = False
     noise_std: float = 0.0
     velocity: Literal["exact", "filter"] = "exact"
     velocity_noise_std: float = 0.0
-    sensor_rate_hz: float = 500.0
+    sensor_rate_hz: float = SENSOR_RATE_HZ
     filter_omega0: float = 100.0
     filter_xi: float = 0.8
     counts_per_rev: int = ENCODER_COUNTS_PER_REV
 
     def __post_init__(self):
-        if self.velocity not in ("exact", "filter"):
-            raise ValueError(f"velocity must be 'exact' or 'filter', got {self.velocity!r}")
-        if self.noise_std < 0 or self.velocity_noise_std < 0:
-            raise ValueError(
-                f"noise_std and velocity_noise_std must be ≥ 0, got {self.noise_std}, {self.velocity_noise_std}"
-            )
-        ratio = self.sensor_rate_hz / DATA_RATE_HZ
-        if ratio < 1 or abs(ratio - round(ratio)) > 1e-9:
-            raise ValueError(
-                f"sensor_rate_hz must be an integer multiple of {DATA_RATE_HZ:g} Hz, got {self.sensor_rate_hz}"
-            )
         if self.velocity_noise_std > 0 and self.velocity == "filter":
             raise ValueError("velocity_noise_std applies to exact velocities, not velocity='filter'")
-
-    @property
-    def oversample(self) -> int:
-        return int(round(self.sensor_rate_hz / DATA_RATE_HZ))
+        _ = self.sensors  # the sensor model's own checks
+        _oversample(self.sensor_rate_hz)
 
     @property
     def sensors(self) -> Sensors:
@@ -168,21 +156,36 @@ class SensorOptions:
             filter_xi=self.filter_xi,
         )
 
-    @property
-    def is_exact(self) -> bool:
-        return self.sensors.exact
+
+def _oversample(sensor_rate_hz: float) -> int:
+    """How many sensor samples make one data sample; an error unless a whole number."""
+    ratio = sensor_rate_hz / DATA_RATE_HZ
+    if ratio < 1 or abs(ratio - round(ratio)) > 1e-9:
+        raise ValueError(f"sensor_rate_hz must be an integer multiple of {DATA_RATE_HZ:g} Hz, got {sensor_rate_hz}")
+    return int(round(ratio))
 
 
-#: the rate a :class:`~furuta_gym.sensors.Sensors` given to the generators samples at (the QUBE's)
-SENSOR_RATE_HZ = SensorOptions.sensor_rate_hz
+def _sensor_model(sensor: Sensors | _SensorOptions | None, sensor_rate_hz: float) -> tuple[Sensors, float]:
+    """The sensor model and the rate it samples at (an old options object carries its own)."""
+    if isinstance(sensor, _SensorOptions):
+        return sensor.sensors, sensor.sensor_rate_hz
+    return sensor or Sensors(), sensor_rate_hz
 
 
-def _sensor_model(sensor: SensorOptions | Sensors | None) -> tuple[Sensors, int]:
-    """The sensor model and how many of its samples make one data sample."""
-    if isinstance(sensor, Sensors):
-        return sensor, int(round(SENSOR_RATE_HZ / DATA_RATE_HZ))
-    options = sensor or SensorOptions()
-    return options.sensors, options.oversample
+def sensor_record(sensors: Sensors, sensor_rate_hz: float = SENSOR_RATE_HZ) -> dict:
+    """A manifest's ``"sensor"`` record: the sensor model's fields and the rate it sampled at."""
+    return {**dataclasses.asdict(sensors), "sensor_rate_hz": float(sensor_rate_hz)}
+
+
+def read_sensor_record(record: dict) -> tuple[Sensors, float]:
+    """``(sensor model, sensor_rate_hz)`` of a manifest's ``"sensor"`` record: the one
+    :func:`sensor_record` writes, or the fields of the options object older manifests hold
+    (``quantize``, ``noise_std``, ...)."""
+    record = dict(record)
+    rate = float(record.pop("sensor_rate_hz", SENSOR_RATE_HZ))
+    if "quantize" in record:
+        return _SensorOptions(**record).sensors, rate
+    return Sensors(**record), rate
 
 
 # --------------------------------------------------------------------------------------------
@@ -378,18 +381,23 @@ def generate_datasets(
     seed: int = 0,
     small: bool = False,
     recipe=None,
-    sensor: SensorOptions | Sensors | None = None,
+    sensor: Sensors | None = None,
     ground_truth: GroundTruth | str = "auto",
+    sensor_rate_hz: float = SENSOR_RATE_HZ,
 ) -> dict[str, list[Trajectory]]:
     """Generate the paper's datasets of ``system`` (``"nmsd"``/``"furuta"``) in memory.
 
     Returns ``{dataset name: [Trajectory, ...]}`` with the names of :data:`DATASET_NAMES`,
     sampled at 100 Hz with velocities. Seeded: the same arguments give the same numbers.
-    ``recipe`` overrides :func:`recipe_for` (``small`` picks the scaled-down one);
+    ``recipe`` overrides :func:`recipe_for` (``small`` picks the scaled-down one); ``sensor``
+    measures the states (default: exactly) at ``sensor_rate_hz`` (a multiple of 100 Hz), before
+    they are subsampled to 100 Hz;
     ``ground_truth`` is a name for :func:`default_ground_truth` or a callable
     ``(x0s (B, 2n), t (T,), us (B, T, m)) -> states (B, T, 2n)``.
     """
-    return _generate(system, "test", seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=ground_truth)
+    return _generate(
+        system, "test", seed, small, recipe, _sensor_model(sensor, sensor_rate_hz), ground_truth=ground_truth
+    )
 
 
 def generate_validation(
@@ -398,8 +406,9 @@ def generate_validation(
     seed: int = 0,
     small: bool = False,
     recipe=None,
-    sensor: SensorOptions | Sensors | None = None,
+    sensor: Sensors | None = None,
     ground_truth: GroundTruth | str = "auto",
+    sensor_rate_hz: float = SENSOR_RATE_HZ,
 ) -> dict[str, list[Trajectory]]:
     """The validation datasets of ``system`` (:data:`VALIDATION_NAMES`), with the arguments of
     :func:`generate_datasets`. Furuta: ``val_free`` (12 × 2 s free from the *training* state
@@ -409,21 +418,17 @@ def generate_validation(
     random ±5 N steps held 1–3 s), from x0 inside the training trajectory's range. Their overlap
     with the test sets is measured by ``studies/validation_overlap.py`` (docs/reproduce.md)."""
     return _generate(
-        system, "validation", seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=ground_truth
+        system, "validation", seed, small, recipe, _sensor_model(sensor, sensor_rate_hz), ground_truth=ground_truth
     )
 
 
 _NOISE_STREAM = {"test": 7919, "validation": 7927}  # sensor-noise streams, one per kind
 
 
-def _generate(system, kind, *, seed, small, recipe, sensor, ground_truth):
+def _generate(system, kind, seed, small, recipe, sensor: tuple[Sensors, float], *, ground_truth):
     spec = get_spec(system)
-    if isinstance(sensor, SensorOptions) and sensor.quantize and not any(spec.angular):
-        raise ValueError(
-            f"quantize: {spec.name} has no encoder angles to quantise (its joints are "
-            f"{spec.joint_names}); use noise_std for a position sensor's resolution"
-        )
-    sensors, oversample = _sensor_model(sensor)
+    sensors, rate = sensor
+    oversample = _oversample(rate)
     # a sensor this system cannot have fails here, before the ground truth's work
     sensors.quantization(spec)
     sensors.noise(spec)
@@ -545,34 +550,33 @@ def generate(
     *,
     seed: int = 0,
     small: bool = False,
-    sensor: SensorOptions | Sensors | None = None,
+    sensor: Sensors | None = None,
     ground_truth: GroundTruth | str = "auto",
     overwrite: bool = False,
     split: str = "test",
+    sensor_rate_hz: float = SENSOR_RATE_HZ,
 ) -> dict[str, Path]:
     """:func:`generate_datasets` then :func:`write_datasets`; returns ``{name: csv path}``.
     ``split="validation"``: the training set and the validation datasets
     (:func:`generate_validation`) instead of the test sets, which are then never written."""
-    sensor = sensor or SensorOptions()
+    sensor, sensor_rate_hz = _sensor_model(sensor, sensor_rate_hz)
     spec = get_spec(system)
     gt = default_ground_truth(spec.name, ground_truth) if isinstance(ground_truth, str) else ground_truth
     recipe = recipe_for(spec.name, small)
     t0 = time.perf_counter()
     if split not in ("test", "validation"):
         raise ValueError(f"split must be 'test' or 'validation', got {split!r}")
-    datasets = generate_datasets(spec.name, seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=gt)
+    measured = (seed, small, recipe, (sensor, sensor_rate_hz))
+    datasets = _generate(spec.name, "test", *measured, ground_truth=gt)
     if split == "validation":
-        datasets = {
-            "train": datasets["train"],
-            **generate_validation(spec.name, seed=seed, small=small, recipe=recipe, sensor=sensor, ground_truth=gt),
-        }
+        datasets = {"train": datasets["train"], **_generate(spec.name, "validation", *measured, ground_truth=gt)}
     metadata = {
         "seed": seed,
         **({"split": split} if split != "test" else {}),
         "small": small,
         "rate_hz": DATA_RATE_HZ,
         "recipe": recipe,
-        "sensor": sensor,
+        "sensor": sensor_record(sensor, sensor_rate_hz),
         "ground_truth": getattr(gt, "name", type(gt).__name__),
         "input_convention": "u samples linearly interpolated between samples",
         "furuta_gym_version": __version__,
@@ -580,3 +584,6 @@ def generate(
         "seconds": round(time.perf_counter() - t0, 2),
     }
     return write_datasets(out_dir, datasets, spec.name, metadata=metadata, overwrite=overwrite)
+
+
+__getattr__ = deprecated_names(__name__)

@@ -228,7 +228,7 @@ def resolution_weights(
     Weighted least squares with the quadrature error as the noise: an interval whose motion the
     sampling under-resolves carries a residual of the order of e however good the model, so its
     weight falls as 1/e² and each such interval counts about as much as one at e = tolerance
-    instead of dominating the sum (see :class:`~furuta_gym.training.train.TrainConfig`).
+    instead of dominating the sum (see :class:`~furuta_gym.training.train.TrainSettings`).
     """
 
     def one(t, x):

@@ -1,8 +1,8 @@
 """The reproduction's training recipe as data: one row per (system, model kind, loss).
 
 :data:`RECIPE` is what ``furuta-gym reproduce`` trains in a full run;
-:func:`~furuta_gym.training.reproduce.training_config` turns a row into a
-:class:`~furuta_gym.training.TrainConfig`. Each row names the rows of the decision log
+:func:`~furuta_gym.training.reproduce.training_settings` turns a row into a
+:class:`~furuta_gym.training.TrainSettings`. Each row names the rows of the decision log
 (docs/reproduce.md, "Decision log") behind its values; the measurements live there and in
 results/, not here. ``--quick`` and a schedule of the caller's keep a row's λ, μ and L_Iτ step
 but take their own epochs and the defaults for the per-model choices (quadrature, fine-tuning

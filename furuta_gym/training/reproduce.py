@@ -21,7 +21,7 @@ tables, are the same. Interrupted runs resume per model: a finished model (``mod
 an unfinished one continues from its training state. The experimental columns of Table 2
 (``exp_*``) need the real QUBE-Servo 2 logs and are not reproduced.
 
-The pipeline's parts, one module each: :mod:`._reproduce_config` (the run's settings and each
+The pipeline's parts, one module each: :mod:`._reproduce_settings` (the run's settings and each
 model's training recipe), :mod:`._reproduce_data` (datasets and ground truth),
 :mod:`._reproduce_one_model` (train, resume or reuse, and score one model),
 :mod:`._reproduce_executors` (in process, a local pool or Ray), :mod:`._reproduce_tables`
@@ -38,8 +38,13 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .. import ensure_x64
+from .._deprecated import deprecated_names
 from ._labels import TEST_SETS
-from ._reproduce_config import (
+from ._reproduce_data import _datasets, truth_model
+from ._reproduce_executors import EXPECTED_SECONDS, _run_all, require_executor, worker_pool
+from ._reproduce_one_model import RUN_RECORD_SCHEMA, run_settings, same_settings
+from ._reproduce_run_record import _write_run_record, machine_info
+from ._reproduce_settings import (
     EVALUATION_SETS,
     EXECUTORS,
     FAILED,
@@ -54,23 +59,19 @@ from ._reproduce_config import (
     SENSORS,
     TRAINING_VELOCITIES,
     VALIDATION_SETS,
-    ReproduceConfig,
+    ReproduceSettings,
     epoch_schedule,
     quadrature_rule,
-    training_config,
+    training_settings,
 )
-from ._reproduce_data import _datasets, truth_model
-from ._reproduce_executors import EXPECTED_SECONDS, _run_all, require_executor, worker_pool
-from ._reproduce_one_model import RUN_RECORD_SCHEMA, run_settings, same_settings
-from ._reproduce_run_record import _write_run_record, machine_info
 from ._reproduce_tables import _write_csv, _write_markdown, build_tables, load_paper_table
 
 __all__ = [
     "PAPER_PAIRS",
     "TEST_SETS",
     "METRIC_COLUMNS",
-    "ReproduceConfig",
-    "training_config",
+    "ReproduceSettings",
+    "training_settings",
     "epoch_schedule",
     "reproduce",
     "load_paper_table",
@@ -106,7 +107,7 @@ def _log(msg: str, stream=None) -> None:
 
 def reproduce(
     out: str | Path,
-    config: ReproduceConfig = ReproduceConfig(),
+    config: ReproduceSettings = ReproduceSettings(),
     *,
     command: str | None = None,
     log: Callable[[str], None] = _log,
@@ -135,20 +136,7 @@ def reproduce(
     ]
     figure_paths: dict[str, dict] = {}
     for what, item, result in _run_all(tasks, out, config, models_for_figures, log):
-        if what == "figures":
-            made, seconds = result
-            timings[f"figures/{item}"] = seconds
-            if isinstance(made, str):
-                log(f"[{item}] figures failed: {made}")
-            else:
-                figure_paths[item] = made
-            continue
-        (system, kind, loss, seed), (metrics, dt, status) = item, result
-        timings[f"{system}/{kind}_{loss}/seed{seed}"] = {"seconds": dt, "status": status}
-        if status == "reused" and isinstance(metrics.get("_seconds"), dict):
-            # what the model cost when it was trained (an earlier or interrupted invocation)
-            timings[f"{system}/{kind}_{loss}/seed{seed}"]["original"] = metrics["_seconds"]
-        results[(system, kind, loss, seed)] = metrics
+        _book(what, item, result, timings, results, figure_paths, log)
     # the paper's row order and seed order, whatever order the jobs finished in
     results = {
         (s, k, l): [results[(s, k, l, seed)] for seed in config.seeds] for s in config.systems for k, l in config.pairs
@@ -166,3 +154,24 @@ def reproduce(
     paths["run.json"] = _write_run_record(out / "run.json", config, command, timings, data_meta)
     log(f"done in {timings['total']} s: {out / 'tables.md'}")
     return paths
+
+
+def _book(what: str, item, result, timings: dict, results: dict, figure_paths: dict, log) -> None:
+    """Book one finished task: a system's figures, or one model's metrics and what it cost."""
+    if what == "figures":
+        made, seconds = result
+        timings[f"figures/{item}"] = seconds
+        if isinstance(made, str):
+            log(f"[{item}] figures failed: {made}")
+        else:
+            figure_paths[item] = made
+        return
+    (system, kind, loss, seed), (metrics, dt, status) = item, result
+    timings[f"{system}/{kind}_{loss}/seed{seed}"] = {"seconds": dt, "status": status}
+    if status == "reused" and isinstance(metrics.get("_seconds"), dict):
+        # what the model cost when it was trained (an earlier or interrupted invocation)
+        timings[f"{system}/{kind}_{loss}/seed{seed}"]["original"] = metrics["_seconds"]
+    results[(system, kind, loss, seed)] = metrics
+
+
+__getattr__ = deprecated_names(__name__)

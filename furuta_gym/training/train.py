@@ -19,7 +19,7 @@ multiplying the learned Lagrangian and τ_NC by one constant: the scale is unide
 one forced trajectory (``forced_trajs``) and the scale is fitted after training by least squares
 (:func:`fit_scale`; the integral residual Z̄ − s·Ā is linear in s), as the paper does.
 
-The parts: :mod:`._train_config` (:class:`TrainConfig`), :mod:`._train_step` (the optimiser
+The parts: :mod:`._train_settings` (:class:`TrainSettings`), :mod:`._train_step` (the optimiser
 step of a loss, compiled) and :mod:`._scale_fit` (:func:`fit_scale`); here are the stages, the
 epochs and blocks, and the run directory a run writes and resumes from.
 """
@@ -43,6 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
+from .._deprecated import deprecated_names
 from .._x64 import ensure_x64
 from ..data import Trajectory
 from ..models import make_model
@@ -50,7 +51,7 @@ from ..systems import get_spec
 from . import checkpoint as ckpt
 from ._itau_block import CAPACITY as BLOCK_CAPACITY, ItauBlock
 from ._scale_fit import ScaleFit, ScaleFitWarning, fit_scale
-from ._train_config import AUGMENTATION_WEIGHT, TrainConfig
+from ._train_settings import AUGMENTATION_WEIGHT, TrainSettings
 from ._train_step import _all_finite, _build_optimizer, _make_step, _step_function, training_step
 from .consistency import check_potential_shape, warn_data_coverage, warn_potential_shape
 from .free_dynamics import has_free_motion, warn_free_dynamics
@@ -58,7 +59,7 @@ from .loss_kinds import INTEGRAL_ONLY, LOSS_KINDS, TRAJECTORY_TERM, loss_kind
 from .losses import Windows, make_windows, resolve_normalization
 
 __all__ = [
-    "TrainConfig",
+    "TrainSettings",
     "train",
     "training_step",
     "fit_scale",
@@ -80,7 +81,7 @@ MODEL_FILE = "model.eqx"
 FREE_DYNAMICS_FILE = "free_dynamics.json"
 
 
-#: TrainConfig fields a resumed run may change: how long it runs and what it prints or saves.
+#: TrainSettings fields a resumed run may change: how long it runs and what it prints or saves.
 #: Anything else (a step size, λ, μ, the quadrature, ...) would continue one run under another's
 #: name.
 RESUMABLE_CHANGES = frozenset({"epochs", "progress", "checkpoint_every"})
@@ -273,7 +274,7 @@ def train(
     system: str,
     loss: str,
     train_trajs: Sequence[Trajectory],
-    config: TrainConfig | None = None,
+    config: TrainSettings | None = None,
     out_dir: str | Path | None = None,
     resume: bool = False,
     *,
@@ -285,7 +286,7 @@ def train(
 
     ``model_kind`` "dln" | "aph" | "adln"; ``system`` "furuta" | "nmsd"; ``loss`` "traj" | "aph" |
     "prop" | "itau"; ``train_trajs`` :class:`~furuta_gym.data.Trajectory` list with velocities;
-    ``config`` a :class:`TrainConfig` (default :meth:`TrainConfig.for_system`). ``hparams``
+    ``config`` a :class:`TrainSettings` (default :meth:`TrainSettings.for_system`). ``hparams``
     override the model's defaults (``make_model``); ``model`` starts from a given model instead.
 
     With ``out_dir``: writes ``train_state.eqx`` (resumable, after every epoch or block of epochs),
@@ -299,7 +300,7 @@ def train(
     """
     ensure_x64()
     spec = get_spec(system)
-    config = config or TrainConfig.for_system(spec.name)
+    config = config or TrainSettings.for_system(spec.name)
     trajs = list(train_trajs)
     model = _prepared_model(spec, model_kind, loss, trajs, config, hparams, model)
     augmentation_weight = _augmentation_weight(config, spec, model, model_kind)
@@ -311,13 +312,8 @@ def train(
     _, static = eqx.partition(model, trainable)
     run = _RunState(params=params, opt_state=optimizer.init(params), lam=float(config.lambda_traj))
     out = Path(out_dir) if out_dir is not None else None
-    run_info = {
-        "model_kind": model_kind,
-        "system": spec.name,
-        "loss": loss,
-        "data_hash": dhash,
-        "config": config.to_json(),
-    }
+    run_info: dict[str, Any] = {"model_kind": model_kind, "system": spec.name, "loss": loss, "data_hash": dhash}
+    run_info["config"] = config.to_json()
     if out is not None:
         static = _open_run_dir(out, resume, model, trainable, run, run_info, static)
     stages = _Stages(
@@ -330,7 +326,15 @@ def train(
         lambda name: _make_step(static, optimizer, name, config, normalization, augmentation_weight),
         lambda name: _step_function(static, optimizer, name, config, normalization, augmentation_weight),
     )
-    with _polite_stop(out, run) as stop, _progress_bar(config, run.start_epoch, f"{model_kind}/{loss}") as bar:
+    _run_epochs(stages, run, out, static, run_info, loss, f"{model_kind}/{loss}")
+    return _finish(eqx.combine(run.params, static), run.history, config, loss, dhash, trajs, forced_trajs, out)
+
+
+def _run_epochs(stages: "_Stages", run: "_RunState", out: Path | None, static, run_info: dict, loss: str, label: str):
+    """Run ``stages`` from ``run.start_epoch`` to the last epoch, saving and showing each epoch
+    (or block of epochs); a polite stop (SIGINT/SIGTERM) ends it after the epoch it is in."""
+    config = stages.config
+    with _polite_stop(out, run) as stop, _progress_bar(config, run.start_epoch, label) as bar:
         epoch = run.start_epoch
         while epoch < config.total_epochs:
             in_blocks = stages.in_blocks(stages.of_epoch(epoch))
@@ -342,7 +346,6 @@ def train(
             epoch += len(done)
             if stop["flag"]:
                 raise _StopRequested
-    return _finish(eqx.combine(run.params, static), run.history, config, loss, dhash, trajs, forced_trajs, out)
 
 
 @dataclasses.dataclass
@@ -359,7 +362,7 @@ class _RunState:
     best: dict | None = None
 
 
-def _prepared_model(spec, model_kind: str, loss: str, trajs, config: TrainConfig, hparams, model):
+def _prepared_model(spec, model_kind: str, loss: str, trajs, config: TrainSettings, hparams, model):
     """The model to train (a new one unless given), after checking it fits the data and the loss."""
     if loss not in LOSS_KINDS:
         raise ValueError(f"loss must be one of {tuple(LOSS_KINDS)}, got {loss!r}")
@@ -387,7 +390,7 @@ def _prepared_model(spec, model_kind: str, loss: str, trajs, config: TrainConfig
     return model
 
 
-def _augmentation_weight(config: TrainConfig, spec, model, model_kind: str) -> float:
+def _augmentation_weight(config: TrainSettings, spec, model, model_kind: str) -> float:
     """μ of the minimum-norm term: the config's, or the recipe's for models with F_a."""
     if config.augmentation_weight is None:
         return AUGMENTATION_WEIGHT.get((spec.name, model.kind), 0.0) if model.has_augmentation else 0.0
@@ -399,7 +402,7 @@ def _augmentation_weight(config: TrainConfig, spec, model, model_kind: str) -> f
     return float(config.augmentation_weight)
 
 
-def _integral_windows(trajs, config: TrainConfig, loss: str, shortest: int):
+def _integral_windows(trajs, config: TrainSettings, loss: str, shortest: int):
     """L_Iτ's windows (made once; None without L_Iτ) and the resolved normalisation."""
     if not loss_kind(loss).uses_integral:
         return None, config.normalize
@@ -442,7 +445,7 @@ def _open_run_dir(out: Path, resume: bool, model, trainable, run: _RunState, run
     return static
 
 
-def _epoch_batches(rng, traj_windows: Windows | None, int_windows: Windows | None, config: TrainConfig):
+def _epoch_batches(rng, traj_windows: Windows | None, int_windows: Windows | None, config: TrainSettings):
     """One epoch's minibatches: trajectory windows (None in an L_Iτ-alone stage) in a random
     order, each paired with L_Iτ windows (all of them, or random batches; None without L_Iτ)."""
     traj_batches: list[Windows | None] = [None]
@@ -501,7 +504,7 @@ def _hand_over_best(run: _RunState, stage: int, block: ItauBlock, last_epoch: in
 
 
 def _save_epochs(
-    out: Path | None, records: list[dict], run: _RunState, static, run_info: dict, config: TrainConfig, loss: str
+    out: Path | None, records: list[dict], run: _RunState, static, run_info: dict, config: TrainSettings, loss: str
 ) -> None:
     """The epochs' history lines, the resumable state after the last of them and (every
     ``checkpoint_every``; a block ends at one) a snapshot."""
@@ -574,7 +577,7 @@ def _polite_stop(out: Path | None, run: _RunState):
 
 
 @contextlib.contextmanager
-def _progress_bar(config: TrainConfig, start_epoch: int, desc: str):
+def _progress_bar(config: TrainSettings, start_epoch: int, desc: str):
     bar = None
     if config.progress and config.total_epochs > start_epoch:
         bar = tqdm(total=config.total_epochs, initial=start_epoch, desc=desc, unit="ep")
@@ -585,7 +588,7 @@ def _progress_bar(config: TrainConfig, start_epoch: int, desc: str):
             bar.close()
 
 
-def _finish(model, history: list, config: TrainConfig, loss: str, dhash: str, trajs, forced_trajs, out):
+def _finish(model, history: list, config: TrainSettings, loss: str, dhash: str, trajs, forced_trajs, out):
     """The trained model (with its overall scale fitted on ``forced_trajs``), saved with its
     history when there is an ``out`` directory; returns ``(model, history)``."""
     meta = {
@@ -620,3 +623,6 @@ def _finish(model, history: list, config: TrainConfig, loss: str, dhash: str, tr
         if "free_dynamics" in meta:
             (out / FREE_DYNAMICS_FILE).write_text(json.dumps(meta["free_dynamics"], indent=1, default=float) + "\n")
     return model, history
+
+
+__getattr__ = deprecated_names(__name__)

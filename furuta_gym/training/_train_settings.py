@@ -1,4 +1,4 @@
-"""A training run's hyper-parameters (:class:`TrainConfig`) and the recipe's μ per model kind
+"""A training run's hyper-parameters (:class:`TrainSettings`) and the recipe's μ per model kind
 (:data:`AUGMENTATION_WEIGHT`); part of :mod:`.train`."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from .losses import AUGMENTATION_PARTS, NORMALIZATIONS, Normalization
 from .recipe import PAPER_SCHEDULE, RECIPE
 
 #: μ of L_prop's minimum-norm term per (system, model kind) with F_a, when
-#: TrainConfig.augmentation_weight is None: the recipe's (furuta_gym.training.recipe).
+#: TrainSettings.augmentation_weight is None: the recipe's (furuta_gym.training.recipe).
 AUGMENTATION_WEIGHT = {
     (s, k): row.augmentation_weight
     for (s, k, loss), row in RECIPE.items()
@@ -25,7 +25,7 @@ AUGMENTATION_WEIGHT = {
 
 
 @dataclasses.dataclass(frozen=True)
-class TrainConfig:
+class TrainSettings:
     """Hyper-parameters of a training run.
 
     ``epochs[k]`` epochs are run with prediction horizon ``horizons[k]`` (an ``int`` is a number
@@ -173,14 +173,14 @@ class TrainConfig:
         return sum(self.epochs)
 
     @classmethod
-    def for_system(cls, system: str, **overrides) -> "TrainConfig":
+    def for_system(cls, system: str, **overrides) -> "TrainSettings":
         """CPU-friendly defaults with the paper's horizons (1 s Furuta, 2 s N-MSD)."""
         base: dict[str, Any] = dict(horizons=PAPER_SCHEDULE[get_spec(system).name]["horizons"])
         base.update(overrides)
         return cls(**base)
 
     @classmethod
-    def paper(cls, system: str, **overrides) -> "TrainConfig":
+    def paper(cls, system: str, **overrides) -> "TrainSettings":
         """The paper's recipe: 2-step stage then the long horizon, full batch (appendix A.2)."""
         base: dict[str, Any] = dict(**PAPER_SCHEDULE[get_spec(system).name], batch_size=None, checkpoint_every=500)
         base.update(overrides)

@@ -1,14 +1,15 @@
-"""What a reproduction run does (:class:`ReproduceConfig`), the sets it scores, and each run's
-training settings from the recipe (:func:`training_config`); part of :mod:`.reproduce`."""
+"""What a reproduction run does (:class:`ReproduceSettings`), the sets it scores, and each run's
+training settings from the recipe (:func:`training_settings`); part of :mod:`.reproduce`."""
 
 from __future__ import annotations
 
 import dataclasses
 from typing import Any
 
+from ..sensors import Sensors
 from ..systems import get_spec
 from ._labels import TEST_SETS
-from .datagen import SYSTEM_DATA, SensorOptions
+from .datagen import SYSTEM_DATA
 from .loss_kinds import loss_kind
 from .recipe import (
     DEFAULT_LEARNING_RATE,
@@ -20,7 +21,7 @@ from .recipe import (
     RunRecipe,
     recipe_row,
 )
-from .train import TrainConfig
+from .train import TrainSettings
 
 PAPER_PAIRS: tuple[tuple[str, str], ...] = (
     ("dln", "traj"),
@@ -42,19 +43,19 @@ METRIC_COLUMNS = {
     name: (*get_spec(name).joint_names, *(f"{j}_dot" for j in get_spec(name).joint_names), *PHYSICS_METRICS)
     for name in SYSTEM_DATA
 }
-#: How the data are measured (:attr:`ReproduceConfig.sensor`): the paper's simulated data, or as its
+#: How the data are measured (:attr:`ReproduceSettings.sensor`): the paper's simulated data, or as its
 #: QUBE recordings were.
-SENSORS = {"exact": SensorOptions(), "experiment": SensorOptions(quantize=True, velocity="filter")}
-#: What the models train on (:attr:`ReproduceConfig.training_velocities`).
+SENSORS = {"exact": Sensors(), "experiment": Sensors.qube()}
+#: What the models train on (:attr:`ReproduceSettings.training_velocities`).
 TRAINING_VELOCITIES = ("recorded", "zero_phase")
-#: Where the models are trained (:attr:`ReproduceConfig.executor`).
+#: Where the models are trained (:attr:`ReproduceSettings.executor`).
 EXECUTORS = ("local", "ray")
 #: Table value of a model whose training failed (no finite model; reason in metrics.json).
 FAILED = "fail"
 
 
 @dataclasses.dataclass(frozen=True)
-class ReproduceConfig:
+class ReproduceSettings:
     """What a reproduction run does.
 
     ``quick``: scaled-down datasets and far fewer epochs (minutes, not the paper's numbers);
@@ -65,7 +66,7 @@ class ReproduceConfig:
     ``{system: (stage-1 epochs, stage-2 epochs)}`` of the L_traj / L_aph runs; ``prop_epochs``
     the same for L_prop, ``{system: (L_Iτ-alone epochs, stage 1, stage 2)}`` (a pair: no L_Iτ
     stage); ``small_data`` overrides the dataset size
-    (default: small when quick); ``train_overrides``: extra :class:`TrainConfig` fields;
+    (default: small when quick); ``train_overrides``: extra :class:`TrainSettings` fields;
     ``model_overrides``: model hyper-parameters (:func:`~furuta_gym.models.make_model` keywords)
     for every model of the run, recorded with its settings like the defaults (a key a model kind
     does not know is an error, so runs that override F_a options name only aph / adln pairs).
@@ -177,7 +178,7 @@ FULL_PROP_FINETUNE_LEARNING_RATE = {
 }
 
 
-def _run_recipe(system: str, config: ReproduceConfig, loss: str, kind: str | None) -> RunRecipe:
+def _run_recipe(system: str, config: ReproduceSettings, loss: str, kind: str | None) -> RunRecipe:
     """The recipe row of one run: the full run's, or with ``--quick``'s / the caller's epochs."""
     name = get_spec(system).name
     if not loss_kind(loss).proposed:
@@ -187,24 +188,24 @@ def _run_recipe(system: str, config: ReproduceConfig, loss: str, kind: str | Non
     return recipe_row(name, kind, loss, None if table is None else tuple(table[name]))
 
 
-def epoch_schedule(system: str, config: ReproduceConfig, loss: str, kind: str | None = None) -> tuple[int, ...]:
+def epoch_schedule(system: str, config: ReproduceSettings, loss: str, kind: str | None = None) -> tuple[int, ...]:
     """Epochs per stage of ``loss`` runs of model ``kind`` on ``system`` (L_prop: ``(L_Iτ alone,
     stage 1, stage 2)``, others ``(stage 1, stage 2)``)."""
     return _run_recipe(system, config, loss, kind).epochs
 
 
-def quadrature_rule(system: str, config: ReproduceConfig, loss: str, kind: str | None = None) -> str:
+def quadrature_rule(system: str, config: ReproduceSettings, loss: str, kind: str | None = None) -> str:
     """L_Iτ's quadrature (and, on the Furuta, the scale fit's) for ``loss`` runs of ``kind`` on
     ``system``, before the caller's overrides."""
     return _run_recipe(system, config, loss, kind).quadrature
 
 
-def training_config(system: str, config: ReproduceConfig, seed: int, loss: str = "prop", kind: str | None = None):
-    """The :class:`~furuta_gym.training.TrainConfig` of one run of model ``kind`` on ``system``
+def training_settings(system: str, config: ReproduceSettings, seed: int, loss: str = "prop", kind: str | None = None):
+    """The :class:`~furuta_gym.training.TrainSettings` of one run of model ``kind`` on ``system``
     with ``loss``: its recipe row, then the caller's ``train_overrides``."""
     name = get_spec(system).name
     row = _run_recipe(name, config, loss, kind)
-    horizons = tuple(TrainConfig.for_system(name).horizons)
+    horizons = tuple(TrainSettings.for_system(name).horizons)
     proposed = loss_kind(loss).proposed
     if proposed and len(row.epochs) == 3:  # a leading stage of L_Iτ alone
         horizons = (None, *horizons)
@@ -225,7 +226,7 @@ def training_config(system: str, config: ReproduceConfig, seed: int, loss: str =
             # written out, not left to the None default: the run record then says which μ it used
             overrides["augmentation_weight"] = row.augmentation_weight
         steps = (row.itau_learning_rate, row.finetune_learning_rate)
-        if len(row.epochs) == 3 and steps != (TrainConfig.learning_rate,) * 2:
+        if len(row.epochs) == 3 and steps != (TrainSettings.learning_rate,) * 2:
             overrides["learning_rate"] = (steps[0], steps[1], steps[1])
     overrides.update(config.train_overrides or {})
-    return TrainConfig.for_system(name, **overrides)
+    return TrainSettings.for_system(name, **overrides)
