@@ -135,18 +135,6 @@ def test_the_branch_finder_sees_a_branch(tmp_path):
     assert _name_branches(sample) == [2, 2, 4, 4]
 
 
-def test_no_function_is_longer_than_80_lines():
-    # issue 26: a function a newcomer can read in one screen; longer ones are cut into named steps
-    long = []
-    for path, _ in _modules().values():
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                length = node.end_lineno - node.lineno + 1
-                if length > 80:
-                    long.append(f"{path}:{node.lineno} {node.name} ({length} lines)")
-    assert not long, "\n".join(long)
-
-
 def _imported_modules(name: str, path: Path, is_package: bool, modules) -> set[str]:
     """The package's modules ``name`` imports, at module level or inside a function: ``import a.b``
     imports a.b; ``from x import y`` imports x.y when that is a module, else x. A module's own

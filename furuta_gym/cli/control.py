@@ -182,6 +182,26 @@ def render_video(controller, make_env, seconds: float, path: str, fps: int = 50)
     imageio.mimsave(path, frames, fps=fps)
 
 
+def _run_record(args, ctrl, design_s: float, run_s: float) -> dict:
+    """What the report records of the run: its arguments, the designed controller, timings."""
+    return {
+        "design": args.design,
+        "plant": args.plant,
+        "seed": args.seed,
+        "seconds": args.seconds,
+        "voltage_limit": args.voltage_limit,
+        "sensor": args.sensor,
+        "k_e": float(ctrl.swing_up.k_e),
+        "acts_on": args.acts_on,
+        "lqr_K": np.asarray(ctrl.lqr.K).tolist(),
+        "lqr_closed_loop_eig_abs": np.abs(ctrl.lqr.design.closed_loop_eigenvalues).tolist(),
+        "catch_angle": ctrl.catch_angle,
+        "release_angle": ctrl.release_angle,
+        "design_seconds": design_s,
+        "run_seconds": run_s,
+    }
+
+
 def run(args) -> int:
     from furuta_gym.controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
 
@@ -210,25 +230,7 @@ def run(args) -> int:
     t0 = time.perf_counter()
     records = evaluate_on_env(ctrl, make_env, x0s, args.seconds, seed=args.seed)
     run_s = time.perf_counter() - t0
-    report = summarise(
-        records,
-        {
-            "design": args.design,
-            "plant": args.plant,
-            "seed": args.seed,
-            "seconds": args.seconds,
-            "voltage_limit": args.voltage_limit,
-            "sensor": args.sensor,
-            "k_e": float(ctrl.swing_up.k_e),
-            "acts_on": args.acts_on,
-            "lqr_K": np.asarray(ctrl.lqr.K).tolist(),
-            "lqr_closed_loop_eig_abs": np.abs(ctrl.lqr.design.closed_loop_eigenvalues).tolist(),
-            "catch_angle": ctrl.catch_angle,
-            "release_angle": ctrl.release_angle,
-            "design_seconds": design_s,
-            "run_seconds": run_s,
-        },
-    )
+    report = summarise(records, _run_record(args, ctrl, design_s, run_s))
     Path(args.json_out).write_text(json.dumps(report, indent=2))
     if args.plot:
         plot_episode(records[0], args.plot, f"design {args.design} → plant {args.plant}, x0 = 0")

@@ -33,6 +33,16 @@ def _rest_bound(fx: _Fitter, theta, dyn, joint: str) -> _rests.RestBound:
     return _rests.rest_bound(fx.layout, theta, fx.fit_segs, dyn, joint, count, fx.settings.rest_window)
 
 
+def _stiction_candidates(library, accepted, evidence) -> list:
+    """The library's stiction terms not yet judged whose joint's Coulomb friction is accepted."""
+    accepted_keys = {a.key for a in accepted}
+    return [
+        c
+        for c in library
+        if c.kind.breakaway_above and c.key not in evidence and f"{c.kind.breakaway_above}:{c.joint}" in accepted_keys
+    ]
+
+
 def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence):
     """Stiction acts only where a joint nearly stops, which the equation error cannot see, but a
     joint that sticks shows in open-loop predictions and in the forces its rests held (``_rests``).
@@ -44,13 +54,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
     the joint against ``min_breakaway_ratio`` × its Coulomb level and the model with it does not
     predict significantly worse. Returns (accepted, θ)."""
     s = fx.settings
-    todo = [
-        c
-        for c in library
-        if c.kind.breakaway_above
-        and c.key not in evidence
-        and f"{c.kind.breakaway_above}:{c.joint}" in {a.key for a in accepted}
-    ]
+    todo = _stiction_candidates(library, accepted, evidence)
     if not todo:
         return accepted, theta
     # whether a joint stops within a window depends on its start velocity, which a smoothed

@@ -199,8 +199,7 @@ def rollout(
     traced = any(
         isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((system, step_fn, batch, policy_state))
     )
-    n = batch.shape[0]
-    chunks = _chunk_count(chunks, n)
+    chunks = _chunk_count(chunks, batch.shape[0])
     # inside someone else's jit, the rollout is part of their computation: a nested jit may not
     # carry compiler options
     run = functools.partial(
@@ -218,15 +217,19 @@ def rollout(
         observation_fn=observation_fn,
         stateful=stateful,
     )
-    if traced or chunks == 1:
+    out = _run_in_chunks(run, batch, 1 if traced else chunks)
+    return Rollout(*(a[0] for a in out)) if single else out
+
+
+def _run_in_chunks(run: Callable[[Array], Any], batch: Array, chunks: int) -> Rollout:
+    """``run(batch)``, as ``chunks`` contiguous sub-batches run concurrently from threads."""
+    if chunks == 1:
         out = run(batch)
     else:
-        with ThreadPoolExecutor(int(chunks), thread_name_prefix="furuta_gym-rollout") as pool:
-            parts = map_chunks(lambda a, b: run(batch[a:b]), n, int(chunks), pool)
+        with ThreadPoolExecutor(chunks, thread_name_prefix="furuta_gym-rollout") as pool:
+            parts = map_chunks(lambda a, b: run(batch[a:b]), batch.shape[0], chunks, pool)
         out = Rollout(*(jnp.concatenate(fields, axis=0) for fields in zip(*parts, strict=True)))
     assert isinstance(out, Rollout)
-    if single:
-        out = Rollout(*(a[0] for a in out))
     return out
 
 
@@ -345,10 +348,7 @@ def scan_closed_loop(
     def body(carry, _):
         x, done, pstate, z = carry
         obs, new_z = observe(x, z)
-        if stateful:
-            action, new_pstate = policy(pstate, obs)
-        else:
-            action, new_pstate = policy(obs), pstate
+        action, new_pstate = policy(pstate, obs) if stateful else (policy(obs), pstate)
         out = controlled_step(
             system,
             x,
@@ -364,14 +364,7 @@ def scan_closed_loop(
         x_next = jnp.where(live, out.state, x)
         # a frozen copy keeps its policy and sensor state too, so nothing it carries can drift to NaN
         new_pstate, new_z = freeze(live, new_pstate, pstate), freeze(live, new_z, z)
-        record_step = (
-            x_next,
-            jnp.where(live, out.action, jnp.zeros_like(out.action)),
-            jnp.where(live, out.reward, jnp.zeros_like(out.reward)),
-            live & out.terminated,
-            live & out.diverged,
-            done | out.terminated,
-        )
+        record_step = _step_record(live, done, x_next, out)
         if record:
             record_step = (*record_step, obs, new_pstate)
         return (x_next, done | out.terminated, new_pstate, new_z), record_step
@@ -381,6 +374,19 @@ def scan_closed_loop(
     xs, us, rs, term, div, done = records[:6]
     out = Rollout(jnp.concatenate([x0[None], xs], axis=0), us, rs, term, div, done)
     return (out, *records[6:]) if record else out
+
+
+def _step_record(live, done, x_next, out: StepOutput) -> tuple:
+    """What a scanned step records: the next state, the action and reward (0 once frozen), the
+    episode's end flags (raised on the step that ends it) and whether it is done."""
+    return (
+        x_next,
+        jnp.where(live, out.action, jnp.zeros_like(out.action)),
+        jnp.where(live, out.reward, jnp.zeros_like(out.reward)),
+        live & out.terminated,
+        live & out.diverged,
+        done | out.terminated,
+    )
 
 
 def _rollout_vmapped(system, policy, x0s, *, policy_state, **options):
