@@ -67,7 +67,7 @@ def tiny_training(out: Path) -> None:
 
     from furuta_gym import numerics
     from furuta_gym.training.datagen import FurutaRecipe, generate_datasets
-    from furuta_gym.training.train import TrainConfig, train
+    from furuta_gym.training.train import TrainSettings, train
 
     recipe = dataclasses.replace(
         FurutaRecipe.small(),
@@ -80,7 +80,7 @@ def tiny_training(out: Path) -> None:
     data = generate_datasets("furuta", seed=0, recipe=recipe, ground_truth="mujoco")
     arrays = {}
     for loss in ("prop",):  # L_prop = L_Iτ + λ·L_traj: both losses' code in one training
-        config = TrainConfig.for_system(
+        config = TrainSettings.for_system(
             "furuta", epochs=(12,), horizons=(2,), seed=0, progress=False, checkpoint_every=10**9
         )
         model, _ = train("dln", "furuta", loss, data["train"], config, forced_trajs=data["scale_fit"])
@@ -103,16 +103,7 @@ def run_setting(
     """One training in a fresh process as ``(pinned, cap, cores, blas, numpy_avx512_off)`` say;
     its parameters."""
     env = _environment(pinned, cap, blas, numpy_avx512_off)
-    proc = subprocess.run(
-        [sys.executable, __file__, "--one", str(out)],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=900,
-        preexec_fn=_affinity(cores),
-    )
-    if proc.returncode != 0:
-        raise RuntimeError(proc.stderr[-3000:])
+    _run_python([__file__, "--one", str(out)], env, cores, timeout=900)
     with np.load(out) as f:
         arrays = {k: f[k] for k in f.files}
     return {"arrays": arrays, "numerics": json.loads((out.parent / (out.stem + ".json")).read_text())}
@@ -183,19 +174,25 @@ def _affinity(cores: int | None):
     return (lambda: os.sched_setaffinity(0, cpus)) if cpus else None
 
 
-def _run_pinned(command: list[str], setting: tuple) -> None:
-    """``furuta-gym COMMAND`` in a fresh process, pinned, as one of :data:`QUICK_SETTINGS`."""
-    _label, cap, cores, blas, numpy_off = setting
+def _run_python(args: list[str], env: dict[str, str], cores: int | None, *, timeout: float) -> None:
+    """``python ARGS`` in a fresh process with ``env`` on the first ``cores`` CPUs (all: None);
+    a failure raises with the tail of its stderr."""
     proc = subprocess.run(
-        [sys.executable, "-m", "furuta_gym", *command],
-        env=_environment(True, cap, blas, numpy_off),
+        [sys.executable, *args],
+        env=env,
         capture_output=True,
         text=True,
-        timeout=7200,
+        timeout=timeout,
         preexec_fn=_affinity(cores),
     )
     if proc.returncode != 0:
         raise RuntimeError(proc.stderr[-3000:])
+
+
+def _run_pinned(command: list[str], setting: tuple) -> None:
+    """``furuta-gym COMMAND`` in a fresh process, pinned, as one of :data:`QUICK_SETTINGS`."""
+    _label, cap, cores, blas, numpy_off = setting
+    _run_python(["-m", "furuta_gym", *command], _environment(True, cap, blas, numpy_off), cores, timeout=7200)
 
 
 def run_reproduce_quick() -> dict:
