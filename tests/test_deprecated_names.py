@@ -57,3 +57,18 @@ def test_the_old_sensor_options_read_as_the_one_sensor_model():
     assert sensors == Sensors.qube(measurement_noise=(0.0, 0.0))
     new = Sensors(position_resolution=1e-4, measurement_noise=(1e-3, 2e-3, 0.0, 0.1))
     assert read_sensor_record(sensor_record(new, 1000.0)) == (new, 1000.0)
+
+
+def test_every_committed_manifest_still_reads_its_sensor():
+    import json
+    from pathlib import Path
+
+    from furuta_gym.training.datagen import read_sensor_record
+
+    manifests = sorted((Path(__file__).resolve().parent.parent / "results").rglob("manifest.json"))
+    records = [json.loads(p.read_text()).get("sensor") for p in manifests]
+    assert sum(r is not None for r in records) >= 10
+    for path, record in zip(manifests, records, strict=True):
+        if record is not None:
+            sensors, rate = read_sensor_record(record)
+            assert isinstance(sensors, Sensors) and rate == 500.0, path
