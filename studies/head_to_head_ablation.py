@@ -314,6 +314,28 @@ def _run_windows(h2h, runs, dyn, stride: float | None):
     return _windows.Windows(x0, us, xs[:, 1:, :n], np.zeros(len(x0), int), runs[0].dt, us.shape[1])
 
 
+def rotor_angle_residual(err: np.ndarray, x0: np.ndarray, dt: float) -> dict:
+    """What a force depending on the rotor's angle alone could take from windows' errors ``err``
+    (W, L, n) started at ``x0``: each window's error fitted as v·t + a·t²/2 per joint, its
+    acceleration error a regressed on a cubic of the rotor's start angle (least squares), and the
+    RMSE with that part of a taken away (an in-sample bound: the regression is fitted per joint on
+    the windows it is scored on; a plant's one torque on the rotor reaches the pendulum only
+    through the coupling)."""
+    L, n = err.shape[1], err.shape[2]
+    t = dt * np.arange(1, L + 1)
+    basis = np.stack([t, t**2 / 2], axis=1)
+    (_, accel) = np.linalg.lstsq(basis, err.transpose(1, 0, 2).reshape(L, -1), rcond=None)[0].reshape(2, -1, n)
+    powers = np.vander(x0[:, 0], 4, increasing=True)
+    coefficients = np.linalg.lstsq(powers, accel, rcond=None)[0]  # (4, n)
+    left = err - (powers @ coefficients)[:, None, :] * (t**2 / 2)[None, :, None]
+    return {
+        "rmse": float(np.sqrt(np.mean(err**2))),
+        "rmse_without": float(np.sqrt(np.mean(left**2))),
+        "coefficients": coefficients.T.tolist(),  # per joint: 1, α, α², α³ (rad/s² per rad^k)
+        "correlation_alpha_squared": [float(np.corrcoef(x0[:, 0] ** 2, accel[:, j])[0, 1]) for j in range(n)],
+    }
+
+
 def oe_in_sample(fx, res) -> dict:
     """Does the finish's output-error fit reach the optimum of its own family? In sample on runs
     1–10, all of whose windows mujoco.sysid fitted: the finish's refit (its start, free set and
@@ -378,6 +400,11 @@ def oe_in_sample(fx, res) -> dict:
             "grid": {k: profile(th, grid[d]) for k, (th, d) in plants.items()},
             "phases": {k: profile(th, phases[d]) for k, (th, d) in plants.items()},
         },
+        "rotor_angle_residual": rotor_angle_residual(
+            _windows.predict_windows(fx.layout, ours, phases[dyn], h2h.SUBSTEPS) - phases[dyn].q,
+            phases[dyn].x0,
+            phases[dyn].dt,
+        ),
         "quantisation_rmse": 2 * np.pi / ENCODER_COUNTS_PER_REV / np.sqrt(12),
         "free": [c.key for c in chosen],
         "windows": {
