@@ -75,31 +75,7 @@ def simulate(
     a diverging learned model shows up as a non-finite prediction.
     """
     ts = jnp.asarray(ts)
-    m = system.spec.n_inputs
-    jump_ts = None
-    if callable(us):
-        u_at = us
-    elif input_interpolation == "linear":
-        us = _samples(us, ts, m)
-        u_of_t = diffrax.LinearInterpolation(ts=ts, ys=us)
-
-        def u_linear(t):
-            return u_of_t.evaluate(t)
-
-        u_at = u_linear
-
-    elif input_interpolation == "zoh":
-        us = _samples(us, ts, m)
-
-        def u_zoh(t):
-            i = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, ts.shape[0] - 1)
-            return us[i]
-
-        u_at = u_zoh
-
-        jump_ts = ts
-    else:
-        raise ValueError(f"input_interpolation must be 'linear' or 'zoh', got {input_interpolation!r}")
+    u_at, jump_ts = _input_of_time(us, ts, system.spec.n_inputs, input_interpolation)
 
     def f(t, x, args):
         return _vector_field_once(system, x, u_at(t))
@@ -133,6 +109,24 @@ def simulate(
 # the transformed (vmapped, differentiated) copies, which cuts the trace time of a differentiated
 # solve by about a quarter (bench/loss_cost.py). XLA inlines the call, so the numbers are the same.
 _vector_field_once = eqx.filter_jit(vector_field)
+
+
+def _input_of_time(us, ts, m: int, input_interpolation: str):
+    """The input as a function of time, and the times where it jumps (held samples), or None."""
+    if callable(us):
+        return us, None
+    if input_interpolation == "linear":
+        u_of_t = diffrax.LinearInterpolation(ts=ts, ys=_samples(us, ts, m))
+        return u_of_t.evaluate, None
+    if input_interpolation == "zoh":
+        samples = _samples(us, ts, m)
+
+        def u_zoh(t):
+            i = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, ts.shape[0] - 1)
+            return samples[i]
+
+        return u_zoh, ts
+    raise ValueError(f"input_interpolation must be 'linear' or 'zoh', got {input_interpolation!r}")
 
 
 def _samples(us, ts, m):
