@@ -93,8 +93,9 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     the breakaway): the law that passes the trace's rule and predicts significantly better than
     the other; else the one the rests name, if it passes, or, passing the size test alone, does
     not predict significantly worse (as a stiction from rests is added); else, where the rests
-    count but cannot tell, the one that predicts significantly better than the other and passes
-    that same size test; else "cannot be told apart" (the better predictor kept) or "neither"."""
+    name neither (or do not count), with both laws passing that size test, the one that predicts
+    significantly better than the other; else "cannot be told apart" (the better predictor kept)
+    or "neither"."""
     ok = {law: f for law, f in fits.items() if f.physical}
     passing = [law for law, f in ok.items() if f.evidence.passes(rule.min_improvement, rule.z_threshold)]
     said = ", ".join(
@@ -120,14 +121,14 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
             else "named by the rests, its prediction agrees"
         )
         return named, f"{why} (t {h2h.z:.1f} between them; {said}); the {rest_words}", named, h2h
-    # rests that cannot tell (every large excursion to one side, or too few) on a log whose rests
-    # no input holds: where both laws gain (a cable is there), the head-to-head takes the rests'
+    # rests that cannot tell (every large excursion to one side, or too few) or do not count
+    # (under input): where both laws gain (a cable is there), the head-to-head takes the rests'
     # part, and the law predicting significantly better than the other is kept on the size test
-    # of a stiction from rests (a release moves the rotor for a second or two: few windows carry
-    # either law's gain)
+    # of a stiction from rests (a release, or a sweep's stop, moves the rotor for a second or
+    # two: few windows carry either law's gain)
     better = LAWS[0] if h2h.z > 0 else LAWS[1]
     both = all(_holds(ok.get(law), rule) for law in LAWS)
-    if rule.rests_count and named is None and both and abs(h2h.z) >= rule.z_threshold:
+    if named is None and both and abs(h2h.z) >= rule.z_threshold:
         return (
             better,
             f"both laws predict better, the {better} law significantly better than the other "
