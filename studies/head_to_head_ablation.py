@@ -305,33 +305,46 @@ PHASE_STRIDE = 0.03
 
 def _run_windows(h2h, runs, dyn, stride: float | None):
     """The head-to-head's windows of ``runs`` (whole runs, velocities on the whole log) as the
-    diagnosis' output-error windows, under input dynamics ``dyn``."""
+    diagnosis' output-error windows, under input dynamics ``dyn`` (``segment``: each window's run)."""
     from furuta_gym.diagnose import _windows
     from furuta_gym.measured import prediction_windows
 
     x0, us, xs = prediction_windows(h2h.with_input(runs, dyn), WINDOW, stride)
-    n = get_spec("furuta").n_dof
-    return _windows.Windows(x0, us, xs[:, 1:, :n], np.zeros(len(x0), int), runs[0].dt, us.shape[1])
+    n, L = get_spec("furuta").n_dof, us.shape[1]
+    step = L if stride is None else max(1, int(round(stride / runs[0].dt)))
+    run = np.concatenate([np.full(len(range(0, len(tr) - L, step)), k) for k, tr in enumerate(runs)])
+    assert run.size == len(x0), "one run index per window"
+    return _windows.Windows(x0, us, xs[:, 1:, :n], run, runs[0].dt, L)
 
 
-def rotor_angle_residual(err: np.ndarray, x0: np.ndarray, dt: float) -> dict:
+def rotor_angle_residual(err: np.ndarray, x0: np.ndarray, dt: float, run: np.ndarray) -> dict:
     """What a force depending on the rotor's angle alone could take from windows' errors ``err``
-    (W, L, n) started at ``x0``: each window's error fitted as v·t + a·t²/2 per joint, its
-    acceleration error a regressed on a cubic of the rotor's start angle (least squares), and the
-    RMSE with that part of a taken away (an in-sample bound: the regression is fitted per joint on
-    the windows it is scored on; a plant's one torque on the rotor reaches the pendulum only
-    through the coupling)."""
+    (W, L, n) started at ``x0`` on runs ``run`` (W,): each window's error fitted as v·t + a·t²/2
+    per joint, its acceleration error a regressed on 1, α, α² of the rotor's start angle (least
+    squares, per joint), and the RMSE with that part of a taken away: fitted on every window (in
+    sample) and, for each run, fitted on the other runs (leave one run out). A proxy: a plant's
+    one torque on the rotor reaches the pendulum only through the coupling, and is refitted with
+    the rest."""
     L, n = err.shape[1], err.shape[2]
     t = dt * np.arange(1, L + 1)
     basis = np.stack([t, t**2 / 2], axis=1)
     (_, accel) = np.linalg.lstsq(basis, err.transpose(1, 0, 2).reshape(L, -1), rcond=None)[0].reshape(2, -1, n)
-    powers = np.vander(x0[:, 0], 4, increasing=True)
-    coefficients = np.linalg.lstsq(powers, accel, rcond=None)[0]  # (4, n)
-    left = err - (powers @ coefficients)[:, None, :] * (t**2 / 2)[None, :, None]
+    powers = np.vander(x0[:, 0], 3, increasing=True)
+
+    def without(fit: np.ndarray, scored: np.ndarray) -> np.ndarray:
+        coefficients = np.linalg.lstsq(powers[fit], accel[fit], rcond=None)[0]  # (3, n)
+        return err[scored] - (powers[scored] @ coefficients)[:, None, :] * (t**2 / 2)[None, :, None]
+
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
+    every = np.ones(len(err), bool)
+    runs = np.unique(run)
+    left_out = {int(k): without(run != k, run == k) for k in runs}
     return {
-        "rmse": float(np.sqrt(np.mean(err**2))),
-        "rmse_without": float(np.sqrt(np.mean(left**2))),
-        "coefficients": coefficients.T.tolist(),  # per joint: 1, α, α², α³ (rad/s² per rad^k)
+        "rmse": rms(err),
+        "rmse_without": rms(without(every, every)),
+        "rmse_without_run_out": rms(np.concatenate(list(left_out.values()))),
+        "per_run": {str(k): [rms(err[run == k]), rms(e)] for k, e in left_out.items()},
+        "coefficients": np.linalg.lstsq(powers, accel, rcond=None)[0].T.tolist(),  # per joint: 1, α, α²
         "correlation_alpha_squared": [float(np.corrcoef(x0[:, 0] ** 2, accel[:, j])[0, 1]) for j in range(n)],
     }
 
@@ -347,8 +360,9 @@ def oe_in_sample(fx, res) -> dict:
     (an oracle: it reads the positions it is scored on; a start velocity also takes up much of an
     error that grows like t², as a force's does), and each plant's RMS error at each step of the
     windows (``profile``: an error of the start velocity grows like t, one of the force like t²);
-    the encoder's count alone as a uniform quantisation error. Scored with the head-to-head's 4
-    RK4 substeps; fitted with the diagnosis'."""
+    the encoder's count alone as a uniform quantisation error; and what a force depending on the
+    rotor's angle could take from the refit's error (:func:`rotor_angle_residual`). Scored with
+    the head-to-head's 4 RK4 substeps; fitted with the diagnosis'."""
     import diagnose_head_to_head as h2h
     from furuta_gym.diagnose import _finish, _windows
     from furuta_gym.diagnose._library import Candidate
@@ -404,6 +418,7 @@ def oe_in_sample(fx, res) -> dict:
             _windows.predict_windows(fx.layout, ours, phases[dyn], h2h.SUBSTEPS) - phases[dyn].q,
             phases[dyn].x0,
             phases[dyn].dt,
+            phases[dyn].segment,
         ),
         "quantisation_rmse": 2 * np.pi / ENCODER_COUNTS_PER_REV / np.sqrt(12),
         "free": [c.key for c in chosen],

@@ -89,18 +89,21 @@ def _shares_sentence(o: dict, dt: float) -> str:
     )
 
 
-def _rotor_angle_sentence(o: dict) -> str:
+def _rotor_angle_sentence(o: dict, runs: list[int]) -> str:
     r = o.get("rotor_angle_residual")
-    if r is None:
+    if r is None or "rmse_without_run_out" not in r:
         return ""
     square = ", ".join(f"{c[2]:+.2f}" for c in r["coefficients"])
     corr = ", ".join(f"{c:+.2f}" for c in r["correlation_alpha_squared"])
+    per_run = ", ".join(
+        f"run {runs[int(k)]} {100 * (after / before - 1):+.1f} %" for k, (before, after) in r["per_run"].items()
+    )
     return (
         f"The refit's windows starting every {1e3 * o['phase_stride']:g} ms, each window's error fitted as v·t + a·t²/2: "
-        f"the acceleration errors a of α and β correlate with the square of the rotor's start angle ({corr}); a cubic "
-        f"of that angle, fitted to them per joint, has α² coefficients {square} rad/s² per rad², and taking that part "
-        f"away lowers the error from {1e3 * r['rmse']:.3f} to {1e3 * r['rmse_without']:.3f} mrad (in sample: what a force "
-        "depending on the rotor's angle alone might take). "
+        f"the acceleration errors a of α and β correlate with the square of the rotor's start angle ({corr}). 1, α "
+        f"and α² of that angle fitted to them per joint (α² coefficients {square} rad/s² per rad²) and that part "
+        f"taken away: {1e3 * r['rmse']:.3f} → {1e3 * r['rmse_without']:.3f} mrad fitted on every run, "
+        f"{1e3 * r['rmse_without_run_out']:.3f} mrad fitted for each run on the other runs ({per_run}). "
     )
 
 
@@ -132,7 +135,7 @@ def _oe_in_sample(doc: dict) -> str:
             if "profile" in o
             else ""
         )
-        + _rotor_angle_sentence(o)
+        + _rotor_angle_sentence(o, doc["fit_runs"])
     )
 
 
