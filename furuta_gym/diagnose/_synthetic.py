@@ -323,6 +323,24 @@ def _open_loop(system: str, excitation: str, k: int, t: np.ndarray, rng, forced:
     return x0, _inputs(system, t, rng, forced)
 
 
+def _sensor(quantize: bool, flicker: float, seed: int):
+    """The encoder: quantised angles, the rotor's one count up on a ``flicker`` share of the
+    samples (issue 64 item 5: a count's flicker under a resting rotor cuts every rest on one count
+    short), drawn from its own stream so that the logs without it are unchanged; or exact angles."""
+    if not quantize:
+        return lambda q: q
+    if not flicker:
+        return quantize_encoder
+    flickers = np.random.default_rng([seed, 64])
+
+    def sense(q):
+        q = np.array(quantize_encoder(q))
+        q[..., 0] += (2 * np.pi / ENCODER_COUNTS_PER_REV) * (flickers.random(q.shape[:-1]) < flicker)
+        return q
+
+    return sense
+
+
 def _named_experiment(excitation) -> tuple[str, ClosedLoopBalancing]:
     """(the experiment's name, the closed loop's settings) of ``measured_like``'s ``excitation``."""
     if isinstance(excitation, ClosedLoopBalancing):
@@ -368,11 +386,9 @@ def measured_like(
 
     ``quantize=False`` logs the Furuta's exact angles (and the balancing controller sees them):
     the same experiment without the encoder's resolution, to tell the sensor's limits from the
-    method's. ``flicker`` (Furuta, quantised): the rotor's encoder reads one count up on that
-    share of the samples, drawn apart from the other streams (issue 64 item 5: an encoder
-    flickering by a count under a resting rotor cuts every rest on one count short).
-    ``true_velocities=True`` attaches the simulator's velocities as ``qd`` (no sensor
-    measures them: to tell what velocity estimation costs).
+    method's. ``flicker``: the rotor's encoder a count up on that share of the samples.
+    ``true_velocities=True`` attaches the simulator's velocities as ``qd`` (no sensor measures
+    them: to tell what velocity estimation costs).
 
     ``input_delay`` is applied as the plant seeing the command ``round(d/dt)`` samples late,
     ``actuator_lag`` after it. The plant takes one MJCF step per sample for ``"chirp"`` (as it
@@ -388,15 +404,12 @@ def measured_like(
             f"{definition.title} has {list(definition.excitations)}"
         )
     rng = np.random.default_rng(seed)
-    flickers = np.random.default_rng([seed, 64])  # its own stream: the logs without it unchanged
     dt = definition.sample_period
-    T = int(round(duration / dt)) + 1
-    t = np.arange(T) * dt
-    # the new experiments integrate MuJoCo finely too: under RK4 the sgn law lets a rotor held by
-    # dry friction against a spring creep at a rate ∝ the step (an encoder count every fraction
-    # of a second at 2 ms), where a real rotor sticks
+    t = np.arange(int(round(duration / dt)) + 1) * dt
+    # the new experiments integrate MuJoCo finely too: under RK4 the sgn law lets a rotor held by dry friction against
+    # a spring creep at a rate ∝ the step (an encoder count every fraction of a second at 2 ms), where a real rotor sticks
     sim = _Plant(system, effects, plant, dt, substeps, fine=excitation != "chirp")
-    sense = quantize_encoder if quantize else (lambda q: q)
+    sense = _sensor(quantize, flicker, seed)
     out, rotor = [], None  # the releases' rotor, drawn only for them (other streams unchanged)
     for k in range(n_trajectories):
         if excitation == "closed_loop_prbs":
@@ -412,9 +425,6 @@ def measured_like(
             q, qd = xs[:, : definition.spec.n_dof], xs[:, definition.spec.n_dof :]
             if definition.encoders:
                 q = sense(q)
-                if flicker and quantize:
-                    q = np.array(q)
-                    q[:, 0] += (2 * np.pi / ENCODER_COUNTS_PER_REV) * (flickers.random(len(q)) < flicker)
             else:
                 q = q + rng.normal(0.0, 1e-3 if noise is None else noise, q.shape)
         qd = np.array(qd) if true_velocities else None
