@@ -349,6 +349,44 @@ def rotor_angle_residual(err: np.ndarray, x0: np.ndarray, dt: float, run: np.nda
     }
 
 
+#: ridge penalties tried in :func:`force_error_bounds` (the best one is reported: a bound)
+RIDGE = (100.0, 300.0, 1000.0, 3000.0, 10000.0, 30000.0)
+
+
+def force_error_bounds(err: np.ndarray, x0: np.ndarray, us: np.ndarray, dt: float, run: np.ndarray) -> dict:
+    """How much any plant could take from windows' errors ``err`` (W, L, n) by a better force:
+    each window's error fitted as v·t + a·t²/2 per joint, and the RMSE with a taken away
+    (``oracle``: each window's own a, which no plant knows), and with a predicted by a smooth
+    function of the window's start state and input (600 random Fourier features of α, β off its
+    nearest rest, α̇, β̇, the input at the start, its mean, and the means of the window's two
+    halves; ridge, fitted for each run on the other runs) under each of :data:`RIDGE`."""
+    L, n = err.shape[1], err.shape[2]
+    t = dt * np.arange(1, L + 1)
+    basis = np.stack([t, t**2 / 2], axis=1)
+    (_, accel) = np.linalg.lstsq(basis, err.transpose(1, 0, 2).reshape(L, -1), rcond=None)[0].reshape(2, -1, n)
+    u = us[:, :, 0]
+    beta = x0[:, 1] - np.pi * np.round(x0[:, 1] / np.pi)
+    F = np.stack(
+        [x0[:, 0], beta, x0[:, 2], x0[:, 3], u[:, 0], u.mean(1), u[:, : L // 2].mean(1), u[:, L // 2 :].mean(1)], 1
+    )
+    F = (F - F.mean(0)) / F.std(0)
+    rng = np.random.default_rng(0)
+    Z = np.cos(F @ (rng.normal(size=(F.shape[1], 600)) / 1.5) + rng.uniform(0, 2 * np.pi, 600))
+    Z = np.concatenate([Z, F, np.ones((len(F), 1))], axis=1)
+    taken = lambda a: err - a[:, None, :] * (t**2 / 2)[None, :, None]  # noqa: E731
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
+    out = {"rmse": rms(err), "oracle": rms(taken(accel)), "ridge": {}}
+    for lam in RIDGE:
+        predicted = np.zeros_like(accel)
+        for k in np.unique(run):
+            A = Z[run != k]
+            predicted[run == k] = Z[run == k] @ np.linalg.solve(
+                A.T @ A + lam * np.eye(Z.shape[1]), A.T @ accel[run != k]
+            )
+        out["ridge"][f"{lam:g}"] = rms(taken(predicted))
+    return out
+
+
 def oe_in_sample(fx, res) -> dict:
     """Does the finish's output-error fit reach the optimum of its own family? In sample on runs
     1–10, all of whose windows mujoco.sysid fitted: the finish's refit (its start, free set and
@@ -361,7 +399,8 @@ def oe_in_sample(fx, res) -> dict:
     error that grows like t², as a force's does), and each plant's RMS error at each step of the
     windows (``profile``: an error of the start velocity grows like t, one of the force like t²);
     the encoder's count alone as a uniform quantisation error; and what a force depending on the
-    rotor's angle could take from the refit's error (:func:`rotor_angle_residual`). Scored with
+    rotor's angle, or any force, could take from the refit's error (:func:`rotor_angle_residual`,
+    :func:`force_error_bounds`). Scored with
     the head-to-head's 4 RK4 substeps; fitted with the diagnosis'."""
     import diagnose_head_to_head as h2h
     from furuta_gym.diagnose import _finish, _windows
@@ -393,6 +432,7 @@ def oe_in_sample(fx, res) -> dict:
     phases = {d: _run_windows(h2h, fit, d, PHASE_STRIDE) for d in (dyn, sysid_dyn)}
     plants = {"prediction_first": (ours, dyn), "sysid": (sysid, sysid_dyn)}
     lumped = lambda th: {b: float(th[i]) for i, b in enumerate(fx.layout.base)}  # noqa: E731
+    ours_err = _windows.predict_windows(fx.layout, ours, phases[dyn], h2h.SUBSTEPS) - phases[dyn].q
     return {
         "finish_objective": {k: rmse(th, finish_win[d]) for k, (th, d) in plants.items()},
         "grid": {k: rmse(th, grid[d]) for k, (th, d) in plants.items()},
@@ -414,11 +454,9 @@ def oe_in_sample(fx, res) -> dict:
             "grid": {k: profile(th, grid[d]) for k, (th, d) in plants.items()},
             "phases": {k: profile(th, phases[d]) for k, (th, d) in plants.items()},
         },
-        "rotor_angle_residual": rotor_angle_residual(
-            _windows.predict_windows(fx.layout, ours, phases[dyn], h2h.SUBSTEPS) - phases[dyn].q,
-            phases[dyn].x0,
-            phases[dyn].dt,
-            phases[dyn].segment,
+        "rotor_angle_residual": rotor_angle_residual(ours_err, phases[dyn].x0, phases[dyn].dt, phases[dyn].segment),
+        "force_error_bounds": force_error_bounds(
+            ours_err, phases[dyn].x0, phases[dyn].us, phases[dyn].dt, phases[dyn].segment
         ),
         "quantisation_rmse": 2 * np.pi / ENCODER_COUNTS_PER_REV / np.sqrt(12),
         "free": [c.key for c in chosen],

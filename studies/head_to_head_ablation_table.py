@@ -107,6 +107,20 @@ def _rotor_angle_sentence(o: dict, runs: list[int]) -> str:
     )
 
 
+def _force_sentence(o: dict) -> str:
+    f = o.get("force_error_bounds")
+    if f is None:
+        return ""
+    best = min(f["ridge"], key=lambda k: f["ridge"][k])
+    return (
+        f"What a better force could take from the same windows' error ({1e3 * f['rmse']:.3f} mrad): each window's "
+        f"own acceleration error taken away (an oracle no plant has) leaves {1e3 * f['oracle']:.3f} mrad; the "
+        "acceleration errors predicted by a smooth function of each window's start state and input, fitted for each "
+        "run on the other runs (600 random Fourier features, ridge, the best penalty of "
+        f"{', '.join(f['ridge'])}: {best}), leave {1e3 * f['ridge'][best]:.3f} mrad. "
+    )
+
+
 def _oe_in_sample(doc: dict) -> str:
     """The sentences of ``head_to_head_ablation.py --oe-in-sample`` ("" before it was run)."""
     o = doc.get("oe_in_sample")
@@ -136,6 +150,7 @@ def _oe_in_sample(doc: dict) -> str:
             else ""
         )
         + _rotor_angle_sentence(o, doc["fit_runs"])
+        + _force_sentence(o)
     )
 
 

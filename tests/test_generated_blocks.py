@@ -114,7 +114,9 @@ def test_head_to_head_ablation_in_sample_refit_prose_matches_its_results():
     as much like t as like t², with a small rest of rounding, on both placements; with start
     velocities refitted the plants come within 3 % of each other; the rotor's start angle squared
     carries the refit's acceleration errors, a few per cent of its error, less on runs left out
-    of its fit, most on run 9 and none on run 1; the refit freed of the
+    of its fit, most on run 9 and none on run 1; each window's own force error taken away leaves
+    most of the error, and a smooth function of state and input takes a few per cent on runs left
+    out; the refit freed of the
     start-velocity error predicts every placement worse than the finish."""
     spec = importlib.util.spec_from_file_location("ablation_table", ROOT / "studies" / "head_to_head_ablation_table.py")
     assert spec is not None and spec.loader is not None
@@ -141,6 +143,11 @@ def test_head_to_head_ablation_in_sample_refit_prose_matches_its_results():
     assert rotor["rmse_without"] < rotor["rmse_without_run_out"] < rotor["rmse"]  # less on runs left out
     change = {doc["fit_runs"][int(k)]: after / before - 1 for k, (before, after) in rotor["per_run"].items()}
     assert min(change, key=lambda k: change[k]) == 9 and change[1] > 0  # run 9 gains most, run 1 loses
+    force = o["force_error_bounds"]  # no force in sight takes the 10 % a plant would need below sysid
+    best = min(force["ridge"].values())
+    assert force["oracle"] > 0.75 * force["rmse"] and 0.01 < 1 - best / force["rmse"] < 0.05
+    need = {p: 1 - 0.9 * o[p][sy] / o[p][pf] for p in ("phases", "grid")}  # to be 10 % below sysid
+    assert need["phases"] > 2 * (1 - best / force["rmse"]) and need["grid"] > need["phases"]
     worse = doc["variants"]["staggered_refined_starts"]
     staggered = doc["variants"]["staggered"]
     assert worse["heldout_rmse"] > staggered["heldout_rmse"]
