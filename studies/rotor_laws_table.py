@@ -7,7 +7,8 @@ docs/diagnose.md: per log, the planted and the found cable (stiffness; the play 
 the rest of a fixed one), Coulomb level and breakaway, their errors, the verdict of step 11 and
 the held-out error ratio; then per law how many logs found it with every coefficient within
 tolerance (±35 %; the play and the breakaway ±50 %), how many chose the other law, how many gained
-≥ 1.4× held-out, and the false alarms on logs without cable or friction. ``--check`` only
+≥ 1.4× held-out, the logs whose held-out error rose, and the false alarms on logs without cable
+or friction. ``--check`` only
 compares (exit 1 when the docs disagree).
 
     python studies/rotor_laws_table.py [--check]
@@ -134,6 +135,11 @@ def summary(docs: list[dict]) -> list[str]:
                 f"it fixed a spring the veto had dropped); found with every coefficient within tolerance on "
                 f"{found}; the other law on {other}; held-out error ≥ 1.4× lower on {gained}."
             )
+        worse = [f"{LAW_NAMES[d['law']]} {d['seed']} ({ratio(d):.2f}×)" for d in mine if ratio(d) < 1.0]
+        lines.append(
+            f"{excitation}: held-out error higher after the diagnosis on {len(worse)} of {len(mine)}"
+            + (f": {', '.join(worse)}." if worse else ".")
+        )
         none = [d for d in mine if d["law"] == "none"]
         if none:
             alarms = sum(bool(_found(d)) for d in none)

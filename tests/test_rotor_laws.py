@@ -415,8 +415,12 @@ def test_the_docs_table_of_the_rotor_laws_grid_is_generated_from_its_results():
     # a law's logs select the other law on at most one of ten
     for law, other in (("moving_rest", "fixed"), ("breakaway", "moving")):
         assert sum(table.rotor(table._found(d))["cable"] == other for d in by_law[law]) <= 1
-    # every log the step kept a law on gained held-out: the step never made prediction worse
-    assert all(table.ratio(d) >= 1.0 for d in docs)
+    # the diagnosis made held-out prediction worse on no release and on at most one sweep of ten
+    # per law (the docs' block names it, checked above)
+    assert all(table.ratio(d) >= 1.0 for d in docs if d["excitation"] == "rotor_releases")
+    for law in ("moving_rest", "breakaway"):
+        sweeps = [d for d in by_law[law] if d["excitation"] == "sticky_sweep"]
+        assert len(sweeps) >= 10 and sum(table.ratio(d) < 1.0 for d in sweeps) <= 1
 
 
 def test_the_breakaways_upper_bound_reads_releases_and_left_rests_but_not_a_one_count_creep():
@@ -517,8 +521,8 @@ def test_where_the_rests_cannot_tell_the_head_to_head_names_a_law_both_gain_with
 
 @pytest.mark.slow
 def test_the_sweep_grid_reproduces_its_committed_results(tmp_path):
-    """Issue 64 item 3's sweeps, the whole grid (results/rotor_laws/sticky_sweep__* and
-    results/rotor_laws_sweeps_more; the CI case above is its seed 104): rerun, each log finds
+    """Issue 64 item 3's sweeps, the whole grid (results/rotor_laws/sticky_sweep__*; the CI case
+    above is its seed 104): rerun, each log finds
     the same effects (coefficients to 1e-6) and step 11 says the same."""
     import importlib.util
 
@@ -528,8 +532,7 @@ def test_the_sweep_grid_reproduces_its_committed_results(tmp_path):
     study = importlib.util.module_from_spec(spec)
     sys.path.insert(0, str(path.parent))  # the study imports rotor_laws_baseline beside it
     spec.loader.exec_module(study)
-    more = RESULTS.parent / "rotor_laws_sweeps_more"  # seeds 105-109, kept apart (docs "Limits")
-    committed = sorted(RESULTS.glob("sticky_sweep__*.json")) + sorted(more.glob("sticky_sweep__*.json"))
+    committed = sorted(RESULTS.glob("sticky_sweep__*.json"))
     assert len(committed) >= 20  # ten logs per law
     for p in committed:
         old = json.loads(p.read_text())
