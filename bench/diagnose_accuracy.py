@@ -17,8 +17,9 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.diagnose import diagnose, measured_like  # noqa: E402
+from furuta_gym.diagnose import diagnose  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
+from furuta_gym.rigs import measured_like  # noqa: E402
 
 GRID = [
     ("furuta", ("spring", "alpha", 5e-4)),

@@ -2,16 +2,18 @@
 the object it was renamed to, with one :class:`DeprecationWarning` per use naming the new name.
 
 Settings objects are ``*Settings`` (CONTRIBUTING.md, "Conventions"); the names they had before
-are listed in :data:`RENAMED`, one dict per module that exported them.
+are listed in :data:`RENAMED`, one dict per module that exported them; names that left a module
+for another are in :data:`MOVED`.
 """
 
 from __future__ import annotations
 
+import importlib
 import sys
 import warnings
 from typing import Any, Callable
 
-__all__ = ["RENAMED", "deprecated_names"]
+__all__ = ["MOVED", "RENAMED", "deprecated_names"]
 
 #: module -> {old name: (the name in that module that serves it, what to use instead)}
 RENAMED: dict[str, dict[str, tuple[str, str]]] = {
@@ -31,12 +33,26 @@ RENAMED: dict[str, dict[str, tuple[str, str]]] = {
     "furuta_gym.rl": {"PPOConfig": ("PPOSettings", "PPOSettings")},
 }
 
+#: module -> {name: the module it moved to, under the same name}
+MOVED: dict[str, dict[str, str]] = {
+    # the simulated rigs are test data, not the diagnosis: they left its public names
+    "furuta_gym.diagnose": {
+        name: "furuta_gym.rigs"
+        for name in ("measured_like", "sticky_rig", "moving_rest_rig", "breakaway_rig", "ClosedLoopBalancing")
+    },
+}
+
 
 def deprecated_names(module: str) -> Callable[[str], Any]:
-    """The ``__getattr__`` of ``module``, serving its old names of :data:`RENAMED`."""
-    renamed = RENAMED[module]
+    """The ``__getattr__`` of ``module``, serving its old names of :data:`RENAMED` and the names
+    :data:`MOVED` out of it."""
+    renamed, moved = RENAMED.get(module, {}), MOVED.get(module, {})
 
     def __getattr__(name: str) -> Any:
+        if name in moved:
+            where = moved[name]
+            warnings.warn(f"{module}.{name} moved; use {where}.{name}", DeprecationWarning, stacklevel=2)
+            return getattr(importlib.import_module(where), name)
         if name not in renamed:
             raise AttributeError(f"module {module!r} has no attribute {name!r}")
         target, instead = renamed[name]

@@ -31,9 +31,10 @@ from ._numerics import numerics
 from ._x64 import ensure_x64
 from .controllers import SwingUpLQR, evaluate_on_env, near_rest_starts
 from .data import save_trajectories
-from .diagnose import diagnose, measured_like
+from .diagnose import diagnose
 from .effects import Effect
 from .models import Furuta
+from .rigs import measured_like
 from .training.datagen import FurutaRecipe, generate_datasets, write_datasets
 from .training.metrics import FORCE_TERMS, energy_error, force_decomposition_errors
 from .training.train import TrainSettings, train

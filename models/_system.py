@@ -149,7 +149,7 @@ class SystemDefinition:
     ``None``; ``back_emf_damping``: its pinned damping (DeLaN lumps it with friction).
     ``known_damping_force(coefficients, q̇)``: the paper's τ_NC structure with given positive
     coefficients (DeLaN). ``excitations``: the synthetic experiments of
-    :func:`furuta_gym.diagnose.measured_like`; ``chirp_ranges``: its random chirps' amplitude,
+    :func:`furuta_gym.rigs.measured_like`; ``chirp_ranges``: its random chirps' amplitude,
     start and end frequency and offset ranges (offset ``None``: no offset drawn).
     ``chirp_initial_ranges``: their initial states' (low, high) per state variable; ``encoders``:
     the joints are measured by quadrature encoders (else by a position sensor with Gaussian noise).

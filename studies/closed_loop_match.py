@@ -36,8 +36,9 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
-from furuta_gym.diagnose import ClosedLoopBalancing, diagnose, measured_like  # noqa: E402
+from furuta_gym.diagnose import diagnose  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
+from furuta_gym.rigs import ClosedLoopBalancing, measured_like  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "closed_loop_match"
 FIT_RUNS, SKIP = list(range(1, 11)), 0.5

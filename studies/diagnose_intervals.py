@@ -33,8 +33,9 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.diagnose import diagnose, measured_like, nominal_base  # noqa: E402
+from furuta_gym.diagnose import diagnose, nominal_base  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
+from furuta_gym.rigs import measured_like  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "diagnose_intervals"
 LOGS = 25  # seeds 0..LOGS-1 per scenario

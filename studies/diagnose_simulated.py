@@ -43,8 +43,9 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 from furuta_gym.cli.diagnose import UNSET, held_stop_counts  # noqa: E402
-from furuta_gym.diagnose import diagnose, measured_like, sticky_rig  # noqa: E402
+from furuta_gym.diagnose import diagnose  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
+from furuta_gym.rigs import measured_like, sticky_rig  # noqa: E402
 
 LOG = dict(n_trajectories=6, duration=10.0)
 # the documented settings per experiment: 0.1 s windows for an inverted (unstable) pendulum

@@ -2,7 +2,7 @@
 simulated closed-loop data, where the true potential is known (issue 44).
 
 The shipped QUBE runs are upright balancing under a PD controller. This script simulates that
-experiment (:func:`furuta_gym.diagnose.measured_like`, ``excitation="closed_loop_prbs"``, 5 runs
+experiment (:func:`furuta_gym.rigs.measured_like`, ``excitation="closed_loop_prbs"``, 5 runs
 of 20 s) on the MuJoCo plant with the effects the diagnosis finds on all 15 real runs, prepares
 it as ``studies/real_models.py`` prepares the real runs (0.5 s skipped, 1 s elementary
 trajectories, zero-phase velocity estimates on the whole log), trains DeLaN on the L_Iτ stage of
@@ -51,9 +51,9 @@ import furuta_gym
 furuta_gym.enable_x64()
 
 from furuta_gym.data import Trajectory  # noqa: E402
-from furuta_gym.diagnose import ClosedLoopBalancing, measured_like  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
 from furuta_gym.measured import prepare_log, window_errors  # noqa: E402
+from furuta_gym.rigs import ClosedLoopBalancing, measured_like  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_models import SKIP, SPLIT, WINDOW, potential_shape  # noqa: E402

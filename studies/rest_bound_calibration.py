@@ -23,8 +23,9 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.diagnose import DiagnosisSettings, held_at_rest, layout_for, measured_like, sticky_rig  # noqa: E402
+from furuta_gym.diagnose import DiagnosisSettings, held_at_rest, layout_for  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
+from furuta_gym.rigs import measured_like, sticky_rig  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "diagnose_rest_bound"
 COUNT = 2 * np.pi / 2048

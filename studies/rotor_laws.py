@@ -28,7 +28,8 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.diagnose import breakaway_rig, diagnose, measured_like, moving_rest_rig  # noqa: E402
+from furuta_gym.diagnose import diagnose  # noqa: E402
+from furuta_gym.rigs import breakaway_rig, measured_like, moving_rest_rig  # noqa: E402
 from rotor_laws_baseline import planted  # noqa: E402  the same record of the planted effects
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -29,7 +29,8 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.diagnose import breakaway_rig, diagnose, measured_like, moving_rest_rig, rest_drift  # noqa: E402
+from furuta_gym.diagnose import diagnose, rest_drift  # noqa: E402
+from furuta_gym.rigs import breakaway_rig, measured_like, moving_rest_rig  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "rotor_laws_baseline"

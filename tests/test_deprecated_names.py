@@ -6,7 +6,7 @@ import warnings
 
 import pytest
 
-from furuta_gym._deprecated import RENAMED
+from furuta_gym._deprecated import MOVED, RENAMED
 from furuta_gym.sensors import Sensors
 
 OLD_NAMES = [(module, old) for module, names in RENAMED.items() for old in names]
@@ -23,6 +23,18 @@ def test_old_name_serves_the_new_object_with_one_warning(module, old):
     assert [w.category for w in caught] == [DeprecationWarning]
     assert instead in str(caught[0].message) and old in str(caught[0].message)
     assert old not in mod.__all__ and (target.startswith("_") or target in mod.__all__)
+
+
+@pytest.mark.parametrize(("module", "name"), [(m, n) for m, names in MOVED.items() for n in names])
+def test_a_moved_name_serves_the_object_of_its_new_module_with_one_warning(module, name):
+    mod, where = importlib.import_module(module), MOVED[module][name]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        served = getattr(mod, name)
+    assert served is getattr(importlib.import_module(where), name)
+    assert [w.category for w in caught] == [DeprecationWarning]
+    assert f"use {where}.{name}" in str(caught[0].message)
+    assert name not in mod.__all__
 
 
 def test_from_import_of_an_old_name_warns_at_the_importer():

@@ -17,9 +17,10 @@ import pytest
 
 from furuta_gym.cli import main
 from furuta_gym.data import DataError, Trajectory, save_trajectories
-from furuta_gym.diagnose import diagnose, measured_like
+from furuta_gym.diagnose import diagnose
 from furuta_gym.effects import Effect
 from furuta_gym.lagrangian import forward_dynamics
+from furuta_gym.rigs import measured_like
 
 FURUTA = dict(n_trajectories=6, duration=5.0)
 NMSD = dict(n_trajectories=6, duration=8.0)

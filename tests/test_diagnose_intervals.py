@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from furuta_gym.diagnose import _intervals, diagnose, measured_like
+from furuta_gym.diagnose import _intervals, diagnose
 from furuta_gym.diagnose._intervals import (
     Interval,
     cluster_intervals,
@@ -27,6 +27,7 @@ from furuta_gym.diagnose._intervals import (
     sysid_calculate_intervals,
 )
 from furuta_gym.envs import Plant
+from furuta_gym.rigs import measured_like
 
 ROOT = Path(__file__).resolve().parents[1]
 _CACHE: dict = {}

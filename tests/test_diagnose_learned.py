@@ -17,9 +17,10 @@ import pytest
 
 from furuta_gym.cli import main
 from furuta_gym.data import Trajectory, save_trajectories
-from furuta_gym.diagnose import diagnose, measured_like
+from furuta_gym.diagnose import diagnose
 from furuta_gym.effects import Effect
 from furuta_gym.models import NMSD
+from furuta_gym.rigs import measured_like
 from furuta_gym.training.checkpoint import load_model
 
 RUNS = Path(__file__).resolve().parents[1] / "results" / "reproduce" / "runs"

@@ -25,8 +25,9 @@ import numpy as np
 import pytest
 
 from furuta_gym.cli import main
-from furuta_gym.diagnose import diagnose, measured_like, sticky_rig
+from furuta_gym.diagnose import diagnose
 from furuta_gym.effects import Effect
+from furuta_gym.rigs import measured_like, sticky_rig
 
 ROOT = Path(__file__).resolve().parents[1]
 LOG = dict(n_trajectories=6, duration=10.0)

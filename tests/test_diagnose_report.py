@@ -10,7 +10,7 @@ import furuta_gym
 
 furuta_gym.enable_x64()
 
-from furuta_gym.diagnose import diagnose, measured_like  # noqa: E402
+from furuta_gym.diagnose import diagnose  # noqa: E402
 from furuta_gym.diagnose._report import (  # noqa: E402
     REPORT_FILES,
     _plot_residual_vs_effect,
@@ -19,6 +19,7 @@ from furuta_gym.diagnose._report import (  # noqa: E402
 )
 from furuta_gym.diagnose._result import EffectEvidence  # noqa: E402
 from furuta_gym.effects import Effect  # noqa: E402
+from furuta_gym.rigs import measured_like  # noqa: E402
 
 SIZE = dict(n_trajectories=6, duration=5.0)
 FRICTION = [Effect("coulomb_friction", "alpha", 1e-3)]

@@ -12,22 +12,14 @@ import pytest
 
 import furuta_gym
 from furuta_gym.data import Trajectory
-from furuta_gym.diagnose import (
-    DiagnosisSettings,
-    _diagnose,
-    _fit,
-    held_at_rest,
-    layout_for,
-    measured_like,
-    sticky_rig,
-    stop_excursions,
-)
+from furuta_gym.diagnose import DiagnosisSettings, _diagnose, _fit, held_at_rest, layout_for, stop_excursions
 from furuta_gym.diagnose._fit import NO_INPUT_DYNAMICS, Segment
 from furuta_gym.diagnose._fitter import _Fitter
 from furuta_gym.diagnose._prepare import _segments, prepare, sensor_resolution
 from furuta_gym.diagnose._rests import rest_bound
 from furuta_gym.diagnose._result import EffectEvidence
 from furuta_gym.diagnose._verdict import _mark_unresolved
+from furuta_gym.rigs import measured_like, sticky_rig
 from furuta_gym.systems import get_spec
 
 furuta_gym.enable_x64()

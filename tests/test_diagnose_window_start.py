@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 import furuta_gym
-from furuta_gym.diagnose import _windows as windows_mod, diagnose, measured_like
+from furuta_gym.diagnose import _windows as windows_mod, diagnose
 from furuta_gym.diagnose._library import layout_for
+from furuta_gym.rigs import measured_like
 
 furuta_gym.enable_x64()
 

@@ -23,7 +23,6 @@ import pytest
 
 import furuta_gym
 from furuta_gym import lagrangian as lag
-from furuta_gym.diagnose._synthetic import measured_like
 from furuta_gym.effects import (
     EFFECT_UNITS,
     INPUT_EFFECTS,
@@ -34,6 +33,7 @@ from furuta_gym.effects import (
 )
 from furuta_gym.envs._backends import MujocoBackend, make_backend
 from furuta_gym.models import Furuta
+from furuta_gym.rigs import measured_like
 from furuta_gym.systems import get_spec
 
 furuta_gym.enable_x64()
@@ -291,7 +291,7 @@ def test_the_closed_loop_experiment_is_an_object_whose_knobs_act():
     """``excitation=ClosedLoopBalancing(...)``: its defaults are ``"closed_loop_prbs"`` bit for
     bit; a lower voltage limit clips the command; a subclass sees every run's signals (how a
     study records its feed-forward); bad gains are one clear error."""
-    from furuta_gym.diagnose import ClosedLoopBalancing
+    from furuta_gym.rigs import ClosedLoopBalancing
 
     short = dict(n_trajectories=2, duration=0.6, seed=4)
     named = measured_like("furuta", excitation="closed_loop_prbs", **short)

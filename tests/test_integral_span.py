@@ -5,10 +5,10 @@ quadrature intervals, so that the estimated velocities' error weighs less agains
 import numpy as np
 import pytest
 
-from furuta_gym.diagnose import measured_like
 from furuta_gym.lagrangian import integral_residual, momentum
 from furuta_gym.measured import prepare_log
 from furuta_gym.models import Furuta, FurutaParameters
+from furuta_gym.rigs import measured_like
 from furuta_gym.training.losses import integral_loss, make_windows, span_sum
 from furuta_gym.training.train import TrainSettings
 

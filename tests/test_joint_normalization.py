@@ -15,10 +15,10 @@ import pytest
 import furuta_gym
 from furuta_gym.cli import build_parser
 from furuta_gym.cli.reproduce import config_from_args
-from furuta_gym.diagnose import measured_like
 from furuta_gym.diagnose._library import nominal_base
 from furuta_gym.effects import Effect
 from furuta_gym.models import NMSD, LumpedSystem
+from furuta_gym.rigs import measured_like
 from furuta_gym.training.losses import _integral_parts, integral_loss, make_windows
 from furuta_gym.training.train import TrainSettings
 

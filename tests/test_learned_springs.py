@@ -71,8 +71,8 @@ def test_without_springs_the_model_has_its_old_leaves_and_a_sprung_one_round_tri
 
 def test_training_moves_the_spring():
     """Its parameters are trainable: L_Iτ steps change them (and not the frozen scale)."""
-    from furuta_gym.diagnose import measured_like
     from furuta_gym.effects import Effect
+    from furuta_gym.rigs import measured_like
     from furuta_gym.training.losses import make_windows
     from furuta_gym.training.train import TrainSettings, training_step
 

@@ -13,11 +13,12 @@ import pytest
 import furuta_gym.lagrangian as lag
 from furuta_gym.cli import main
 from furuta_gym.data import save_trajectories
-from furuta_gym.diagnose import diagnose, measured_like
+from furuta_gym.diagnose import diagnose
 from furuta_gym.diagnose._library import layout_for
 from furuta_gym.effects import Effect, can_join, merge_spring_rests
 from furuta_gym.envs import MujocoBackend, Plant, plant_mjcf, save_mjcf
 from furuta_gym.models import analytic_model
+from furuta_gym.rigs import measured_like
 
 FURUTA_EFFECTS = (
     Effect("spring", "alpha", 2e-3, reference=0.1),

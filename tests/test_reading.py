@@ -208,7 +208,7 @@ def test_implied_units_of_an_encoders_quantum():
 
 
 def test_inspect_says_what_the_shipped_runs_and_a_free_release_can_identify(tmp_path, capsys):
-    from furuta_gym.diagnose import measured_like
+    from furuta_gym.rigs import measured_like
 
     out = tmp_path / "inspect.json"
     assert main(["inspect", "qube:1-2", "--system", "furuta", "--json", str(out)]) == 0

@@ -17,9 +17,10 @@ import pytest
 
 import furuta_gym
 from furuta_gym.data import Trajectory
-from furuta_gym.diagnose import RestDrift, breakaway_rig, measured_like, moving_rest_rig, rest_drift
+from furuta_gym.diagnose import RestDrift, rest_drift
 from furuta_gym.effects import Effect
 from furuta_gym.envs import MujocoBackend
+from furuta_gym.rigs import breakaway_rig, measured_like, moving_rest_rig
 from furuta_gym.signals import quantize_encoder
 
 furuta_gym.enable_x64()

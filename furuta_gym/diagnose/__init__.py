@@ -7,6 +7,7 @@ refits and reports the held-out errors before and after; ``finish="prediction"``
 final model for prediction beside the report. See ``docs/diagnose.md``.
 """
 
+from .._deprecated import deprecated_names
 from ._diagnose import diagnose
 from ._drift import REST_LAWS, Rest, RestDrift, rest_drift
 from ._finish import PredictionFinish
@@ -16,7 +17,6 @@ from ._report import write_figures as write_report_figures, write_json as write_
 from ._rests import RestBound, Stop, held_at_rest, stop_excursions
 from ._result import DiagnosisResult, EffectEvidence, ErrorSummary
 from ._settings import DiagnosisSettings
-from ._synthetic import ClosedLoopBalancing, breakaway_rig, measured_like, moving_rest_rig, sticky_rig
 
 __all__ = [
     "diagnose",
@@ -30,11 +30,6 @@ __all__ = [
     "Candidate",
     "layout_for",
     "nominal_base",
-    "measured_like",
-    "sticky_rig",
-    "moving_rest_rig",
-    "breakaway_rig",
-    "ClosedLoopBalancing",
     "held_at_rest",
     "RestBound",
     "Stop",
@@ -46,3 +41,5 @@ __all__ = [
     "write_report_figures",
     "write_report_json",
 ]
+
+__getattr__ = deprecated_names(__name__)  # measured_like and the rigs moved to furuta_gym.rigs

@@ -1,7 +1,9 @@
-"""Measured-like datasets with a known undeclared effect, for tests, demos and benchmarks.
+"""Simulated rigs and the logs they give: measured-like datasets with a known undeclared effect,
+for tests, demos, benchmarks and trying a diagnosis (:func:`furuta_gym.diagnose.diagnose`) on a
+rig whose truth is known.
 
 The plant is the MuJoCo ground truth with the effects written into it
-(:class:`furuta_gym.envs._backends.MujocoBackend`, a plant variant; Coulomb friction and stiction
+(:class:`furuta_gym.envs.MujocoBackend`, a plant variant; Coulomb friction and stiction
 as the exact sgn law, an actuator lag as MuJoCo's actuator dynamics) — or, with
 ``plant="analytic"``, the analytic model plus :class:`furuta_gym.effects.WithEffects` (dry
 friction smoothed by tanh(v/1e-3)) and :class:`furuta_gym.effects.ActuatorLag` — integrated with
@@ -42,13 +44,13 @@ import jax
 import numpy as np
 from scipy.signal import lfilter
 
-from .._x64 import ensure_x64
-from ..data import Trajectory
-from ..effects import ActuatorLag, Effect, WithEffects, actuator_lag_time
-from ..envs import MujocoBackend
-from ..models import SYSTEM_DEFINITIONS, analytic_model, system_definition
-from ..signals import ENCODER_COUNTS_PER_REV, chirp, quantize_encoder
-from ..simulate import rk4_zoh_step, rollout_zoh
+from ._x64 import ensure_x64
+from .data import Trajectory
+from .effects import ActuatorLag, Effect, WithEffects, actuator_lag_time
+from .envs import MujocoBackend
+from .models import SYSTEM_DEFINITIONS, analytic_model, system_definition
+from .signals import ENCODER_COUNTS_PER_REV, chirp, quantize_encoder
+from .simulate import rk4_zoh_step, rollout_zoh
 
 __all__ = [
     "measured_like",
