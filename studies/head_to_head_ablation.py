@@ -38,6 +38,11 @@ of runs 1–10 only** (runs 11–15 are never read):
 * **the start velocity**: the refit with each training window's start velocity refitted under
   the plant too (3 Gauss-Newton steps on the window's own positions), a fit freed of the
   velocity estimate's error; scored, like every variant, from the measured start state.
+* **the input** (``--input-residual``, :func:`input_residual`): the committed prediction-first
+  plant's rotor acceleration error binned by the window's mean input and by the rotor's speed
+  (is it a dead band or gain of the input, or the rotor's friction?); and the finish with an
+  input dead band u_eff = sign(u)·max(|u| − d, 0) after the delay, d fitted with the rest on a
+  grid (:data:`DEAD_BANDS`: the refit at each, the best on its training windows kept).
 * **in sample** (``--oe-in-sample``, :func:`oe_in_sample`): whether the finish's output-error fit
   reaches the optimum of its own family, started from sysid's values and on sysid's objective,
   and how much of each window's error its start velocity carries.
@@ -50,11 +55,13 @@ the table into docs/diagnose.md.
     python studies/head_to_head_ablation.py [--variants a,b] [--out results/head_to_head/ablation.json]
     python studies/head_to_head_ablation.py --in-sample   # the committed plants on runs 1–10 themselves
     python studies/head_to_head_ablation.py --oe-in-sample   # the finish's refit and sysid's values on runs 1–10 (oe_in_sample)
+    python studies/head_to_head_ablation.py --input-residual   # the force error by input and rotor speed
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import platform
 import re
@@ -70,6 +77,7 @@ furuta_gym.enable_x64()
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
 from furuta_gym.diagnose import InputDynamics  # noqa: E402
 from furuta_gym.diagnose.finish_ablation import (  # noqa: E402
+    FINISH,
     STARTS_EVERY,
     Variant,
     diagnose_with_context,
@@ -81,6 +89,10 @@ from furuta_gym.systems import get_spec  # noqa: E402
 FIT_RUNS = list(range(1, 11))
 SKIP, WINDOW, OE_WINDOWS, FOLDS = 0.5, 0.1, 64, 3
 SYSID = Path(__file__).resolve().parents[1] / "results" / "head_to_head" / "sysid.json"
+#: the input dead bands (V) the dead-band variant refits at: the rotor's acceleration error on
+#: runs 1–10 is odd in the input and largest at 0.1–0.3 V, about 0.6 rad/s² there, with the
+#: rotor's response about 30 rad/s² per volt: tens of mV (beside a refitted rotor friction)
+DEAD_BANDS = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.14)
 
 
 VARIANTS = {
@@ -144,6 +156,12 @@ VARIANTS = {
             law=("karnopp", 0.01),
             refit_delay=True,
             free_j1b=True,
+        ),
+        Variant(
+            "staggered_dead_band",
+            "the finish now, with an input dead band fitted with the rest (0–140 mV)",
+            placement="staggered",
+            dead_bands=DEAD_BANDS,
         ),
         Variant(
             "staggered_refined_starts",
@@ -306,7 +324,7 @@ PHASE_STRIDE = 0.03
 def _run_windows(h2h, runs, dyn, stride: float | None):
     """The head-to-head's windows of ``runs`` (whole runs, velocities on the whole log) as the
     diagnosis' output-error windows, under input dynamics ``dyn`` (``segment``: each window's run)."""
-    from furuta_gym.diagnose import _windows
+    from furuta_gym.diagnose.finish_ablation import Windows
     from furuta_gym.measured import prediction_windows
 
     x0, us, xs = prediction_windows(h2h.with_input(runs, dyn), WINDOW, stride)
@@ -314,7 +332,7 @@ def _run_windows(h2h, runs, dyn, stride: float | None):
     step = L if stride is None else max(1, int(round(stride / runs[0].dt)))
     run = np.concatenate([np.full(len(range(0, len(tr) - L, step)), k) for k, tr in enumerate(runs)])
     assert run.size == len(x0), "one run index per window"
-    return _windows.Windows(x0, us, xs[:, 1:, :n], run, runs[0].dt, L)
+    return Windows(x0, us, xs[:, 1:, :n], run, runs[0].dt, L)
 
 
 def rotor_angle_residual(err: np.ndarray, x0: np.ndarray, dt: float, run: np.ndarray) -> dict:
@@ -403,9 +421,14 @@ def oe_in_sample(fx, res) -> dict:
     :func:`force_error_bounds`). Scored with
     the head-to-head's 4 RK4 substeps; fitted with the diagnosis'."""
     import diagnose_head_to_head as h2h
-    from furuta_gym.diagnose import _finish, _windows
-    from furuta_gym.diagnose._library import Candidate
-    from furuta_gym.diagnose.finish_ablation import refit_start
+    from furuta_gym.diagnose import Candidate
+    from furuta_gym.diagnose.finish_ablation import (
+        predict_windows,
+        refit as finish_refit,
+        refit_start,
+        refit_windows,
+        window_square_sums,
+    )
     from furuta_gym.signals import ENCODER_COUNTS_PER_REV
 
     fit = h2h.load_runs(FIT_RUNS)
@@ -414,25 +437,25 @@ def oe_in_sample(fx, res) -> dict:
     sysid, sysid_dyn = sysid_start(fx, start)
 
     def rmse(theta, win, refine: int = 0) -> float:
-        ss = _windows.window_square_sums(fx.layout, theta, win, h2h.SUBSTEPS, refine)
+        ss = window_square_sums(fx.layout, theta, win, h2h.SUBSTEPS, refine)
         return float(np.sqrt(ss.sum() / (ss.size * win.q[0].size)))
 
     def profile(theta, win) -> list[float]:
         """RMS position error of both angles at each step of the windows."""
-        err = _windows.predict_windows(fx.layout, theta, win, h2h.SUBSTEPS) - win.q
+        err = predict_windows(fx.layout, theta, win, h2h.SUBSTEPS) - win.q
         return [float(x) for x in np.sqrt(np.mean(err**2, axis=(0, 2)))]
 
     def refit(theta, d, win):
-        return _finish._refit(fx, theta, chosen, d, win)[0]
+        return finish_refit(fx, theta, chosen, d, win)
 
-    finish_win = {d: _finish.refit_windows(fx, fx.fit_segs, d) for d in (dyn, sysid_dyn)}
+    finish_win = {d: refit_windows(fx, fx.fit_segs, d) for d in (dyn, sysid_dyn)}
     ours = refit(start, dyn, finish_win[dyn])
     from_sysid = refit(sysid, sysid_dyn, finish_win[sysid_dyn])
     grid = {d: _run_windows(h2h, fit, d, None) for d in (dyn, sysid_dyn)}
     phases = {d: _run_windows(h2h, fit, d, PHASE_STRIDE) for d in (dyn, sysid_dyn)}
     plants = {"prediction_first": (ours, dyn), "sysid": (sysid, sysid_dyn)}
     lumped = lambda th: {b: float(th[i]) for i, b in enumerate(fx.layout.base)}  # noqa: E731
-    ours_err = _windows.predict_windows(fx.layout, ours, phases[dyn], h2h.SUBSTEPS) - phases[dyn].q
+    ours_err = predict_windows(fx.layout, ours, phases[dyn], h2h.SUBSTEPS) - phases[dyn].q
     return {
         "finish_objective": {k: rmse(th, finish_win[d]) for k, (th, d) in plants.items()},
         "grid": {k: rmse(th, grid[d]) for k, (th, d) in plants.items()},
@@ -470,14 +493,85 @@ def oe_in_sample(fx, res) -> dict:
     }
 
 
+#: bin edges of :func:`input_residual`: a window's mean input (V) and its rotor's start speed (rad/s)
+INPUT_BINS = (-10.0, -3.0, -1.0, -0.3, -0.1, 0.0, 0.1, 0.3, 1.0, 3.0, 10.0)
+SPEED_BINS = (-10.0, -1.0, -0.3, -0.1, -0.03, 0.0, 0.03, 0.1, 0.3, 1.0, 10.0)
+
+
+def _binned(value: np.ndarray, edges, accel: np.ndarray, split: np.ndarray) -> list[dict]:
+    """Mean (and its standard error) of ``accel`` in each bin of ``value``, all and split by the
+    sign of ``split``."""
+
+    def cell(m):
+        y = accel[m]
+        return [float(y.mean()), float(y.std() / np.sqrt(y.size)), int(y.size)] if y.size > 5 else None
+
+    return [
+        {
+            "bin": [lo, hi],
+            "all": cell(m := (value >= lo) & (value < hi)),
+            "pos": cell(m & (split > 0)),
+            "neg": cell(m & (split < 0)),
+        }
+        for lo, hi in zip(edges[:-1], edges[1:], strict=False)
+    ]
+
+
+def input_residual(results: Path) -> dict:
+    """Is the committed prediction-first plant's force error on runs 1–10 a function of the input
+    (a dead band, a voltage-dependent gain) or of the rotor's velocity (its friction)? Windows
+    starting every 30 ms (:data:`PHASE_STRIDE`), each window's error (measured − predicted)
+    fitted as v·t + a·t²/2 per joint; the rotor's a binned by the window's mean input (the input
+    the plant sees, delayed) split by the sign of the rotor's start speed, and by that speed
+    split by the sign of the input; and a regressed on 1, ū, sgn ū and on 1, α̇, sgn α̇ (R²)."""
+    import diagnose_head_to_head as h2h
+    from furuta_gym.envs import Plant
+    from furuta_gym.measured import prediction_windows
+
+    plant = Plant.from_json(
+        json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]["plant"]
+    )
+    runs = h2h.load_runs(FIT_RUNS)
+    dt = runs[0].dt
+    x0, us, xs = prediction_windows(h2h.with_input(runs, h2h.input_dynamics(plant.effects)), WINDOW, PHASE_STRIDE)
+    field = h2h.lagrangian_field(
+        h2h.LumpedSystem.of("furuta", plant.lumped), [e for e in plant.effects if not e.kind.on_input], dt
+    )
+    err = xs[:, 1:, :2] - h2h.predict_field(field, x0, us, dt)[:, 1:, :2]
+    L = err.shape[1]
+    t = dt * np.arange(1, L + 1)
+    basis = np.stack([t, t**2 / 2], axis=1)
+    accel = np.linalg.lstsq(basis, err.transpose(1, 0, 2).reshape(L, -1), rcond=None)[0].reshape(2, -1, 2)[1]
+    u, speed, a = us[:, :, 0].mean(1), x0[:, 2], accel[:, 0]
+
+    def regression(columns: list[np.ndarray]) -> dict:
+        X = np.stack([np.ones_like(a), *columns], axis=1)
+        c = np.linalg.lstsq(X, a, rcond=None)[0]
+        return {"coefficients": c.tolist(), "r2": float(1 - (a - X @ c).var() / a.var())}
+
+    return {
+        "windows": int(len(x0)),
+        "stride": PHASE_STRIDE,
+        "rotor_accel_rms": float(np.sqrt(np.mean(a**2))),
+        "by_input": _binned(u, INPUT_BINS, a, speed),
+        "by_speed": _binned(speed, SPEED_BINS, a, u),
+        "pendulum_by_input": _binned(u, INPUT_BINS, accel[:, 1], speed),
+        "on_input": regression([u, np.sign(u)]),
+        "on_speed": regression([speed, np.sign(speed)]),
+        "on_both": regression([u, np.sign(u), speed, np.sign(speed)]),
+    }
+
+
 def dump(doc: dict) -> str:
     """The result file's text: per-window sums to 5 significant digits, each list on one line.
-    Windows starting every 10 ms are ten times as many: their sums are kept for the current
-    finish only, which later variants are compared with (each variant's comparison is kept in
-    its ``by_placement``; the summaries keep their full precision)."""
+    Windows starting every 10 ms are ten times as many: their sums are kept for the finish until
+    the ablation and the finish now (``FINISH``) only, which later variants are compared with
+    (each variant's comparisons are kept in its ``by_placement``; the summaries keep their full
+    precision). ``doc`` itself keeps every sum."""
+    doc = copy.deepcopy(doc)
     for name, r in doc["variants"].items():
         for fold in r["per_fold"]:
-            if name != "current":
+            if name not in ("current", FINISH):
                 fold.pop("sums_starts", None)
             for key in [k for k in fold if k.startswith("sums")]:
                 fold[key] = [float(f"{x:.5g}") for x in fold[key]]
@@ -499,6 +593,11 @@ def main() -> None:
         action="store_true",
         help="only the finish's refit and sysid's values on runs 1–10's own windows (oe_in_sample)",
     )
+    ap.add_argument(
+        "--input-residual",
+        action="store_true",
+        help="only the committed prediction-first plant's rotor acceleration error by input and speed",
+    )
     args = ap.parse_args()
     names = args.variants.split(",")
     if unknown := [v for v in names if v not in VARIANTS]:
@@ -508,6 +607,10 @@ def main() -> None:
     for name, r in doc["variants"].items():  # labels are the code's (a variant's meaning can be renamed)
         if name in VARIANTS:
             r["label"] = VARIANTS[name].label
+    if args.input_residual:
+        doc["input_residual"] = input_residual(Path(__file__).resolve().parents[1] / "results" / "head_to_head")
+        print(json.dumps(doc["input_residual"], indent=1))
+        return out.write_text(dump(doc)) and None
     if args.in_sample:
         doc["in_sample"] = in_sample(Path(__file__).resolve().parents[1] / "results" / "head_to_head")
         print(doc["in_sample"])

@@ -121,6 +121,53 @@ def _force_sentence(o: dict) -> str:
     )
 
 
+def _input_residual_sentence(doc: dict) -> str:
+    """The sentence of ``head_to_head_ablation.py --input-residual`` ("" before it was run)."""
+    r = doc.get("input_residual")
+    if r is None:
+        return ""
+    cell = lambda c: "–" if c is None else f"{c[0]:+.2f} ± {c[1]:.2f}"  # noqa: E731
+    edges = lambda b: f"{b['bin'][0]:g} to {b['bin'][1]:g}"  # noqa: E731
+    by_input = "; ".join(
+        f"{edges(b)} V: {cell(b['all'])} (rotor turning forward {cell(b['pos'])}, backward {cell(b['neg'])})"
+        for b in r["by_input"]
+        if b["all"] is not None and b["all"][2] >= 100
+    )
+    by_speed = "; ".join(
+        f"{edges(b)} rad/s: {cell(b['all'])}" for b in r["by_speed"] if b["all"] is not None and b["all"][2] >= 100
+    )
+    u, v = r["on_input"], r["on_speed"]
+    return (
+        f"The committed prediction-first plant's rotor acceleration error on runs 1–10 (measured − predicted; "
+        f"{r['windows']} windows starting every {1e3 * r['stride']:g} ms, each window's error fitted as v·t + a·t²/2; "
+        f"RMS {r['rotor_accel_rms']:.2f} rad/s²; mean ± standard error in rad/s², bins of at least 100 windows), by "
+        f"the window's mean input: {by_input}. By the rotor's start speed: {by_speed}. Regressed on 1, ū, sgn ū: "
+        f"sgn ū {u['coefficients'][2]:+.2f} rad/s², ū {u['coefficients'][1]:+.2f} rad/s² per V, R² {u['r2']:.3f}; "
+        f"on 1, α̇, sgn α̇: sgn α̇ {v['coefficients'][2]:+.3f} rad/s², R² {v['r2']:.4f}. "
+    )
+
+
+def _dead_band_sentence(doc: dict) -> str:
+    """The dead-band variant against the finish now, on each placement ("" before it was run)."""
+    r = doc["variants"].get("staggered_dead_band")
+    if r is None or "vs_finish" not in r:
+        return ""
+    bands = ", ".join(f"{1e3 * f['dead_band']:g}" for f in r["per_fold"])
+    places = {"segments": r["vs_finish"]} | {
+        p: e["vs_finish"] for p, e in r.get("by_placement", {}).items() if "vs_finish" in e
+    }
+    words = {"segments": "the finish's own held-out windows", "grid": "the score's grid", "starts": "every 10 ms"}
+    return (
+        f'The row "{r["label"]}": its dead band per fold {bands} mV; against the finish now ("prediction-first '
+        'now"): '
+        + ", ".join(f"{words[p]} {_change(c)}" for p, c in places.items())
+        + " (each passing the rule for a gain: "
+        + ", ".join("yes" if c["passes_rule"] else "no" for c in places.values())
+        + ")"
+        + ". "
+    )
+
+
 def _oe_in_sample(doc: dict) -> str:
     """The sentences of ``head_to_head_ablation.py --oe-in-sample`` ("" before it was run)."""
     o = doc.get("oe_in_sample")
@@ -202,9 +249,11 @@ def body(given: dict | None = None) -> str:
             "MJCF's back-EMF in the rotor damping): every fold was in its fit. "
             + in_sample
             + _oe_in_sample(doc)
+            + _input_residual_sentence(doc)
+            + _dead_band_sentence(doc)
             + f"{doc['machine']}, {doc['date']}. From `python studies/head_to_head_ablation.py && python "
             "studies/head_to_head_ablation.py --in-sample && python studies/head_to_head_ablation.py --oe-in-sample && "
-            "python studies/head_to_head_ablation_table.py`.",
+            "python studies/head_to_head_ablation.py --input-residual && python studies/head_to_head_ablation_table.py`.",
         ]
     )
 

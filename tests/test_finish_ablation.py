@@ -85,3 +85,17 @@ def test_the_finish_refits_on_windows_that_follow_one_another_with_a_gap():
     assert np.all(np.diff(start[:19]) == 55) and np.all(np.diff(start[19:]) == 55)
     back_to_back = {k % 50 for k in (25, 1102)}
     assert len(back_to_back) == 2
+
+
+def test_dead_band_input_follows_the_delay_and_passes_nothing_below_its_band():
+    """The dead-band variant's input: the delay first, then sign(u)·max(|u| − d, 0)."""
+    from furuta_gym.diagnose._fit import InputDynamics
+    from furuta_gym.diagnose.finish_ablation import DeadBandInput
+
+    dt, u = 0.002, np.array([[0.0], [0.01], [-0.01], [0.5], [-0.5], [0.03]])
+    banded = DeadBandInput("delay", 0.004, 0.02)
+    delayed = InputDynamics("delay", 0.004).apply(u, dt)
+    expected = np.sign(delayed) * np.maximum(np.abs(delayed) - 0.02, 0.0)
+    assert np.allclose(banded.apply(u, dt), expected)
+    assert np.allclose(DeadBandInput("none", 0.0, 0.02).apply(u, dt).ravel(), [0, 0, 0, 0.48, -0.48, 0.01])
+    assert np.allclose(DeadBandInput("delay", 0.004).apply(u, dt), delayed)  # no band: the delay alone

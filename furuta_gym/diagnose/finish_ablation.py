@@ -6,7 +6,8 @@ touching any test data, the diagnosis' segments are split into folds as the diag
 (every third segment of a log; fold 2 is its held-out set), and a variant of the refit is fitted
 on the other folds and scored on each fold in turn (:func:`run_variant`). A variant changes one
 thing: the dry-friction law of the predictor (``friction_law``), the input delay refitted with the
-rest, J1b freed to the rigid-body boundary, the refit's data (one fold, or its windows placed
+rest, an input dead band fitted with the rest (:class:`DeadBandInput`), J1b freed to the
+rigid-body boundary, the refit's data (one fold, or its windows placed
 otherwise: :data:`PLACEMENTS`), its evaluations or its start. Every variant is scored on the held-out
 fold's windows under each placement, since where a 0.1 s window starts changes its error (the
 shipped runs' input steps every 0.1 s). ``studies/head_to_head_ablation.py`` runs them on the
@@ -28,23 +29,31 @@ from ..simulate import rollout_zoh
 from ..systems import get_spec
 from . import _finish, _fit, _trace as _trace_mod, _windows
 from ._diagnose import diagnose
-from ._finish import PLACEMENTS, STARTS_EVERY, drawn, log_starts, placed_windows
+from ._finish import PLACEMENTS, STARTS_EVERY, drawn, log_starts, placed_windows, refit_windows
 from ._fit import InputDynamics
 from ._library import Candidate
 from ._settings import DiagnosisSettings
+from ._windows import Windows, predict_windows, window_square_sums
 
 __all__ = [
     "PLACEMENTS",
     "STARTS_EVERY",
+    "FINISH",
+    "DeadBandInput",
     "Variant",
+    "Windows",
     "diagnose_with_context",
     "fold_of",
     "friction_law",
     "log_starts",
     "placed_windows",
+    "predict_windows",
+    "refit",
     "refit_start",
+    "refit_windows",
     "run_variant",
     "summarise",
+    "window_square_sums",
 ]
 
 FOLDS = 3
@@ -52,6 +61,8 @@ FOLDS = 3
 DELAY_STEPS = np.array([-0.5e-3, -0.25e-3, 0.25e-3, 0.5e-3])
 BOUNDARY_MARGIN = 0.01
 RULE = DiagnosisSettings()  # its rule for a gain judges a variant against the current finish
+#: the variant that is the finish as shipped now (its windows staggered, :mod:`._finish`)
+FINISH = "staggered"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,6 +81,22 @@ class Variant:
     max_windows: int | None = None  # the refit on this many of them, drawn at random (None: all)
     # Gauss-Newton steps on each training window's start velocity in the refit (scored without)
     start_iterations: int = 0
+    # an input dead band (V, :class:`DeadBandInput`): the refit at each, the one whose refit fits
+    # the training windows best kept (empty: none)
+    dead_bands: tuple[float, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class DeadBandInput(InputDynamics):
+    """The input dynamics followed by a dead band: u_eff = sign(u)·max(|u| − ``dead_band``, 0),
+    what a motor driver or the brushes' friction that needs a least voltage to pass any current
+    would do. It acts on the input, not the rotor's velocity (the rotor's Coulomb friction)."""
+
+    dead_band: float = 0.0  # V
+
+    def apply(self, u: np.ndarray, dt: float) -> np.ndarray:
+        u = super().apply(u, dt)
+        return np.sign(u) * np.maximum(np.abs(u) - self.dead_band, 0.0)
 
 
 def diagnose_with_context(data, system: str, **kwargs):
@@ -161,6 +188,12 @@ def friction_law(law):
         _windows._predictor = original
 
 
+def refit(fx, theta, chosen, dyn, win) -> np.ndarray:
+    """θ of the finish's output-error refit from ``theta`` with ``chosen`` free on windows ``win``
+    (under input dynamics ``dyn``), as the finish refits."""
+    return _finish._refit(fx, theta, chosen, dyn, win)[0]
+
+
 def refit_start(fx, res):
     """The finish's start: the diagnosed θ with its inconsistent effects and every joint's
     Coulomb friction at their tested values, the candidates it frees and its input dynamics."""
@@ -179,7 +212,7 @@ def refit_delay(fx, theta, chosen, dyn, windows):
     training windows under input dynamics ``d``."""
     if dyn.kind == "none":
         return theta, chosen, dyn
-    grid = [dyn] + [InputDynamics(dyn.kind, dyn.seconds + s) for s in DELAY_STEPS]
+    grid = [dyn] + [dataclasses.replace(dyn, seconds=dyn.seconds + s) for s in DELAY_STEPS]
     sums = [_windows.window_square_sums(fx.layout, theta, windows(d), fx.substeps).sum() for d in grid]
     best = grid[int(np.argmin(sums))]
     if best == dyn:
@@ -215,6 +248,22 @@ def refit_j1b(fx, res, start, chosen, dyn, win):
     return theta, chosen
 
 
+def refit_dead_band(fx, start, chosen, dyn, windows, dead_bands):
+    """The refit at each input dead band of ``dead_bands`` (from the same start), kept where its
+    training windows' sum of squares is least: the dead band fitted with the rest on a grid.
+    ``windows(d)``: the training windows under input dynamics ``d``."""
+    best = None
+    for band in dead_bands:
+        d = DeadBandInput(dyn.kind, dyn.seconds, float(band))
+        win = windows(d)
+        theta, kept, _, _ = _finish._refit(fx, start, chosen, d, win)
+        total = float(_windows.window_square_sums(fx.layout, theta, win, fx.substeps).sum())
+        if best is None or total < best[0]:
+            best = (total, theta, kept, d, win)
+    assert best is not None, "dead_bands holds one value at least"
+    return best[1:]
+
+
 @contextlib.contextmanager
 def _restoring(fx, settings):
     try:
@@ -246,6 +295,8 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
     with friction_law(variant.law), _restoring(fx, settings):
         if not variant.refit:
             theta = start
+        elif variant.dead_bands:
+            theta, chosen, dyn, win = refit_dead_band(fx, start, chosen, dyn, windows, variant.dead_bands)
         elif variant.free_j1b:
             theta, chosen = refit_j1b(fx, res, start, chosen, dyn, win)
         else:
@@ -264,6 +315,7 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
         "effects": {c.key: float(theta[fx.layout.index(c.key)]) for c in chosen if not c.kind.input_dynamics},
         "delay": dyn.seconds,
         "input_dynamics": dyn.kind,
+        **({"dead_band": dyn.dead_band} if isinstance(dyn, DeadBandInput) else {}),
         "train_windows": int(win.x0.shape[0]) if variant.refit else 0,
     }
 
@@ -301,27 +353,39 @@ def _pooled(doc: dict, key: str) -> dict[str, np.ndarray]:
     }
 
 
+def _change(base, sums) -> dict:
+    ev = _trace_mod.Evidence.of_sums(base, sums)
+    return {
+        "improvement": float(ev.improvement),
+        "z_score": float(ev.z),
+        "passes_rule": bool(ev.passes(RULE.min_improvement, RULE.z_threshold)),
+    }
+
+
 def summarise(doc: dict, length: int, n: int) -> None:
     """Pooled held-out RMSE, fold 2's (the finish's own held-out windows) and the change against
     the current finish, with the diagnosis' rule for a gain (relative drop of the sum of squares,
     t of per-window log ratios); the same on the held-out windows of each other placement
-    (``by_placement``)."""
+    (``by_placement``). ``vs_finish``: the same change against the finish as shipped now
+    (:data:`FINISH`), where both variants' sums are at hand."""
     pooled = _pooled(doc, "sums")
     base = pooled.get("current")
     for v, r in doc["variants"].items():
         r["heldout_rmse"] = rmse(pooled[v], length, n)
         r["fold_rmse"] = [rmse(f["sums"], length, n) for f in r["per_fold"]]
         if base is not None and v != "current":
-            ev = _trace_mod.Evidence.of_sums(base, pooled[v])
-            r["vs_current"] = {"improvement": float(ev.improvement), "z_score": float(ev.z)}
-            r["passes_rule"] = bool(ev.passes(RULE.min_improvement, RULE.z_threshold))
+            change = _change(base, pooled[v])
+            r["vs_current"] = {k: change[k] for k in ("improvement", "z_score")}
+            r["passes_rule"] = change["passes_rule"]
+        if FINISH in pooled and v not in ("current", FINISH):
+            r["vs_finish"] = _change(pooled[FINISH], pooled[v])
     for placement in PLACEMENTS[1:]:
         pooled = _pooled(doc, f"sums_{placement}")
         base = pooled.get("current")
         for v, sums in pooled.items():
             entry = {"heldout_rmse": rmse(sums, length, n), "windows": int(sums.size)}
             if base is not None and v != "current":
-                ev = _trace_mod.Evidence.of_sums(base, sums)
-                entry |= {"improvement": float(ev.improvement), "z_score": float(ev.z)}
-                entry["passes_rule"] = bool(ev.passes(RULE.min_improvement, RULE.z_threshold))
+                entry |= _change(base, sums)
+            if FINISH in pooled and v not in ("current", FINISH):
+                entry["vs_finish"] = _change(pooled[FINISH], sums)
             doc["variants"][v].setdefault("by_placement", {})[placement] = entry
