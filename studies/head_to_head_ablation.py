@@ -517,38 +517,74 @@ def _binned(value: np.ndarray, edges, accel: np.ndarray, split: np.ndarray) -> l
     ]
 
 
-def input_residual(results: Path) -> dict:
-    """Is the committed prediction-first plant's force error on runs 1–10 a function of the input
-    (a dead band, a voltage-dependent gain) or of the rotor's velocity (its friction)? Windows
-    starting every 30 ms (:data:`PHASE_STRIDE`), each window's error (measured − predicted)
-    fitted as v·t + a·t²/2 per joint; the rotor's a binned by the window's mean input (the input
-    the plant sees, delayed) split by the sign of the rotor's start speed, and by that speed
-    split by the sign of the input; and a regressed on 1, ū, sgn ū and on 1, α̇, sgn α̇ (R²)."""
-    import diagnose_head_to_head as h2h
-    from furuta_gym.envs import Plant
+def _window_accelerations(h2h, runs, lumped: dict, effects, dyn):
+    """Windows of ``runs`` starting every :data:`PHASE_STRIDE` s under a plant (``lumped`` values,
+    memoryless ``effects``, input dynamics ``dyn``): each window's start state, its mean input as
+    logged and delayed (before any dead band), each joint's acceleration error a (measured −
+    predicted, the window's error fitted as v·t + a·t²/2) and the position RMSE."""
     from furuta_gym.measured import prediction_windows
 
-    plant = Plant.from_json(
-        json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]["plant"]
-    )
-    runs = h2h.load_runs(FIT_RUNS)
     dt = runs[0].dt
-    x0, us, xs = prediction_windows(h2h.with_input(runs, h2h.input_dynamics(plant.effects)), WINDOW, PHASE_STRIDE)
-    field = h2h.lagrangian_field(
-        h2h.LumpedSystem.of("furuta", plant.lumped), [e for e in plant.effects if not e.kind.on_input], dt
-    )
+    x0, us, xs = prediction_windows(h2h.with_input(runs, dyn), WINDOW, PHASE_STRIDE)
+    field = h2h.lagrangian_field(h2h.LumpedSystem.of("furuta", lumped), effects, dt)
     err = xs[:, 1:, :2] - h2h.predict_field(field, x0, us, dt)[:, 1:, :2]
     L = err.shape[1]
     t = dt * np.arange(1, L + 1)
     basis = np.stack([t, t**2 / 2], axis=1)
     accel = np.linalg.lstsq(basis, err.transpose(1, 0, 2).reshape(L, -1), rcond=None)[0].reshape(2, -1, 2)[1]
-    u, speed, a = us[:, :, 0].mean(1), x0[:, 2], accel[:, 0]
+    logged = InputDynamics(dyn.kind, dyn.seconds)  # the delay alone
+    u = prediction_windows(h2h.with_input(runs, logged), WINDOW, PHASE_STRIDE)[1][:, :, 0].mean(1)
+    return x0, u, accel, float(np.sqrt(np.mean(err**2)))
 
-    def regression(columns: list[np.ndarray]) -> dict:
-        X = np.stack([np.ones_like(a), *columns], axis=1)
-        c = np.linalg.lstsq(X, a, rcond=None)[0]
-        return {"coefficients": c.tolist(), "r2": float(1 - (a - X @ c).var() / a.var())}
 
+def _regression(a: np.ndarray, columns: list[np.ndarray]) -> dict:
+    X = np.stack([np.ones_like(a), *columns], axis=1)
+    c = np.linalg.lstsq(X, a, rcond=None)[0]
+    return {"coefficients": c.tolist(), "r2": float(1 - (a - X @ c).var() / a.var())}
+
+
+def _fold_plants(h2h, runs, doc: dict) -> dict:
+    """The finish now and the dead-band variant as refitted on folds 0 and 1 (the finish's own
+    split), on the same windows: RMSE, and the rotor's acceleration error by the mean input."""
+    from furuta_gym.diagnose.finish_ablation import DeadBandInput
+    from furuta_gym.effects import Effect
+
+    out = {}
+    for name in (FINISH, "staggered_dead_band"):
+        if name not in doc["variants"]:
+            continue
+        f = doc["variants"][name]["per_fold"][2]
+        effects = [Effect(*key.split(":"), value) for key, value in f["effects"].items()]
+        dyn = DeadBandInput(f["input_dynamics"], f["delay"], f.get("dead_band", 0.0))
+        _, u, accel, rmse = _window_accelerations(h2h, runs, f["theta"], effects, dyn)
+        out[name] = {
+            "rmse": rmse,
+            "dead_band": dyn.dead_band,
+            "by_input": _binned(u, INPUT_BINS, accel[:, 0], u),
+            "on_input": _regression(accel[:, 0], [u, np.sign(u)]),
+        }
+    return out
+
+
+def input_residual(results: Path, doc: dict) -> dict:
+    """Is the committed prediction-first plant's force error on runs 1–10 a function of the input
+    (a dead band, a voltage-dependent gain) or of the rotor's velocity (its friction)? Windows
+    starting every 30 ms (:data:`PHASE_STRIDE`), each window's error (measured − predicted)
+    fitted as v·t + a·t²/2 per joint; the rotor's a binned by the window's mean input (the input
+    the plant sees, delayed) split by the sign of the rotor's start speed, and by that speed
+    split by the sign of the input; and a regressed on 1, ū, sgn ū and on 1, α̇, sgn α̇ (R²).
+    ``fold_plants``: the same for the finish now and the dead-band variant refitted on folds 0
+    and 1 (:func:`_fold_plants`)."""
+    import diagnose_head_to_head as h2h
+    from furuta_gym.envs import Plant
+
+    plant = Plant.from_json(
+        json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]["plant"]
+    )
+    runs = h2h.load_runs(FIT_RUNS)
+    effects = [e for e in plant.effects if not e.kind.on_input]
+    x0, u, accel, _ = _window_accelerations(h2h, runs, plant.lumped, effects, h2h.input_dynamics(plant.effects))
+    speed, a = x0[:, 2], accel[:, 0]
     return {
         "windows": int(len(x0)),
         "stride": PHASE_STRIDE,
@@ -556,9 +592,10 @@ def input_residual(results: Path) -> dict:
         "by_input": _binned(u, INPUT_BINS, a, speed),
         "by_speed": _binned(speed, SPEED_BINS, a, u),
         "pendulum_by_input": _binned(u, INPUT_BINS, accel[:, 1], speed),
-        "on_input": regression([u, np.sign(u)]),
-        "on_speed": regression([speed, np.sign(speed)]),
-        "on_both": regression([u, np.sign(u), speed, np.sign(speed)]),
+        "on_input": _regression(a, [u, np.sign(u)]),
+        "on_speed": _regression(a, [speed, np.sign(speed)]),
+        "on_both": _regression(a, [u, np.sign(u), speed, np.sign(speed)]),
+        "fold_plants": _fold_plants(h2h, runs, doc),
     }
 
 
@@ -608,7 +645,7 @@ def main() -> None:
         if name in VARIANTS:
             r["label"] = VARIANTS[name].label
     if args.input_residual:
-        doc["input_residual"] = input_residual(Path(__file__).resolve().parents[1] / "results" / "head_to_head")
+        doc["input_residual"] = input_residual(Path(__file__).resolve().parents[1] / "results" / "head_to_head", doc)
         print(json.dumps(doc["input_residual"], indent=1))
         return out.write_text(dump(doc)) and None
     if args.in_sample:

@@ -143,7 +143,20 @@ def _input_residual_sentence(doc: dict) -> str:
         f"RMS {r['rotor_accel_rms']:.2f} rad/s²; mean ± standard error in rad/s², bins of at least 100 windows), by "
         f"the window's mean input: {by_input}. By the rotor's start speed: {by_speed}. Regressed on 1, ū, sgn ū: "
         f"sgn ū {u['coefficients'][2]:+.2f} rad/s², ū {u['coefficients'][1]:+.2f} rad/s² per V, R² {u['r2']:.3f}; "
-        f"on 1, α̇, sgn α̇: sgn α̇ {v['coefficients'][2]:+.3f} rad/s², R² {v['r2']:.4f}. "
+        f"on 1, α̇, sgn α̇: sgn α̇ {v['coefficients'][2]:+.3f} rad/s², R² {v['r2']:.4f}. " + _fold_plants_sentence(r)
+    )
+
+
+def _fold_plants_sentence(r: dict) -> str:
+    """The finish now and the dead-band variant (refitted on folds 0 and 1) on the same windows."""
+    plants = r.get("fold_plants", {})
+    if "staggered" not in plants or "staggered_dead_band" not in plants:
+        return ""
+    now, banded = plants["staggered"], plants["staggered_dead_band"]
+    sign = lambda p: f"sgn ū {p['on_input']['coefficients'][2]:+.2f} rad/s², R² {p['on_input']['r2']:.4f}"  # noqa: E731
+    return (
+        f"Refitted on folds 0 and 1, on the same windows: the finish now {1e3 * now['rmse']:.3f} mrad ({sign(now)}), "
+        f"with the dead band ({1e3 * banded['dead_band']:g} mV) {1e3 * banded['rmse']:.3f} mrad ({sign(banded)}). "
     )
 
 
