@@ -92,7 +92,7 @@ SYSID = Path(__file__).resolve().parents[1] / "results" / "head_to_head" / "sysi
 #: the input dead bands (V) the dead-band variant refits at: the rotor's acceleration error on
 #: runs 1–10 is odd in the input and largest at 0.1–0.3 V, about 0.6 rad/s² there, with the
 #: rotor's response about 30 rad/s² per volt: tens of mV (beside a refitted rotor friction)
-DEAD_BANDS = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.14)
+DEAD_BANDS = (0.0, 0.02, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1, 0.14)
 
 
 VARIANTS = {
@@ -162,6 +162,14 @@ VARIANTS = {
             "the finish now, with an input dead band fitted with the rest (0–140 mV)",
             placement="staggered",
             dead_bands=DEAD_BANDS,
+        ),
+        Variant(
+            "staggered_dead_band_delay_j1b",
+            "the finish now, with the dead band (40–80 mV), the input delay refitted and J1b freed",
+            placement="staggered",
+            dead_bands=(0.04, 0.05, 0.06, 0.07, 0.08),
+            refit_delay=True,
+            free_j1b=True,
         ),
         Variant(
             "staggered_refined_starts",

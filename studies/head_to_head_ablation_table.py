@@ -161,24 +161,26 @@ def _fold_plants_sentence(r: dict) -> str:
 
 
 def _dead_band_sentence(doc: dict) -> str:
-    """The dead-band variant against the finish now, on each placement ("" before it was run)."""
-    r = doc["variants"].get("staggered_dead_band")
-    if r is None or "vs_finish" not in r:
-        return ""
-    bands = ", ".join(f"{1e3 * f['dead_band']:g}" for f in r["per_fold"])
-    places = {"segments": r["vs_finish"]} | {
-        p: e["vs_finish"] for p, e in r.get("by_placement", {}).items() if "vs_finish" in e
-    }
+    """The dead-band variants against the finish now, on each placement ("" before they were run)."""
     words = {"segments": "the finish's own held-out windows", "grid": "the score's grid", "starts": "every 10 ms"}
-    return (
-        f'The row "{r["label"]}": its dead band per fold {bands} mV; against the finish now ("prediction-first '
-        'now"): '
-        + ", ".join(f"{words[p]} {_change(c)}" for p, c in places.items())
-        + " (each passing the rule for a gain: "
-        + ", ".join("yes" if c["passes_rule"] else "no" for c in places.values())
-        + ")"
-        + ". "
-    )
+    out = []
+    for name in ("staggered_dead_band", "staggered_dead_band_delay_j1b"):
+        r = doc["variants"].get(name)
+        if r is None or "vs_finish" not in r:
+            continue
+        bands = ", ".join(f"{1e3 * f['dead_band']:g}" for f in r["per_fold"])
+        places = {"segments": r["vs_finish"]} | {
+            p: e["vs_finish"] for p, e in r.get("by_placement", {}).items() if "vs_finish" in e
+        }
+        out.append(
+            f'The row "{r["label"]}": its dead band per fold {bands} mV; against the finish now ("prediction-first '
+            'now"): '
+            + ", ".join(f"{words[p]} {_change(c)}" for p, c in places.items())
+            + " (each passing the rule for a gain: "
+            + ", ".join("yes" if c["passes_rule"] else "no" for c in places.values())
+            + "). "
+        )
+    return "".join(out)
 
 
 def _oe_in_sample(doc: dict) -> str:

@@ -248,15 +248,16 @@ def refit_j1b(fx, res, start, chosen, dyn, win):
     return theta, chosen
 
 
-def refit_dead_band(fx, start, chosen, dyn, windows, dead_bands):
+def refit_dead_band(fx, fit, dyn, windows, dead_bands):
     """The refit at each input dead band of ``dead_bands`` (from the same start), kept where its
     training windows' sum of squares is least: the dead band fitted with the rest on a grid.
-    ``windows(d)``: the training windows under input dynamics ``d``."""
+    ``fit(d, win)``: the refit's (θ, kept candidates) under input dynamics ``d`` on windows
+    ``win``; ``windows(d)``: the training windows under ``d``."""
     best = None
     for band in dead_bands:
         d = DeadBandInput(dyn.kind, dyn.seconds, float(band))
         win = windows(d)
-        theta, kept, _, _ = _finish._refit(fx, start, chosen, d, win)
+        theta, kept = fit(d, win)
         total = float(_windows.window_square_sums(fx.layout, theta, win, fx.substeps).sum())
         if best is None or total < best[0]:
             best = (total, theta, kept, d, win)
@@ -270,6 +271,14 @@ def _restoring(fx, settings):
         yield
     finally:
         fx.settings = settings
+
+
+def _fit_once(fx, res, variant: Variant, start, chosen, dyn, win):
+    """The variant's refit from ``start`` under input dynamics ``dyn`` on ``win``: (θ, kept)."""
+    if variant.free_j1b:
+        return refit_j1b(fx, res, start, chosen, dyn, win)
+    theta, chosen, _, _ = _finish._refit(fx, start, chosen, dyn, win)
+    return theta, chosen
 
 
 def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
@@ -296,11 +305,10 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
         if not variant.refit:
             theta = start
         elif variant.dead_bands:
-            theta, chosen, dyn, win = refit_dead_band(fx, start, chosen, dyn, windows, variant.dead_bands)
-        elif variant.free_j1b:
-            theta, chosen = refit_j1b(fx, res, start, chosen, dyn, win)
+            fit = lambda d, w: _fit_once(fx, res, variant, start, chosen, d, w)  # noqa: E731
+            theta, chosen, dyn, win = refit_dead_band(fx, fit, dyn, windows, variant.dead_bands)
         else:
-            theta, chosen, _, _ = _finish._refit(fx, start, chosen, dyn, win)
+            theta, chosen = _fit_once(fx, res, variant, start, chosen, dyn, win)
         if variant.refit_delay:
             theta, chosen, dyn = refit_delay(fx, theta, chosen, dyn, windows)
         sums = {
