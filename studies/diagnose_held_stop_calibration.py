@@ -81,7 +81,7 @@ def main() -> None:
         "held_stop": held_stop,
         "min_stop_seconds": 0.04,
         "held_speed": HELD_SPEED,
-        "velocity": DiagnosisSettings().velocity,
+        "velocity": DiagnosisSettings().reading.velocity,
         "rows": rows,
     }
     (OUT / "calibration.json").write_text(json.dumps(doc, indent=1) + "\n")

@@ -43,7 +43,7 @@ def _bound(effects, excitation: str, seed: int) -> dict:
         if e.name == "spring" and e.reference:
             theta[layout.index("constant_torque:alpha")] = e.coefficient * e.reference
     log = measured_like("furuta", effects, excitation=excitation, seed=seed, **LOG)
-    b = held_at_rest(log, "alpha", layout, theta, window=DiagnosisSettings().rest_window, count=COUNT)
+    b = held_at_rest(log, "alpha", layout, theta, window=DiagnosisSettings().rests.rest_window, count=COUNT)
     by = {e.name: e.coefficient for e in effects}
     breakaway = by["coulomb_friction"] + by.get("stiction", 0.0)
     return {
@@ -66,7 +66,7 @@ def main() -> None:
         rows += [dict(_bound(effects, "sine_sweep", s), stiction=False) for s in SEEDS]
     rows += [dict(_bound(sticky_rig(s), "sticky_sweep", s), stiction=True) for s in SEEDS]
     OUT.mkdir(parents=True, exist_ok=True)
-    doc = {"window_seconds": DiagnosisSettings().rest_window, "count_rad": COUNT, "rows": rows}
+    doc = {"window_seconds": DiagnosisSettings().rests.rest_window, "count_rad": COUNT, "rows": rows}
     (OUT / "calibration.json").write_text(json.dumps(doc, indent=1) + "\n")
     for r in rows:
         print(

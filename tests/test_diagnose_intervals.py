@@ -192,7 +192,7 @@ def test_output_error_intervals_on_a_log_whose_output_error_fit_is_reported():
     res = _nmsd(7)
     assert res.interval_method["source"] == "output_error", res.notes
     assert res.interval_method["clusters"] == "open-loop windows"
-    assert res.interval_method["n_clusters"] == res.settings.oe_max_windows
+    assert res.interval_method["n_clusters"] == res.settings.output_error.oe_max_windows
     base, effects = exp.truths(exp.SCENARIOS["nmsd_force_and_spring"])
     found = {f"{e.name}:{e.joint}": e.interval for e in res.significant}
     out = {**{k: iv for k, iv in res.intervals.items() if iv is not None}, **found}

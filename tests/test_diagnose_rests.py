@@ -166,7 +166,7 @@ def _equation_error_coefficients(data, keys, **settings) -> dict[str, float]:
     """The equation-error fit of the declared model with ``keys`` added, as the search fits it."""
     spec, notes = get_spec("furuta"), []
     layout = layout_for("furuta")
-    trajs, qds, resolved = prepare(data, spec, DiagnosisSettings(**settings), {}, notes)
+    trajs, qds, resolved = prepare(data, spec, DiagnosisSettings().replaced(**settings), {}, notes)
     fixed = _diagnose._anchor(spec, layout, None, True, notes)
     theta_fixed = layout.nominal()
     for k, v in fixed.items():
@@ -202,9 +202,9 @@ def test_stops_left_out_keep_the_equation_error_spring_of_a_sticky_sweep_unbiase
 
 
 def test_stop_dwell_is_off_by_default_and_checked():
-    assert DiagnosisSettings().stop_dwell is None
+    assert DiagnosisSettings().rests.stop_dwell is None
     with pytest.raises(ValueError, match="stop_dwell: expected a positive time in s or None, got -0.04"):
-        DiagnosisSettings(stop_dwell=-0.04).resolved("furuta", DT)
+        DiagnosisSettings().replaced(stop_dwell=-0.04).resolved("furuta", DT)
     from furuta_gym.cli import build_parser
 
     args = build_parser().parse_args(["diagnose", "log.csv", "--system", "furuta", "--stop-dwell", "0.04"])
@@ -212,10 +212,10 @@ def test_stop_dwell_is_off_by_default_and_checked():
 
 
 def test_held_stop_is_on_by_default_can_be_turned_off_and_is_checked():
-    assert DiagnosisSettings().held_stop == 2.0
-    assert DiagnosisSettings(held_stop=None).resolved("furuta", DT).held_stop is None
+    assert DiagnosisSettings().rests.held_stop == 2.0
+    assert DiagnosisSettings().replaced(held_stop=None).resolved("furuta", DT).rests.held_stop is None
     with pytest.raises(ValueError, match="held_stop: expected a number of counts >= 1 or None, got 0.5"):
-        DiagnosisSettings(held_stop=0.5).resolved("furuta", DT)
+        DiagnosisSettings().replaced(held_stop=0.5).resolved("furuta", DT)
     from furuta_gym.cli import build_parser
     from furuta_gym.cli.diagnose import UNSET
 
@@ -251,4 +251,4 @@ def test_held_stop_off_on_the_cli_reaches_diagnose(monkeypatch, tmp_path):
         with pytest.raises(Stop):
             cli.run(args)
         assert seen[-1].get("held_stop", "absent") == expected
-    assert DiagnosisSettings().held_stop == 2.0
+    assert DiagnosisSettings().rests.held_stop == 2.0

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from furuta_gym.diagnose._library import Candidate
-from furuta_gym.diagnose._trace import Evidence, SearchSettings, log_ratio_t, search
+from furuta_gym.diagnose._settings import SearchSettings
+from furuta_gym.diagnose._trace import Evidence, log_ratio_t, search
 
 SPRING = Candidate("spring", "alpha")
 COULOMB = Candidate("coulomb_friction", "alpha")
@@ -123,7 +124,7 @@ def test_indistinguishable_candidates_resolve_to_the_specific_mechanism():
 def test_max_effects_bounds_the_search():
     table = {(frozenset(), frozenset({c.key})): _ev(0.2, 5.0) for c in (SPRING, COULOMB, DRAG)}
     table.update({(frozenset({SPRING.key}), frozenset({c.key})): _ev(0.2, 5.0) for c in (COULOMB, DRAG)})
-    s = SearchSettings(3.0, 0.03, 1, 4, 2.0)
+    s = SearchSettings(z_threshold=3.0, min_improvement=0.03, max_effects=1, pair_pool=4, member_z_threshold=2.0)
     steps, _ = search(FakeComparer(table), [SPRING, COULOMB, DRAG], s)
     assert len(steps) == 1
 

@@ -48,7 +48,7 @@ def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
             continue
         if not (named or c in accepted or (ev is not None and ev.status == "not confirmed")):
             comparer = comparer or fx.comparer()
-            if comparer.compare(accepted, [c]).improvement < fx.settings.inconsistent_gain:
+            if comparer.compare(accepted, [c]).improvement < fx.settings.search.inconsistent_gain:
                 continue
         out.append((c, rests))
     return out
@@ -66,13 +66,13 @@ def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, for
     friction. Returns (accepted, θ, the joints' reports, (context, cable, its evidence) of a cable
     with memory kept, or None)."""
     s, reports, kept_cable = fx.settings, [], None
-    rule = _laws.Rule(s.min_improvement, s.z_threshold, s.veto_t, rests_count=not forced)
+    rule = _laws.Rule(s.search.min_improvement, s.search.z_threshold, s.search.veto_t, rests_count=not forced)
     for spring, rests in _cable_law_joints(fx, trajs, library, accepted, evidence, forced):
         stays = [a for a in accepted if not _cable_owned(a, spring.joint)]
-        ctx = _laws.Context(fx, spring.joint, trajs, dyn, stays, max(1, s.start_iterations))
+        ctx = _laws.Context(fx, spring.joint, trajs, dyn, stays, max(1, s.output_error.start_iterations))
         stiffness = float(fx.fit_ee(accepted + [spring])[0][fx.layout.index(spring.key)])
         held = _rest_bound(fx, theta, dyn, spring.joint).held
-        fits = _laws.fit_laws(ctx, theta, stiffness, held, s.oe_max_nfev)
+        fits = _laws.fit_laws(ctx, theta, stiffness, held, s.output_error.oe_max_nfev)
         verdict, reason, kept, h2h = _laws.verdict(fits, rests, ctx.win_val.q, rule)
         fx.notes.append(f"{spring.joint}: the cable laws (Method step 11): {verdict}: {reason}")
         reports.append(_laws.RotorLaw(spring.joint, verdict, reason, rests, fits, kept, h2h))

@@ -75,7 +75,7 @@ def _trace(fx: _Fitter, testable, evidence):
     steps, _ = _trace_mod.search(
         comparer,
         testable,
-        _trace_mod.SearchSettings(s.z_threshold, s.min_improvement, s.max_effects, s.pair_pool, s.member_z_threshold),
+        s.search,
         same,
     )
     for step in steps:

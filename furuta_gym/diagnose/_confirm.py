@@ -43,7 +43,7 @@ def _confirm(fx: _Fitter, steps, theta_before, evidence):
         for step in todo:
             ev, th, trial_dyn, trial_sums = _try_step(fx, accepted, dyn, sums, step)
             flipped = non_physical(fx.layout, th, step.members)
-            if ev.z > -fx.settings.veto_t and not flipped:
+            if ev.z > -fx.settings.search.veto_t and not flipped:
                 accepted, theta, dyn, sums = accepted + list(step.members), th, trial_dyn, trial_sums
             else:
                 vetoed.append((step, ev, flipped))

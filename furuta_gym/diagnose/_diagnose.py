@@ -134,7 +134,7 @@ def diagnose(
         dict(column_map=column_map, signs=signs, offsets=offsets, units=units, time_unit=time_unit),
         candidates,
         model,
-        dataclasses.replace(settings or DiagnosisSettings(), **overrides),
+        (settings or DiagnosisSettings()).replaced(**overrides),
         keep_fitter=prediction,
     )
     result = _diagnose_once(request, fixed)
@@ -157,7 +157,7 @@ def _check_finish(finish, model, settings, overrides) -> bool:
         raise ValueError(
             "finish='prediction' refits a plant of lumped parameters; a diagnosis of a given model has none"
         )
-    if not overrides.get("oe", (settings or DiagnosisSettings()).oe):
+    if not overrides.get("oe", (settings or DiagnosisSettings()).output_error.oe):
         raise ValueError("finish='prediction' refits by output error, which oe=False turns off")
     return True
 
@@ -188,7 +188,7 @@ def _diagnose_once(request: _Request, fixed: Mapping[str, float] | None) -> Diag
     notes: list[str] = []
     trajs, qds, settings = prepare(request.data, spec, request.settings, request.reading, notes)
     if any(tr.qd is None for tr in trajs):
-        notes.append(f"velocities estimated ({settings.velocity})")
+        notes.append(f"velocities estimated ({settings.reading.velocity})")
     segs = _segments(trajs, qds, settings)
     test_segs = _test_segments(request.test, spec, settings, request.reading, trajs[0].dt, notes)
     u_all = np.concatenate([s.u[:, 0] for s in segs])

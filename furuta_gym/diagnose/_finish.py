@@ -155,7 +155,7 @@ def drawn(win: _windows.Windows, count: int | None) -> _windows.Windows:
 def refit_windows(fx, segments, dyn) -> _windows.Windows:
     """The refit's windows: one after another in each segment with a :data:`STARTS_EVERY` gap
     between them, from each log's grid (module docstring)."""
-    return placed_windows(segments, fx.L, dyn, STAGGERED, log_starts(fx.segs, fx.settings.trim_seconds))
+    return placed_windows(segments, fx.L, dyn, STAGGERED, log_starts(fx.segs, fx.settings.reading.trim_seconds))
 
 
 def _extra_candidates(layout, result) -> list[tuple[Candidate, float]]:
@@ -205,7 +205,9 @@ def _refit(fx, theta, chosen, dyn, win):
     s, chosen, left_out, improved = fx.settings, list(chosen), [], False
     for _ in range(len(chosen) + 1):
         free = free_columns(fx.layout, chosen, fx.fixed_idx)
-        theta, ok = _windows.oe_fit(fx.layout, theta, free, win, fx.substeps, s.oe_max_nfev, s.start_iterations)
+        theta, ok = _windows.oe_fit(
+            fx.layout, theta, free, win, fx.substeps, s.output_error.oe_max_nfev, s.output_error.start_iterations
+        )
         improved |= ok
         effects = _effects(fx.layout, theta, chosen, dyn)
         bad = [c for c, e in zip(chosen, effects, strict=True) if not can_join(e, effects)]
@@ -243,10 +245,10 @@ def _decide(fx, result, theta, improved, ev) -> str | None:
     rigid = _rigid_failure(result.system, theta, fx.layout)
     if rigid:
         return f"the refit's values fail a body condition: {rigid}"
-    if not ev.passes(s.min_improvement, s.z_threshold):
+    if not ev.passes(s.search.min_improvement, s.search.z_threshold):
         return (
             f"it predicts the held-out windows {ev.improvement:+.1%} better (sum of squares, t {ev.z:.1f}); "
-            f"the diagnosis' rule for a gain asks ≥ {s.min_improvement:.0%} and t ≥ {s.z_threshold:g}"
+            f"the diagnosis' rule for a gain asks ≥ {s.search.min_improvement:.0%} and t ≥ {s.search.z_threshold:g}"
         )
     return None
 
@@ -302,5 +304,5 @@ def prediction_finish(fx, result) -> PredictionFinish:
         z_score=float(ev.z),
         fit_windows=int(fit_win.x0.shape[0]),
         heldout_windows=int(held_win.x0.shape[0]),
-        window_seconds=float(fx.settings.window),
+        window_seconds=float(fx.settings.output_error.window),
     )

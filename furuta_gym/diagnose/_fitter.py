@@ -26,8 +26,8 @@ class _Fitter:
         self.theta_fixed, self.fixed_idx = theta_fixed, set(fixed_idx)
         self.declared_fixed_idx = set(fixed_idx)  # before any weakly identified parameter is held
         dt = segs[0].dt
-        self.stride = max(1, int(round(settings.interval / dt)))
-        self.L = int(round(settings.window / dt))
+        self.stride = max(1, int(round(settings.search.interval / dt)))
+        self.L = int(round(settings.output_error.window / dt))
         self.substeps = system_definition(spec.name).diagnosis_substeps
         self.alternative = ""  # the input dynamics' other kind and how it fitted (a note)
         self.resolution: dict[str, float] = {}  # encoder count per quantised joint (sensor_resolution)
@@ -40,7 +40,7 @@ class _Fitter:
             raise DataError("too short: no complete open-loop window in the fit or held-out segments")
         # fit-set windows: a random subset drives the output-error fit, the rest validates effects
         order = np.random.default_rng(0).permutation(all_fit_win.x0.shape[0])
-        k = settings.oe_max_windows
+        k = settings.output_error.oe_max_windows
         self.oe_idx = np.sort(order[:k])
         self.val_idx = np.sort(order[k:]) if order.size > k else self.oe_idx
 
@@ -50,12 +50,12 @@ class _Fitter:
             self.layout,
             self.theta_fixed,
             self.stride,
-            self.settings.input_hold,
-            self.settings.block_seconds,
+            self.settings.reading.input_hold,
+            self.settings.search.block_seconds,
             dynamics,
-            self.settings.exclude_rest,
-            self.settings.stop_dwell,
-            self.settings.held_stop,
+            self.settings.rests.exclude_rest,
+            self.settings.rests.stop_dwell,
+            self.settings.rests.held_stop,
         )
         if segs is None:
             self.fit_prob = Problem(self.fit_segs, self.c_input)
@@ -70,7 +70,7 @@ class _Fitter:
             self.theta_fixed,
             self.fixed_idx,
             self.weights,
-            weighting=self.settings.evidence_weighting,
+            weighting=self.settings.search.evidence_weighting,
             recordings=[s.name.rsplit("[", 1)[0] for s in self.fit_segs],
         )
 
@@ -94,7 +94,7 @@ class _Fitter:
             A, c = X[:, others], X[:, j]
             c_perp = c - A @ np.linalg.lstsq(A, c, rcond=None)[0]
             t = abs(nominal[j]) * np.linalg.norm(c_perp) / max(sigma, 1e-300)
-            if t < self.settings.identify_t:
+            if t < self.settings.search.identify_t:
                 out[self.layout.base[j]] = float(t)
         return out
 
@@ -103,7 +103,9 @@ class _Fitter:
         return _windows.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
 
     def window_rmse(self, theta, win) -> float:
-        return _windows.window_errors(self.layout, theta, win, self.substeps, self.settings.start_iterations)[1]
+        return _windows.window_errors(
+            self.layout, theta, win, self.substeps, self.settings.output_error.start_iterations
+        )[1]
 
     def validation_rmse(self, theta, dynamics) -> float:
         return self.window_rmse(theta, self.fit_windows(dynamics, self.val_idx))
@@ -111,7 +113,7 @@ class _Fitter:
     def validation_sums(self, theta, dynamics, start_iterations: int | None = None) -> np.ndarray:
         """Per-window squared position errors on the fit-set validation windows."""
         win = self.fit_windows(dynamics, self.val_idx)
-        start = self.settings.start_iterations if start_iterations is None else start_iterations
+        start = self.settings.output_error.start_iterations if start_iterations is None else start_iterations
         return _windows.window_square_sums(self.layout, theta, win, self.substeps, start)
 
     def validation_predictions(self, theta, dynamics, start_iterations: int) -> np.ndarray:
@@ -134,7 +136,7 @@ class _Fitter:
         (:meth:`record`): the output-error one, or the equation-error one (its base parameters
         held at nominal when the refinement started from, and kept, the nominal values)."""
         ee = FitOrigin("equation_error", theta0, free, dynamics)
-        if not self.settings.oe:
+        if not self.settings.output_error.oe:
             return self.record(theta0, ee)
         win = self.fit_windows(dynamics, self.oe_idx)
         # start from the equation-error estimate unless it is non-physical or predicts worse than
@@ -161,8 +163,8 @@ class _Fitter:
             free,
             win,
             self.substeps,
-            max_nfev=self.settings.oe_max_nfev,
-            start_iterations=self.settings.start_iterations,
+            max_nfev=self.settings.output_error.oe_max_nfev,
+            start_iterations=self.settings.output_error.start_iterations,
         )
         if not ok:
             self.notes.append(f"output-error refinement did not improve on the {label} start ({tag})")
@@ -175,7 +177,9 @@ class _Fitter:
                 f"output-error refinement; kept ({tag})"
             )
             return self.record(start, start_origin)
-        return self.record(th, FitOrigin("output_error", th, free, dynamics, self.settings.start_iterations))
+        return self.record(
+            th, FitOrigin("output_error", th, free, dynamics, self.settings.output_error.start_iterations)
+        )
 
     def errors(self, theta, segs, prob) -> ErrorSummary:
         r = prob.R @ theta
@@ -188,7 +192,7 @@ class _Fitter:
             trajectory_rmse_per_joint={j: float(v) for j, v in zip(names, per_q, strict=True)},
             residual_rms=float(np.sqrt(np.mean(r**2))),
             residual_rms_per_joint={j: float(v) for j, v in zip(names, np.sqrt(np.mean(r**2, axis=0)), strict=True)},
-            window_seconds=self.settings.window,
+            window_seconds=self.settings.output_error.window,
             n_windows=int(win.x0.shape[0]),
         )
 
@@ -223,7 +227,7 @@ def _fit_declared(fx: _Fitter) -> np.ndarray:
         fx.fixed_idx |= {fx.layout.index(k) for k in weak}
         fx.notes.append(
             "not identifiable from these data, held at nominal: "
-            + ", ".join(f"{k} (t {t:.1f} < {fx.settings.identify_t})" for k, t in weak.items())
+            + ", ".join(f"{k} (t {t:.1f} < {fx.settings.search.identify_t})" for k, t in weak.items())
         )
         th_ee, free_base = fx.fit_ee([])
     return fx.refine(th_ee, free_base, _fit.NO_INPUT_DYNAMICS, "declared model")

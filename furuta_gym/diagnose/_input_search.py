@@ -28,7 +28,7 @@ def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputD
     free = free_columns(fx.layout, effects, fx.fixed_idx)
     _, linear = fit_equation_error(fx.fit_prob, fx.layout, free, fx.theta_fixed, fx.weights, True)
     dt = fx.segs[0].dt
-    bound = min(fx.settings.max_delay, max(3.0 * linear, 4.0 * dt))
+    bound = min(fx.settings.search.max_delay, max(3.0 * linear, 4.0 * dt))
     grid = np.arange(0.5 * dt, bound + 1e-12, 0.5 * dt)
 
     def sums(dyn):
@@ -51,7 +51,7 @@ def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputD
         refined = (sums(_fit.InputDynamics(kind, float(res.x))), float(res.x))
         found[kind] = refined if refined[0].sum() < best[0].sum() else best
     ev = _prediction_evidence(found["delay"][0], found["lag"][0])
-    lag_wins = ev.passes(fx.settings.min_improvement, fx.settings.z_threshold)
+    lag_wins = ev.passes(fx.settings.search.min_improvement, fx.settings.search.z_threshold)
     dyn = _fit.InputDynamics("lag", found["lag"][1]) if lag_wins else _fit.InputDynamics("delay", found["delay"][1])
     other = (
         (INPUT_DYNAMICS_EFFECTS["delay"], found["delay"][1])
@@ -63,9 +63,9 @@ def _search_input_dynamics(fx: _Fitter, effects: list[Candidate]) -> _fit.InputD
         f"(validation gain of the lag over the delay {ev.improvement:.1%}, t {ev.z:.1f})"
     )
     fx.notes.append(f"input dynamics: {dyn.kind} {dyn.seconds:.4g} s; {fx.alternative}")
-    if dyn.seconds > 0.95 * fx.settings.max_delay:
+    if dyn.seconds > 0.95 * fx.settings.search.max_delay:
         fx.notes.append(
             f"input {dyn.kind} estimate {dyn.seconds:.4g} s is at the search bound max_delay = "
-            f"{fx.settings.max_delay} s: it stands in for something else"
+            f"{fx.settings.search.max_delay} s: it stands in for something else"
         )
     return dyn

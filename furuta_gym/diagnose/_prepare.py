@@ -41,7 +41,9 @@ def _as_trajectories(data, spec, reading: dict, notes: list[str]) -> list[Trajec
 
 def _velocities(tr: Trajectory, settings: DiagnosisSettings) -> np.ndarray:
     """Measured velocities, or estimated as train and evaluate estimate them."""
-    return np.asarray(estimate_velocities(tr, settings.velocity, settings.velocity_cutoff_hz).qd, dtype=float)
+    return np.asarray(
+        estimate_velocities(tr, settings.reading.velocity, settings.reading.velocity_cutoff_hz).qd, dtype=float
+    )
 
 
 def _check_data(trajs: list[Trajectory], spec, settings: DiagnosisSettings) -> None:
@@ -50,16 +52,16 @@ def _check_data(trajs: list[Trajectory], spec, settings: DiagnosisSettings) -> N
         raise DataError(f"trajectories have different sample periods {sorted(set(dts))}; expected one")
     dt = dts[0]
     total = sum(len(tr) for tr in trajs) * dt
-    assert settings.window is not None  # resolved settings
-    need = 10 * settings.window + 2 * settings.trim_seconds * len(trajs)
+    assert settings.output_error.window is not None  # resolved settings
+    need = 10 * settings.output_error.window + 2 * settings.reading.trim_seconds * len(trajs)
     if total < need:
         raise DataError(
             f"too short: {total:.2f} s of data in {len(trajs)} trajectory(ies); diagnosing a "
-            f"{spec.name} needs at least {need:.1f} s (10 open-loop windows of {settings.window} s "
+            f"{spec.name} needs at least {need:.1f} s (10 open-loop windows of {settings.output_error.window} s "
             f"for fitting and held-out errors)"
         )
-    if not any(len(tr) * dt > settings.window + 2 * settings.trim_seconds + dt for tr in trajs):
-        raise DataError(f"too short: every trajectory is shorter than one {settings.window} s window")
+    if not any(len(tr) * dt > settings.output_error.window + 2 * settings.reading.trim_seconds + dt for tr in trajs):
+        raise DataError(f"too short: every trajectory is shorter than one {settings.output_error.window} s window")
     q_all = np.concatenate([tr.q for tr in trajs])
     for j, name in enumerate(spec.joint_names):
         rng = float(np.ptp(q_all[:, j]))
@@ -92,9 +94,9 @@ def _pieces(trajs, qds, settings: DiagnosisSettings):
     whole log's grid, so a gap only removes the segments it falls in (trimmed at its edges too)
     and the rest are fitted or held out as in the log without it."""
     dt = trajs[0].dt
-    trim = int(round(settings.trim_seconds / dt))
-    seg_len = int(round(settings.segment_seconds / dt))
-    min_len = int(round(settings.window / dt)) + 2
+    trim = int(round(settings.reading.trim_seconds / dt))
+    seg_len = int(round(settings.reading.segment_seconds / dt))
+    min_len = int(round(settings.output_error.window / dt)) + 2
     pieces, i = [], 0
     for run in _runs(trajs):
         first, last = trajs[run[0]], trajs[run[-1]]
@@ -122,7 +124,7 @@ def _pieces(trajs, qds, settings: DiagnosisSettings):
 def _segments(trajs, qds, settings: DiagnosisSettings) -> list[_fit.Segment]:
     """Fit and held-out segments: every ``holdout_every``-th segment is held out."""
     dt = trajs[0].dt
-    every = settings.holdout_every
+    every = settings.reading.holdout_every
     segs = [
         _fit.Segment(name, t, q, qd, u, dt, i, (k % every) == (every - 1))
         for i, (name, t, q, qd, u, k) in enumerate(_pieces(trajs, qds, settings))
@@ -131,7 +133,7 @@ def _segments(trajs, qds, settings: DiagnosisSettings) -> list[_fit.Segment]:
         segs[-1].held_out = True
     if sum(s.held_out for s in segs) == 0 or sum(not s.held_out for s in segs) < 2:
         raise DataError(
-            f"too short: {len(segs)} usable segment(s) of about {settings.segment_seconds} s; "
+            f"too short: {len(segs)} usable segment(s) of about {settings.reading.segment_seconds} s; "
             f"need at least 3 (two to fit, one held out)"
         )
     return segs
@@ -150,7 +152,9 @@ def _test_segments(test, spec, settings, reading: dict, dt, notes) -> list[_fit.
         for i, (name, t, q, qd, u, _) in enumerate(_pieces(trajs, qds, settings))
     ]
     if not segs:
-        raise DataError(f"test: too short; every test trajectory is shorter than one {settings.window} s window")
+        raise DataError(
+            f"test: too short; every test trajectory is shorter than one {settings.output_error.window} s window"
+        )
     return segs
 
 

@@ -195,7 +195,7 @@ def _anchor(res):
 
 
 def _stride(res, dt: float) -> int:
-    return max(1, int(round(res.settings.interval / dt)))
+    return max(1, int(round(res.settings.search.interval / dt)))
 
 
 def _problem(res, segments, dynamics):
@@ -208,12 +208,12 @@ def _problem(res, segments, dynamics):
         res.layout,
         theta0,
         _stride(res, segments[0].dt),
-        st.input_hold,
-        st.block_seconds,
+        st.reading.input_hold,
+        st.search.block_seconds,
         dynamics,
-        st.exclude_rest,
-        st.stop_dwell,
-        st.held_stop,
+        st.rests.exclude_rest,
+        st.rests.stop_dwell,
+        st.rests.held_stop,
     )
     return Problem(copies, _fit.input_direction(res.layout, theta0))
 
@@ -271,7 +271,7 @@ def _plot_residual_over_time(res, segs, kind: str):
                 ax.bar(
                     t[rest],
                     1,
-                    width=res.settings.interval,
+                    width=res.settings.search.interval,
                     color="0.88",
                     transform=ax.get_xaxis_transform(),
                     label="at rest (left out of the fit)",
@@ -288,7 +288,7 @@ def _plot_residual_over_time(res, segs, kind: str):
     for ax in axes[-1]:
         ax.set_xlabel("time in the log [s]", fontsize=8)
     fig.suptitle(
-        f"{res.system}, {kind}: integral residual Z̄ − Ā per {res.settings.interval:g} s interval\n"
+        f"{res.system}, {kind}: integral residual Z̄ − Ā per {res.settings.search.interval:g} s interval\n"
         f"(the impulse the model misses; 0 = perfect), declared model before vs after",
         fontsize=10,
     )
@@ -309,7 +309,7 @@ def _window_predictions(res, segs):
     """Every non-overlapping open-loop window of ``segs`` (as ``diagnose`` scores them): the
     measured positions (W, L + 1, n) from the start state on, both models' predictions the same
     shape, the time axis (W, L + 1) and each window's segment name."""
-    L = int(round(res.settings.window / segs[0].dt))
+    L = int(round(res.settings.output_error.window / segs[0].dt))
     substeps = system_definition(res.system).diagnosis_substeps
     preds = []
     for theta, dyn in ((res.theta_before, _fit.NO_INPUT_DYNAMICS), (res.theta_after, res.input_dynamics)):
@@ -354,7 +354,7 @@ def _plot_prediction_windows(res, segs, kind: str):
     # constrained layout makes room for the figure-level legend below the panels
     fig = _figure("constrained", figsize=(2.9 * (_N_WORST + _N_TYPICAL), 2.4 * len(joints) + 1.0))
     if got is None:
-        fig.text(0.5, 0.5, f"no complete {res.settings.window} s window in the {kind}", ha="center")
+        fig.text(0.5, 0.5, f"no complete {res.settings.output_error.window} s window in the {kind}", ha="center")
         return fig
     meas, pb, pa, t, names = got
     # one position RMSE per window over both joints (as trajectory_rmse), rad or m
@@ -380,7 +380,7 @@ def _plot_prediction_windows(res, segs, kind: str):
                 ax.set_xlabel("time in the log [s]", fontsize=8)
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8)
     fig.suptitle(
-        f"{res.system}: open-loop predictions over {res.settings.window:g} s from the measured state, "
+        f"{res.system}: open-loop predictions over {res.settings.output_error.window:g} s from the measured state, "
         f"{kind} ({tags.count('largest error')} windows with the largest declared-model error, "
         f"{tags.count('typical')} typical)",
         fontsize=10,
@@ -452,7 +452,7 @@ def _plot_residual_vs_effect(res):
     ax.set_ylabel(f"declared model's residual Z̄ − Ā on {names[j]} [{runit}]", fontsize=8)
     verdict = "significant" if eff.significant else "strongest tested, not significant"
     ax.set_title(
-        f"{res.system}: residual per {res.settings.interval:g} s interval vs {eff.name}:{eff.joint} ({verdict})",
+        f"{res.system}: residual per {res.settings.search.interval:g} s interval vs {eff.name}:{eff.joint} ({verdict})",
         fontsize=9,
     )
     ax.legend(fontsize=7)

@@ -223,7 +223,7 @@ class DiagnosisResult:
             "test_error_after": None if self.test_after is None else self.test_after.to_json(),
             "fixed_parameters": self.fixed,
             "notes": self.notes,
-            "settings": dataclasses.asdict(self.settings),
+            "settings": self.settings.flat(),
             "plant": None if self.layout.learned is not None else self.plant().to_json(),
             "prediction_finish": None if self.prediction is None else self.prediction.to_json(),
             **({"rotor_laws": [r.to_json(self.layout) for r in self.rotor_laws]} if self.rotor_laws else {}),

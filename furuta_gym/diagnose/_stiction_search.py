@@ -30,7 +30,7 @@ def _rest_bound(fx: _Fitter, theta, dyn, joint: str) -> _rests.RestBound:
     count = fx.resolution.get(joint)
     if count is None:
         return _rests.RestBound(joint, 0.0, 0, 0.0)
-    return _rests.rest_bound(fx.layout, theta, fx.fit_segs, dyn, joint, count, fx.settings.rest_window)
+    return _rests.rest_bound(fx.layout, theta, fx.fit_segs, dyn, joint, count, fx.settings.rests.rest_window)
 
 
 def _stiction_candidates(library, accepted, evidence) -> list:
@@ -59,12 +59,12 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
         return accepted, theta
     # whether a joint stops within a window depends on its start velocity, which a smoothed
     # estimate near a stop does not resolve: the windows' start velocities are estimated too
-    start = max(1, s.start_iterations)
+    start = max(1, s.output_error.start_iterations)
     win = fx.fit_windows(dyn, fx.oe_idx)
 
     def refit(th0, effects):
         free = free_columns(fx.layout, effects, fx.fixed_idx)
-        th, ok = _windows.oe_fit(fx.layout, th0, free, win, fx.substeps, s.oe_max_nfev, start)
+        th, ok = _windows.oe_fit(fx.layout, th0, free, win, fx.substeps, s.output_error.oe_max_nfev, start)
         if ok:
             fx.record(th, FitOrigin("output_error", th, free, dyn, start))
         return th, fx.validation_predictions(th, dyn, start)
@@ -78,7 +78,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
         ev = _stiction_evidence(pred, trial_pred, measured)
         coef = float(th[fx.layout.index(c.key)])
         how = "found by prediction, given the joint's Coulomb friction: gain and t on the fit-set validation windows"
-        if coef > 0 and is_physical(fx.layout, th) and ev.passes(s.min_improvement, s.z_threshold):
+        if coef > 0 and is_physical(fx.layout, th) and ev.passes(s.search.min_improvement, s.search.z_threshold):
             th = _breakaway_at_least(fx, th, c, bound)
         else:
             fx.notes.append(
@@ -91,7 +91,7 @@ def _stiction_by_prediction(fx: _Fitter, library, accepted, theta, dyn, evidence
             fitted, (th, how) = (th, trial_pred), found
             trial_pred = fx.validation_predictions(th, dyn, start)
             ev = _stiction_evidence(pred, trial_pred, measured)
-            if ev.z <= -s.veto_t:
+            if ev.z <= -s.search.veto_t:
                 fx.notes.append(
                     f"{c.key}: {how}, but predicts worse with it (gain {ev.improvement:.1%}, t {ev.z:.1f}): not added"
                 )
@@ -115,7 +115,7 @@ def _vetoed_with_stiction(fx: _Fitter, library, vetoed, accepted, theta, dyn, ev
     coefficients physical. Returns (accepted, θ)."""
     if not vetoed:  # nearly every diagnosis: no windows to build
         return accepted, theta
-    start = max(1, fx.settings.start_iterations)
+    start = max(1, fx.settings.output_error.start_iterations)
     win, measured = fx.fit_windows(dyn, fx.oe_idx), fx.fit_windows(dyn, fx.val_idx).q
     for step in vetoed:
         c = _stiction_partner(library, accepted, step)
@@ -124,14 +124,14 @@ def _vetoed_with_stiction(fx: _Fitter, library, vetoed, accepted, theta, dyn, ev
         trial = accepted + list(step.members) + [c]
         free, bound = free_columns(fx.layout, trial, fx.fixed_idx), _rest_bound(fx, theta, dyn, c.joint)
         th0 = _stiction_start(fx, fx.fit_ee(accepted + list(step.members))[0], c, bound.held)
-        th, ok = _windows.oe_fit(fx.layout, th0, free, win, fx.substeps, fx.settings.oe_max_nfev, start)
+        th, ok = _windows.oe_fit(fx.layout, th0, free, win, fx.substeps, fx.settings.output_error.oe_max_nfev, start)
         before = _square_sums(fx.validation_predictions(theta, dyn, start), measured)
         ev = _prediction_evidence(before, _square_sums(fx.validation_predictions(th, dyn, start), measured))
         coef, members = float(th[fx.layout.index(c.key)]), ", ".join(m.key for m in step.members)
         if not (ok and coef > 0 and is_physical(fx.layout, th) and not non_physical(fx.layout, th, step.members)):
             fx.notes.append(f"{members}: tried again with {c.key} (ΔF {coef:.3g}): not physical; dropped")
             continue
-        if not (ev.improvement > 0 and ev.z > -fx.settings.veto_t):
+        if not (ev.improvement > 0 and ev.z > -fx.settings.search.veto_t):
             fx.notes.append(
                 f"{members}: tried again with {c.key} free: validation gain {ev.improvement:.1%}, t {ev.z:.1f}; dropped"
             )
@@ -227,7 +227,7 @@ def _breakaway_at_least(fx: _Fitter, theta, c: Candidate, bound: _rests.RestBoun
     _held_from(fx, out, theta, i, "raised to the force the rests held (a lower bound, not a fit)")
     fx.notes.append(
         f"{c.key}: ΔF raised {theta[i]:.3g} -> {out[i]:.3g} to the force the rests held "
-        f"({bound.held:.3g} over {bound.n_windows} windows of {fx.settings.rest_window:g} s)"
+        f"({bound.held:.3g} over {bound.n_windows} windows of {fx.settings.rests.rest_window:g} s)"
     )
     return out
 
@@ -248,10 +248,10 @@ def _stiction_from_rests(fx: _Fitter, base, c: Candidate, bound: _rests.RestBoun
     ratio = bound.held / base[j] if base[j] > 0 else 0.0
     seen = (
         f"rests held the joint against up to {bound.held:.3g} ({ratio:.2f}× its Coulomb level, "
-        f"{bound.n_windows} windows of {s.rest_window:g} s)"
+        f"{bound.n_windows} windows of {s.rests.rest_window:g} s)"
     )
-    if ratio < s.min_breakaway_ratio:
-        fx.notes.append(f"{c.key}: {seen}; under {s.min_breakaway_ratio:g}×: no stiction from rests")
+    if ratio < s.rests.min_breakaway_ratio:
+        fx.notes.append(f"{c.key}: {seen}; under {s.rests.min_breakaway_ratio:g}×: no stiction from rests")
         return None
     th = base.copy()
     th[i] = bound.held - base[j]

@@ -38,8 +38,9 @@ from scipy.stats import t as student_t
 
 from ._library import Candidate
 from ._problem import block_sums, fit_equation_error, free_columns, momentum_norm
+from ._settings import SearchSettings
 
-__all__ = ["Evidence", "Comparer", "SearchSettings", "Step", "search", "log_ratio_t"]
+__all__ = ["Evidence", "Comparer", "Step", "search", "log_ratio_t"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -221,15 +222,6 @@ class Comparer:
         if self.recordings is None:
             return segment.astype(str).astype(object)
         return np.array([self.recordings[k] for k in segment], dtype=object)
-
-
-@dataclasses.dataclass(frozen=True)
-class SearchSettings:
-    z_threshold: float
-    min_improvement: float
-    max_effects: int
-    pair_pool: int
-    member_z_threshold: float
 
 
 def _representatives(pool, equivalents):

@@ -54,7 +54,7 @@ def _finish_evidence(fx, library, accepted, theta, dyn, evidence):
             )
         elif ev.status == "tested":
             ev.improvement, ev.z_score = score.improvement, score.z
-        if ev.status == "tested" and score.improvement >= fx.settings.inconsistent_gain:
+        if ev.status == "tested" and score.improvement >= fx.settings.search.inconsistent_gain:
             ev.status, ev.note = "inconsistent", _inconsistency(c, score, fx.settings)
             fx.notes.append(f"{c.key}: {ev.note}")
         free = free_columns(fx.layout, given + [c], fx.fixed_idx)
@@ -86,7 +86,7 @@ def _inconsistency(c: Candidate, score, settings: DiagnosisSettings) -> str:
     )
     return (
         f"inconsistent: removes {score.improvement:.0%} of the held-out residual, but its t "
-        f"{score.z:.1f} < {settings.z_threshold:g}; helps on {helps or 'no recording'}; hurts on "
+        f"{score.z:.1f} < {settings.search.z_threshold:g}; helps on {helps or 'no recording'}; hurts on "
         f"{hurts or 'no recording'}. Likely: {cause}"
     )
 
@@ -120,7 +120,9 @@ def _reported_intervals(fx: _Fitter, theta, accepted, dyn, ordered):
     origin = fx.origin(theta)
     if origin is None:  # not a recorded estimate: the output-error criterion at the reported θ
         sticky = any(c.kind.breakaway_above for c in accepted)
-        start = max(1, fx.settings.start_iterations) if sticky else fx.settings.start_iterations
+        start = (
+            max(1, fx.settings.output_error.start_iterations) if sticky else fx.settings.output_error.start_iterations
+        )
         free = free_columns(fx.layout, accepted, fx.fixed_idx)
         origin = FitOrigin("output_error", theta, free, dyn, start, recorded=False)
     out, notes, method = _intervals.fit_intervals(fx, theta, origin)

@@ -291,14 +291,13 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
     elif variant.start == "nominal":
         nb = len(fx.layout.base)
         start[:nb] = np.where([i in fx.fixed_idx for i in range(nb)], start[:nb], fx.layout.nominal()[:nb])
-    starts = log_starts(fx.segs, fx.settings.trim_seconds)
+    starts = log_starts(fx.segs, fx.settings.reading.trim_seconds)
     windows = lambda d: drawn(placed_windows(train, fx.L, d, variant.placement, starts), variant.max_windows)  # noqa: E731
     win = windows(dyn)
     settings = fx.settings
     if variant.max_nfev is not None or variant.start_iterations:
-        fx.settings = dataclasses.replace(
-            settings,
-            oe_max_nfev=variant.max_nfev or settings.oe_max_nfev,
+        fx.settings = settings.replaced(
+            oe_max_nfev=variant.max_nfev or settings.output_error.oe_max_nfev,
             start_iterations=variant.start_iterations,
         )
     with friction_law(variant.law), _restoring(fx, settings):
@@ -366,7 +365,7 @@ def _change(base, sums) -> dict:
     return {
         "improvement": float(ev.improvement),
         "z_score": float(ev.z),
-        "passes_rule": bool(ev.passes(RULE.min_improvement, RULE.z_threshold)),
+        "passes_rule": bool(ev.passes(RULE.search.min_improvement, RULE.search.z_threshold)),
     }
 
 
