@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from furuta_gym.diagnose._library import Candidate
-from furuta_gym.diagnose._settings import SearchSettings
+from furuta_gym.diagnose._settings import DiagnosisSettings, SearchSettings
 from furuta_gym.diagnose._trace import Evidence, log_ratio_t, search
 
 SPRING = Candidate("spring", "alpha")
@@ -208,7 +208,7 @@ class _FakeFitter:
     def __init__(self):
         from types import SimpleNamespace
 
-        self.settings, self.notes, self.built = SimpleNamespace(veto_t=2.0), [], []
+        self.settings, self.notes, self.built = DiagnosisSettings().replaced(veto_t=2.0), [], []
         self.layout = SimpleNamespace(index=COEFFICIENT_ORDER.index)
 
     def validation_sums(self, theta, dyn):

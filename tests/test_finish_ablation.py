@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import furuta_gym
+from furuta_gym.diagnose import DiagnosisSettings
 from furuta_gym.diagnose.finish_ablation import MUJOCO_IMPEDANCE, fold_of, soft_friction_dynamics
 from furuta_gym.lagrangian import forward_dynamics, forward_dynamics_with_dry_friction
 from furuta_gym.models import Furuta
@@ -76,7 +77,7 @@ def test_the_finish_refits_on_windows_that_follow_one_another_with_a_gap():
     from furuta_gym.diagnose._fit import InputDynamics
 
     segs = [_segment("run01[0]", 0.55, 1077), _segment("run01[1]", 2.704, 1077)]
-    fx = types.SimpleNamespace(L=50, segs=segs, settings=types.SimpleNamespace(trim_seconds=0.05))
+    fx = types.SimpleNamespace(L=50, segs=segs, settings=DiagnosisSettings().replaced(trim_seconds=0.05))
     win = refit_windows(fx, segs, InputDynamics())
     assert win.x0.shape == (19 + 18, 4) and win.us.shape == (37, 50, 1)
     start = np.round((win.x0[:, 0] - 0.5) / 0.002).astype(int)  # each start's sample on the log
