@@ -85,6 +85,12 @@ class RestDrift:
         )
 
 
+def flicker_tolerance(flicker: int, count: float) -> float:
+    """How far a resting joint's reading may stray from its first value and still be one rest:
+    ``flicker`` encoder counts of ``count`` (rad or m), with a margin for counts held as floats."""
+    return flicker * count * 1.01
+
+
 def _runs_within(q: np.ndarray, tolerance: float) -> np.ndarray:
     """Bounds [0, …, T] of the runs of ``q`` that stay within ``tolerance`` of their first value
     (greedy from the start); ``tolerance`` 0: runs on one value."""
@@ -166,7 +172,7 @@ def rest_drift(
     than "cannot tell" (a law seen on one side only could be a constant force). ``flicker``: a
     rest may flicker by that many encoder counts of ``count`` (rad or m)."""
     j = get_spec(system).joint_names.index(joint)
-    rests = _rests(trajectories, j, min_rest, flicker * count * 1.01)  # 1.01: counts as floats
+    rests = _rests(trajectories, j, min_rest, flicker_tolerance(flicker, count))
     follows, sides = [], []
     for before, rest in zip(rests[:-1], rests[1:], strict=True):
         assert rest.excursion is not None

@@ -26,7 +26,7 @@ from ..lagrangian import inverse_dynamics
 from ..measured import estimate_velocities
 from ..signals import ENCODER_COUNTS_PER_REV
 from ..systems import get_spec
-from ._drift import _runs_within
+from ._drift import _runs_within, flicker_tolerance
 from ._fit import (
     NO_INPUT_DYNAMICS,
     InputDynamics,
@@ -255,7 +255,7 @@ def breakaway_bracket(
     ``count``."""
     j = get_spec(layout.system).joint_names.index(joint)
     forces = holding_forces(layout, j, trajectories, theta)
-    tolerance = flicker * count * 1.01
+    tolerance = flicker_tolerance(flicker, count)
     return (
         held_force(trajectories, forces, j, tolerance, min_rest),
         moving_force(trajectories, forces, j, tolerance, min_rest, 0.01, 0.05),

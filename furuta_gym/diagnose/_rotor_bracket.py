@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _rests
+from ._drift import flicker_tolerance
 from ._rotor_context import Context, _joint_effects, _starts
 from ._rotor_neutral import neutral_paths
 
@@ -29,7 +30,7 @@ def holding_forces(ctx: Context, theta, cable: tuple | None = None) -> list[np.n
 def held_still(ctx: Context, theta, cable=None, min_rest: float = 0.2, flicker: int = 1) -> float:
     """The largest force (N·m or N) a rest held, under θ (and ``cable``): the breakaway was at
     least that (:func:`._rests.held_force`)."""
-    tolerance = flicker * ctx.fx.resolution.get(ctx.joint, 0.0) * 1.01
+    tolerance = flicker_tolerance(flicker, ctx.fx.resolution.get(ctx.joint, 0.0))
     return _rests.held_force(ctx.trajs, holding_forces(ctx, theta, cable), ctx.j, tolerance, min_rest)
 
 
@@ -38,7 +39,7 @@ def broke_away(
 ) -> float | None:
     """The least force (N·m or N) that moved the joint off a rest, under θ (and ``cable``): the
     breakaway was at most that (:func:`._rests.moving_force`). None: no rest was left."""
-    tolerance = flicker * ctx.fx.resolution.get(ctx.joint, 0.0) * 1.01
+    tolerance = flicker_tolerance(flicker, ctx.fx.resolution.get(ctx.joint, 0.0))
     forces = holding_forces(ctx, theta, cable)
     return _rests.moving_force(ctx.trajs, forces, ctx.j, tolerance, min_rest, first_rest, span)
 
