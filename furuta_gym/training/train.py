@@ -312,8 +312,13 @@ def train(
     _, static = eqx.partition(model, trainable)
     run = _RunState(params=params, opt_state=optimizer.init(params), lam=float(config.lambda_traj))
     out = Path(out_dir) if out_dir is not None else None
-    run_info: dict[str, Any] = {"model_kind": model_kind, "system": spec.name, "loss": loss, "data_hash": dhash}
-    run_info["config"] = config.to_json()
+    run_info = {
+        "model_kind": model_kind,
+        "system": spec.name,
+        "loss": loss,
+        "data_hash": dhash,
+        "config": config.to_json(),
+    }
     if out is not None:
         static = _open_run_dir(out, resume, model, trainable, run, run_info, static)
     stages = _Stages(
