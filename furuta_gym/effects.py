@@ -18,6 +18,7 @@ name                   generalized force on joint j                  unit of coe
 ``input_gain``         τ_u → (1 + g)·τ_u (joint "u")                 dimensionless g
 ``input_delay``        u(t) → u(t − d) (joint "u")                   s
 ``actuator_lag``       plant gets u_m, τ·u̇_m = u − u_m (joint "u")   s
+``input_dead_band``    τ_u(u) → τ_u(sgn u·max(|u| − d, 0)) ("u")    the input's (V or N)
 =====================  ============================================  =======================
 
 * ``spring`` with a non-zero ``reference``: a cable whose neutral is not at q_j = 0.
@@ -28,6 +29,12 @@ name                   generalized force on joint j                  unit of coe
   for the Furuta pendulum's β, a centre of mass off the pendulum's axis by the angle δ,
   V = ½·mp·g·Lp·(1 − cos(β − δ)), so it hangs at β = δ.
 * ``actuator_lag``: the amplifier / motor electrical time constant (~1–20 ms).
+* ``input_dead_band``: the input passes nothing until its magnitude exceeds the width d, then
+  passes what exceeds it (slope 1), oddly (:func:`dead_band`): a motor driver, or brushes
+  that need a least voltage to pass any current. It acts on the input after the input delay
+  (the model's τ_u takes the dead-banded input; MuJoCo's control is dead-banded before the
+  actuator), not on the rotor's velocity as a Coulomb friction does. d is in the system's input
+  unit (V for the Furuta's motor voltage, N for the N-MSD's force), d ≥ 0.
 * ``hysteretic_spring``: a cable whose neutral r moves: it stays put while |q_j − r| ≤ w
   (``play``) and is dragged along beyond (the play operator, r ∈ [q_j − w, q_j + w]); it starts
   at ``reference``. After a large swing the cable's neutral is left where the swing dragged it,
@@ -41,7 +48,7 @@ the units, the MuJoCo form (:class:`MujocoForm`), the diagnosis library's scale 
 sign, so code elsewhere asks ``effect.kind`` and never compares names.
 
 :class:`WithEffects` adds joint effects to any Lagrangian system (springs and ``com_offset``
-into V, so energy stays right; the rest into τ_NC; the input gain into τ_u). ``input_delay`` and
+into V, so energy stays right; the rest into τ_NC; the input gain and dead band into τ_u). ``input_delay`` and
 ``actuator_lag`` have no memoryless form: they live in the env/plant (an input buffer; the lag
 state, :class:`ActuatorLag` or MuJoCo's actuator activation), not in a Lagrangian model.
 """
@@ -82,7 +89,9 @@ __all__ = [
     "cable_force",
     "play_operator",
     "actuator_lag_time",
+    "dead_band",
     "effects_potential",
+    "shaped_input",
 ]
 
 
@@ -149,6 +158,10 @@ class EffectKind:
     second_bounds: ClassVar[tuple[float, float]] = (0.0, 0.0)
     #: scales the input force
     scales_input: ClassVar[bool] = False
+    #: a memoryless law of the input itself (:meth:`input_law`), in the system's input unit, with
+    #: the physical bounds of its coefficient
+    shapes_input: ClassVar[bool] = False
+    coefficient_bounds: ClassVar[tuple[float, float]] = (-math.inf, math.inf)
     #: what the sensor must resolve for a found value to mean something: "position" (one count)
     #: or "sample" (one sample period)
     resolution: ClassVar[str | None] = None
@@ -179,6 +192,10 @@ class EffectKind:
     def input_gain(self, effect: "Effect") -> float:
         """Its share g of the input force's factor (1 + Σ g)."""
         return 0.0
+
+    def input_law(self, effect: "Effect", xp) -> Callable[[Any], Any] | None:
+        """The input the plant takes, as a law of the commanded input (``shapes_input``)."""
+        return None
 
     def dry_friction_limit(self, effect: "Effect", xp) -> Callable[[Any], Any]:
         raise ValueError(f"{self.name!r} is not dry friction; expected one of {DRY_FRICTION}")
@@ -310,6 +327,17 @@ class _InputDelay(_InputEffect):
     input_dynamics, resolution = "delay", "sample"
 
 
+class _InputDeadBand(_InputEffect):
+    # memoryless, but MuJoCo has no native form: MujocoBackend dead-bands the control itself
+    name, units, physically_positive = "input_dead_band", ("input", "input"), True
+    shapes_input, coefficient_bounds = True, (0.0, math.inf)
+    home = "the input: the model's τ_u (WithEffects) and MujocoBackend's control"
+
+    def input_law(self, effect, xp):
+        width = effect.coefficient
+        return lambda u: dead_band(u, width, xp)
+
+
 class _ActuatorLag(_InputEffect):
     name, units, has_memory = "actuator_lag", ("s", "s"), True
     home = "the env's actuation path (ActuatorLag) or MujocoBackend (actuator dynamics)"
@@ -357,6 +385,12 @@ class Effect:
         if kind.on_input != (self.joint == "u"):
             where = "the input 'u'" if kind.on_input else "a joint, not 'u'"
             raise ValueError(f"effect {self.name!r} acts on {where}; got joint={self.joint!r}")
+        low, high = kind.coefficient_bounds
+        if kind.shapes_input and not (math.isfinite(self.coefficient) and low <= self.coefficient <= high):
+            raise ValueError(
+                f"effect {self.name!r}: its width must be in [{low:g}, {high:g}] (the input's unit), "
+                f"got {self.coefficient!r}"
+            )
         if not (math.isfinite(self.play) and self.play >= 0):
             raise ValueError(f"effect {self.name!r}: play must be >= 0 (rad or m), got {self.play!r}")
         if not (math.isfinite(self.stribeck_velocity) and self.stribeck_velocity > 0):
@@ -379,6 +413,8 @@ class Effect:
 
     def unit(self, spec: SystemSpec) -> str:
         """Unit of the coefficient on this joint of ``spec`` (angular or linear)."""
+        if self.kind.shapes_input:
+            return spec.input_units[0]
         angular = self.joint == "u" or spec.angular[self.joint_index(spec)]
         return self.kind.units[0 if angular else 1]
 
@@ -438,6 +474,28 @@ def effects_potential(potential, effects: Sequence[Effect], q, spec: SystemSpec)
         if e.kind.in_potential:
             v = v + e.kind.potential_energy(e, q[e.joint_index(spec)])
     return v
+
+
+def dead_band(u, width, xp: Any = np):
+    """The input through a dead band of ``width`` d ≥ 0: sgn(u)·max(|u| − d, 0), zero for
+    |u| ≤ d, slope 1 beyond, odd. Written once for the analytic model (:class:`WithEffects`),
+    the MuJoCo plant and the diagnosis' windows (``xp``: numpy or jax.numpy)."""
+    return xp.sign(u) * xp.maximum(xp.abs(u) - width, 0.0)
+
+
+def shaped_input(effects: Sequence[Effect], xp: Any = np) -> Callable[[Any], Any] | None:
+    """The input the plant takes as a law of the commanded one, the ``effects``' input laws in
+    their order (an ``input_dead_band``); None when none of them shapes the input."""
+    laws = [e.kind.input_law(e, xp) for e in effects if e.kind.shapes_input]
+    if not laws:
+        return None
+
+    def shaped(u):
+        for law in laws:
+            u = law(u)
+        return u
+
+    return shaped
 
 
 def dragged_neutral(neutral, q, play, xp: Any = np):
@@ -570,7 +628,8 @@ class WithEffects(AbstractLagrangianSystem):
 
     Springs enter the potential (½k(q − q_ref)²) and ``com_offset`` shifts the base potential,
     V(q − Σδ·e_j), so energy and the force decomposition stay physical; friction, stiction, drag
-    and constant torques enter τ_NC; ``input_gain`` scales τ_u. ``input_delay`` and
+    and constant torques enter τ_NC; ``input_gain`` scales τ_u, whose input an
+    ``input_dead_band`` passes through its law first. ``input_delay`` and
     ``actuator_lag`` are rejected here (they are not memoryless).
     """
 
@@ -613,7 +672,8 @@ class WithEffects(AbstractLagrangianSystem):
 
     def input_force(self, q, qd, u):
         gain = 1.0 + sum(e.kind.input_gain(e) for e in self.effects)
-        return gain * self.base.input_force(q, qd, u)
+        shaped = shaped_input(self.effects, jnp)
+        return gain * self.base.input_force(q, qd, u if shaped is None else shaped(u))
 
 
 def spring_rests(effects) -> dict[str, float]:

@@ -103,8 +103,8 @@ def plain_forms(effects, model: mujoco.MjModel) -> PlainForms:
         if e.kind.input_dynamics == "delay" and hasattr(model, "actuator_delay"):
             out.delay += e.coefficient
             out.approximated.append(e)
-        elif e.kind.on_input and e.kind.has_memory and e.kind.input_dynamics != "lag":
-            out.missing.append(e)  # an input law with memory MuJoCo has no form of
+        elif e.kind.on_input and (e.kind.shapes_input or (e.kind.has_memory and e.kind.input_dynamics != "lag")):
+            out.missing.append(e)  # an input law MuJoCo has no form of (a dead band), or one with memory
             continue
         elif e.kind.on_input or not (form.laws or form.neutrals or form.shift.any()):
             continue  # native: a spring, damping, the gain, the lag

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from ..assets import asset_path
-from ..effects import CableNeutral, Effect, MujocoForm, actuator_lag_time
+from ..effects import CableNeutral, Effect, MujocoForm, actuator_lag_time, shaped_input
 from ..models import system_definition
 from ..systems import get_spec
 from ._backend_base import AbstractBackend
@@ -229,6 +229,9 @@ class MujocoBackend(AbstractBackend):
     (``dyntype="filter"``, ``dynprm[0]`` = τ): the activation ``data.act`` holds u_m and MuJoCo
     integrates it with the state in every RK4 stage; :meth:`reset` sets it to 0 (the plant at rest
     with no input), :attr:`state` stays (q, q̇) and :attr:`lagged_input` reads or sets u_m.
+    An ``input_dead_band`` (no MJCF form) dead-bands the control before it reaches the actuator,
+    as the analytic model's τ_u takes the dead-banded input; with an ``actuator_lag`` too the two
+    would disagree on their order (MuJoCo's lag acts after the control), so that is refused.
     """
 
     native_actuator_lag = True
@@ -252,6 +255,12 @@ class MujocoBackend(AbstractBackend):
                 )
             effects = plant.effects
         self.effects = tuple(effects)
+        self._shaped = shaped_input(self.effects, np)
+        if self._shaped is not None and actuator_lag_time(self.effects) > 0:
+            raise ValueError(
+                "an input_dead_band with an actuator_lag: MuJoCo's lag acts on the dead-banded control, "
+                "the analytic model's dead band on the lagged input; give one of them"
+            )
         self.model = load_mjcf(self.system, actuator_lag=actuator_lag_time(self.effects) > 0)
         if timestep is not None:  # default: the MJCF's (what every env uses)
             self.model.opt.timestep = float(timestep)
@@ -339,16 +348,20 @@ class MujocoBackend(AbstractBackend):
         for dof, neutral in self._neutrals:
             neutral.advance(float(self._qpos[dof]))
 
+    def _control(self, u):
+        """What the actuator gets of the input ``u``: ``u``, or ``u`` through its dead band."""
+        return u if self._shaped is None else self._shaped(np.asarray(u, dtype=np.float64))
+
     def step(self, u) -> np.ndarray:
-        self._ctrl[:] = u
+        self._ctrl[:] = self._control(u)
         self._mj_step(self.substeps)
         return np.concatenate((self._qpos, self._qvel))
 
     def step_split(self, u_first, n_first: int, u) -> np.ndarray:
         if n_first > 0:
-            self.data.ctrl[:] = u_first
+            self.data.ctrl[:] = self._control(u_first)
             self._mj_step(n_first)
-        self.data.ctrl[:] = u
+        self.data.ctrl[:] = self._control(u)
         if self.substeps - n_first > 0:
             self._mj_step(self.substeps - n_first)
         return np.concatenate((self.data.qpos, self.data.qvel))
@@ -374,11 +387,12 @@ class MujocoBackend(AbstractBackend):
         # MjModel/MjData pickle, but the callback closure does not: rebuild it on unpickling
         state = self.__dict__.copy()
         state["_callback"] = None
-        for k in ("_ctrl", "_qpos", "_qvel", "_neutrals"):
+        for k in ("_ctrl", "_qpos", "_qvel", "_neutrals", "_shaped"):
             state.pop(k, None)
         return state
 
     def __setstate__(self, state):
         vars(self).update(state)
+        self._shaped = shaped_input(self.effects, np)
         self._bind_views()
         self._apply_parameters()
