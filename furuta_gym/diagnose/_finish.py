@@ -16,6 +16,12 @@ segment with a ``STARTS_EVERY`` gap between them (:func:`placed_windows`, ``"sta
 every 0.1 s), and windows back to back from each segment's first sample start at a few points of
 such a cycle only, which the refit then favours (docs/diagnose.md, "What separates
 prediction-first from sysid"). The held-out windows stay the diagnosis' own.
+
+The refit then tries an input dead band (``input_dead_band``, :func:`_fit_dead_band`): θ
+refitted at a few widths, the best by the fit windows' error, its width then searched on
+:data:`DEAD_BAND_GRID` and θ refitted there. It joins the finish's plant only by the diagnosis' rule for a gain on the held-out
+windows against the refit without it (:class:`DeadBandTrial`). It is not a library candidate:
+the diagnosis' report does not name it.
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ __all__ = [
     "FINISHES",
     "PLACEMENTS",
     "STARTS_EVERY",
+    "DEAD_BAND_GRID",
+    "DeadBandTrial",
     "PredictionFinish",
     "log_starts",
     "placed_windows",
@@ -51,6 +59,43 @@ STARTS_EVERY = 0.01
 #: ... or one after another with a ``STARTS_EVERY`` gap between them, so that their starts move
 #: through every point of a cycle of the window's length without overlapping (the refit's)
 STAGGERED = "staggered"
+#: the input dead bands the finish searches (the input's unit: V for the Furuta's motor; the
+#: real QUBE's is about 50 mV, docs/diagnose.md), and the rounds of search and refit
+DEAD_BAND_GRID = tuple(round(0.01 * k, 3) for k in range(16))
+#: the widths the refit is repeated at before the search on the grid (:func:`_fit_dead_band`)
+DEAD_BAND_COARSE = (0.02, 0.05, 0.1)
+
+
+@dataclasses.dataclass(frozen=True)
+class DeadBandTrial:
+    """The finish's input dead band: the ``width`` its search found (0: none better than none),
+    whether it joined the plant and why, and its evidence on the held-out windows against the
+    refit without it (``improvement`` of the sum of squares, ``z_score`` the t of the per-window
+    log ratios; NaN when not refitted), with both refits' position RMSE."""
+
+    width: float
+    unit: str
+    kept: bool
+    reason: str
+    improvement: float = float("nan")
+    z_score: float = float("nan")
+    heldout_rmse: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        finite = lambda x: float(x) if np.isfinite(x) else None  # noqa: E731
+        return {
+            "effect": "input_dead_band:u",
+            "width": self.width,
+            "unit": self.unit,
+            "kept": self.kept,
+            "reason": self.reason,
+            "heldout_improvement": finite(self.improvement),
+            "z_score": finite(self.z_score),
+            "heldout_trajectory_rmse": {k: finite(v) for k, v in self.heldout_rmse.items()},
+        }
+
+    def summary(self) -> str:
+        return f"  input dead band: {'kept' if self.kept else 'not kept'} — {self.reason}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +120,7 @@ class PredictionFinish:
     fit_windows: int
     heldout_windows: int
     window_seconds: float
+    dead_band: DeadBandTrial | None = None
 
     def to_json(self) -> dict:
         finite = lambda x: float(x) if np.isfinite(x) else None  # noqa: E731
@@ -92,6 +138,7 @@ class PredictionFinish:
             "window_seconds": self.window_seconds,
             "plant": self.plant.to_json(),
             "refit_plant": None if self.refit is None else self.refit.to_json(),
+            "input_dead_band": None if self.dead_band is None else self.dead_band.to_json(),
         }
 
     def summary(self) -> str:
@@ -105,6 +152,7 @@ class PredictionFinish:
                 f"  refitted by output error on {self.fit_windows} fit-set windows (starting anywhere); added: "
                 f"{', '.join(self.added) or 'nothing'}; left out (wrong sign): {', '.join(self.left_out) or 'nothing'}",
             )
+            + (() if self.dead_band is None else (self.dead_band.summary(),))
         )
 
 
@@ -253,6 +301,74 @@ def _decide(fx, result, theta, improved, ev) -> str | None:
     return None
 
 
+def _fit_total(fx, theta, dyn) -> float:
+    """The fit windows' sum of squares at ``theta`` under input dynamics ``dyn``."""
+    win = refit_windows(fx, fx.fit_segs, dyn)
+    return float(_windows.window_square_sums(fx.layout, theta, win, fx.substeps).sum())
+
+
+def _band_refit(fx, fit, dyn, width: float):
+    """The refit ``fit`` (θ, chosen, left out, improved) refitted from its θ with a dead band of
+    ``width``: (its fit windows' sum of squares, the refit, its input dynamics)."""
+    band = _fit.DeadBandInput(dyn.kind, dyn.seconds, float(width))
+    theta, chosen, left_out, improved = _refit(fx, fit[0], fit[1], band, refit_windows(fx, fx.fit_segs, band))
+    refit = (theta, chosen, list(fit[2]) + [k for k in left_out if k not in fit[2]], improved or fit[3])
+    return _fit_total(fx, theta, band), refit, band
+
+
+def _fit_dead_band(fx, fit, dyn):
+    """The dead band fitted with the rest from the refit ``fit``: θ refitted at each width of
+    :data:`DEAD_BAND_COARSE` (the refit without one has absorbed what it can into the friction,
+    so a width searched at its θ alone finds none), the best by the fit windows' error; then the
+    width searched on :data:`DEAD_BAND_GRID` at that refit's θ and θ refitted there once more.
+    Returns (the refit with it, its input dynamics), or None when none beats the refit without."""
+    best = (_fit_total(fx, fit[0], dyn), fit, None)
+    for width in DEAD_BAND_COARSE:
+        best = min(best, _band_refit(fx, fit, dyn, width), key=lambda b: b[0])
+    if best[2] is None:
+        return None
+    totals = [_fit_total(fx, best[1][0], _fit.DeadBandInput(dyn.kind, dyn.seconds, w)) for w in DEAD_BAND_GRID]
+    width = DEAD_BAND_GRID[int(np.nanargmin(totals))]
+    if width not in (0.0, best[2].dead_band):
+        best = min(best, _band_refit(fx, best[1], dyn, width), key=lambda b: b[0])
+    return best[1], best[2]
+
+
+def _dead_band_trial(fx, result, fit, dyn, refit_sums):
+    """The refit with an input dead band when it passes the diagnosis' rule for a gain on the
+    held-out windows against ``fit``, the refit without (held-out sums ``refit_sums``), and is
+    physical: (refit, input dynamics, held-out sums, :class:`DeadBandTrial`)."""
+    unit = Effect("input_dead_band", "u", 0.0).unit(fx.spec)
+    if dyn.kind == "lag":
+        why = "not tried: with an actuator lag, the MuJoCo plant and the model would apply it in other orders"
+        return fit, dyn, refit_sums, DeadBandTrial(0.0, unit, False, why)
+    found = _fit_dead_band(fx, fit, dyn)
+    if found is None:
+        return fit, dyn, refit_sums, DeadBandTrial(0.0, unit, False, "the fit windows' error is least without one")
+    band_fit, band = found
+    sums = _heldout_sums(fx, {"band": band_fit[0]}, _windows.make_windows(fx.held_segs, fx.L, band))["band"]
+    ev = _trace_mod.Evidence.of_sums(refit_sums, sums)
+    if not np.all(np.isfinite(sums)):
+        ev = _trace_mod.Evidence(-np.inf, -np.inf, int(sums.size))
+    why_not = _decide(fx, result, band_fit[0], True, ev)
+    n_points = fx.L * len(fx.spec.joint_names)
+    rmse = {k: float(np.sqrt(v.sum() / (v.size * n_points))) for k, v in (("without", refit_sums), ("with", sums))}
+    reason = (
+        why_not or f"predicts the held-out windows {ev.improvement:.1%} better (t {ev.z:.1f}) than the refit without"
+    )
+    trial = DeadBandTrial(
+        band.dead_band, unit, why_not is None, f"{band.dead_band:g} {unit}: {reason}", ev.improvement, ev.z, rmse
+    )
+    return (band_fit, band, sums, trial) if why_not is None else (fit, dyn, refit_sums, trial)
+
+
+def _plant_effects(layout, theta, chosen, dyn) -> list[Effect]:
+    """The refit plant's effects: the chosen ones (springs with their rests), and a dead band."""
+    effects = merge_spring_rests(_effects(layout, theta, chosen, dyn))
+    width = getattr(dyn, "dead_band", 0.0)
+    return effects + ([Effect("input_dead_band", "u", width)] if width > 0 else [])
+
+
 def prediction_finish(fx, result) -> PredictionFinish:
     """Refit ``result``'s final model for prediction on its fitting context ``fx`` (the
     diagnosis' ``_Fitter``) and decide whether to keep it (module docstring)."""
@@ -269,9 +385,11 @@ def prediction_finish(fx, result) -> PredictionFinish:
             with_inconsistent[layout.index(c.key)] = coefficient
     fit_win = refit_windows(fx, fx.fit_segs, dyn)
     held_win = _windows.make_windows(fx.held_segs, fx.L, dyn)
-    theta, chosen, left_out, improved = _refit(fx, start, found + [c for c, _ in extra], dyn, fit_win)
+    fit = _refit(fx, start, found + [c for c, _ in extra], dyn, fit_win)
     # the diagnosed plant is scored with its own input dynamics, the other two with the refit's
-    sums = _heldout_sums(fx, {"with_inconsistent": with_inconsistent, "refit": theta}, held_win)
+    sums = _heldout_sums(fx, {"with_inconsistent": with_inconsistent, "refit": fit[0]}, held_win)
+    fit, dyn, sums["refit"], band = _dead_band_trial(fx, result, fit, dyn, sums["refit"])
+    theta, chosen, left_out, improved = fit
     diagnosed_win = _windows.make_windows(fx.held_segs, fx.L, result.input_dynamics)
     sums = {**_heldout_sums(fx, {"diagnosed": result.theta_after}, diagnosed_win), **sums}
     baseline = min(("diagnosed", "with_inconsistent"), key=lambda k: sums[k].sum())
@@ -279,9 +397,9 @@ def prediction_finish(fx, result) -> PredictionFinish:
     if not np.all(np.isfinite(sums["refit"])):
         ev = _trace_mod.Evidence(-np.inf, -np.inf, int(sums["refit"].size))
     why_not = _decide(fx, result, theta, improved, ev)
-    names = [c.key for c in chosen]
+    names = [c.key for c in chosen] + (["input_dead_band:u"] if band.kept else [])
     refit = Plant(
-        effects=merge_spring_rests(_effects(layout, theta, chosen, dyn)),
+        effects=_plant_effects(layout, theta, chosen, dyn),
         lumped={b: float(theta[i]) for i, b in enumerate(layout.base)},
         system=result.system,
         source=f"diagnosis, prediction-first refit ({', '.join(names) or 'no effect'})",
@@ -305,4 +423,5 @@ def prediction_finish(fx, result) -> PredictionFinish:
         fit_windows=int(fit_win.x0.shape[0]),
         heldout_windows=int(held_win.x0.shape[0]),
         window_seconds=float(fx.settings.output_error.window),
+        dead_band=band,
     )

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.linalg import eigh
 from scipy.signal import lfilter
 
+from ..effects import dead_band
 from ..lagrangian import (
     interval_difference,
     interval_integral,
@@ -30,6 +31,7 @@ from ._library import ParameterLayout
 __all__ = [
     "Segment",
     "InputDynamics",
+    "DeadBandInput",
     "build_regressors",
     "ee_fit",
     "delay_input",
@@ -170,6 +172,18 @@ class InputDynamics:
 
 
 NO_INPUT_DYNAMICS = InputDynamics()
+
+
+@dataclasses.dataclass(frozen=True)
+class DeadBandInput(InputDynamics):
+    """The input dynamics followed by an ``input_dead_band``: u_eff = sgn(u)·max(|u| − d, 0)
+    (:func:`~furuta_gym.effects.dead_band`), after the delay as the plant applies it. It acts
+    on the input, not on the rotor's velocity (the rotor's Coulomb friction)."""
+
+    dead_band: float = 0.0  # the input's unit (V)
+
+    def apply(self, u: np.ndarray, dt: float) -> np.ndarray:
+        return dead_band(super().apply(u, dt), self.dead_band, np)
 
 
 def _group(x: np.ndarray, stride: int) -> np.ndarray:

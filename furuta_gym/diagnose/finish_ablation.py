@@ -30,7 +30,7 @@ from ..systems import get_spec
 from . import _finish, _fit, _trace as _trace_mod, _windows
 from ._diagnose import diagnose
 from ._finish import PLACEMENTS, STARTS_EVERY, drawn, log_starts, placed_windows, refit_windows
-from ._fit import InputDynamics
+from ._fit import DeadBandInput
 from ._library import Candidate
 from ._settings import DiagnosisSettings
 from ._windows import Windows, predict_windows, window_square_sums
@@ -84,19 +84,6 @@ class Variant:
     # an input dead band (V, :class:`DeadBandInput`): the refit at each, the one whose refit fits
     # the training windows best kept (empty: none)
     dead_bands: tuple[float, ...] = ()
-
-
-@dataclasses.dataclass(frozen=True)
-class DeadBandInput(InputDynamics):
-    """The input dynamics followed by a dead band: u_eff = sign(u)·max(|u| − ``dead_band``, 0),
-    what a motor driver or the brushes' friction that needs a least voltage to pass any current
-    would do. It acts on the input, not the rotor's velocity (the rotor's Coulomb friction)."""
-
-    dead_band: float = 0.0  # V
-
-    def apply(self, u: np.ndarray, dt: float) -> np.ndarray:
-        u = super().apply(u, dt)
-        return np.sign(u) * np.maximum(np.abs(u) - self.dead_band, 0.0)
 
 
 def diagnose_with_context(data, system: str, **kwargs):
