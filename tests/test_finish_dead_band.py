@@ -43,8 +43,8 @@ def test_the_finish_finds_a_planted_dead_band_and_adds_none_where_there_is_none(
     assert "input_dead_band" not in {e.name for e in res.effects} | {e.name for e in res.plant().effects}
     assert "input dead band: kept" in finish.summary()
     doc = json.loads(json.dumps(res.to_json()))["prediction_finish"]
-    assert doc["input_dead_band"]["kept"] is True and doc["input_dead_band"]["width"] == finish.dead_band.width
-    assert doc["input_dead_band"]["z_score"] == pytest.approx(finish.dead_band.z_score)
+    assert doc["dead_band"]["kept"] is True and doc["dead_band"]["width"] == finish.dead_band.width
+    assert doc["dead_band"]["z_score"] == pytest.approx(finish.dead_band.z_score)
     assert Plant.from_json(doc["plant"]) == finish.plant
     # the spring is refitted as well as without a dead band
     spring = next(e for e in finish.plant.effects if e.name == "spring")

@@ -138,7 +138,7 @@ class PredictionFinish:
             "window_seconds": self.window_seconds,
             "plant": self.plant.to_json(),
             "refit_plant": None if self.refit is None else self.refit.to_json(),
-            "input_dead_band": None if self.dead_band is None else self.dead_band.to_json(),
+            "dead_band": None if self.dead_band is None else self.dead_band.to_json(),
         }
 
     def summary(self) -> str:
