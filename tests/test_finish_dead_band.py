@@ -54,3 +54,19 @@ def test_the_finish_finds_a_planted_dead_band_and_adds_none_where_there_is_none(
     assert plain.dead_band is not None and not plain.dead_band.kept, plain.summary()
     assert "input_dead_band" not in {e.name for e in plain.plant.effects}
     assert np.isfinite(plain.heldout_rmse["refit"])
+
+
+def test_with_an_actuator_lag_the_finish_does_not_try_a_dead_band():
+    """The MuJoCo plant lags the dead-banded control, the model dead-bands the lagged input: the
+    finish does not fit what the two would simulate differently."""
+    from types import SimpleNamespace
+
+    from furuta_gym.diagnose import InputDynamics
+    from furuta_gym.diagnose._finish import _dead_band_trial
+    from furuta_gym.systems import get_spec
+
+    fit, sums, lag = (np.zeros(3), [], [], True), np.ones(4), InputDynamics("lag", 0.005)
+    out = _dead_band_trial(SimpleNamespace(spec=get_spec("furuta")), None, fit, lag, sums)
+    assert out[0] is fit and out[1] is lag and out[2] is sums
+    assert not out[3].kept and out[3].width == 0.0 and out[3].reason.startswith("not tried")
+    assert out[3].to_json()["z_score"] is None
