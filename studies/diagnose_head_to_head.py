@@ -66,7 +66,6 @@ import jax.numpy as jnp  # noqa: E402
 import head_to_head_sysid as hsysid  # noqa: E402
 from furuta_gym.datasets import load_qube_closed_loop  # noqa: E402
 from furuta_gym.diagnose import InputDynamics  # noqa: E402
-from furuta_gym.diagnose._fit import DeadBandInput  # noqa: E402
 from furuta_gym.effects import Effect, WithEffects, can_join, merge_spring_rests  # noqa: E402
 from furuta_gym.envs import Plant  # noqa: E402
 from furuta_gym.lagrangian import forward_dynamics_with_dry_friction  # noqa: E402
@@ -188,21 +187,11 @@ def fixed_rows(test) -> list[dict]:
     return rows
 
 
-def input_dynamics(effects) -> InputDynamics:
-    """A found input delay or lag as the input transformation the diagnosis scores with, and
-    after it the plant's input dead band (the prediction-first finish's), if it has one."""
-    kinds = {"input_delay": "delay", "actuator_lag": "lag"}
-    found = [InputDynamics(kinds[e.name], e.coefficient) for e in effects if e.kind.on_input and e.name in kinds]
-    dyn = found[0] if found else InputDynamics()
-    bands = [e.coefficient for e in effects if e.kind.shapes_input]
-    return DeadBandInput(dyn.kind, dyn.seconds, bands[0]) if bands else dyn
-
-
 def score_plant(plant, test, stride: float | None = None) -> dict:
     """A diagnosed plant (lumped values, effects) on the test runs."""
     base = LumpedSystem.of("furuta", plant.lumped)
     joint_effects = [e for e in plant.effects if not e.kind.on_input]
-    return score_field(lagrangian_field(base, joint_effects), test, input_dynamics(plant.effects), stride)
+    return score_field(lagrangian_field(base, joint_effects), test, InputDynamics.of_effects(plant.effects), stride)
 
 
 def run_diagnosis(candidates, finish=None):

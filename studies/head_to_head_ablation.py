@@ -290,7 +290,7 @@ def prediction_windows_of(h2h, plant, runs, stride: float | None):
     """The windows a plant is scored on: its input delay applied from each run's own samples."""
     from furuta_gym.measured import prediction_windows
 
-    return prediction_windows(h2h.with_input(runs, h2h.input_dynamics(plant.effects)), WINDOW, stride)
+    return prediction_windows(h2h.with_input(runs, InputDynamics.of_effects(plant.effects)), WINDOW, stride)
 
 
 def in_sample(results: Path) -> dict:
@@ -591,7 +591,7 @@ def input_residual(results: Path, doc: dict) -> dict:
     )
     runs = h2h.load_runs(FIT_RUNS)
     effects = [e for e in plant.effects if not e.kind.on_input]
-    x0, u, accel, _ = _window_accelerations(h2h, runs, plant.lumped, effects, h2h.input_dynamics(plant.effects))
+    x0, u, accel, _ = _window_accelerations(h2h, runs, plant.lumped, effects, InputDynamics.of_effects(plant.effects))
     speed, a = x0[:, 2], accel[:, 0]
     return {
         "windows": int(len(x0)),

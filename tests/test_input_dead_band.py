@@ -103,3 +103,21 @@ def test_the_written_mjcf_says_it_cannot_express_the_dead_band_and_keeps_it(tmp_
     path = tmp_path / "rig.xml"
     path.write_text(text)
     assert BAND in Plant.load(path).effects
+
+
+def test_the_diagnosis_scores_a_plant_with_its_delay_then_its_dead_band():
+    """InputDynamics.of_effects: what a plant's effects put between the log and the plant, in the
+    plant's order (the delay, then the dead band)."""
+    from furuta_gym.diagnose import InputDynamics
+
+    effects = [
+        Effect("input_dead_band", "u", 0.05),
+        Effect("input_delay", "u", 0.004),
+        Effect("coulomb_friction", "alpha", 1e-4),
+    ]
+    dyn = InputDynamics.of_effects(effects)
+    assert (dyn.kind, dyn.seconds, dyn.dead_band) == ("delay", 0.004, 0.05)
+    u = np.array([0.0, 0.2, -0.2, 0.03, -0.03, 1.0, 1.0, 1.0])
+    np.testing.assert_allclose(dyn.apply(u, 0.002), dead_band(InputDynamics("delay", 0.004).apply(u, 0.002), 0.05))
+    assert InputDynamics.of_effects([Effect("coulomb_friction", "alpha", 1e-4)]) == InputDynamics()
+    assert InputDynamics.of_effects([Effect("actuator_lag", "u", 0.01)]) == InputDynamics("lag", 0.01)

@@ -170,6 +170,15 @@ class InputDynamics:
             return lag_input(u, self.seconds, dt)
         return u
 
+    @staticmethod
+    def of_effects(effects) -> "InputDynamics":
+        """What a plant's ``effects`` put between the logged input and the plant: their input
+        delay or lag (the first), then their input dead band, if any (:class:`DeadBandInput`)."""
+        found = [InputDynamics(e.kind.input_dynamics, float(e.coefficient)) for e in effects if e.kind.input_dynamics]
+        dyn = found[0] if found else NO_INPUT_DYNAMICS
+        bands = [float(e.coefficient) for e in effects if e.kind.shapes_input]
+        return DeadBandInput(dyn.kind, dyn.seconds, bands[0]) if bands else dyn
+
 
 NO_INPUT_DYNAMICS = InputDynamics()
 
