@@ -117,8 +117,14 @@ VARIANTS = {
         Variant("starts", "refit on windows starting every 10 ms (every phase of the input cycle)", placement="starts"),
         Variant(
             "staggered",
-            "prediction-first now: refit on windows one after another with a 10 ms gap (every start of a cycle)",
+            "the finish's refit before its dead band: windows one after another with a 10 ms gap (every start of a cycle)",
             placement="staggered",
+        ),
+        Variant(
+            "finish",
+            "the finish as shipped: that refit, then its input dead band search (20/50/100 mV, a 10 mV grid)",
+            placement="staggered",
+            finish_dead_band=True,
         ),
         Variant(
             "staggered_delay_j1b",

@@ -301,36 +301,38 @@ def _decide(fx, result, theta, improved, ev) -> str | None:
     return None
 
 
-def _fit_total(fx, theta, dyn) -> float:
-    """The fit windows' sum of squares at ``theta`` under input dynamics ``dyn``."""
-    win = refit_windows(fx, fx.fit_segs, dyn)
+def _fit_total(fx, theta, win) -> float:
+    """The sum of squares of windows ``win`` at ``theta``."""
     return float(_windows.window_square_sums(fx.layout, theta, win, fx.substeps).sum())
 
 
-def _band_refit(fx, fit, dyn, width: float):
+def _band_refit(fx, fit, dyn, width: float, windows):
     """The refit ``fit`` (θ, chosen, left out, improved) refitted from its θ with a dead band of
-    ``width``: (its fit windows' sum of squares, the refit, its input dynamics)."""
+    ``width`` on the training windows ``windows(dynamics)``: (their sum of squares, the refit,
+    its input dynamics)."""
     band = _fit.DeadBandInput(dyn.kind, dyn.seconds, float(width))
-    theta, chosen, left_out, improved = _refit(fx, fit[0], fit[1], band, refit_windows(fx, fx.fit_segs, band))
+    theta, chosen, left_out, improved = _refit(fx, fit[0], fit[1], band, windows(band))
     refit = (theta, chosen, list(fit[2]) + [k for k in left_out if k not in fit[2]], improved or fit[3])
-    return _fit_total(fx, theta, band), refit, band
+    return _fit_total(fx, theta, windows(band)), refit, band
 
 
-def _fit_dead_band(fx, fit, dyn):
+def _fit_dead_band(fx, fit, dyn, windows=None):
     """The dead band fitted with the rest from the refit ``fit``: θ refitted at each width of
     :data:`DEAD_BAND_COARSE` (the refit without one has absorbed what it can into the friction,
-    so a width searched at its θ alone finds none), the best by the fit windows' error; then the
-    width searched on :data:`DEAD_BAND_GRID` at that refit's θ and θ refitted there once more.
+    so a width searched at its θ alone finds none), the best by the training windows' error; then
+    the width searched on :data:`DEAD_BAND_GRID` at that refit's θ and θ refitted there once more.
+    ``windows(dynamics)``: the training windows (default: the finish's, on the fit segments).
     Returns (the refit with it, its input dynamics), or None when none beats the refit without."""
-    best = (_fit_total(fx, fit[0], dyn), fit, None)
+    windows = windows or (lambda d: refit_windows(fx, fx.fit_segs, d))
+    best = (_fit_total(fx, fit[0], windows(dyn)), fit, None)
     for width in DEAD_BAND_COARSE:
-        best = min(best, _band_refit(fx, fit, dyn, width), key=lambda b: b[0])
+        best = min(best, _band_refit(fx, fit, dyn, width, windows), key=lambda b: b[0])
     if best[2] is None:
         return None
-    totals = [_fit_total(fx, best[1][0], _fit.DeadBandInput(dyn.kind, dyn.seconds, w)) for w in DEAD_BAND_GRID]
-    width = DEAD_BAND_GRID[int(np.nanargmin(totals))]
+    grid = [_fit.DeadBandInput(dyn.kind, dyn.seconds, w) for w in DEAD_BAND_GRID]
+    width = DEAD_BAND_GRID[int(np.nanargmin([_fit_total(fx, best[1][0], windows(d)) for d in grid]))]
     if width not in (0.0, best[2].dead_band):
-        best = min(best, _band_refit(fx, best[1], dyn, width), key=lambda b: b[0])
+        best = min(best, _band_refit(fx, best[1], dyn, width, windows), key=lambda b: b[0])
     return best[1], best[2]
 
 

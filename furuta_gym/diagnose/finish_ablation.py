@@ -61,7 +61,8 @@ FOLDS = 3
 DELAY_STEPS = np.array([-0.5e-3, -0.25e-3, 0.25e-3, 0.5e-3])
 BOUNDARY_MARGIN = 0.01
 RULE = DiagnosisSettings()  # its rule for a gain judges a variant against the current finish
-#: the variant that is the finish as shipped now (its windows staggered, :mod:`._finish`)
+#: the variant every other is compared with: the finish's refit (its windows staggered,
+#: :mod:`._finish`) before its dead band search (variant ``finish`` adds that search)
 FINISH = "staggered"
 
 
@@ -84,6 +85,10 @@ class Variant:
     # an input dead band (V, :class:`DeadBandInput`): the refit at each, the one whose refit fits
     # the training windows best kept (empty: none)
     dead_bands: tuple[float, ...] = ()
+    # the finish's own dead band search (:func:`._finish._fit_dead_band`) on the training windows,
+    # after the refit without one; always taken when found (the finish's keep rule reads the
+    # held-out fold, which here is the scored one)
+    finish_dead_band: bool = False
 
 
 def diagnose_with_context(data, system: str, **kwargs):
@@ -268,6 +273,16 @@ def _fit_once(fx, res, variant: Variant, start, chosen, dyn, win):
     return theta, chosen
 
 
+def refit_finish_dead_band(fx, res, variant: Variant, start, chosen, dyn, windows):
+    """The variant's refit, then the finish's dead band search from it on the training windows
+    ``windows(dynamics)``: (θ, kept, input dynamics, training windows)."""
+    theta, chosen = _fit_once(fx, res, variant, start, chosen, dyn, windows(dyn))
+    found = _finish._fit_dead_band(fx, (theta, chosen, [], False), dyn, windows)
+    if found is not None:
+        (theta, chosen, _, _), dyn = found
+    return theta, chosen, dyn, windows(dyn)
+
+
 def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
     """Refit on the ``train`` segments as the variant says; per-window squared errors on ``held``
     under each placement of its windows (``sums``: the diagnosis' own, ``sums_<placement>``)."""
@@ -290,6 +305,8 @@ def fit_and_score(fx, res, variant: Variant, train, held, given=None) -> dict:
     with friction_law(variant.law), _restoring(fx, settings):
         if not variant.refit:
             theta = start
+        elif variant.finish_dead_band:
+            theta, chosen, dyn, win = refit_finish_dead_band(fx, res, variant, start, chosen, dyn, windows)
         elif variant.dead_bands:
             fit = lambda d, w: _fit_once(fx, res, variant, start, chosen, d, w)  # noqa: E731
             theta, chosen, dyn, win = refit_dead_band(fx, fit, dyn, windows, variant.dead_bands)
