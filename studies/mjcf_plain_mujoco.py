@@ -90,20 +90,27 @@ def plant_row(name: str, test, windows) -> dict:
     label, where = PLANTS[name]
     doc = json.loads((OUT.parent / f"{name}.json").read_text())
     plant = Plant.from_json(doc[where[0]][where[1]])
+    # what --mjcf writes: the finish's refit without what MJCF cannot express, when it has one
+    written = doc[where[0]].get("mujoco_plant") if name == "diagnosed_prediction" else None
+    written = plant if written is None else Plant.from_json(written)
     x0, us, xs, history = windows
     dt = test[0].dt
-    xml = plant_mjcf(plant)
-    forms = plain_forms(plant.effects, mujoco.MjModel.from_xml_string(xml))
+    xml = plant_mjcf(written)
+    forms = plain_forms(written.effects, mujoco.MjModel.from_xml_string(xml))
     return {
         "name": name,
         "label": label,
         "effects": [f"{e.name}:{e.joint}" for e in plant.effects],
+        "written_effects": [f"{e.name}:{e.joint}" for e in written.effects],
+        "written_refitted_without": [f"{e.name}:{e.joint}" for e in plant.effects if e.kind.shapes_input]
+        if written is not plant
+        else [],
         "approximated": [f"{e.name}:{e.joint}" for e in forms.approximated],
         "not_expressed": [f"{e.name}:{e.joint}" for e in forms.missing],
         "committed_plant_position_rmse": doc["position_rmse"],
         "plant": h2h.score_plant(plant, test),
         "plain_mujoco": h2h.score(plain_mujoco(xml, x0, us, history, dt), xs),
-        "native_terms_only": h2h.score(plain_mujoco(plant_mjcf(native_only(plant)), x0, us, history, dt), xs),
+        "native_terms_only": h2h.score(plain_mujoco(plant_mjcf(native_only(written)), x0, us, history, dt), xs),
     }
 
 

@@ -1,21 +1,20 @@
 """The prediction-first finish tries an input dead band (issue 66): a dead band of 50 mV planted
 in the MuJoCo plant that logs the runs is found by the finish and kept by the diagnosis' rule for
 a gain on its held-out windows; a plant without one gets none. The diagnosis' report does not name
-it (it is no library candidate).
+it (it is no library candidate), and ``--mjcf`` writes the refit without it, which plain MuJoCo
+can run."""
 
-Measured (this machine, 2026-12; 4 × 5 s chirps, a cable spring, no quantisation): found 0.05 V
-exactly, the held-out sum of squares 99.9 % below the refit without it (t 4.2); without a dead
-band the search leaves the refit as it is ("the fit windows' error is least without one")."""
-
+import argparse
 import json
 
 import numpy as np
 import pytest
 
 import furuta_gym
+from furuta_gym.cli.diagnose import _write_outputs
 from furuta_gym.diagnose import diagnose
 from furuta_gym.effects import Effect
-from furuta_gym.envs import Plant
+from furuta_gym.envs import Plant, plant_mjcf
 from furuta_gym.rigs import measured_like
 
 furuta_gym.enable_x64()
@@ -31,7 +30,7 @@ def _diagnosed(effects):
 
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-def test_the_finish_finds_a_planted_dead_band_and_adds_none_where_there_is_none():
+def test_the_finish_finds_a_planted_dead_band_and_adds_none_where_there_is_none(tmp_path):
     res = _diagnosed([SPRING, BAND])
     finish = res.prediction
     assert finish.kept and finish.dead_band is not None and finish.dead_band.kept, finish.summary()
@@ -49,10 +48,21 @@ def test_the_finish_finds_a_planted_dead_band_and_adds_none_where_there_is_none(
     # the spring is refitted as well as without a dead band
     spring = next(e for e in finish.plant.effects if e.name == "spring")
     assert spring.coefficient == pytest.approx(5e-3, rel=0.05)
+    # plain MuJoCo gets the refit without the band (it cannot run one), not the plant minus it
+    mujoco_plant = finish.mujoco_plant
+    assert mujoco_plant is finish.mujoco_refit and "input_dead_band" not in {e.name for e in mujoco_plant.effects}
+    assert {e.name for e in mujoco_plant.effects} >= {"spring"} and mujoco_plant.lumped != finish.plant.lumped
+    assert Plant.from_json(doc["mujoco_plant"]) == mujoco_plant
+    args = argparse.Namespace(json=None, report=None, mjcf=str(tmp_path / "rig.xml"), overwrite=False)
+    _write_outputs(res, argparse.Namespace(**vars(args), prediction_first=True, with_inconsistent=False))
+    xml = (tmp_path / "rig.xml").read_text()
+    assert "without its input dead band (0.05 V), which MJCF cannot express" in xml
+    assert xml == plant_mjcf(mujoco_plant)
 
     plain = _diagnosed([SPRING]).prediction
     assert plain.dead_band is not None and not plain.dead_band.kept, plain.summary()
     assert "input_dead_band" not in {e.name for e in plain.plant.effects}
+    assert plain.mujoco_refit is None and plain.mujoco_plant is plain.plant
     assert np.isfinite(plain.heldout_rmse["refit"])
 
 

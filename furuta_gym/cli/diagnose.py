@@ -201,5 +201,9 @@ def _write_outputs(res, args: argparse.Namespace) -> None:
     if args.mjcf:
         from ..envs import save_mjcf
 
-        plant = res.plant(include_inconsistent=args.with_inconsistent, prediction_first=args.prediction_first)
+        if args.prediction_first:  # the refit plain MuJoCo runs best (without a dead band, refitted)
+            assert res.prediction is not None, "--prediction-first runs the finish"
+            plant = res.prediction.mujoco_plant
+        else:
+            plant = res.plant(include_inconsistent=args.with_inconsistent)
         print(f"wrote {save_mjcf(plant, args.mjcf, overwrite=args.overwrite)}")

@@ -121,6 +121,16 @@ class PredictionFinish:
     heldout_windows: int
     window_seconds: float
     dead_band: DeadBandTrial | None = None
+    #: the refit without its dead band, which plain MuJoCo cannot run (None: no dead band kept)
+    mujoco_refit: Plant | None = None
+
+    @property
+    def mujoco_plant(self) -> Plant:
+        """The plant for plain MuJoCo (``diagnose --mjcf``, :func:`~furuta_gym.envs.save_mjcf`):
+        ``plant``, or, when it holds an effect MJCF cannot express (an input dead band) and it is
+        the refit, the refit fitted without it, which predicts better than the plant with that
+        effect dropped."""
+        return self.mujoco_refit if self.kept and self.mujoco_refit is not None else self.plant
 
     def to_json(self) -> dict:
         finite = lambda x: float(x) if np.isfinite(x) else None  # noqa: E731
@@ -139,6 +149,7 @@ class PredictionFinish:
             "plant": self.plant.to_json(),
             "refit_plant": None if self.refit is None else self.refit.to_json(),
             "dead_band": None if self.dead_band is None else self.dead_band.to_json(),
+            "mujoco_plant": None if self.mujoco_refit is None else self.mujoco_refit.to_json(),
         }
 
     def summary(self) -> str:
@@ -371,6 +382,17 @@ def _plant_effects(layout, theta, chosen, dyn) -> list[Effect]:
     return effects + ([Effect("input_dead_band", "u", width)] if width > 0 else [])
 
 
+def _refit_plant(layout, result, theta, chosen, dyn) -> Plant:
+    """The refit at ``theta`` with the ``chosen`` effects and input dynamics ``dyn`` as a plant."""
+    names = [c.key for c in chosen] + (["input_dead_band:u"] if getattr(dyn, "dead_band", 0.0) > 0 else [])
+    return Plant(
+        effects=_plant_effects(layout, theta, chosen, dyn),
+        lumped={b: float(theta[i]) for i, b in enumerate(layout.base)},
+        system=result.system,
+        source=f"diagnosis, prediction-first refit ({', '.join(names) or 'no effect'})",
+    )
+
+
 def prediction_finish(fx, result) -> PredictionFinish:
     """Refit ``result``'s final model for prediction on its fitting context ``fx`` (the
     diagnosis' ``_Fitter``) and decide whether to keep it (module docstring)."""
@@ -390,6 +412,7 @@ def prediction_finish(fx, result) -> PredictionFinish:
     fit = _refit(fx, start, found + [c for c, _ in extra], dyn, fit_win)
     # the diagnosed plant is scored with its own input dynamics, the other two with the refit's
     sums = _heldout_sums(fx, {"with_inconsistent": with_inconsistent, "refit": fit[0]}, held_win)
+    without = (fit, dyn)  # the refit without a dead band: plain MuJoCo has no form of one
     fit, dyn, sums["refit"], band = _dead_band_trial(fx, result, fit, dyn, sums["refit"])
     theta, chosen, left_out, improved = fit
     diagnosed_win = _windows.make_windows(fx.held_segs, fx.L, result.input_dynamics)
@@ -400,12 +423,7 @@ def prediction_finish(fx, result) -> PredictionFinish:
         ev = _trace_mod.Evidence(-np.inf, -np.inf, int(sums["refit"].size))
     why_not = _decide(fx, result, theta, improved, ev)
     names = [c.key for c in chosen] + (["input_dead_band:u"] if band.kept else [])
-    refit = Plant(
-        effects=_plant_effects(layout, theta, chosen, dyn),
-        lumped={b: float(theta[i]) for i, b in enumerate(layout.base)},
-        system=result.system,
-        source=f"diagnosis, prediction-first refit ({', '.join(names) or 'no effect'})",
-    )
+    refit = _refit_plant(layout, result, theta, chosen, dyn)
     reason = why_not or (
         f"predicts the held-out windows {ev.improvement:.1%} better (sum of squares, t {ev.z:.1f}) "
         f"than the diagnosed plant{' with its inconsistent effects' if baseline == 'with_inconsistent' else ''}"
@@ -426,4 +444,15 @@ def prediction_finish(fx, result) -> PredictionFinish:
         heldout_windows=int(held_win.x0.shape[0]),
         window_seconds=float(fx.settings.output_error.window),
         dead_band=band,
+        mujoco_refit=_mujoco_refit(layout, result, without, band),
     )
+
+
+def _mujoco_refit(layout, result, without, band: DeadBandTrial) -> Plant | None:
+    """The refit without its dead band (``without``: that refit and its input dynamics) as the
+    plant for plain MuJoCo, which has no form of one; None when no dead band was kept."""
+    if not band.kept:
+        return None
+    plant = _refit_plant(layout, result, without[0][0], without[0][1], without[1])
+    why = f"refitted without its input dead band ({band.width:g} {band.unit}), which MJCF cannot express"
+    return dataclasses.replace(plant, source=f"{plant.source}; {why}")
