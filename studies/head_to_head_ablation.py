@@ -299,6 +299,15 @@ def prediction_windows_of(h2h, plant, runs, stride: float | None):
     return prediction_windows(h2h.with_input(runs, InputDynamics.of_effects(plant.effects)), WINDOW, stride)
 
 
+def committed_finish_plant(results: Path, without_dead_band: bool = False):
+    """The head-to-head's committed prediction-first plant, or its refit without the dead band
+    (the plant the dead band was found in: what the finish was before it tried one)."""
+    from furuta_gym.envs import Plant
+
+    finish = json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]
+    return Plant.from_json(finish["mujoco_plant"] if without_dead_band and finish["mujoco_plant"] else finish["plant"])
+
+
 def in_sample(results: Path) -> dict:
     """The committed sysid (MJCF terms) and prediction-first plants on runs 1–10 themselves, with
     the head-to-head's scoring (back-to-back windows of whole runs, sysid rolled out by MuJoCo),
@@ -307,14 +316,11 @@ def in_sample(results: Path) -> dict:
     this says whether the gap is there already on the data both fitted; no reading of runs 11–15."""
     import diagnose_head_to_head as h2h  # the head-to-head's scoring (its module imports MuJoCo's sysid helpers)
     import head_to_head_sysid as hsysid
-    from furuta_gym.envs import Plant
 
     sysid = json.loads((results / "sysid.json").read_text())["parameters"]
     plants = {
         "sysid_in_furuta_gym": sysid_plant(sysid),
-        "prediction_first": Plant.from_json(
-            json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]["plant"]
-        ),
+        "prediction_first": committed_finish_plant(results),
     }
     fit = h2h.load_runs(FIT_RUNS)
     return {
@@ -581,7 +587,7 @@ def _fold_plants(h2h, runs, doc: dict) -> dict:
 
 
 def input_residual(results: Path, doc: dict) -> dict:
-    """Is the committed prediction-first plant's force error on runs 1–10 a function of the input
+    """Is the committed prediction-first refit's force error, without its dead band (the plant it was found in), on runs 1–10 a function of the input
     (a dead band, a voltage-dependent gain) or of the rotor's velocity (its friction)? Windows
     starting every 30 ms (:data:`PHASE_STRIDE`), each window's error (measured − predicted)
     fitted as v·t + a·t²/2 per joint; the rotor's a binned by the window's mean input (the input
@@ -590,11 +596,8 @@ def input_residual(results: Path, doc: dict) -> dict:
     ``fold_plants``: the same for the finish now and the dead-band variant refitted on folds 0
     and 1 (:func:`_fold_plants`)."""
     import diagnose_head_to_head as h2h
-    from furuta_gym.envs import Plant
 
-    plant = Plant.from_json(
-        json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]["plant"]
-    )
+    plant = committed_finish_plant(results, without_dead_band=True)
     runs = h2h.load_runs(FIT_RUNS)
     effects = [e for e in plant.effects if not e.kind.on_input]
     x0, u, accel, _ = _window_accelerations(h2h, runs, plant.lumped, effects, InputDynamics.of_effects(plant.effects))
@@ -647,7 +650,7 @@ def main() -> None:
     ap.add_argument(
         "--input-residual",
         action="store_true",
-        help="only the committed prediction-first plant's rotor acceleration error by input and speed",
+        help="only the committed prediction-first refit's rotor acceleration error (without its dead band) by input and speed",
     )
     args = ap.parse_args()
     names = args.variants.split(",")

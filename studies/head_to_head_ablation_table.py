@@ -138,7 +138,7 @@ def _input_residual_sentence(doc: dict) -> str:
     )
     u, v = r["on_input"], r["on_speed"]
     return (
-        f"The committed prediction-first plant's rotor acceleration error on runs 1–10 (measured − predicted; "
+        f"The committed prediction-first refit's rotor acceleration error without its dead band on runs 1–10 (measured − predicted; "
         f"{r['windows']} windows starting every {1e3 * r['stride']:g} ms, each window's error fitted as v·t + a·t²/2; "
         f"RMS {r['rotor_accel_rms']:.2f} rad/s²; mean ± standard error in rad/s², bins of at least 100 windows), by "
         f"the window's mean input: {by_input}. By the rotor's start speed: {by_speed}. Regressed on 1, ū, sgn ū: "
