@@ -390,6 +390,12 @@ def row_plant(doc: dict, folder: Path):
     return None
 
 
+def without_dead_band(doc: dict):
+    """The prediction-first row's refit without its dead band (None for other rows, or without one)."""
+    plant = doc.get("prediction_finish", {}).get("mujoco_plant") if doc["name"] == "diagnosed_prediction" else None
+    return None if plant is None else Plant.from_json(plant)
+
+
 def score_row(doc: dict, folder: Path, test, stride: float | None) -> dict:
     """A committed row's fit scored again on ``test``, its windows one every ``stride`` s."""
     name = doc["name"]
@@ -416,6 +422,11 @@ def rescore_every_phase(out: Path, test) -> None:
         again = score_row(doc, out, test, None)["position_rmse"]
         assert abs(again - doc["position_rmse"]) <= 1e-6 * doc["position_rmse"], (name, again, doc["position_rmse"])
         doc["every_phase"] = {**score_row(doc, out, test, EVERY_PHASE), "stride_seconds": EVERY_PHASE}
+        if (without := without_dead_band(doc)) is not None:  # what --mjcf writes of it, in our simulator
+            doc["without_dead_band"] = {
+                "position_rmse": score_plant(without, test)["position_rmse"],
+                "every_phase_position_rmse": score_plant(without, test, EVERY_PHASE)["position_rmse"],
+            }
         path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
         print(
             f"{doc['label']:55s} back to back {1e3 * again:.3f} mrad, every phase "

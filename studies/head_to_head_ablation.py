@@ -128,14 +128,14 @@ VARIANTS = {
         ),
         Variant(
             "staggered_delay_j1b",
-            "the finish now, with the input delay refitted and J1b freed",
+            "the refit before the dead band, with the input delay refitted and J1b freed",
             placement="staggered",
             refit_delay=True,
             free_j1b=True,
         ),
         Variant(
             "staggered_all",
-            "the finish now, with those and dry friction relaxed over 10 ms",
+            "the refit before the dead band, with those and dry friction relaxed over 10 ms",
             placement="staggered",
             refit_delay=True,
             free_j1b=True,
@@ -165,13 +165,13 @@ VARIANTS = {
         ),
         Variant(
             "staggered_dead_band",
-            "the finish now, with an input dead band fitted with the rest (0–140 mV)",
+            "the refit before the dead band, with an input dead band fitted with the rest (0–140 mV)",
             placement="staggered",
             dead_bands=DEAD_BANDS,
         ),
         Variant(
             "staggered_dead_band_delay_j1b",
-            "the finish now, with the dead band (40–80 mV), the input delay refitted and J1b freed",
+            "the refit before the dead band, with the dead band (40–80 mV), the input delay refitted and J1b freed",
             placement="staggered",
             dead_bands=(0.04, 0.05, 0.06, 0.07, 0.08),
             refit_delay=True,
@@ -179,7 +179,7 @@ VARIANTS = {
         ),
         Variant(
             "staggered_refined_starts",
-            "the finish now, each training window's start velocity refitted with the plant (3 steps)",
+            "the refit before the dead band, each training window's start velocity refitted with the plant (3 steps)",
             placement="staggered",
             start_iterations=3,
         ),
@@ -593,7 +593,7 @@ def input_residual(results: Path, doc: dict) -> dict:
     fitted as v·t + a·t²/2 per joint; the rotor's a binned by the window's mean input (the input
     the plant sees, delayed) split by the sign of the rotor's start speed, and by that speed
     split by the sign of the input; and a regressed on 1, ū, sgn ū and on 1, α̇, sgn α̇ (R²).
-    ``fold_plants``: the same for the finish now and the dead-band variant refitted on folds 0
+    ``fold_plants``: the same for the refit before the dead band and the dead-band variant refitted on folds 0
     and 1 (:func:`_fold_plants`)."""
     import diagnose_head_to_head as h2h
 
@@ -619,7 +619,7 @@ def input_residual(results: Path, doc: dict) -> dict:
 def dump(doc: dict) -> str:
     """The result file's text: per-window sums to 5 significant digits, each list on one line.
     Windows starting every 10 ms are ten times as many: their sums are kept for the finish until
-    the ablation and the finish now (``FINISH``) only, which later variants are compared with
+    the ablation and the refit before the dead band (``FINISH``) only, which later variants are compared with
     (each variant's comparisons are kept in its ``by_placement``; the summaries keep their full
     precision). ``doc`` itself keeps every sum."""
     doc = copy.deepcopy(doc)

@@ -148,23 +148,24 @@ def _input_residual_sentence(doc: dict) -> str:
 
 
 def _fold_plants_sentence(r: dict) -> str:
-    """The finish now and the dead-band variant (refitted on folds 0 and 1) on the same windows."""
+    """The refit before the dead band and the dead-band variant (refitted on folds 0 and 1) on the same windows."""
     plants = r.get("fold_plants", {})
     if "staggered" not in plants or "staggered_dead_band" not in plants:
         return ""
     now, banded = plants["staggered"], plants["staggered_dead_band"]
     sign = lambda p: f"sgn ū {p['on_input']['coefficients'][2]:+.2f} rad/s², R² {p['on_input']['r2']:.4f}"  # noqa: E731
     return (
-        f"Refitted on folds 0 and 1, on the same windows: the finish now {1e3 * now['rmse']:.3f} mrad ({sign(now)}), "
+        f"Refitted on folds 0 and 1, on the same windows: the refit before the dead band {1e3 * now['rmse']:.3f} mrad ({sign(now)}), "
         f"with the dead band ({1e3 * banded['dead_band']:g} mV) {1e3 * banded['rmse']:.3f} mrad ({sign(banded)}). "
     )
 
 
 def _dead_band_sentence(doc: dict) -> str:
-    """The dead-band variants against the finish now, on each placement ("" before they were run)."""
+    """The dead-band variants (the shipped finish among them) against the refit before the dead band,
+    on each placement ("" before they were run)."""
     words = {"segments": "the finish's own held-out windows", "grid": "the score's grid", "starts": "every 10 ms"}
     out = []
-    for name in ("staggered_dead_band", "staggered_dead_band_delay_j1b"):
+    for name in ("finish", "staggered_dead_band", "staggered_dead_band_delay_j1b"):
         r = doc["variants"].get(name)
         if r is None or "vs_finish" not in r:
             continue
@@ -173,8 +174,7 @@ def _dead_band_sentence(doc: dict) -> str:
             p: e["vs_finish"] for p, e in r.get("by_placement", {}).items() if "vs_finish" in e
         }
         out.append(
-            f'The row "{r["label"]}": its dead band per fold {bands} mV; against the finish now ("prediction-first '
-            'now"): '
+            f'The row "{r["label"]}": its dead band per fold {bands} mV; against the refit before it ("staggered"): '
             + ", ".join(f"{words[p]} {_change(c)}" for p, c in places.items())
             + " (each passing the rule for a gain: "
             + ", ".join("yes" if c["passes_rule"] else "no" for c in places.values())

@@ -215,12 +215,12 @@ def prediction_first(doc: dict) -> str:
         f"{f['heldout_windows']} held-out {f['window_seconds']:g} s windows of the fit runs it predicts "
         f"{_mrad(held['refit'])} mrad against {_mrad(held['diagnosed'])} (diagnosed) and "
         f"{_mrad(held['with_inconsistent'])} (with its inconsistent effects): "
-        f"{'kept' if doc['kept'] else 'not kept'} ({f['reason']}){not_kept}.{_dead_band(f)} Its wall time is the "
+        f"{'kept' if doc['kept'] else 'not kept'} ({f['reason']}){not_kept}.{_dead_band(f, doc.get('without_dead_band'))} Its wall time is the "
         "diagnosis' and the finish's."
     )
 
 
-def _dead_band(finish: dict) -> str:
+def _dead_band(finish: dict, without: dict | None) -> str:
     """The finish's input dead band trial, in a sentence (empty for results made before it had one)."""
     band = finish.get("dead_band")
     if band is None:
@@ -228,10 +228,16 @@ def _dead_band(finish: dict) -> str:
     if not band["kept"]:
         return f" Its input dead band is not kept ({band['reason']})."
     held = band["heldout_trajectory_rmse"]
-    return (
+    text = (
         f" With it, an input dead band of {1e3 * band['width']:.0f} mV (fitted with the rest) is kept: held-out "
         f"{_mrad(held['without'])} → {_mrad(held['with'])} mrad ({band['heldout_improvement']:.1%} of the sum of "
-        f"squares, t {band['z_score']:.1f}); `--mjcf` writes the refit without it, which plain MuJoCo can run."
+        f"squares, t {band['z_score']:.1f}); `--mjcf` writes the refit without it, which plain MuJoCo can run"
+    )
+    if without is None:
+        return text + "."
+    return text + (
+        f", and which scores {_mrad(without['position_rmse'])} mrad on these unseen runs "
+        f"({_mrad(without['every_phase_position_rmse'])} on the windows starting every 10 ms)."
     )
 
 
