@@ -179,9 +179,10 @@ def _sysid_line() -> str:
         summary = json.loads((HEAD_TO_HEAD / "summary.json").read_text())
     except FileNotFoundError:
         return "No head-to-head results (results/head_to_head/) to set mujoco.sysid's time beside."
+    band = ", the finish's dead band trial included" if ours["prediction_finish"].get("dead_band") else ""
     return (
         f"Beside it, from the head-to-head's committed results (results/head_to_head/, {summary['date']}, "
-        f"{summary['cpu']}; fit on runs 1–10 only, before this change): mujoco.sysid's fit "
+        f"{summary['cpu']}; fit on runs 1–10 only{band}): mujoco.sysid's fit "
         f"{sysid['wall_seconds']:.0f} s, the diagnosis with its prediction-first finish "
         f"{ours['wall_seconds']:.0f} s."
     )
