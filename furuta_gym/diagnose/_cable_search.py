@@ -19,14 +19,13 @@ from ._result import EffectEvidence, ErrorSummary
 from ._stiction_search import _rest_bound
 
 
-def _cable_law_joints(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, forced):
+def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
     """(spring, rests) of each joint where the two cable laws are tried (Method step 11): not loaded
     by gravity (there gravity sets the rest), encoder-quantised, with a spring a law with memory
     generalises and dry friction in the library, the spring not added and vetoed for predicting
     worse, or removing ``inconsistent_gain`` of the held-out residual, or (a log without input,
     whose rests no input holds) added, or its rests naming a law (:func:`rest_drift`, read
-    through a one-count flicker); under input, added without the joint's dry friction although
-    its rests held a force that only friction holds (:func:`_held`)."""
+    through a one-count flicker)."""
     gravity = system_definition(fx.spec.name).lumped.gravity_joints
     out, comparer = [], None
     for c in library:
@@ -44,11 +43,8 @@ def _cable_law_joints(fx: _Fitter, trajs, library, accepted, theta, dyn, evidenc
         named = not forced and rests.verdict in _laws.LAWS  # a spring added too may be the wrong law
         # without input a spring added may be either law's stand-in, whatever the rests say (a
         # fixed spring far too stiff holds a rotor that a breakaway held): the laws are tried;
-        # under input, only where the search left the joint's dry friction out although its rests
-        # held a force (a sweep of a fixed cable held by a breakaway: the spring and its rest
-        # pass, the friction does not); otherwise not (a controller may hold the rotor wherever
-        # it rests)
-        if c in accepted and forced and (any(f in accepted for f in friction) or not _held(fx, theta, dyn, c.joint)):
+        # under input, not (a controller holds the rotor wherever it rests)
+        if c in accepted and forced:
             continue
         if not (named or c in accepted or (ev is not None and ev.status == "not confirmed")):
             comparer = comparer or fx.comparer()
@@ -56,12 +52,6 @@ def _cable_law_joints(fx: _Fitter, trajs, library, accepted, theta, dyn, evidenc
                 continue
         out.append((c, rests))
     return out
-
-
-def _held(fx: _Fitter, theta, dyn, joint: str) -> bool:
-    """Whether ``joint``'s rests held a force beyond the slack of a rest window under θ (step 2's
-    reading, :func:`._rests.rest_bound`): the model without the joint's friction would have moved it."""
-    return _rest_bound(fx, theta, dyn, joint).held > 0
 
 
 def _cable_owned(c: Candidate, joint: str) -> bool:
@@ -77,7 +67,7 @@ def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, for
     with memory kept, or None)."""
     s, reports, kept_cable = fx.settings, [], None
     rule = _laws.Rule(s.search.min_improvement, s.search.z_threshold, s.search.veto_t, rests_count=not forced)
-    for spring, rests in _cable_law_joints(fx, trajs, library, accepted, theta, dyn, evidence, forced):
+    for spring, rests in _cable_law_joints(fx, trajs, library, accepted, evidence, forced):
         stays = [a for a in accepted if not _cable_owned(a, spring.joint)]
         ctx = _laws.Context(fx, spring.joint, trajs, dyn, stays, max(1, s.output_error.start_iterations))
         stiffness = float(fx.fit_ee(accepted + [spring])[0][fx.layout.index(spring.key)])
