@@ -545,3 +545,39 @@ def test_the_sweep_grid_reproduces_its_committed_results(tmp_path):
         assert all(found(new)[k] == pytest.approx(v, rel=1e-6) for k, v in found(old).items()), p.name
         verdicts = lambda d: [r["verdict"] for r in d.get("rotor_laws") or []]  # noqa: E731
         assert verdicts(new) == verdicts(old), p.name
+
+
+def test_a_law_that_alone_passes_is_not_named_where_the_other_predicts_significantly_better():
+    """Issue 64's sweeps: the law that alone passes t ≥ 3 against the model as diagnosed was named
+    although the other law, gaining more over fewer windows at a smaller t, predicted the
+    validation windows significantly better than it (t ≥ 3 between them). The head-to-head now
+    decides there: under input (the rests do not count) the better law is named where it passes
+    the size test; where the rests name the passing law they still decide, and say so."""
+    from furuta_gym.diagnose._rotor_laws import LAWS, Rule, verdict
+    from furuta_gym.diagnose._trace import Evidence
+
+    rule = Rule(0.03, 3.0, 2.0, rests_count=False)
+    rng = np.random.default_rng(64)
+    cannot = dataclasses.replace(_NO_RESTS, verdict="cannot tell")
+    # the breakaway misses every validation window by about half the moving rest's error
+    moving, measured = _law_fit(LAWS[0], 0.5 + 0.05 * rng.random(40))
+    fixed, _ = _law_fit(LAWS[1], 0.25 + 0.05 * rng.random(40))
+    # each law's evidence against the model as diagnosed, as the windows' weights gave it: the
+    # moving rest passes, the breakaway gains more at a smaller t
+    moving = dataclasses.replace(moving, evidence=Evidence(0.30, 3.4, 40))
+    fixed = dataclasses.replace(fixed, evidence=Evidence(0.80, 2.6, 40))
+    said, reason, kept, h2h = verdict({LAWS[0]: moving, LAWS[1]: fixed}, cannot, measured, rule)
+    assert h2h.z <= -3 and said == kept == LAWS[1] and "significantly better than the other" in reason
+    # where the better law fails the size test (predicts significantly worse than the model), the
+    # two cannot be told apart; where it is not significantly better, the law that passes is named
+    worse = dataclasses.replace(fixed, evidence=Evidence(0.80, -2.5, 40))
+    assert verdict({LAWS[0]: moving, LAWS[1]: worse}, cannot, measured, rule)[0] == "cannot be told apart"
+    close, _ = _law_fit(LAWS[1], 0.5 + 0.05 * rng.random(40))
+    close = dataclasses.replace(close, evidence=Evidence(0.80, 2.6, 40))
+    assert verdict({LAWS[0]: moving, LAWS[1]: close}, cannot, measured, rule)[2] == LAWS[0]
+    # without input, rests that name the passing law decide what prediction says against it
+    named = dataclasses.replace(_NO_RESTS, verdict="moving rest")
+    said, reason, kept, _ = verdict(
+        {LAWS[0]: moving, LAWS[1]: fixed}, named, measured, dataclasses.replace(rule, rests_count=True)
+    )
+    assert said == kept == LAWS[0] and "though the other law predicts significantly better" in reason

@@ -91,11 +91,13 @@ class Rule:
 def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     """(verdict, reason, the law kept or None, head-to-head evidence of the moving rest against
     the breakaway): the law that passes the trace's rule and predicts significantly better than
-    the other; else the one the rests name, if it passes, or, passing the size test alone, does
-    not predict significantly worse (as a stiction from rests is added); else, where the rests
-    name neither (or do not count), with both laws passing that size test, the one that predicts
-    significantly better than the other; else "cannot be told apart" (the better predictor kept)
-    or "neither"."""
+    the other, or that alone passes while the other does not predict significantly better than
+    it (t ≥ the rule's between them: a law whose few windows give it a smaller t may still beat
+    the one that passes); else the one the rests name, if it passes, or, passing the size test
+    alone, does not predict significantly worse (as a stiction from rests is added); else, where
+    the rests name neither (or do not count), with both laws passing that size test, the one that
+    predicts significantly better than the other; else "cannot be told apart" (the better
+    predictor kept) or "neither"."""
     ok = {law: f for law, f in fits.items() if f.physical}
     passing = [law for law, f in ok.items() if f.evidence.passes(rule.min_improvement, rule.z_threshold)]
     said = ", ".join(
@@ -104,20 +106,23 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     named = rests.verdict if rule.rests_count and rests.verdict in LAWS else None
     rest_words = f"rests: {rests.verdict} ({rests.reason})" + ("" if rule.rests_count else ", not counted under input")
     h2h = _evidence(fits[LAWS[1]].predictions, fits[LAWS[0]].predictions, measured)
+    better = LAWS[0] if h2h.z > 0 else LAWS[1]
     if len(passing) == 2 and abs(h2h.z) >= rule.z_threshold:
-        law = LAWS[0] if h2h.z > 0 else LAWS[1]
         return (
-            law,
-            f"both predict better, the {law} law significantly (t {abs(h2h.z):.1f}; {said}); {rest_words}",
-            law,
+            better,
+            f"both predict better, the {better} law significantly (t {abs(h2h.z):.1f}; {said}); {rest_words}",
+            better,
             h2h,
         )
-    if len(passing) == 1 and named in (None, passing[0]):
+    beaten = len(passing) == 1 and abs(h2h.z) >= rule.z_threshold and better != passing[0]
+    if len(passing) == 1 and named in (None, passing[0]) and not beaten:
         return passing[0], f"only the {passing[0]} law predicts better ({said}); {rest_words}", passing[0], h2h
     if named is not None and _holds(ok.get(named), rule):
         why = (
             "prediction cannot tell the laws apart"
             if len(passing) == 2
+            else "named by the rests, though the other law predicts significantly better"
+            if beaten
             else "named by the rests, its prediction agrees"
         )
         return named, f"{why} (t {h2h.z:.1f} between them; {said}); the {rest_words}", named, h2h
@@ -126,7 +131,6 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     # part, and the law predicting significantly better than the other is kept on the size test
     # of a stiction from rests (a release, or a sweep's stop, moves the rotor for a second or
     # two: few windows carry either law's gain)
-    better = LAWS[0] if h2h.z > 0 else LAWS[1]
     both = all(_holds(ok.get(law), rule) for law in LAWS)
     if named is None and both and abs(h2h.z) >= rule.z_threshold:
         return (
@@ -136,7 +140,7 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
             better,
             h2h,
         )
-    if len(passing) == 2 or (len(passing) == 1 and named):
+    if len(passing) == 2 or (len(passing) == 1 and (named or beaten)):
         better = LAWS[0] if h2h.improvement > 0 else LAWS[1]
         return "cannot be told apart", f"t {h2h.z:.1f} between them ({said}); {rest_words}", better, h2h
     return "neither", f"neither law predicts the validation windows better ({said}); {rest_words}", None, None
