@@ -59,7 +59,7 @@ BLAS_CORE = "Haswell"  # OpenBLAS's AVX2 + FMA kernels (AMD Zen uses the same on
 # an unknown flag in XLA_FLAGS aborts the process: the lowest supported jaxlib, 0.8.1, knows this one
 _YNN_SINCE = (0, 8, 1)
 
-_state: dict = {"pinned": {}, "not_applied": None}
+_state: dict = {"pinned": {}, "not_applied": None, "blas_not_applied": None}
 
 
 class NumericsWarning(UserWarning):
@@ -161,6 +161,13 @@ def pin_numerics() -> dict[str, str]:
             f"{THREADS}={PINNED_THREADS} yourself; {OPT_OUT}=1 silences this."
         )
         warnings.warn(_state["not_applied"], NumericsWarning, stacklevel=2)
+    if "OPENBLAS_CORETYPE" in wanted and "numpy" in sys.modules:  # NumPy loads its OpenBLAS on import
+        _state["blas_not_applied"] = (
+            "NumPy was imported before furuta_gym: its OpenBLAS has chosen its kernels for this CPU, so "
+            "NumPy's and SciPy's results may differ between machines (child processes get the pin). Import "
+            f"furuta_gym before NumPy, or set OPENBLAS_CORETYPE={BLAS_CORE} yourself; {OPT_OUT}=1 silences this."
+        )
+        warnings.warn(_state["blas_not_applied"], NumericsWarning, stacklevel=2)
     unread = unread_xla_flags(wanted.get("XLA_FLAGS", os.environ.get("XLA_FLAGS", "")))
     if unread:
         warnings.warn(
@@ -178,7 +185,8 @@ def numerics() -> dict:
     """What furuta_gym pinned in this process: ``{"pinned": {variable: value set}, "xla_flags":
     XLA_FLAGS as given, "xla_flags_unread": its words XLA will not read, "pjrt_nproc": XLA's thread
     pool size if set, "openblas_coretype": ...,
-    "not_applied": why the XLA pin did not apply, or None}``."""
+    "not_applied": why the XLA pin did not apply, or None, "blas_not_applied": why OpenBLAS's
+    pin did not apply in this process (NumPy imported first), or None}``."""
     flags = os.environ.get("XLA_FLAGS", "")
     return {
         "pinned": dict(_state["pinned"]),
@@ -187,6 +195,7 @@ def numerics() -> dict:
         "pjrt_nproc": os.environ.get(THREADS),
         "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE"),
         "not_applied": _state["not_applied"],
+        "blas_not_applied": _state["blas_not_applied"],
     }
 
 

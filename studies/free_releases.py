@@ -32,10 +32,11 @@ import time
 import warnings
 from pathlib import Path
 
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import jax.numpy as jnp
 import numpy as np
-
-import furuta_gym
 
 furuta_gym.enable_x64()
 

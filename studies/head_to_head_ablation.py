@@ -68,9 +68,10 @@ import re
 import time
 from pathlib import Path
 
-import numpy as np
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
 
-import furuta_gym
+# isort: split
+import numpy as np
 
 furuta_gym.enable_x64()
 

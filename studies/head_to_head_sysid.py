@@ -22,6 +22,9 @@ intervals are ``mujoco.sysid.calculate_intervals``'.
 
 from __future__ import annotations
 
+import furuta_gym  # noqa: F401  first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 from furuta_gym.assets import asset_path

@@ -27,6 +27,9 @@ import json
 import time
 from pathlib import Path
 
+import furuta_gym  # noqa: F401  first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import mujoco
 import numpy as np
 

@@ -36,12 +36,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import equinox as eqx
 import gymnasium
 import jax
 import numpy as np
 
-import furuta_gym
 from furuta_gym.controllers import episode_metrics, near_rest_starts
 from furuta_gym.envs import Plant, functional
 from furuta_gym.rl import GymnasiumPolicy, PPOSettings, episode_returns, train_ppo

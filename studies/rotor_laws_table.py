@@ -21,6 +21,9 @@ import sys
 from pathlib import Path
 
 sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
+import furuta_gym  # noqa: F401  first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 from _generated import block_main  # noqa: E402
 from furuta_gym.effects import EFFECT_KINDS  # noqa: E402
 

@@ -19,10 +19,11 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ and os.environ.get("FURUTA_GYM_
     os.environ.setdefault("FURUTA_GYM_STEP_CACHE", "0")
     atexit.register(shutil.rmtree, _session_cache, ignore_errors=True)
 
+import furuta_gym  # noqa: E402  first: it pins NumPy's BLAS before JAX loads NumPy
+
+# isort: split
 import jax  # noqa: E402
 import pytest  # noqa: E402
-
-import furuta_gym  # noqa: E402
 
 if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])

@@ -242,6 +242,35 @@ def test_the_env_base_class_stays_short():
     assert len(lines) <= 300, f"LagrangianEnv is {len(lines)} lines; move a part into its own module"
 
 
+def test_scripts_import_furuta_gym_before_numpy():
+    """A study or bench script that uses furuta_gym imports it before any third-party module:
+    NumPy loads its OpenBLAS on import, and only a BLAS loaded after furuta_gym gets its pinned
+    core type, so a script that imports NumPy first computes other bits on other CPUs."""
+    import sys
+
+    problems = []
+    for folder in ("studies", "bench"):
+        for path in sorted((REPO / folder).glob("*.py")):
+            tops = [n for n in ast.parse(path.read_text()).body if isinstance(n, (ast.Import, ast.ImportFrom))]
+            roots = [
+                "."
+                if isinstance(n, ast.ImportFrom) and n.level
+                else (n.module or "")
+                if isinstance(n, ast.ImportFrom)
+                else n.names[0].name
+                for n in tops
+            ]
+            roots = [r.split(".")[0] for r in roots]
+            if "furuta_gym" not in roots:
+                continue
+            before = [
+                r for r in roots[: roots.index("furuta_gym")] if r not in sys.stdlib_module_names | {"__future__"}
+            ]
+            if before:
+                problems.append(f"{folder}/{path.name} imports {before[0]} before furuta_gym")
+    assert not problems, "\n".join(problems)
+
+
 def test_scripts_use_only_public_names():
     """studies/ and bench/ are the package's first users: they import no private module and no
     private name of furuta_gym (a study that needs one shows a public API that is missing)."""

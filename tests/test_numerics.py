@@ -54,10 +54,20 @@ def test_the_pin_extends_the_users_flags_and_never_replaces_them():
     assert pinned_environment({}, **{**env, "jaxlib_version": "0.7.2"})["XLA_FLAGS"] == "--xla_cpu_max_isa=AVX2"
 
 
+def _blas_pinned_here() -> bool:
+    from furuta_gym._numerics import _cpu_flags
+
+    flags = _cpu_flags()
+    return platform.machine().lower() in ("x86_64", "amd64") and flags is not None and {"avx2", "fma"} <= flags
+
+
 def _run(code: str, **env) -> subprocess.CompletedProcess:
+    """``code`` in a fresh interpreter without the pinned variables (``env`` adds to them; a
+    variable given as None is removed)."""
     environ = {
         k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "FURUTA_GYM_NATIVE_ISA", "PJRT_NPROC")
     } | env
+    environ = {k: v for k, v in environ.items() if v is not None}
     return subprocess.run(
         [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=300, env=environ
     )
@@ -65,12 +75,15 @@ def _run(code: str, **env) -> subprocess.CompletedProcess:
 
 @pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"), reason="the pin is x86-64's")
 def test_the_pin_reaches_xla_and_a_late_import_says_it_cannot():
-    early = _run("""
+    early = _run(
+        """
         import jax, jax.numpy as jnp            # imported first is fine: XLA reads its flags later
         import furuta_gym, os
         jnp.ones(2) + 1
         print(os.environ["XLA_FLAGS"], "|", furuta_gym.numerics()["not_applied"])
-    """)
+        """,
+        OPENBLAS_CORETYPE="Haswell",  # NumPy (which JAX imports) is not: its BLAS is pinned by hand here
+    )
     assert early.returncode == 0, early.stderr
     assert early.stdout.split("|")[0].strip() == PIN and early.stdout.split("|")[1].strip() == "None"
     assert "NumericsWarning" not in early.stderr
@@ -85,6 +98,26 @@ def test_the_pin_reaches_xla_and_a_late_import_says_it_cannot():
     assert late.stdout.startswith("None |") and "not pinned" in late.stdout  # nothing claimed
     opted_out = _run("import furuta_gym, os; print(os.environ.get('XLA_FLAGS'))", FURUTA_GYM_NATIVE_ISA="1")
     assert opted_out.stdout.strip() == "None"
+
+
+@pytest.mark.skipif(not _blas_pinned_here(), reason="OpenBLAS's core type is pinned on x86-64 with AVX2 and FMA")
+def test_numpy_imported_first_keeps_its_own_blas_and_a_warning_says_so():
+    """NumPy loads its OpenBLAS on import: imported before furuta_gym, its kernels are the CPU's
+    own choice, and the warning says so; furuta_gym first, the pin applies."""
+    code = """
+        import os
+        {first}
+        print(os.environ.get("OPENBLAS_CORETYPE"), "|", furuta_gym.numerics()["blas_not_applied"])
+    """
+    late = _run(code.format(first="import numpy, furuta_gym"), OPENBLAS_CORETYPE=None)
+    assert late.returncode == 0, late.stderr
+    assert "NumericsWarning: NumPy was imported before furuta_gym" in late.stderr
+    assert late.stdout.startswith("Haswell |") and "may differ between machines" in late.stdout
+    early = _run(code.format(first="import furuta_gym, numpy"), OPENBLAS_CORETYPE=None)
+    assert early.returncode == 0, early.stderr
+    assert "NumericsWarning" not in early.stderr and early.stdout.split() == ["Haswell", "|", "None"]
+    given = _run(code.format(first="import numpy, furuta_gym"), OPENBLAS_CORETYPE="Haswell")
+    assert "NumericsWarning" not in given.stderr and given.stdout.split()[-1] == "None"
 
 
 # A jitted float64 loop whose reductions YNNPACK splits by the core count when it is on, and a
