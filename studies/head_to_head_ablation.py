@@ -303,10 +303,11 @@ def prediction_windows_of(h2h, plant, runs, stride: float | None):
 def committed_finish_plant(results: Path, without_dead_band: bool = False):
     """The head-to-head's committed prediction-first plant, or its refit without the dead band
     (the plant the dead band was found in: what the finish was before it tried one)."""
-    from furuta_gym.envs import Plant
+    import diagnose_head_to_head as h2h  # where the head to head reads its rows' plants
 
-    finish = json.loads((results / "diagnosed_prediction.json").read_text())["prediction_finish"]
-    return Plant.from_json(finish["mujoco_plant"] if without_dead_band and finish["mujoco_plant"] else finish["plant"])
+    doc = json.loads((results / "diagnosed_prediction.json").read_text())
+    without = h2h.without_dead_band(doc) if without_dead_band else None
+    return without if without is not None else h2h.row_plant(doc, results)
 
 
 def in_sample(results: Path) -> dict:

@@ -94,7 +94,7 @@ def plant_row(name: str, test, windows) -> dict:
     doc = json.loads((OUT.parent / f"{name}.json").read_text())
     plant = Plant.from_json(doc[where[0]][where[1]])
     # what --mjcf writes: the finish's refit without what MJCF cannot express, when it has one
-    written = doc[where[0]].get("mujoco_plant") if name == "diagnosed_prediction" else None
+    written = doc[where[0]].get("mujoco_plant")  # only a finish with a dead band has one
     written = plant if written is None else Plant.from_json(written)
     x0, us, xs, history = windows
     dt = test[0].dt

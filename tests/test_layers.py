@@ -242,6 +242,16 @@ def test_the_env_base_class_stays_short():
     assert len(lines) <= 300, f"LagrangianEnv is {len(lines)} lines; move a part into its own module"
 
 
+def _top_module(node) -> str | None:
+    """The top-level package a module-level import statement names first ("." for a relative
+    one), None for any other statement."""
+    if isinstance(node, ast.Import):
+        return node.names[0].name.split(".")[0]
+    if isinstance(node, ast.ImportFrom):
+        return "." if node.level else (node.module or "").split(".")[0]
+    return None
+
+
 def test_scripts_import_furuta_gym_before_numpy():
     """A study or bench script that uses furuta_gym imports it before any third-party module:
     NumPy loads its OpenBLAS on import, and only a BLAS loaded after furuta_gym gets its pinned
@@ -251,16 +261,7 @@ def test_scripts_import_furuta_gym_before_numpy():
     problems = []
     for folder in ("studies", "bench"):
         for path in sorted((REPO / folder).glob("*.py")):
-            tops = [n for n in ast.parse(path.read_text()).body if isinstance(n, (ast.Import, ast.ImportFrom))]
-            roots = [
-                "."
-                if isinstance(n, ast.ImportFrom) and n.level
-                else (n.module or "")
-                if isinstance(n, ast.ImportFrom)
-                else n.names[0].name
-                for n in tops
-            ]
-            roots = [r.split(".")[0] for r in roots]
+            roots = [r for r in map(_top_module, ast.parse(path.read_text()).body) if r is not None]
             if "furuta_gym" not in roots:
                 continue
             before = [

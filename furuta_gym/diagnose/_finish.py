@@ -312,6 +312,14 @@ def _decide(fx, result, theta, improved, ev) -> str | None:
     return None
 
 
+def _heldout_evidence(base, sums) -> _trace_mod.Evidence:
+    """The gain of per-window held-out ``sums`` over ``base`` (a refit that did not simulate
+    every window gains nothing)."""
+    if not np.all(np.isfinite(sums)):
+        return _trace_mod.Evidence(-np.inf, -np.inf, int(sums.size))
+    return _trace_mod.Evidence.of_sums(base, sums)
+
+
 def _fit_total(fx, theta, win) -> float:
     """The sum of squares of windows ``win`` at ``theta``."""
     return float(_windows.window_square_sums(fx.layout, theta, win, fx.substeps).sum())
@@ -322,9 +330,10 @@ def _band_refit(fx, fit, dyn, width: float, windows):
     ``width`` on the training windows ``windows(dynamics)``: (their sum of squares, the refit,
     its input dynamics)."""
     band = _fit.DeadBandInput(dyn.kind, dyn.seconds, float(width))
-    theta, chosen, left_out, improved = _refit(fx, fit[0], fit[1], band, windows(band))
+    win = windows(band)
+    theta, chosen, left_out, improved = _refit(fx, fit[0], fit[1], band, win)
     refit = (theta, chosen, list(fit[2]) + [k for k in left_out if k not in fit[2]], improved or fit[3])
-    return _fit_total(fx, theta, windows(band)), refit, band
+    return _fit_total(fx, theta, win), refit, band
 
 
 def _fit_dead_band(fx, fit, dyn, windows=None):
@@ -360,12 +369,10 @@ def _dead_band_trial(fx, result, fit, dyn, refit_sums):
         return fit, dyn, refit_sums, DeadBandTrial(0.0, unit, False, "the fit windows' error is least without one")
     band_fit, band = found
     sums = _heldout_sums(fx, {"band": band_fit[0]}, _windows.make_windows(fx.held_segs, fx.L, band))["band"]
-    ev = _trace_mod.Evidence.of_sums(refit_sums, sums)
-    if not np.all(np.isfinite(sums)):
-        ev = _trace_mod.Evidence(-np.inf, -np.inf, int(sums.size))
+    ev = _heldout_evidence(refit_sums, sums)
     why_not = _decide(fx, result, band_fit[0], True, ev)
-    n_points = fx.L * len(fx.spec.joint_names)
-    rmse = {k: float(np.sqrt(v.sum() / (v.size * n_points))) for k, v in (("without", refit_sums), ("with", sums))}
+    n = len(fx.spec.joint_names)
+    rmse = {k: _windows.position_rmse(v, fx.L, n) for k, v in (("without", refit_sums), ("with", sums))}
     reason = (
         why_not or f"predicts the held-out windows {ev.improvement:.1%} better (t {ev.z:.1f}) than the refit without"
     )
@@ -382,9 +389,14 @@ def _plant_effects(layout, theta, chosen, dyn) -> list[Effect]:
     return effects + ([Effect("input_dead_band", "u", width)] if width > 0 else [])
 
 
+def _refit_names(chosen, dyn) -> list[str]:
+    """The refit's effects by name: the ``chosen`` candidates, and the dead band of ``dyn``."""
+    return [c.key for c in chosen] + (["input_dead_band:u"] if getattr(dyn, "dead_band", 0.0) > 0 else [])
+
+
 def _refit_plant(layout, result, theta, chosen, dyn) -> Plant:
     """The refit at ``theta`` with the ``chosen`` effects and input dynamics ``dyn`` as a plant."""
-    names = [c.key for c in chosen] + (["input_dead_band:u"] if getattr(dyn, "dead_band", 0.0) > 0 else [])
+    names = _refit_names(chosen, dyn)
     return Plant(
         effects=_plant_effects(layout, theta, chosen, dyn),
         lumped={b: float(theta[i]) for i, b in enumerate(layout.base)},
@@ -418,17 +430,15 @@ def prediction_finish(fx, result) -> PredictionFinish:
     diagnosed_win = _windows.make_windows(fx.held_segs, fx.L, result.input_dynamics)
     sums = {**_heldout_sums(fx, {"diagnosed": result.theta_after}, diagnosed_win), **sums}
     baseline = min(("diagnosed", "with_inconsistent"), key=lambda k: sums[k].sum())
-    ev = _trace_mod.Evidence.of_sums(sums[baseline], sums["refit"])
-    if not np.all(np.isfinite(sums["refit"])):
-        ev = _trace_mod.Evidence(-np.inf, -np.inf, int(sums["refit"].size))
+    ev = _heldout_evidence(sums[baseline], sums["refit"])
     why_not = _decide(fx, result, theta, improved, ev)
-    names = [c.key for c in chosen] + (["input_dead_band:u"] if band.kept else [])
+    names = _refit_names(chosen, dyn)
     refit = _refit_plant(layout, result, theta, chosen, dyn)
     reason = why_not or (
         f"predicts the held-out windows {ev.improvement:.1%} better (sum of squares, t {ev.z:.1f}) "
         f"than the diagnosed plant{' with its inconsistent effects' if baseline == 'with_inconsistent' else ''}"
     )
-    n_points = held_win.q[0].size
+    length, n = held_win.q.shape[1:]
     return PredictionFinish(
         kept=why_not is None,
         reason=reason,
@@ -436,7 +446,7 @@ def prediction_finish(fx, result) -> PredictionFinish:
         refit=refit if np.all(np.isfinite(sums["refit"])) else None,
         added=tuple(k for k in names if k not in {f"{e.name}:{e.joint}" for e in result.significant}),
         left_out=tuple(left_out),
-        heldout_rmse={k: float(np.sqrt(v.sum() / (v.size * n_points))) for k, v in sums.items()},
+        heldout_rmse={k: _windows.position_rmse(v, length, n) for k, v in sums.items()},
         baseline=baseline,
         improvement=float(ev.improvement),
         z_score=float(ev.z),

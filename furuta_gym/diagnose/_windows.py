@@ -27,6 +27,7 @@ __all__ = [
     "Windows",
     "make_windows",
     "oe_fit",
+    "position_rmse",
     "predict_windows",
     "predict_windows_at",
     "window_errors",
@@ -162,6 +163,13 @@ def window_residuals(layout, theta, win: Windows, substeps: int = 1, start_itera
     """(W·L·n,) predicted − measured positions of every window, window by window (the output-error
     fit's residual, non-finite where a rollout blew up)."""
     return (predict_windows(layout, theta, win, substeps, start_iterations) - win.q).reshape(-1)
+
+
+def position_rmse(sums, length: int, n: int) -> float:
+    """Position RMSE over every joint (``n``) and step (``length``) of the windows whose squared
+    errors sum to ``sums``, one per window."""
+    sums = np.asarray(sums, dtype=float)
+    return float(np.sqrt(sums.sum() / (sums.size * length * n)))
 
 
 def window_square_sums(layout, theta, win: Windows, substeps: int = 1, start_iterations: int = 0) -> np.ndarray:

@@ -250,7 +250,7 @@ def refit_dead_band(fx, fit, dyn, windows, dead_bands):
         d = DeadBandInput(dyn.kind, dyn.seconds, float(band))
         win = windows(d)
         theta, kept = fit(d, win)
-        total = float(_windows.window_square_sums(fx.layout, theta, win, fx.substeps).sum())
+        total = _finish._fit_total(fx, theta, win)
         if best is None or total < best[0]:
             best = (total, theta, kept, d, win)
     assert best is not None, "dead_bands holds one value at least"
@@ -350,10 +350,8 @@ def run_variant(fx, res, variant: Variant, given=None) -> dict:
     }
 
 
-def rmse(sums, length: int, n: int) -> float:
-    """Position RMSE over every joint from per-window sums of squares."""
-    sums = np.asarray(sums, dtype=float)
-    return float(np.sqrt(sums.sum() / (sums.size * length * n)))
+#: position RMSE over every joint from per-window sums of squares
+rmse = _windows.position_rmse
 
 
 def _pooled(doc: dict, key: str) -> dict[str, np.ndarray]:
