@@ -22,7 +22,9 @@ Experiments (``excitation=``):
   pendulum hanging, in which a rotor held by dry friction mostly repeats its encoder count: every
   third segment is a large swing followed by a slow low-amplitude chirp (the rotor left off the
   cable's neutral creeps and oscillates around where the swing left it), the others chirps of
-  random amplitude and band (at high frequency the rotor moves a few counts in all).
+  random amplitude and band (at high frequency the rotor moves a few counts in all). The segments
+  are one rig's, recorded one after another: each starts near zero, and a cable whose neutral
+  moves remembers where the last one left it, as in ``"rotor_releases"``.
 * ``"rotor_releases"`` (Furuta): at 0 V, pendulum hanging, the rotor carried 0.5–2 rad (either
   sign) from where it rests and let go from rest, once per trajectory; the trajectories are one
   rig's releases in order (the hand is not simulated, but a cable whose neutral moves remembers
@@ -64,6 +66,9 @@ __all__ = [
 
 EXCITATIONS = ("chirp", "sine_sweep", "sticky_sweep", "rotor_releases", "closed_loop_prbs")
 
+#: experiments whose trajectories are one rig's, recorded one after another: a cable whose neutral
+#: moves remembers where the rotor was carried between them, as the diagnosis reads such logs
+RECORDED_BACK_TO_BACK = ("sticky_sweep", "rotor_releases")
 #: rad: the rotor is carried no further from zero than this (a cable limits its travel)
 RELEASE_TRAVEL = 2.5
 
@@ -379,7 +384,8 @@ def measured_like(
       (switched at zero crossings), 0 V in between.
     * ``"rotor_releases"``: u = 0; each trajectory a release from rest, the rotor carried 0.5–2 rad
       (either sign) from where the previous one left it (the first from α ~ U(−0.1, 0.1)), the
-      pendulum hanging (β0 ~ U(−0.02, 0.02)); the plant keeps its memory between them.
+      pendulum hanging (β0 ~ U(−0.02, 0.02)); the plant keeps its memory between them, as it
+      does between the segments of ``"sticky_sweep"`` (:data:`RECORDED_BACK_TO_BACK`).
     * ``"closed_loop_prbs"``: upright balancing from β0 = π ± 0.05, α0 = ±0.1, velocities ±0.05;
       PD on the encoder angles (:data:`BALANCE_GAINS`, filtered-difference velocities) tracking
       references plus a ±0.5 V feed-forward as the MIT logs do, saturated at ±10 V; u is the
@@ -422,7 +428,7 @@ def measured_like(
                 x0, u = _release_start(rotor, rng), np.zeros_like(t)
             else:
                 x0, u = _open_loop(system, excitation, k, t, rng, forced)
-            xs = sim.roll(x0, u, carried=excitation == "rotor_releases" and k > 0)
+            xs = sim.roll(x0, u, carried=excitation in RECORDED_BACK_TO_BACK and k > 0)
             rotor = float(xs[-1, 0])
             q, qd = xs[:, : definition.spec.n_dof], xs[:, definition.spec.n_dof :]
             if definition.encoders:

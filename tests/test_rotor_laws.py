@@ -79,6 +79,36 @@ def test_a_hand_carrying_the_rotor_drags_the_cables_neutral_and_a_reset_forgets_
     assert pulled < 0 and plant.state[2] / pulled == pytest.approx(3.0, rel=0.02)
 
 
+def test_a_sweeps_segments_are_one_rigs_recorded_back_to_back_and_a_moving_rest_remembers_the_last():
+    """The sticky sweep's segments are one rig's, one after another: a hand brings the rotor back
+    near zero between them, and a cable whose rest moves remembers where the last segment left it
+    (as the diagnosis reads a log: its neutral run over the trajectories in recorded order)."""
+    rig = [Effect("hysteretic_spring", "alpha", 2e-3, play=0.3), Effect("coulomb_friction", "alpha", 1e-4)]
+    log = measured_like(
+        "furuta",
+        rig,
+        excitation="sticky_sweep",
+        seed=0,
+        n_trajectories=2,
+        duration=4.0,
+        quantize=False,
+        true_velocities=True,
+    )
+    plant = MujocoBackend("furuta", 10, rig, timestep=2e-4)
+
+    def second(carried: bool) -> np.ndarray:
+        plant.reset(np.concatenate([log[0].q[0], log[0].qd[0]]))
+        for u in log[0].u[:-1]:
+            plant.step(u)
+        x0 = np.concatenate([log[1].q[0], log[1].qd[0]])
+        (plant.move if carried else plant.reset)(x0)
+        return np.stack([x0] + [plant.step(u).copy() for u in log[1].u[:-1]])[:, 0]
+
+    assert np.abs(log[0].q[:, 0]).max() > 0.3 + abs(log[1].q[0, 0])  # the first dragged the neutral
+    np.testing.assert_array_equal(second(carried=True), log[1].q[:, 0])
+    assert np.abs(second(carried=False) - log[1].q[:, 0]).max() > 0.01
+
+
 def test_releases_start_at_rest_carried_half_a_radian_to_two_from_the_last_rest(releases):
     for _, log in releases["moving"] + releases["breakaway"]:
         for before, tr in zip(log[:-1], log[1:], strict=True):
