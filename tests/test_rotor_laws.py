@@ -401,6 +401,26 @@ def test_the_diagnosis_finds_a_moving_rest_on_releases_and_names_it():
     assert [e for e in doc["effects"] if e["significant"]][0]["play"] == cable.play
 
 
+def test_a_sweep_of_a_cable_whose_rest_moves_is_found_where_the_fixed_springs_column_is_flat():
+    """Under input the rests do not count, and a moving rest pulls at most k·play, so the fixed
+    spring's column gains little: step 11 is tried because the spring's column with the neutral
+    the log's history implies gains (a dev seed of the sweeps; before, nothing was found)."""
+    from furuta_gym.diagnose import diagnose
+
+    rig = moving_rest_rig(202)
+    data = measured_like("furuta", rig, excitation="sticky_sweep", seed=202, n_trajectories=6, duration=10.0)
+    res = diagnose(data, "furuta")
+    (cable,) = _rotor(res.found, lambda k: k.has_memory)
+    assert cable.coefficient == pytest.approx(rig[0].coefficient, rel=0.35)
+    assert cable.play == pytest.approx(rig[0].play, rel=0.5)
+    (coulomb,) = _rotor(res.found, lambda k: k.is_dry_friction)
+    assert coulomb.coefficient == pytest.approx(rig[1].coefficient, rel=0.35)
+    assert not _rotor(res.found, lambda k: k.absorbs_constant_force)
+    (law,) = res.rotor_laws
+    assert law.verdict == law.kept == "moving rest" and law.rests.verdict == "cannot tell"
+    assert res.error_before.trajectory_rmse / res.error_after.trajectory_rmse >= 1.4
+
+
 def test_the_diagnosis_finds_a_large_breakaway_through_an_encoders_flicker():
     """Item 5: a one-count flicker on a fifth of the rotor's samples cuts every rest short; the
     rests are read through it and the breakaway is fitted by prediction, not from one-count rests."""

@@ -23,7 +23,8 @@ def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
     """(spring, rests) of each joint where the two cable laws are tried (Method step 11): not loaded
     by gravity (there gravity sets the rest), encoder-quantised, with a spring a law with memory
     generalises and dry friction in the library, the spring not added and vetoed for predicting
-    worse, or removing ``inconsistent_gain`` of the held-out residual, or (a log without input,
+    worse, or removing ``inconsistent_gain`` of the held-out residual, fixed or with a neutral that
+    moves (:func:`_memory_gain`), or (a log without input,
     whose rests no input holds) added, or its rests naming a law (:func:`rest_drift`, read
     through a one-count flicker)."""
     gravity = system_definition(fx.spec.name).lumped.gravity_joints
@@ -47,11 +48,26 @@ def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
         if c in accepted and forced:
             continue
         if not (named or c in accepted or (ev is not None and ev.status == "not confirmed")):
-            comparer = comparer or fx.comparer()
-            if comparer.compare(accepted, [c]).improvement < fx.settings.search.inconsistent_gain:
+            comparer, gain = comparer or fx.comparer(), fx.settings.search.inconsistent_gain
+            if comparer.compare(accepted, [c]).improvement < gain and _memory_gain(fx, trajs, accepted, c) < gain:
                 continue
         out.append((c, rests))
     return out
+
+
+def _memory_gain(fx: _Fitter, trajs, accepted, spring: Candidate) -> float:
+    """The held-out gain beside ``accepted`` of ``spring`` with a neutral that moves: its column
+    with the neutral the play operator gives over the log's positions, at the best play of step
+    11's grid. A cable whose rest moves pulls like a fixed spring only within its play, so the
+    fixed spring's column can be flat where this one is not."""
+    j, i = fx.spec.joint_names.index(spring.joint), fx.layout.index(spring.key)
+    gains = [
+        fx.comparer(fx.fit_prob.with_column(i, j, _laws.memory_column(trajs, j, fx.stride, fx.fit_prob, play)))
+        .compare(accepted, [spring])
+        .improvement
+        for play in _laws.PLAY_GRID
+    ]
+    return max(gains)
 
 
 def _cable_owned(c: Candidate, joint: str) -> bool:

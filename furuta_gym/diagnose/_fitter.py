@@ -62,10 +62,11 @@ class _Fitter:
             self.held_prob = Problem(self.held_segs, self.c_input)
             self.dynamics = dynamics
 
-    def comparer(self) -> _trace_mod.Comparer:
-        """Cross-validated comparisons on the fit segments, blocks labelled by their recording."""
+    def comparer(self, prob=None) -> _trace_mod.Comparer:
+        """Cross-validated comparisons on the fit segments (``prob``: their problem with a column
+        replaced, :meth:`Problem.with_column`), blocks labelled by their recording."""
         return _trace_mod.Comparer(
-            self.fit_prob,
+            self.fit_prob if prob is None else prob,
             self.layout,
             self.theta_fixed,
             self.fixed_idx,

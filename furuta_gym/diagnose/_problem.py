@@ -39,6 +39,16 @@ class Problem:
         sub.segments = None
         return sub
 
+    def with_column(self, index: int, joint: int, column: np.ndarray) -> Problem:
+        """This problem with parameter ``index``'s regressor on ``joint`` replaced by ``column``
+        (N,) and zero on the other joints: the same candidate under another law."""
+        out = object.__new__(Problem)
+        out.__dict__.update(self.__dict__)
+        out.R = self.R.copy()
+        out.R[:, :, index] = 0.0
+        out.R[:, joint, index] = column
+        return out
+
     def delay_column(self, theta):
         """(N, n, 1): ∂(Z̄ − Ā)/∂d at d = 0 for the current input gain."""
         return (self.dU[:, None] * (self.c_input @ theta)[None, :] * self.keep)[:, :, None]

@@ -123,17 +123,23 @@ def _starts(cable: tuple):
 
 
 def cable_column(ctx: Context, prob, play: float, starts=None) -> np.ndarray:
-    """(N,) the equation-error regressor of the cable's stiffness on the joint: −∫(q_j − r) over
-    each interval of ``prob`` (segments cut from ``ctx.trajs``; trapezoid, as the library's
-    forces), left out where the joint rests as the library's equations are."""
-    paths = neutral_paths(ctx.trajs, ctx.j, play, starts)
+    """(N,) the equation-error regressor of the cable's stiffness on the joint (:func:`memory_column`)."""
+    return memory_column(ctx.trajs, ctx.j, ctx.fx.stride, prob, play, starts)
+
+
+def memory_column(trajs, j: int, stride: int, prob, play: float, starts=None) -> np.ndarray:
+    """(N,) the equation-error regressor of a cable with memory's stiffness on joint ``j``:
+    −∫(q_j − r) over each interval of ``prob`` (segments cut from ``trajs``, ``stride`` samples
+    per interval; trapezoid, as the library's forces), r the neutral the play operator gives over
+    the log's positions, left out where the joint rests as the library's equations are."""
+    paths = neutral_paths(trajs, j, play, starts)
     column = []
     for s in prob.segments:
         t, r = paths[s.name.rsplit("[", 1)[0]]
         offset = int(np.searchsorted(t, s.t[0] - 1e-9 * s.dt))
-        stretch = s.q[:, ctx.j] - r[offset : offset + s.q.shape[0]]
-        column.append(_fit._group(0.5 * s.dt * (stretch[:-1] + stretch[1:]), ctx.fx.stride)[: s.A.shape[0]])
-    return -np.concatenate(column) * prob.keep[:, ctx.j]
+        stretch = s.q[:, j] - r[offset : offset + s.q.shape[0]]
+        column.append(_fit._group(0.5 * s.dt * (stretch[:-1] + stretch[1:]), stride)[: s.A.shape[0]])
+    return -np.concatenate(column) * prob.keep[:, j]
 
 
 def residual(ctx: Context, theta, cable, prob) -> np.ndarray:

@@ -25,7 +25,7 @@ from ._rotor_context import (
 )
 from ._rotor_verdict import LAWS, LawFit, _evidence
 
-_PLAY_GRID = (0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 0.8, 1.2, 1.6)  # the play's starts (rad or m)
+PLAY_GRID = (0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 0.8, 1.2, 1.6)  # the play's starts (rad or m)
 _FIRST_GRID = (-1.0, 0.0, 1.0)  # starts of ρ of the log's first neutral
 _BREAKAWAY_GRID = (1.0, 4.0, 9.0)  # starts of ΔF in Coulomb levels (a breakaway up to 10×)
 
@@ -155,7 +155,7 @@ def _start_moving(ctx: Context, theta, stiffness: float):
     i = ctx.layout.index(c["sliding"].key)
     scale, typical = ctx.layout.typical_scale(), _typical_spring(ctx)
     starts, cables = [], []
-    for w in _PLAY_GRID:
+    for w in PLAY_GRID:
         th, k = ee_with_cable(ctx, [c["sliding"]], w)
         th = _physical_base(ctx, _cleared(ctx, th), theta)
         th[i] = max(th[i] if is_physical(ctx.layout, th) else 0.0, 2.0 * scale[i])

@@ -28,13 +28,22 @@ distinct, both are reported and the better predictor is kept, "cannot be told ap
 from __future__ import annotations
 
 from ._rotor_bracket import broke_away, held_still, holding_forces
-from ._rotor_context import Context, cable_column, ee_with_cable, memory_law_for, residual, window_errors
-from ._rotor_fits import fit_law, fit_laws
+from ._rotor_context import (
+    Context,
+    cable_column,
+    ee_with_cable,
+    memory_column,
+    memory_law_for,
+    residual,
+    window_errors,
+)
+from ._rotor_fits import PLAY_GRID, fit_law, fit_laws
 from ._rotor_neutral import carried_starts, neutral_paths, predict
 from ._rotor_verdict import LAWS, LawFit, RotorLaw, Rule, _evidence, verdict
 
 __all__ = [
     "LAWS",
+    "PLAY_GRID",
     "Context",
     "LawFit",
     "RotorLaw",
@@ -44,6 +53,7 @@ __all__ = [
     "cable_column",
     "carried_starts",
     "ee_with_cable",
+    "memory_column",
     "fit_law",
     "fit_laws",
     "held_still",
