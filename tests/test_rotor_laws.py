@@ -620,11 +620,24 @@ def test_a_law_that_alone_passes_is_not_named_where_the_other_predicts_significa
     assert h2h.z <= -3 and said == kept == LAWS[1] and "significantly better than the other" in reason
     # where the better law fails the size test (predicts significantly worse than the model), the
     # two cannot be told apart; where it is not significantly better, the law that passes is named
+    # if it predicts better than the other, and else the two cannot be told apart and the better
+    # predictor is kept (a larger gain on a few windows than the passing law's on many)
     worse = dataclasses.replace(fixed, evidence=Evidence(0.80, -2.5, 40))
     assert verdict({LAWS[0]: moving, LAWS[1]: worse}, cannot, measured, rule)[0] == "cannot be told apart"
-    close, _ = _law_fit(LAWS[1], 0.5 + 0.05 * rng.random(40))
-    close = dataclasses.replace(close, evidence=Evidence(0.80, 2.6, 40))
-    assert verdict({LAWS[0]: moving, LAWS[1]: close}, cannot, measured, rule)[2] == LAWS[0]
+    noise = 0.3 * rng.random(40)
+    for offset, named_law in ((0.02, LAWS[0]), (-0.02, None)):
+        close, _ = _law_fit(LAWS[1], 0.5 + offset + noise[::-1])
+        close = dataclasses.replace(close, evidence=Evidence(0.80, 2.6, 40))
+        pair = {
+            LAWS[0]: dataclasses.replace(_law_fit(LAWS[0], 0.5 + noise)[0], evidence=moving.evidence),
+            LAWS[1]: close,
+        }
+        said, _, kept, h2h = verdict(pair, cannot, measured, rule)
+        assert abs(h2h.z) < 3 and (h2h.improvement > 0) == (offset > 0)
+        if named_law:
+            assert said == kept == named_law
+        else:
+            assert said == "cannot be told apart" and kept == LAWS[1]
     # without input, rests that name the passing law decide what prediction says against it
     named = dataclasses.replace(_NO_RESTS, verdict="moving rest")
     said, reason, kept, _ = verdict(

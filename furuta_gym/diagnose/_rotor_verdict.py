@@ -91,9 +91,9 @@ class Rule:
 def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     """(verdict, reason, the law kept or None, head-to-head evidence of the moving rest against
     the breakaway): the law that passes the trace's rule and predicts significantly better than
-    the other, or that alone passes while the other does not predict significantly better than
+    the other, or that alone passes while the other neither predicts significantly better than
     it (t ≥ the rule's between them: a law whose few windows give it a smaller t may still beat
-    the one that passes); else the one the rests name, if it passes, or, passing the size test
+    the one that passes) nor, gaining the size test, predicts better at all (:func:`_rivals`); else the one the rests name, if it passes, or, passing the size test
     alone, does not predict significantly worse (as a stiction from rests is added); else, where
     the rests name neither (or do not count), with both laws passing that size test, the one that
     predicts significantly better than the other; else "cannot be told apart" (the better
@@ -115,7 +115,8 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
             h2h,
         )
     beaten = len(passing) == 1 and abs(h2h.z) >= rule.z_threshold and better != passing[0]
-    if len(passing) == 1 and named in (None, passing[0]) and not beaten:
+    rivalled = len(passing) == 1 and not beaten and _rivals(ok, passing[0], h2h, rule)
+    if len(passing) == 1 and named in (None, passing[0]) and not (beaten or rivalled):
         return passing[0], f"only the {passing[0]} law predicts better ({said}); {rest_words}", passing[0], h2h
     if named is not None and _holds(ok.get(named), rule):
         why = (
@@ -140,10 +141,19 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
             better,
             h2h,
         )
-    if len(passing) == 2 or (len(passing) == 1 and (named or beaten)):
+    if len(passing) == 2 or (len(passing) == 1 and (named or beaten or rivalled)):
         better = LAWS[0] if h2h.improvement > 0 else LAWS[1]
         return "cannot be told apart", f"t {h2h.z:.1f} between them ({said}); {rest_words}", better, h2h
     return "neither", f"neither law predicts the validation windows better ({said}); {rest_words}", None, None
+
+
+def _rivals(ok: dict[str, LawFit], passing: str, h2h: Evidence, rule: Rule) -> bool:
+    """Whether the law other than ``passing`` gains the size test and predicts the validation
+    windows better (sum of squares; ``h2h``: the moving rest against the breakaway), though not
+    significantly: naming the one that passes would claim what the windows do not show (its gain
+    may sit on many windows, the other's larger gain on a few)."""
+    other = next(law for law in LAWS if law != passing)
+    return _holds(ok.get(other), rule) and (h2h.improvement > 0) == (other == LAWS[0])
 
 
 def _holds(fit: LawFit | None, rule: Rule) -> bool:
