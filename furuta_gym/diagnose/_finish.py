@@ -17,8 +17,8 @@ every 0.1 s), and windows back to back from each segment's first sample start at
 such a cycle only, which the refit then favours (docs/diagnose.md, "What separates
 prediction-first from sysid"). The held-out windows stay the diagnosis' own.
 
-The refit then tries an input dead band (``input_dead_band``, :func:`_fit_dead_band`): θ
-refitted at a few widths, the best by the fit windows' error, its width then searched on
+The refit then tries an input dead band (``input_dead_band``, :func:`_fit_dead_band`): a few
+widths ranked by short refits of θ, the best refitted in full, its width then searched on
 :data:`DEAD_BAND_GRID` and θ refitted there. It joins the finish's plant only by the diagnosis' rule for a gain on the held-out
 windows against the refit without it (:class:`DeadBandTrial`). It is not a library candidate:
 the diagnosis' report does not name it.
@@ -64,6 +64,9 @@ STAGGERED = "staggered"
 DEAD_BAND_GRID = tuple(round(0.01 * k, 3) for k in range(16))
 #: the widths the refit is repeated at before the search on the grid (:func:`_fit_dead_band`)
 DEAD_BAND_COARSE = (0.02, 0.05, 0.1)
+#: the output-error evaluations of the short refits that rank those widths: a refit's first steps
+#: take nearly all of its fall in error, and only the best width is worth a refit in full
+DEAD_BAND_SCREEN_NFEV = 3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -257,16 +260,16 @@ def _effects(layout, theta, chosen, dyn) -> list[Effect]:
     ]
 
 
-def _refit(fx, theta, chosen, dyn, win):
-    """Output error on ``win`` with ``chosen`` free; effects the refit leaves of the wrong physical
-    sign (:func:`~furuta_gym.effects.can_join`) are left out and the rest refitted. Returns (θ,
-    kept candidates, left-out keys, whether any refit lowered the fit windows' error)."""
+def _refit(fx, theta, chosen, dyn, win, max_nfev: int | None = None):
+    """Output error on ``win`` with ``chosen`` free (at most ``max_nfev`` evaluations, default the
+    settings'); effects the refit leaves of the wrong physical sign
+    (:func:`~furuta_gym.effects.can_join`) are left out and the rest refitted. Returns (θ, kept
+    candidates, left-out keys, whether any refit lowered the fit windows' error)."""
     s, chosen, left_out, improved = fx.settings, list(chosen), [], False
+    max_nfev = s.output_error.oe_max_nfev if max_nfev is None else max_nfev
     for _ in range(len(chosen) + 1):
         free = free_columns(fx.layout, chosen, fx.fixed_idx)
-        theta, ok = _windows.oe_fit(
-            fx.layout, theta, free, win, fx.substeps, s.output_error.oe_max_nfev, s.output_error.start_iterations
-        )
+        theta, ok = _windows.oe_fit(fx.layout, theta, free, win, fx.substeps, max_nfev, s.output_error.start_iterations)
         improved |= ok
         effects = _effects(fx.layout, theta, chosen, dyn)
         bad = [c for c, e in zip(chosen, effects, strict=True) if not can_join(e, effects)]
@@ -325,34 +328,37 @@ def _fit_total(fx, theta, win) -> float:
     return float(_windows.window_square_sums(fx.layout, theta, win, fx.substeps).sum())
 
 
-def _band_refit(fx, fit, dyn, width: float, windows):
+def _band_refit(fx, fit, dyn, width: float, windows, max_nfev: int | None = None):
     """The refit ``fit`` (θ, chosen, left out, improved) refitted from its θ with a dead band of
-    ``width`` on the training windows ``windows(dynamics)``: (their sum of squares, the refit,
-    its input dynamics)."""
+    ``width`` on the training windows ``windows(dynamics)`` (``max_nfev``: :func:`_refit`'s):
+    (their sum of squares, the refit, its input dynamics)."""
     band = _fit.DeadBandInput(dyn.kind, dyn.seconds, float(width))
     win = windows(band)
-    theta, chosen, left_out, improved = _refit(fx, fit[0], fit[1], band, win)
+    theta, chosen, left_out, improved = _refit(fx, fit[0], fit[1], band, win, max_nfev)
     refit = (theta, chosen, list(fit[2]) + [k for k in left_out if k not in fit[2]], improved or fit[3])
     return _fit_total(fx, theta, win), refit, band
 
 
 def _fit_dead_band(fx, fit, dyn, windows=None):
-    """The dead band fitted with the rest from the refit ``fit``: θ refitted at each width of
-    :data:`DEAD_BAND_COARSE` (the refit without one has absorbed what it can into the friction,
-    so a width searched at its θ alone finds none), the best by the training windows' error; then
+    """The dead band fitted with the rest from the refit ``fit``: the widths of
+    :data:`DEAD_BAND_COARSE` ranked by the training windows' error after a short refit of θ at
+    each (:data:`DEAD_BAND_SCREEN_NFEV`; the refit without one has absorbed what it can into the
+    friction, so a width searched at its θ alone finds none), θ refitted in full at the best; then
     the width searched on :data:`DEAD_BAND_GRID` at that refit's θ and θ refitted there once more.
     ``windows(dynamics)``: the training windows (default: the finish's, on the fit segments).
     Returns (the refit with it, its input dynamics), or None when none beats the refit without."""
     windows = windows or (lambda d: refit_windows(fx, fx.fit_segs, d))
-    best = (_fit_total(fx, fit[0], windows(dyn)), fit, None)
-    for width in DEAD_BAND_COARSE:
-        best = min(best, _band_refit(fx, fit, dyn, width, windows), key=lambda b: b[0])
+    total = lambda b: b[0]  # noqa: E731
+    none = (_fit_total(fx, fit[0], windows(dyn)), fit, None)
+    short = [_band_refit(fx, fit, dyn, w, windows, DEAD_BAND_SCREEN_NFEV) for w in DEAD_BAND_COARSE]
+    ranked = min([none, *short], key=total)[2]
+    best = none if ranked is None else min(none, _band_refit(fx, fit, dyn, ranked.dead_band, windows), key=total)
     if best[2] is None:
         return None
     grid = [_fit.DeadBandInput(dyn.kind, dyn.seconds, w) for w in DEAD_BAND_GRID]
     width = DEAD_BAND_GRID[int(np.nanargmin([_fit_total(fx, best[1][0], windows(d)) for d in grid]))]
     if width not in (0.0, best[2].dead_band):
-        best = min(best, _band_refit(fx, best[1], dyn, width, windows), key=lambda b: b[0])
+        best = min(best, _band_refit(fx, best[1], dyn, width, windows), key=total)
     return best[1], best[2]
 
 
