@@ -384,8 +384,7 @@ def measured_like(
       (switched at zero crossings), 0 V in between.
     * ``"rotor_releases"``: u = 0; each trajectory a release from rest, the rotor carried 0.5–2 rad
       (either sign) from where the previous one left it (the first from α ~ U(−0.1, 0.1)), the
-      pendulum hanging (β0 ~ U(−0.02, 0.02)); the plant keeps its memory between them, as it
-      does between the segments of ``"sticky_sweep"`` (:data:`RECORDED_BACK_TO_BACK`).
+      pendulum hanging (β0 ~ U(−0.02, 0.02)); the plant keeps its memory between them, as between a sweep's segments.
     * ``"closed_loop_prbs"``: upright balancing from β0 = π ± 0.05, α0 = ±0.1, velocities ±0.05;
       PD on the encoder angles (:data:`BALANCE_GAINS`, filtered-difference velocities) tracking
       references plus a ±0.5 V feed-forward as the MIT logs do, saturated at ±10 V; u is the
