@@ -93,11 +93,11 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     the breakaway): the law that passes the trace's rule and predicts significantly better than
     the other, or that alone passes while the other neither predicts significantly better than
     it (t ≥ the rule's between them: a law whose few windows give it a smaller t may still beat
-    the one that passes) nor, gaining the size test, predicts better at all (:func:`_rivals`); else the one the rests name, if it passes, or, passing the size test
-    alone, does not predict significantly worse (as a stiction from rests is added); else, where
-    the rests name neither (or do not count), with both laws passing that size test, the one that
-    predicts significantly better than the other; else "cannot be told apart" (the better
-    predictor kept) or "neither"."""
+    the one that passes) nor, gaining the size test, predicts better at all (:func:`_rivals`);
+    else the one the rests name, if it passes, or, passing the size test alone, does not predict
+    significantly worse (as a stiction from rests is added); else, where the rests name neither
+    (or do not count), with both laws passing that size test, the one that predicts significantly
+    better than the other; else "cannot be told apart" (the better predictor kept) or "neither"."""
     ok = {law: f for law, f in fits.items() if f.physical}
     passing = [law for law, f in ok.items() if f.evidence.passes(rule.min_improvement, rule.z_threshold)]
     said = ", ".join(
