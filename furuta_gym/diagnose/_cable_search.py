@@ -17,6 +17,7 @@ from ._library import Candidate
 from ._problem import free_columns
 from ._result import EffectEvidence, ErrorSummary
 from ._stiction_search import _rest_bound
+from ._trace import Evidence
 
 
 def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
@@ -24,9 +25,8 @@ def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
     by gravity (there gravity sets the rest), encoder-quantised, with a spring a law with memory
     generalises and dry friction in the library, the spring not added and vetoed for predicting
     worse, or removing ``inconsistent_gain`` of the held-out residual, fixed or with a neutral that
-    moves (:func:`_memory_gain`), or (a log without input,
-    whose rests no input holds) added, or its rests naming a law (:func:`rest_drift`, read
-    through a one-count flicker)."""
+    moves (:func:`_memory_gain`), or added (under input, where :func:`_holding_open`), or its
+    rests naming a law (:func:`rest_drift`, read through a one-count flicker)."""
     gravity = system_definition(fx.spec.name).lumped.gravity_joints
     out, comparer = [], None
     for c in library:
@@ -44,8 +44,9 @@ def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
         named = not forced and rests.verdict in _laws.LAWS  # a spring added too may be the wrong law
         # without input a spring added may be either law's stand-in, whatever the rests say (a
         # fixed spring far too stiff holds a rotor that a breakaway held): the laws are tried;
-        # under input, not (a controller holds the rotor wherever it rests)
-        if c in accepted and forced:
+        # under input, only where its joint's friction leaves open what held it (a controller
+        # holds the rotor wherever it rests, and sliding friction found beside it explains that)
+        if c in accepted and forced and not _holding_open(friction, accepted):
             continue
         if not (named or c in accepted or (ev is not None and ev.status == "not confirmed")):
             comparer, gain = comparer or fx.comparer(), fx.settings.search.inconsistent_gain
@@ -53,6 +54,14 @@ def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
                 continue
         out.append((c, rests))
     return out
+
+
+def _holding_open(friction: list[Candidate], accepted) -> bool:
+    """Whether a joint's dry friction as diagnosed leaves open what held it: no sliding friction
+    added (a breakaway 5–10× a small sliding level hides that level from the equation error,
+    which leaves stops out) or a stiction added (which law it belongs to is step 11's question)."""
+    sliding = [d for d in friction if not d.kind.breakaway_above]
+    return not any(d in accepted for d in sliding) or any(d in accepted for d in friction if d.kind.breakaway_above)
 
 
 def _memory_gain(fx: _Fitter, trajs, accepted, spring: Candidate) -> float:
@@ -75,6 +84,20 @@ def _cable_owned(c: Candidate, joint: str) -> bool:
     return c.joint == joint and (c.kind.in_potential or c.kind.is_constant_force or c.kind.is_dry_friction)
 
 
+def _breakaway_diagnosed(accepted, spring: Candidate, evidence, rule) -> tuple | None:
+    """(the joint's effects, its stiction's evidence) where ``accepted`` already holds the large
+    breakaway's law on the spring's joint (the spring and a stiction the earlier steps found by
+    the trace's rule), else None: that law's fit is then the model as diagnosed, judged by the
+    stiction's evidence (a stiction set from rests alone is refitted, as without it)."""
+    owned = [a for a in accepted if _cable_owned(a, spring.joint)]
+    stiction = next((a for a in owned if a.kind.breakaway_above), None)
+    if spring not in owned or stiction is None or stiction.key not in evidence:
+        return None
+    ev = evidence[stiction.key]
+    found = Evidence(ev.improvement or 0.0, ev.z_score or 0.0, 0)
+    return (owned, found) if found.passes(rule.min_improvement, rule.z_threshold) else None
+
+
 def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, forced):
     """Method step 11 (:mod:`._rotor_laws`): on each joint of :func:`_cable_law_joints`, the
     moving rest and the large breakaway fitted by prediction and told apart; the law the data
@@ -88,11 +111,12 @@ def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, for
         ctx = _laws.Context(fx, spring.joint, trajs, dyn, stays, max(1, s.output_error.start_iterations))
         stiffness = float(fx.fit_ee(accepted + [spring])[0][fx.layout.index(spring.key)])
         held = _rest_bound(fx, theta, dyn, spring.joint).held
-        fits = _laws.fit_laws(ctx, theta, stiffness, held, s.output_error.oe_max_nfev)
+        diagnosed = _breakaway_diagnosed(accepted, spring, evidence, rule)
+        fits = _laws.fit_laws(ctx, theta, stiffness, held, s.output_error.oe_max_nfev, diagnosed)
         verdict, reason, kept, h2h = _laws.verdict(fits, rests, ctx.win_val.q, rule)
         fx.notes.append(f"{spring.joint}: the cable laws (Method step 11): {verdict}: {reason}")
         reports.append(_laws.RotorLaw(spring.joint, verdict, reason, rests, fits, kept, h2h))
-        if kept is None:
+        if kept is None or (diagnosed is not None and kept == _laws.LAWS[1]):
             continue
         f = fits[kept]
         accepted, theta = ctx.others + f.effects, f.theta

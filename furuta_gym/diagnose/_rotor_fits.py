@@ -186,13 +186,22 @@ def _best_start(ctx: Context, starts, cables) -> int:
     return int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
 
 
-def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int) -> dict[str, LawFit]:
-    """Both laws fitted on the joint (module docstring) and judged against ``theta``."""
+def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int, diagnosed=None) -> dict[str, LawFit]:
+    """Both laws fitted on the joint (module docstring) and judged against ``theta``.
+    ``diagnosed``: (the joint's effects, the stiction's evidence) where the model as diagnosed is
+    already the large breakaway's law (the earlier steps found the joint's spring and stiction):
+    that law is then the model itself, with the stiction's evidence, and the moving rest's
+    evidence against it is the head-to-head of the two."""
     base = ctx.predictions([theta], [(0.0, 0.0)], "val")[0]
     out = {}
     th0, effects, bounds = _start_breakaway(ctx, theta, held)
-    fitted = fit_law(ctx, th0, effects, None, max_nfev, bounds)
-    fits = {LAWS[1]: (effects, (_settled(ctx, fitted[0], th0, bounds), fitted[1]))}
+    if diagnosed is None:
+        fitted = fit_law(ctx, th0, effects, None, max_nfev, bounds)
+        fits = {LAWS[1]: (effects, (_settled(ctx, fitted[0], th0, bounds), fitted[1]))}
+    else:
+        fits, (owned, found) = {}, diagnosed
+        th = np.array(theta, dtype=float)
+        out[LAWS[1]] = LawFit(LAWS[1], th, (0.0, 0.0), owned, base, found, physical=True, incumbent=True)
     th0, effects, cable0 = _start_moving(ctx, th0, max(spring_k, 2.0 * _typical_spring(ctx)))
     fits[LAWS[0]] = (effects, fit_law(ctx, th0, effects, cable0, max_nfev))
     for law, (effects, (th, cable)) in fits.items():
@@ -201,4 +210,4 @@ def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int) -
         physical = physical and bool(cable[0] > 0 if law == LAWS[0] else True)
         ev = _evidence(base, pred, ctx.win_val.q)
         out[law] = LawFit(law, th, tuple(float(x) for x in cable), effects, pred, ev, physical)
-    return out
+    return {law: out[law] for law in (LAWS[1], LAWS[0])}

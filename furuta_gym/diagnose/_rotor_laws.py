@@ -4,9 +4,11 @@ A cable whose rest moves (a law with memory, e.g. ``hysteretic_spring``: the pla
 a fixed cable held by a breakaway far above the sliding friction both leave a rotor resting off
 its cable's neutral; a fixed spring with modest dry friction does neither, so it predicts worse
 although its equation error is strong (the equation error leaves rests out). Where a joint's
-memoryless spring is vetoed or inconsistent, or its rests name a law (:func:`rest_drift`), each
-law is fitted by output error on the output-error windows and judged on the fit-set validation
-windows against the model as diagnosed, by the trace's rule:
+memoryless spring is vetoed or inconsistent, or its rests name a law (:func:`rest_drift`), or it
+was added while the joint's friction leaves open what held it, each law is fitted by output
+error on the output-error windows and judged on the fit-set validation windows against the model
+as diagnosed, by the trace's rule (where the search found the breakaway's law, that model is the
+law's fit, replaced only by a law predicting significantly better):
 
 * **large breakaway**: the fixed spring (its rest as a constant force), Coulomb friction and a
   stiction fitted free, from the breakaway the rests held (:mod:`._rests`);

@@ -29,6 +29,7 @@ class LawFit:
     predictions: np.ndarray
     evidence: Evidence
     physical: bool
+    incumbent: bool = False  # the model as diagnosed (the search found this law), not a refit
 
 
 @dataclasses.dataclass
@@ -93,7 +94,8 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     the breakaway): the law that passes the trace's rule and predicts significantly better than
     the other, or that alone passes while the other neither predicts significantly better than
     it (t ≥ the rule's between them: a law whose few windows give it a smaller t may still beat
-    the one that passes) nor, gaining the size test, predicts better at all (:func:`_rivals`);
+    the one that passes) nor, gaining the size test, predicts better at all (:func:`_rivals`; not
+    asked of the model as diagnosed, ``incumbent``, which only a significantly better law replaces);
     else the one the rests name, if it passes, or, passing the size test alone, does not predict
     significantly worse (as a stiction from rests is added); else, where the rests name neither
     (or do not count), with both laws passing that size test, the one that predicts significantly
@@ -115,7 +117,8 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
             h2h,
         )
     beaten = len(passing) == 1 and abs(h2h.z) >= rule.z_threshold and better != passing[0]
-    rivalled = len(passing) == 1 and not beaten and _rivals(ok, passing[0], h2h, rule)
+    # the model as diagnosed passed the trace's steps: only a law predicting significantly better replaces it
+    rivalled = len(passing) == 1 and not beaten and not ok[passing[0]].incumbent and _rivals(ok, passing[0], h2h, rule)
     if len(passing) == 1 and named in (None, passing[0]) and not (beaten or rivalled):
         return passing[0], f"only the {passing[0]} law predicts better ({said}); {rest_words}", passing[0], h2h
     if named is not None and _holds(ok.get(named), rule):
