@@ -25,7 +25,10 @@ backend (the first computation), as it reads ``PJRT_NPROC``, so importing ``jax`
 fine but computing with it is not: then nothing is pinned, :class:`NumericsWarning` says so and :func:`numerics` reports it.
 ``OPENBLAS_CORETYPE=Haswell`` (on a CPU with AVX2 and FMA) does the same for the BLAS that NumPy
 and JAX's LAPACK calls load, when they load after furuta_gym (always under the ``furuta-gym``
-command). ``FURUTA_GYM_NATIVE_ISA=1`` turns all of it off. The variables are set in
+command), and ``OPENBLAS_NUM_THREADS=1`` for its threads: OpenBLAS splits a long dot product
+(and what a least-squares solve builds on it) into one partial sum per core it may use, and caps
+any count asked for at the cores the process may run on, so only one thread gives the same bits
+on every machine (and under ``taskset``). ``FURUTA_GYM_NATIVE_ISA=1`` turns all of it off. The variables are set in
 ``os.environ``, so child processes inherit them.
 """
 
@@ -46,6 +49,7 @@ __all__ = [
     "unread_xla_flags",
     "PINNED_ISA",
     "PINNED_THREADS",
+    "PINNED_BLAS_THREADS",
     "OPT_OUT",
 ]
 
@@ -56,6 +60,8 @@ YNN_FUSIONS = "--xla_cpu_experimental_ynn_fusion_type"
 THREADS = "PJRT_NPROC"  # XLA's intra-op pool size; XLA also reads NPROC, after this one
 PINNED_THREADS = 2
 BLAS_CORE = "Haswell"  # OpenBLAS's AVX2 + FMA kernels (AMD Zen uses the same ones)
+BLAS_THREADS = "OPENBLAS_NUM_THREADS"  # OpenBLAS reads it before GOTO_NUM_THREADS and OMP_NUM_THREADS
+PINNED_BLAS_THREADS = 1
 # an unknown flag in XLA_FLAGS aborts the process: the lowest supported jaxlib, 0.8.1, knows this one
 _YNN_SINCE = (0, 8, 1)
 
@@ -112,6 +118,8 @@ def pinned_environment(
     # a core type the CPU lacks would crash OpenBLAS: only where AVX2 and FMA are known present
     if "OPENBLAS_CORETYPE" not in environ and cpu_flags is not None and {"avx2", "fma"} <= cpu_flags:
         out["OPENBLAS_CORETYPE"] = BLAS_CORE
+    if BLAS_THREADS not in environ and "GOTO_NUM_THREADS" not in environ:
+        out[BLAS_THREADS] = str(PINNED_BLAS_THREADS)
     return out
 
 
@@ -161,11 +169,13 @@ def pin_numerics() -> dict[str, str]:
             f"{THREADS}={PINNED_THREADS} yourself; {OPT_OUT}=1 silences this."
         )
         warnings.warn(_state["not_applied"], NumericsWarning, stacklevel=2)
-    if "OPENBLAS_CORETYPE" in wanted and "numpy" in sys.modules:  # NumPy loads its OpenBLAS on import
+    blas = {"OPENBLAS_CORETYPE", BLAS_THREADS} & wanted.keys()
+    if blas and "numpy" in sys.modules:  # NumPy loads its OpenBLAS on import
         _state["blas_not_applied"] = (
-            "NumPy was imported before furuta_gym: its OpenBLAS has chosen its kernels for this CPU, so "
-            "NumPy's and SciPy's results may differ between machines (child processes get the pin). Import "
-            f"furuta_gym before NumPy, or set OPENBLAS_CORETYPE={BLAS_CORE} yourself; {OPT_OUT}=1 silences this."
+            "NumPy was imported before furuta_gym: its OpenBLAS has chosen its kernels and threads for this "
+            "CPU, so NumPy's and SciPy's results may differ between machines (child processes get the pin). "
+            f"Import furuta_gym before NumPy, or set {' and '.join(f'{k}={wanted[k]}' for k in sorted(blas))} "
+            f"yourself; {OPT_OUT}=1 silences this."
         )
         warnings.warn(_state["blas_not_applied"], NumericsWarning, stacklevel=2)
     unread = unread_xla_flags(wanted.get("XLA_FLAGS", os.environ.get("XLA_FLAGS", "")))
@@ -184,7 +194,7 @@ def pin_numerics() -> dict[str, str]:
 def numerics() -> dict:
     """What furuta_gym pinned in this process: ``{"pinned": {variable: value set}, "xla_flags":
     XLA_FLAGS as given, "xla_flags_unread": its words XLA will not read, "pjrt_nproc": XLA's thread
-    pool size if set, "openblas_coretype": ...,
+    pool size if set, "openblas_coretype": ..., "openblas_num_threads": ...,
     "not_applied": why the XLA pin did not apply, or None, "blas_not_applied": why OpenBLAS's
     pin did not apply in this process (NumPy imported first), or None}``."""
     flags = os.environ.get("XLA_FLAGS", "")
@@ -194,6 +204,7 @@ def numerics() -> dict:
         "xla_flags_unread": unread_xla_flags(flags),
         "pjrt_nproc": os.environ.get(THREADS),
         "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE"),
+        "openblas_num_threads": os.environ.get(BLAS_THREADS),
         "not_applied": _state["not_applied"],
         "blas_not_applied": _state["blas_not_applied"],
     }

@@ -29,15 +29,24 @@ def _study():
 
 def test_the_pin_extends_the_users_flags_and_never_replaces_them():
     env = dict(machine="x86_64", cpu_flags=AVX2, jaxlib_version="0.10.2")
-    assert pinned_environment({}, **env) == {"XLA_FLAGS": PIN, "OPENBLAS_CORETYPE": "Haswell", "PJRT_NPROC": "2"}
+    assert pinned_environment({}, **env) == {
+        "XLA_FLAGS": PIN,
+        "OPENBLAS_CORETYPE": "Haswell",
+        "PJRT_NPROC": "2",
+        "OPENBLAS_NUM_THREADS": "1",
+    }
     # the user's flags stay, after the pin (XLA stops reading at a word that is not a -- flag:
     # one in the user's flags must not hide the pin); a cap or a YNN choice of the user's wins;
     # so does a BLAS core
     got = pinned_environment({"XLA_FLAGS": " --xla_dump_to=/tmp/x ", "OPENBLAS_CORETYPE": "Zen"}, **env)
-    assert got == {"XLA_FLAGS": PIN + " --xla_dump_to=/tmp/x", "PJRT_NPROC": "2"}
-    # a thread count of the user's wins (XLA reads PJRT_NPROC, then NPROC)
+    assert got == {"XLA_FLAGS": PIN + " --xla_dump_to=/tmp/x", "PJRT_NPROC": "2", "OPENBLAS_NUM_THREADS": "1"}
+    # a thread count of the user's wins (XLA reads PJRT_NPROC, then NPROC; OpenBLAS its own
+    # variable, then GOTO_NUM_THREADS, before OMP_NUM_THREADS, which other libraries read too)
     assert "PJRT_NPROC" not in pinned_environment({"NPROC": "8"}, **env)
     assert "PJRT_NPROC" not in pinned_environment({"PJRT_NPROC": "8"}, **env)
+    for given in ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS"):
+        assert "OPENBLAS_NUM_THREADS" not in pinned_environment({given: "4"}, **env)
+    assert pinned_environment({"OMP_NUM_THREADS": "4"}, **env)["OPENBLAS_NUM_THREADS"] == "1"
     got = pinned_environment({"XLA_FLAGS": "--xla_cpu_max_isa=AVX512"}, **env)
     assert got["XLA_FLAGS"] == "--xla_cpu_experimental_ynn_fusion_type= --xla_cpu_max_isa=AVX512"
     assert unread_xla_flags("--a=1 intra_op_parallelism_threads=1 --b=2") == ["intra_op_parallelism_threads=1", "--b=2"]
@@ -47,7 +56,7 @@ def test_the_pin_extends_the_users_flags_and_never_replaces_them():
     assert pinned_environment({"FURUTA_GYM_NATIVE_ISA": "1"}, **env) == {}
     assert pinned_environment({"FURUTA_GYM_NATIVE_ISA": "0"}, **env)["XLA_FLAGS"] == PIN
     assert pinned_environment({}, **{**env, "machine": "aarch64"}) == {}
-    no_blas = {"XLA_FLAGS": PIN, "PJRT_NPROC": "2"}
+    no_blas = {"XLA_FLAGS": PIN, "PJRT_NPROC": "2", "OPENBLAS_NUM_THREADS": "1"}  # a core type only
     assert pinned_environment({}, **{**env, "cpu_flags": frozenset({"sse4_2", "avx"})}) == no_blas
     assert pinned_environment({}, **{**env, "cpu_flags": None}) == no_blas
     # a jaxlib older than the supported ones may not know the YNN flag (an unknown flag aborts)
@@ -65,7 +74,9 @@ def _run(code: str, **env) -> subprocess.CompletedProcess:
     """``code`` in a fresh interpreter without the pinned variables (``env`` adds to them; a
     variable given as None is removed)."""
     environ = {
-        k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "FURUTA_GYM_NATIVE_ISA", "PJRT_NPROC")
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("XLA_FLAGS", "FURUTA_GYM_NATIVE_ISA", "PJRT_NPROC", "OPENBLAS_NUM_THREADS")
     } | env
     environ = {k: v for k, v in environ.items() if v is not None}
     return subprocess.run(
@@ -83,6 +94,7 @@ def test_the_pin_reaches_xla_and_a_late_import_says_it_cannot():
         print(os.environ["XLA_FLAGS"], "|", furuta_gym.numerics()["not_applied"])
         """,
         OPENBLAS_CORETYPE="Haswell",  # NumPy (which JAX imports) is not: its BLAS is pinned by hand here
+        OPENBLAS_NUM_THREADS="1",
     )
     assert early.returncode == 0, early.stderr
     assert early.stdout.split("|")[0].strip() == PIN and early.stdout.split("|")[1].strip() == "None"
@@ -116,8 +128,10 @@ def test_numpy_imported_first_keeps_its_own_blas_and_a_warning_says_so():
     early = _run(code.format(first="import furuta_gym, numpy"), OPENBLAS_CORETYPE=None)
     assert early.returncode == 0, early.stderr
     assert "NumericsWarning" not in early.stderr and early.stdout.split() == ["Haswell", "|", "None"]
-    given = _run(code.format(first="import numpy, furuta_gym"), OPENBLAS_CORETYPE="Haswell")
+    given = _run(code.format(first="import numpy, furuta_gym"), OPENBLAS_CORETYPE="Haswell", OPENBLAS_NUM_THREADS="1")
     assert "NumericsWarning" not in given.stderr and given.stdout.split()[-1] == "None"
+    threads = _run(code.format(first="import numpy, furuta_gym"), OPENBLAS_CORETYPE="Haswell")
+    assert "OPENBLAS_NUM_THREADS=1 yourself" in threads.stderr  # the core type given, not the threads
 
 
 # A jitted float64 loop whose reductions YNNPACK splits by the core count when it is on, and a
@@ -207,3 +221,40 @@ def test_numerics_cost_benchmark_section_matches_its_results():
         cwd=ROOT / "bench",
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+BLAS_PROBE = """
+    import os, sys
+    os.sched_setaffinity(0, {{int(c) for c in sys.argv[1].split(",")}})  # before OpenBLAS loads
+    {first}
+    import numpy as np
+    rng = np.random.default_rng(0)
+    x, y = rng.standard_normal(2_000_000), rng.standard_normal(2_000_000)
+    A, b = rng.standard_normal((4000, 60)), rng.standard_normal(4000)
+    print(float(x @ y).hex(), np.linalg.lstsq(A, b, rcond=None)[0].tobytes().hex())
+"""
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two cores to compare with one")
+def test_numpy_gives_the_same_bits_on_one_core_and_on_two():
+    """OpenBLAS splits a long dot product (and a least-squares solve) into one partial sum per
+    core it may use: a process on one core (or under ``taskset``) gave other bits than one on two.
+    furuta_gym pins its threads at one; without the pin the two differ (this machine's OpenBLAS)."""
+    import textwrap as tw
+
+    def probe(cores: str, first: str, **env) -> str:
+        code = tw.dedent(BLAS_PROBE.format(first=first))
+        out = subprocess.run(
+            [sys.executable, "-c", code, cores],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env={k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"} | env,
+        )
+        assert out.returncode == 0, out.stderr
+        return out.stdout
+
+    pinned = [probe(c, "import furuta_gym") for c in ("0", "0,1")]
+    assert pinned[0] == pinned[1]
+    native = [probe(c, "pass", OPENBLAS_CORETYPE="Haswell") for c in ("0", "0,1")]
+    assert native[0] != native[1] and native[0] == pinned[0]  # one thread is what one core gave
