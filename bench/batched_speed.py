@@ -29,6 +29,9 @@ import sys
 import time
 from pathlib import Path
 
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 from _generated import machine, publish
@@ -159,7 +162,6 @@ def main(argv=None) -> int:
 
     import jax
 
-    import furuta_gym
 
     furuta_gym.enable_x64()
     import gymnasium as gym

@@ -30,6 +30,9 @@ import sys
 import time
 from pathlib import Path
 
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 from _generated import publish
@@ -197,7 +200,6 @@ def main(argv=None) -> int:
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
 
-    import furuta_gym
 
     furuta_gym.enable_x64()
     import gymnasium as gym

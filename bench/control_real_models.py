@@ -21,6 +21,9 @@ import sys
 import time
 from pathlib import Path
 
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 from _generated import machine, publish
@@ -49,7 +52,6 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
-    import furuta_gym
 
     furuta_gym.enable_x64()
     import gymnasium as gym

@@ -38,6 +38,9 @@ import sys
 import time
 from pathlib import Path
 
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 from _generated import machine, publish
@@ -161,7 +164,6 @@ def make_cases(names=None) -> dict:
     import gymnasium as gym
     import jax
 
-    import furuta_gym
     from furuta_gym.models import make_model
 
     furuta_gym.enable_x64()
@@ -209,7 +211,6 @@ def _inline_dispatch_child(args) -> int:
     """Child process: opt into inline dispatch before JAX starts, measure, print JSON."""
     import json
 
-    import furuta_gym
 
     furuta_gym.inline_cpu_dispatch()
     best = best_rates(make_cases(INLINE_CASES), args.steps, args.repeats)

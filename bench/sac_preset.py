@@ -30,6 +30,9 @@ import sys
 import time
 from pathlib import Path
 
+import furuta_gym  # noqa: F401  first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 from _generated import machine, write_section
@@ -49,7 +52,6 @@ EVAL_SEED_BASE = 10_000  # evaluation resets never reuse a training seed
 def make_env(name: str, seed: int):
     import gymnasium as gym
 
-    import furuta_gym  # noqa: F401  (registers the ids)
 
     env = gym.make(ENVS[name])
     env.reset(seed=seed)

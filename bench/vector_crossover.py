@@ -23,6 +23,9 @@ import datetime
 import os
 import sys
 
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 from _generated import machine, write_section
@@ -65,7 +68,6 @@ def main(argv=None) -> int:
 
     import jax
 
-    import furuta_gym
     from furuta_gym.envs.vector import BATCHED_FROM
     from furuta_gym.models import make_model
 

@@ -54,6 +54,9 @@ import shutil
 import time
 from pathlib import Path
 
+import furuta_gym  # first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 from select_augmentation_weight import _run_dir, _score, parse_selection_args
@@ -91,7 +94,6 @@ def _config(
 
 def _train(out: Path, config, command: str) -> None:
     """One candidate's runs (a worker's task): the reproduction of ``config`` into ``out``."""
-    import furuta_gym
     from furuta_gym.training.reproduce import reproduce
 
     furuta_gym.enable_x64()
@@ -400,7 +402,6 @@ def _decide(args, rows, sets: list, names: list) -> tuple[list[str], dict, dict]
 
 def main(argv=None) -> None:
     args = _arguments(argv)
-    import furuta_gym
     from furuta_gym.training.reproduce import machine_info
 
     furuta_gym.enable_x64()

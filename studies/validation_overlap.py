@@ -27,6 +27,9 @@ import json
 import sys
 from pathlib import Path
 
+import furuta_gym  # noqa: F401  first: it pins NumPy's BLAS before NumPy loads it (docs/conventions.md)
+
+# isort: split
 import numpy as np
 
 sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # bench/_generated.py writes the blocks
