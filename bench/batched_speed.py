@@ -162,7 +162,6 @@ def main(argv=None) -> int:
 
     import jax
 
-
     furuta_gym.enable_x64()
     import gymnasium as gym
 

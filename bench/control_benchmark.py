@@ -200,7 +200,6 @@ def main(argv=None) -> int:
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
 
-
     furuta_gym.enable_x64()
     import gymnasium as gym
 

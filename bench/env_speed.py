@@ -211,7 +211,6 @@ def _inline_dispatch_child(args) -> int:
     """Child process: opt into inline dispatch before JAX starts, measure, print JSON."""
     import json
 
-
     furuta_gym.inline_cpu_dispatch()
     best = best_rates(make_cases(INLINE_CASES), args.steps, args.repeats)
     print("INLINE " + json.dumps(best))

@@ -52,7 +52,6 @@ EVAL_SEED_BASE = 10_000  # evaluation resets never reuse a training seed
 def make_env(name: str, seed: int):
     import gymnasium as gym
 
-
     env = gym.make(ENVS[name])
     env.reset(seed=seed)
     env.action_space.seed(seed)
