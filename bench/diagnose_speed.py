@@ -104,17 +104,20 @@ def timed_run(tree: Path, cache: Path) -> dict:
         return json.loads(out.read_text())
 
 
+#: a value this close to zero is a term fitted to nothing (a damping of 1e-24): it has no scale to compare
+NOTHING = 1e-12
+
+
 def largest_difference(a, b, path: str = "") -> tuple[float, list[str]]:
-    """Largest relative difference of two JSON documents' numbers (two within 1e-12 of zero, a
-    damping fitted to nothing, count as equal, as against the committed JSON), and where other
-    values differ."""
+    """Largest relative difference of two JSON documents' numbers (two within :data:`NOTHING` of
+    zero count as equal, as against the committed JSON), and where other values differ."""
     if isinstance(a, dict) and isinstance(b, dict) and set(a) == set(b):
         parts = [largest_difference(a[k], b[k], f"{path}/{k}") for k in a]
     elif isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
         parts = [largest_difference(x, y, f"{path}[{i}]") for i, (x, y) in enumerate(zip(a, b, strict=True))]
     elif isinstance(a, float) and isinstance(b, float):
         scale = max(abs(a), abs(b))
-        return (abs(a - b) / scale if scale > 1e-12 else 0.0), []
+        return (abs(a - b) / scale if scale > NOTHING else 0.0), []
     else:
         return 0.0, ([] if a == b else [path])
     return max([0.0] + [p[0] for p in parts]), [w for p in parts for w in p[1]]
@@ -128,7 +131,7 @@ def against_committed(result: dict) -> dict:
     found = {(e["name"], e["joint"]): e["coefficient"] for e in committed["effects"] if e["significant"]}
     pairs = [(e["coefficient"], found[(e["name"], e["joint"])]) for e in result["effects"] if e["significant"]]
     pairs += [(v, committed["parameters_after"][k]) for k, v in result["parameters_after"].items()]
-    pairs = [(a, b) for a, b in pairs if max(abs(a), abs(b)) > 1e-12]  # a damping fitted to zero has no scale
+    pairs = [(a, b) for a, b in pairs if max(abs(a), abs(b)) > NOTHING]
     return {
         "same_effects_and_statuses": key(result) == key(committed),
         "largest_relative_difference": max(abs(a - b) / max(abs(a), abs(b), 1e-300) for a, b in pairs),

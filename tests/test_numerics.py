@@ -224,8 +224,8 @@ def test_numerics_cost_benchmark_section_matches_its_results():
 
 
 BLAS_PROBE = """
-    import os, sys
-    os.sched_setaffinity(0, {{int(c) for c in sys.argv[1].split(",")}})  # before OpenBLAS loads
+    import os
+    os.sched_setaffinity(0, {{{cores}}})  # before OpenBLAS loads
     {first}
     import numpy as np
     rng = np.random.default_rng(0)
@@ -240,21 +240,13 @@ def test_numpy_gives_the_same_bits_on_one_core_and_on_two():
     """OpenBLAS splits a long dot product (and a least-squares solve) into one partial sum per
     core it may use: a process on one core (or under ``taskset``) gave other bits than one on two.
     furuta_gym pins its threads at one; without the pin the two differ (this machine's OpenBLAS)."""
-    import textwrap as tw
 
     def probe(cores: str, first: str, **env) -> str:
-        code = tw.dedent(BLAS_PROBE.format(first=first))
-        out = subprocess.run(
-            [sys.executable, "-c", code, cores],
-            capture_output=True,
-            text=True,
-            timeout=300,
-            env={k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"} | env,
-        )
+        out = _run(BLAS_PROBE.format(cores=cores, first=first), **env)
         assert out.returncode == 0, out.stderr
         return out.stdout
 
-    pinned = [probe(c, "import furuta_gym") for c in ("0", "0,1")]
+    pinned = [probe(c, "import furuta_gym") for c in ("0", "0, 1")]
     assert pinned[0] == pinned[1]
-    native = [probe(c, "pass", OPENBLAS_CORETYPE="Haswell") for c in ("0", "0,1")]
+    native = [probe(c, "pass", OPENBLAS_CORETYPE="Haswell") for c in ("0", "0, 1")]
     assert native[0] != native[1] and native[0] == pinned[0]  # one thread is what one core gave

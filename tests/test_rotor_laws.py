@@ -376,6 +376,10 @@ def test_the_verdict_names_the_law_that_predicts_better_or_says_they_cannot_be_t
     assert verdict({LAWS[0]: weak, LAWS[1]: worse}, rests["moving rest"], measured, under_input)[0] == "neither"
 
 
+def _sweep_log(rig, seed: int) -> list[Trajectory]:
+    return measured_like("furuta", rig, excitation="sticky_sweep", seed=seed, n_trajectories=6, duration=10.0)
+
+
 def _release_log(rig, seed: int) -> list[Trajectory]:
     return measured_like("furuta", rig, excitation="rotor_releases", n_trajectories=8, duration=6.0, seed=seed)
 
@@ -408,8 +412,7 @@ def test_a_sweep_of_a_cable_whose_rest_moves_is_found_where_the_fixed_springs_co
     from furuta_gym.diagnose import diagnose
 
     rig = moving_rest_rig(202)
-    data = measured_like("furuta", rig, excitation="sticky_sweep", seed=202, n_trajectories=6, duration=10.0)
-    res = diagnose(data, "furuta")
+    res = diagnose(_sweep_log(rig, 202), "furuta")
     (cable,) = _rotor(res.found, lambda k: k.has_memory)
     assert cable.coefficient == pytest.approx(rig[0].coefficient, rel=0.35)
     assert cable.play == pytest.approx(rig[0].play, rel=0.5)
@@ -503,8 +506,7 @@ def test_a_sweep_of_the_fixed_cable_held_by_friction_finds_its_spring_and_no_mov
     from furuta_gym.diagnose import diagnose
 
     rig = breakaway_rig(104)
-    data = measured_like("furuta", rig, excitation="sticky_sweep", seed=104, n_trajectories=6, duration=10.0)
-    res = diagnose(data, "furuta")
+    res = diagnose(_sweep_log(rig, 104), "furuta")
     (spring,) = _rotor(res.found, lambda k: k.absorbs_constant_force)
     assert spring.coefficient == pytest.approx(rig[0].coefficient, rel=0.35)
     assert not _rotor(res.found, lambda k: k.has_memory)
@@ -647,10 +649,6 @@ def test_a_law_that_alone_passes_is_not_named_where_the_other_predicts_significa
         {LAWS[0]: moving, LAWS[1]: fixed}, named, measured, dataclasses.replace(rule, rests_count=True)
     )
     assert said == kept == LAWS[0] and "though the other law predicts significantly better" in reason
-
-
-def _sweep_log(rig, seed: int) -> list[Trajectory]:
-    return measured_like("furuta", rig, excitation="sticky_sweep", seed=seed, n_trajectories=6, duration=10.0)
 
 
 def test_under_input_a_spring_added_without_the_rotors_friction_goes_to_step_11():

@@ -116,7 +116,7 @@ def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, for
         verdict, reason, kept, h2h = _laws.verdict(fits, rests, ctx.win_val.q, rule)
         fx.notes.append(f"{spring.joint}: the cable laws (Method step 11): {verdict}: {reason}")
         reports.append(_laws.RotorLaw(spring.joint, verdict, reason, rests, fits, kept, h2h))
-        if kept is None or (diagnosed is not None and kept == _laws.LAWS[1]):
+        if kept is None or fits[kept].incumbent:  # none, or the model as diagnosed: nothing to change
             continue
         f = fits[kept]
         accepted, theta = ctx.others + f.effects, f.theta
