@@ -8,8 +8,8 @@ the rest of a fixed one), Coulomb level and breakaway, their errors, the verdict
 the held-out error ratio; then per law how many logs found it with every coefficient within
 tolerance (±35 %; the play and the breakaway ±50 %), how many chose the other law, how many gained
 ≥ 1.4× held-out, the logs whose held-out error rose, and the false alarms on logs without cable
-or friction. ``--check`` only
-compares (exit 1 when the docs disagree).
+or friction; and the same counts on the development seeds (``results/rotor_laws_dev``, block
+``diagnose-rotor-laws-dev``). ``--check`` only compares (exit 1 when the docs disagree).
 
     python studies/rotor_laws_table.py [--check]
 """
@@ -30,7 +30,8 @@ from furuta_gym.effects import EFFECT_KINDS  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "rotor_laws"
 DOC = ROOT / "docs" / "diagnose.md"
-BLOCK = "diagnose-rotor-laws"
+BLOCK, DEV_BLOCK = "diagnose-rotor-laws", "diagnose-rotor-laws-dev"
+DEV = ROOT / "results" / "rotor_laws_dev"
 TOLERANCE, WIDE = 0.35, 0.50  # coefficients; the play and the breakaway
 LAW_NAMES = {"moving_rest": "moving rest", "breakaway": "fixed neutral held by friction", "none": "none"}
 
@@ -159,8 +160,20 @@ def body(folder: Path = RESULTS) -> str:
     return "\n".join(head + [_row(d) for d in docs] + [""] + summary(docs))
 
 
+def dev_body(folder: Path = DEV) -> str:
+    """The development seeds' counts (``results/rotor_laws_dev``: where step 11's choices were
+    settled, never the grid's seeds), one line per law and experiment as the grid's."""
+    docs = load(folder)
+    seeds = {}
+    for d in docs:
+        seeds.setdefault((d["excitation"], LAW_NAMES[d["law"]]), []).append(d["seed"])
+    spans = "; ".join(f"{e}, {law}: seeds {min(s)}–{max(s)}" for (e, law), s in seeds.items())
+    return "\n".join([f"Development seeds ({spans}):", ""] + summary(docs))
+
+
 def main(argv=None) -> int:
-    return block_main(__file__, DOC, BLOCK, body, argv)
+    status = block_main(__file__, DOC, BLOCK, body, argv)
+    return status | block_main(__file__, DOC, DEV_BLOCK, dev_body, argv)
 
 
 if __name__ == "__main__":

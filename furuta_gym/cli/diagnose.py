@@ -121,6 +121,13 @@ def _add_fit_arguments(parser: argparse.ArgumentParser) -> None:
         "'off' or 0 keeps every stop's equations, as before this became the default)",
     )
     parser.add_argument(
+        "--cable-laws",
+        choices=["auto", "always"],
+        help="Method step 11, the cable whose rest moves against a fixed cable held by a large "
+        "breakaway: 'auto' where the data ask for it (default), 'always' on every joint with a spring "
+        "(you know a cable is there: each law's fit and evidence are reported)",
+    )
+    parser.add_argument(
         "--skip",
         type=float,
         default=0.0,
@@ -181,6 +188,7 @@ def _overrides(args: argparse.Namespace) -> dict:
         ("interval", args.interval),
         ("oe_max_windows", args.oe_windows),
         ("stop_dwell", args.stop_dwell),
+        ("cable_laws", args.cable_laws),
     ):
         if val is not None:
             overrides[key] = val

@@ -23,37 +23,46 @@ from ._trace import Evidence
 def _cable_law_joints(fx: _Fitter, trajs, library, accepted, evidence, forced):
     """(spring, rests) of each joint where the two cable laws are tried (Method step 11): not loaded
     by gravity (there gravity sets the rest), encoder-quantised, with a spring a law with memory
-    generalises and dry friction in the library, the spring not added and vetoed for predicting
-    worse, or removing ``inconsistent_gain`` of the held-out residual, fixed or with a neutral that
-    moves (:func:`_memory_gain`), or added (under input, where :func:`_holding_open`), or its
-    rests naming a law (:func:`rest_drift`, read through a one-count flicker)."""
+    generalises and dry friction in the library, and asked for by the data (:func:`_data_ask`) or
+    by the settings (``cable_laws="always"``)."""
     gravity = system_definition(fx.spec.name).lumped.gravity_joints
-    out, comparer = [], None
+    out, always = [], fx.settings.rests.cable_laws == "always"
     for c in library:
         friction = [d for d in library if d.joint == c.joint and d.kind.is_dry_friction]
         if not (c.kind.absorbs_constant_force and _laws.memory_law_for(c.kind)) or len(friction) < 2:
             continue
-        ev = evidence.get(c.key)
-        if (
-            c.joint in gravity
-            or c.joint not in fx.resolution
-            or (ev is not None and not ev.significant and ev.status in ("absorbed", "not identifiable", "equivalent"))
-        ):
+        if c.joint in gravity or c.joint not in fx.resolution:
             continue
-        rests = rest_drift(trajs, fx.spec.name, c.joint, flicker=1, count=fx.resolution[c.joint])
-        named = not forced and rests.verdict in _laws.LAWS  # a spring added too may be the wrong law
-        # without input a spring added may be either law's stand-in, whatever the rests say (a
-        # fixed spring far too stiff holds a rotor that a breakaway held): the laws are tried;
-        # under input, only where its joint's friction leaves open what held it (a controller
-        # holds the rotor wherever it rests, and sliding friction found beside it explains that)
-        if c in accepted and forced and not _holding_open(friction, accepted):
-            continue
-        if not (named or c in accepted or (ev is not None and ev.status == "not confirmed")):
-            comparer, gain = comparer or fx.comparer(), fx.settings.search.inconsistent_gain
-            if comparer.compare(accepted, [c]).improvement < gain and _memory_gain(fx, trajs, accepted, c) < gain:
-                continue
-        out.append((c, rests))
+        rests = _data_ask(fx, trajs, c, friction, accepted, evidence, forced)
+        if rests is None and always:
+            rests = rest_drift(trajs, fx.spec.name, c.joint, flicker=1, count=fx.resolution[c.joint])
+        if rests is not None:
+            out.append((c, rests))
     return out
+
+
+def _data_ask(fx: _Fitter, trajs, c: Candidate, friction, accepted, evidence, forced):
+    """The rests of spring ``c``'s joint (:func:`rest_drift`, read through a one-count flicker) where
+    the data ask for the laws, else None: the spring not added and vetoed for predicting worse, or
+    removing ``inconsistent_gain`` of the held-out residual, fixed or with a neutral that moves
+    (:func:`_memory_gain`), or added (under input, where :func:`_holding_open`), or its rests
+    naming a law."""
+    ev = evidence.get(c.key)
+    if ev is not None and not ev.significant and ev.status in ("absorbed", "not identifiable", "equivalent"):
+        return None
+    rests = rest_drift(trajs, fx.spec.name, c.joint, flicker=1, count=fx.resolution[c.joint])
+    named = not forced and rests.verdict in _laws.LAWS  # a spring added too may be the wrong law
+    # without input a spring added may be either law's stand-in, whatever the rests say (a
+    # fixed spring far too stiff holds a rotor that a breakaway held): the laws are tried;
+    # under input, only where its joint's friction leaves open what held it (a controller
+    # holds the rotor wherever it rests, and sliding friction found beside it explains that)
+    if c in accepted and forced and not _holding_open(friction, accepted):
+        return None
+    if not (named or c in accepted or (ev is not None and ev.status == "not confirmed")):
+        gain = fx.settings.search.inconsistent_gain
+        if fx.comparer().compare(accepted, [c]).improvement < gain and _memory_gain(fx, trajs, accepted, c) < gain:
+            return None
+    return rests
 
 
 def _holding_open(friction: list[Candidate], accepted) -> bool:
@@ -108,7 +117,7 @@ def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, for
     rule = _laws.Rule(s.search.min_improvement, s.search.z_threshold, s.search.veto_t, rests_count=not forced)
     for spring, rests in _cable_law_joints(fx, trajs, library, accepted, evidence, forced):
         stays = [a for a in accepted if not _cable_owned(a, spring.joint)]
-        ctx = _laws.Context(fx, spring.joint, trajs, dyn, stays, max(1, s.output_error.start_iterations))
+        ctx = _laws.Context(fx, spring.joint, trajs, dyn, stays, max(1, s.output_error.start_iterations), forced)
         stiffness = float(fx.fit_ee(accepted + [spring])[0][fx.layout.index(spring.key)])
         held = _rest_bound(fx, theta, dyn, spring.joint).held
         diagnosed = _breakaway_diagnosed(accepted, spring, evidence, rule)

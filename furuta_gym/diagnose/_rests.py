@@ -193,17 +193,23 @@ def holding_forces(layout: ParameterLayout, j: int, trajectories: Sequence[Traje
     return out
 
 
-def held_force(trajectories, forces, j: int, tolerance: float, min_rest: float) -> float:
-    """The largest force a rest held: over each run of ``min_rest`` s of joint ``j`` within
+def held_forces(trajectories, forces, j: int, tolerance: float, min_rest: float) -> np.ndarray:
+    """The force each rest held, signed: over each run of ``min_rest`` s of joint ``j`` within
     ``tolerance`` of its first value (an encoder flickering by a count under a resting joint does
     not cut the rest), the median of ``forces`` (the other joints' pull, read with noise, averages
-    out); 0 without a rest. The breakaway was at least that."""
-    out = [0.0]
+    out)."""
+    out = []
     for tr, f in zip(trajectories, forces, strict=True):
         bounds = _runs_within(np.asarray(tr.q[:, j], float), tolerance)
         runs = zip(bounds[:-1], bounds[1:], strict=True)
-        out += [abs(float(np.median(f[a:b]))) for a, b in runs if b - a >= int(round(min_rest / tr.dt))]
-    return max(out)
+        out += [float(np.median(f[a:b])) for a, b in runs if b - a >= int(round(min_rest / tr.dt))]
+    return np.asarray(out)
+
+
+def held_force(trajectories, forces, j: int, tolerance: float, min_rest: float) -> float:
+    """The largest force a rest held (:func:`held_forces`); 0 without a rest. The breakaway was at
+    least that."""
+    return float(np.abs(held_forces(trajectories, forces, j, tolerance, min_rest)).max(initial=0.0))
 
 
 def moving_force(

@@ -44,13 +44,42 @@ def broke_away(
     return _rests.moving_force(ctx.trajs, forces, ctx.j, tolerance, min_rest, first_rest, span)
 
 
-def _breakaway_bound(ctx: Context, theta, cable=None) -> dict:
+def centred(ctx: Context, theta, cable=None, min_rest: float = 0.2, flicker: int = 1) -> np.ndarray:
+    """``theta`` with the fixed cable's rest (its constant force) where the forces the log's rests
+    held are centred on it: a neutral whose friction holds the joint keeps every rest within
+    ±F_s/k of it, so the least breakaway the rests allow is half the spread of those forces,
+    whatever the rest (a log without input, with few moves, leaves the equation error's rest far
+    off, and the largest force held about that rest put the bracket above the breakaway).
+    Unchanged under input (the driven motion sets the equation error's rest), without a rest's
+    column or without a rest."""
+    c = _joint_effects(ctx)
+    if ctx.driven or "rest" not in c:
+        return np.asarray(theta)
+    tolerance = flicker_tolerance(flicker, ctx.fx.resolution.get(ctx.joint, 0.0))
+    i, out = ctx.layout.index(c["rest"].key), np.array(theta, dtype=float)
+
+    def held(value: float) -> np.ndarray:
+        out[i] = value
+        return _rests.held_forces(ctx.trajs, holding_forces(ctx, out, cable), ctx.j, tolerance, min_rest)
+
+    # the rests' forces are affine in the constant force: two reads give the shift that centres them
+    at_zero, unit = held(0.0), ctx.layout.typical_scale()[i]
+    if at_zero.size == 0:
+        return np.asarray(theta)
+    slope = float(np.median(held(unit) - at_zero)) / unit
+    out[i] = -0.5 * (at_zero.max() + at_zero.min()) / slope
+    return out
+
+
+def _breakaway_bound(ctx: Context, theta, cable=None, centre: bool = True) -> dict:
     """{the stiction's key: (its least, its largest ΔF)}: the joint's breakaway at least the
     largest force a rest held (:func:`held_still`) and at most the least force that moved it off
     a rest (:func:`broke_away`), both under the start's cable, less its Coulomb level; the windows
     alone say little between the two (a stiction that held every stop they show fits them as well
-    as the right one). With a rest left, the Coulomb level's key too: (0, that least force)."""
-    c = _joint_effects(ctx)
+    as the right one). With a rest left, the Coulomb level's key too: (0, that least force).
+    ``centre``: read about the rest that centres the rests' forces (:func:`centred`), else about
+    θ's own."""
+    c, theta = _joint_effects(ctx), centred(ctx, theta, cable) if centre else theta
     most, coulomb = broke_away(ctx, theta, cable), theta[ctx.layout.index(c["sliding"].key)]
     least = held_still(ctx, theta, cable) - coulomb
     if most is None:

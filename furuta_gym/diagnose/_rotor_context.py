@@ -12,6 +12,7 @@ import numpy as np
 from ..effects import EFFECT_KINDS, EffectKind
 from ..systems import get_spec
 from . import _fit, _windows
+from ._drift import flicker_tolerance
 from ._library import Candidate
 from ._problem import free_columns
 from ._rotor_neutral import _window_neutrals, carried_starts, neutral_paths, predict
@@ -33,11 +34,17 @@ class Context:
     dyn: Any
     others: list[Candidate]  # the accepted effects the laws leave as they are
     start_iterations: int = 1
+    driven: bool = False  # the log has input (the rotor rests against it, not against the cable alone)
 
     def __post_init__(self):
         fx = self.fx
         self.layout, self.j = fx.layout, get_spec(fx.layout.system).joint_names.index(self.joint)
         self.win_fit, self.win_val = fx.fit_windows(self.dyn, fx.oe_idx), fx.fit_windows(self.dyn, fx.val_idx)
+        moving = _moving(self.win_fit, self.j, flicker_tolerance(1, fx.resolution.get(self.joint, 0.0)))
+        self.win_moving = _windows.Windows(
+            *(getattr(self.win_fit, f)[moving] for f in ("x0", "us", "q", "segment")), self.win_fit.dt, fx.L
+        )
+        self.moving_idx = fx.oe_idx[moving]
         self._neutrals: dict[tuple, np.ndarray] = {}
 
     def neutrals(self, cable: tuple, idx) -> np.ndarray:
@@ -53,8 +60,20 @@ class Context:
                 self._neutrals.pop(next(iter(self._neutrals)))
         return self._neutrals[key][idx]
 
+    def windows(self, which: str) -> _windows.Windows:
+        """The output-error windows (``"fit"``), those where the joint moves (``"moving"``) or the
+        validation windows (``"val"``)."""
+        return self._sets()[which][0]
+
+    def _sets(self) -> dict:
+        return {
+            "fit": (self.win_fit, self.fx.oe_idx),
+            "moving": (self.win_moving, self.moving_idx),
+            "val": (self.win_val, self.fx.val_idx),
+        }
+
     def predictions(self, thetas, cables, which: str, start_iterations: int | None = None) -> np.ndarray:
-        win, idx = (self.win_fit, self.fx.oe_idx) if which == "fit" else (self.win_val, self.fx.val_idx)
+        win, idx = self._sets()[which]
         r0s = [self.neutrals(c, idx) for c in cables]
         start = self.start_iterations if start_iterations is None else start_iterations
         return predict(self.layout, thetas, [c[:2] for c in cables], win, r0s, self.fx.substeps, self.j, start)
@@ -66,6 +85,13 @@ class Context:
     def candidate(self, kind_test) -> Candidate | None:
         """The joint's library candidate of the kind ``kind_test`` accepts."""
         return next((c for c in self.layout.candidates if c.joint == self.joint and kind_test(c.kind)), None)
+
+
+def _moving(win, j: int, tolerance: float) -> np.ndarray:
+    """Which of ``win`` see joint ``j`` leave the ``tolerance`` of its start (the rest, read through a
+    flicker, stays); all of them where none does."""
+    out = np.any(np.abs(win.q[:, :, j] - win.x0[:, None, j]) > tolerance, axis=1)
+    return out if out.any() else np.ones_like(out)
 
 
 def _with_first(ctx: Context, stiffness: float, play: float, rho: float) -> tuple:

@@ -28,15 +28,26 @@ from ._rotor_verdict import LAWS, LawFit, _evidence
 PLAY_GRID = (0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 0.8, 1.2, 1.6)  # the play's starts (rad or m)
 _FIRST_GRID = (-1.0, 0.0, 1.0)  # starts of ρ of the log's first neutral
 _BREAKAWAY_GRID = (1.0, 4.0, 9.0)  # starts of ΔF in Coulomb levels (a breakaway up to 10×)
+#: the windows the large breakaway is first fitted on where no input drives the rotor: those where
+#: it moves. A window in which it rests says only that friction held it against the cable, which
+#: the rests' bracket reads; fitted, the rests' windows (most of a release log) pushed the
+#: friction up, since a rotor predicted from a velocity read through quantisation drifts where
+#: the real one stayed
+MOVING = "moving"
 
 
 def fit_law(
-    ctx: Context, theta0, effects: list[Candidate], cable0: tuple | None, max_nfev: int, bounds: dict | None = None
+    ctx: Context,
+    theta0,
+    effects: list[Candidate],
+    cable0: tuple | None,
+    max_nfev: int,
+    bounds: dict | None = None,
+    which: str = "fit",
 ):
-    """Output-error fit of θ's free entries (the effects' and the declared model's) and, given
-    ``cable0`` (:meth:`Context.cable`), the cable's stiffness, second parameter and each
-    trajectory's first neutral (ρ ∈ [−1, 1]: where in the play of its first sample; the history
-    before a log is unknown); ``bounds``: {effect key: (its least, its largest value)}; returns (θ, cable)."""
+    """Output-error fit on the windows ``which`` of θ's free entries and, given ``cable0``
+    (:meth:`Context.cable`), the cable's stiffness, second parameter and each trajectory's first
+    neutral (ρ ∈ [−1, 1] of its play: no history before a log); ``bounds``: {effect key: (least, largest)}."""
     layout = ctx.layout
     # the declared model's parameters stay at the start's: the windows where the joint moves, all
     # that tells the laws apart, are few (a release moves the rotor for a second or two)
@@ -52,21 +63,11 @@ def fit_law(
 
     def residuals(zs) -> np.ndarray:
         ths, cables = zip(*map(unpack, zs), strict=True)
-        r = (ctx.predictions(ths, cables, "fit") - ctx.win_fit.q[None]).reshape(len(zs), -1)
+        r = (ctx.predictions(ths, cables, which) - ctx.windows(which).q[None]).reshape(len(zs), -1)
         return np.where(np.isfinite(r), r, 1e3)
 
     z0 = theta0[free] / scale[free]
-    # a base parameter and an effect that only one sign makes physical are not fitted past zero
-    positive = [
-        i < len(layout.base) or layout.candidates[i - len(layout.base)].kind.physically_positive
-        for i in range(layout.size)
-    ]
-    lower = np.where(positive, 0.0, -np.inf)[free] / scale[free]
-    upper = np.full(nf, np.inf)
-    for key, (least, value) in (bounds or {}).items():
-        i = int(np.flatnonzero(np.flatnonzero(free) == layout.index(key))[0])
-        upper[i] = max(value, 1e-12) / scale[layout.index(key)]
-        lower[i] = min(least, 0.99 * value) / scale[layout.index(key)]
+    lower, upper = _box(layout, free, scale, bounds or {})
     if cable0:
         lo, hi = EFFECT_KINDS[_memory_kind(ctx).name].second_bounds
         z0 = np.concatenate([z0, [1.0, cable0[1], cable0[2]]])
@@ -89,6 +90,40 @@ def fit_law(
         x_scale="jac",
     )
     return unpack(sol.x)
+
+
+def _box(layout, free: np.ndarray, scale: np.ndarray, bounds: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) of the scaled free entries: a base parameter and an effect that only one
+    sign makes physical are not fitted past zero; ``bounds``: {effect key: (least, largest)}."""
+    positive = [
+        i < len(layout.base) or layout.candidates[i - len(layout.base)].kind.physically_positive
+        for i in range(layout.size)
+    ]
+    lower = np.where(positive, 0.0, -np.inf)[free] / scale[free]
+    upper = np.full(int(free.sum()), np.inf)
+    for key, (least, value) in bounds.items():
+        i = int(np.flatnonzero(np.flatnonzero(free) == layout.index(key))[0])
+        upper[i] = max(value, 1e-12) / scale[layout.index(key)]
+        lower[i] = min(least, 0.99 * value) / scale[layout.index(key)]
+    return lower, upper
+
+
+def _fit_breakaway(ctx: Context, theta0, effects: list[Candidate], bounds: dict, max_nfev: int) -> np.ndarray:
+    """The large breakaway's law, within the rests' bracket, its breakaway at most the bracket's
+    middle (:func:`_settled`). Without input, in two stages: every coefficient on the windows
+    where the rotor moves (:data:`MOVING`), then its ΔF alone on every output-error window, within
+    the bracket read about the rest that stage fitted (the rests' windows say how far friction
+    held the rotor, and fitted with the rest they pushed the sliding level and the rest's
+    constant force up together; the first stage's bracket, read about the rest that centres the
+    rests' forces, lets a breakaway through that the fitted rest's rests would not hold). Under
+    input in one, on every window: there the rotor rests against the input, which the windows read."""
+    stiction = _joint_effects(ctx)["breakaway"]
+    if ctx.driven:
+        return _settled(ctx, fit_law(ctx, theta0, effects, None, max_nfev, bounds)[0], theta0, bounds)
+    first = fit_law(ctx, theta0, effects, None, max_nfev, bounds, MOVING)[0]
+    held = _breakaway_bound(ctx, first, centre=False)
+    theta = fit_law(ctx, first, [stiction], None, max_nfev, {stiction.key: held[stiction.key]})[0]
+    return _settled(ctx, theta, first, held)
 
 
 def _start_breakaway(ctx: Context, theta, held: float):
@@ -114,7 +149,7 @@ def _start_breakaway(ctx: Context, theta, held: float):
         if "rest" in c:
             th[ctx.layout.index(c["rest"].key)] = rest
         starts += _with_nominal_base(ctx, th)
-    best = starts[_best_start(ctx, starts, [(0.0, 0.0)] * len(starts))]
+    best = starts[_best_start(ctx, starts, [(0.0, 0.0)] * len(starts), "fit" if ctx.driven else MOVING)]
     return best, effects + [c["breakaway"]], bounds
 
 
@@ -179,10 +214,10 @@ def _with_nominal_base(ctx: Context, theta) -> list[np.ndarray]:
     return [np.array(theta, dtype=float), nominal]
 
 
-def _best_start(ctx: Context, starts, cables) -> int:
-    """Index of the start that predicts the output-error windows best."""
-    pred = ctx.predictions(starts, cables, "fit")
-    costs = np.sum((pred - ctx.win_fit.q[None]) ** 2, axis=(1, 2, 3))
+def _best_start(ctx: Context, starts, cables, which: str = "fit") -> int:
+    """Index of the start that predicts the output-error windows (``which``) best."""
+    pred = ctx.predictions(starts, cables, which)
+    costs = np.sum((pred - ctx.windows(which).q[None]) ** 2, axis=(1, 2, 3))
     return int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
 
 
@@ -196,8 +231,12 @@ def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int, d
     out = {}
     th0, effects, bounds = _start_breakaway(ctx, theta, held)
     if diagnosed is None:
-        fitted = fit_law(ctx, th0, effects, None, max_nfev, bounds)
-        fits = {LAWS[1]: (effects, (_settled(ctx, fitted[0], th0, bounds), fitted[1]))}
+        fits = {
+            LAWS[1]: (
+                effects,
+                (_fit_breakaway(ctx, th0, effects, bounds, max_nfev), (0.0, 0.0)),
+            )
+        }
     else:
         fits, (owned, found) = {}, diagnosed
         th = np.array(theta, dtype=float)

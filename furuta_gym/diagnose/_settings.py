@@ -71,6 +71,10 @@ class RestSettings:
     # (2 counts, issue 43: the whole grid and the shipped runs find what they found without it, and
     # the sticky sweeps' spring is right on one more log); None turns it off
     held_stop: float | None = 2.0
+    # Method step 11 (the cable whose rest moves, the large breakaway): "auto" where the data ask
+    # for it, "always" on every joint whose spring has a law with memory (a user who knows a
+    # cable is there asks both laws, and gets each one's fit and evidence)
+    cable_laws: str = "auto"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,5 +151,7 @@ def _check(settings: DiagnosisSettings) -> None:
     weighting = settings.search.evidence_weighting
     if weighting not in ("regressor", "uniform"):
         raise ValueError(f"evidence_weighting: expected 'regressor' or 'uniform', got {weighting!r}")
+    if settings.rests.cable_laws not in ("auto", "always"):
+        raise ValueError(f"cable_laws: expected 'auto' or 'always', got {settings.rests.cable_laws!r}")
     if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or start < 0:
         raise ValueError(f"start_iterations: expected an integer >= 0, got {start!r}")
