@@ -82,6 +82,7 @@ from furuta_gym.diagnose.finish_ablation import (  # noqa: E402
     STARTS_EVERY,
     Variant,
     diagnose_with_context,
+    rotor_laws_held_out,
     run_variant,
     summarise,
 )
@@ -618,6 +619,18 @@ def input_residual(results: Path, doc: dict) -> dict:
     }
 
 
+def cable_laws() -> dict:
+    """Issue 64's two rotor laws on runs 1–10 (Method step 11 asked on the rotor whatever the data
+    say): each law fitted by the diagnosis onto its model as diagnosed, and scored, with that
+    model, on the diagnosis' held-out segments (fold 2) (:func:`rotor_laws_held_out`)."""
+    data = load_qube_closed_loop(FIT_RUNS, skip_seconds=SKIP)
+    doc = rotor_laws_held_out(data, "furuta", window=WINDOW, oe_max_windows=OE_WINDOWS)
+    return doc | {
+        "machine": f"{platform.node()} {platform.processor() or platform.machine()}",
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+    }
+
+
 def dump(doc: dict) -> str:
     """The result file's text: per-window sums to 5 significant digits, each list on one line.
     Windows starting every 10 ms are ten times as many: their sums are kept for the finish until
@@ -654,6 +667,11 @@ def main() -> None:
         action="store_true",
         help="only the committed prediction-first refit's rotor acceleration error (without its dead band) by input and speed",
     )
+    ap.add_argument(
+        "--cable-laws",
+        action="store_true",
+        help="only issue 64's two rotor laws (Method step 11, asked always) on runs 1–10, scored on fold 2",
+    )
     args = ap.parse_args()
     names = args.variants.split(",")
     if unknown := [v for v in names if v not in VARIANTS]:
@@ -663,6 +681,10 @@ def main() -> None:
     for name, r in doc["variants"].items():  # labels are the code's (a variant's meaning can be renamed)
         if name in VARIANTS:
             r["label"] = VARIANTS[name].label
+    if args.cable_laws:
+        doc["cable_laws"] = cable_laws()
+        print(json.dumps(doc["cable_laws"], indent=1))
+        return out.write_text(dump(doc)) and None
     if args.input_residual:
         doc["input_residual"] = input_residual(Path(__file__).resolve().parents[1] / "results" / "head_to_head", doc)
         print(json.dumps(doc["input_residual"], indent=1))

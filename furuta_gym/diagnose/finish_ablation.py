@@ -27,11 +27,12 @@ import numpy as np
 from ..lagrangian import forward_dynamics, forward_dynamics_with_dry_friction, solve_mass_matrix
 from ..simulate import rollout_zoh
 from ..systems import get_spec
-from . import _finish, _fit, _trace as _trace_mod, _windows
+from . import _cable_search, _finish, _fit, _trace as _trace_mod, _windows
 from ._diagnose import diagnose
 from ._finish import PLACEMENTS, STARTS_EVERY, drawn, log_starts, placed_windows, refit_windows
 from ._fit import DeadBandInput
 from ._library import Candidate
+from ._rotor_context import window_errors
 from ._settings import DiagnosisSettings
 from ._windows import Windows, predict_windows, window_square_sums
 
@@ -51,6 +52,7 @@ __all__ = [
     "refit",
     "refit_start",
     "refit_windows",
+    "rotor_laws_held_out",
     "run_variant",
     "summarise",
     "window_square_sums",
@@ -112,6 +114,49 @@ def diagnose_with_context(data, system: str, **kwargs):
     finally:
         _finish.prediction_finish = original
     return res, captured["fx"], wall
+
+
+def rotor_laws_held_out(data, system: str, **kwargs) -> dict:
+    """Method step 11 asked on every joint with a cable's spring (``cable_laws="always"``) in
+    ``diagnose(data, system, finish="prediction", **kwargs)``, and each law's fit scored, beside
+    the model as diagnosed that it was fitted onto, on the diagnosis' held-out segments from
+    measured start states (as the diagnosis scores its own errors): {"verdict", "reason",
+    "diagnosed_heldout_rmse", "seconds", "laws": {law: effects, cable, validation gain and t,
+    held-out RMSE}}. Wrapped while it runs, as :func:`diagnose_with_context` is."""
+    seen, original = {}, _cable_search._laws.fit_laws
+
+    def capture(ctx, theta, *args, **kw):
+        seen.update(ctx=ctx, theta=np.array(theta))
+        return original(ctx, theta, *args, **kw)
+
+    _cable_search._laws.fit_laws = capture
+    try:
+        res, fx, wall = diagnose_with_context(data, system, cable_laws="always", **kwargs)
+    finally:
+        _cable_search._laws.fit_laws = original
+    (law,) = res.rotor_laws
+    ctx = seen["ctx"]
+
+    def held_out(theta, cable) -> float:
+        return window_errors(ctx, theta, cable, fx.held_segs)[1]
+
+    laws = {
+        name: {
+            "effects": {c.key: float(f.theta[fx.layout.index(c.key)]) for c in f.effects},
+            "cable": list(f.cable),
+            "validation_gain": f.evidence.improvement,
+            "validation_t": f.evidence.z,
+            "heldout_rmse": held_out(f.theta, f.cable),
+        }
+        for name, f in law.fits.items()
+    }
+    return {
+        "verdict": law.verdict,
+        "reason": law.reason,
+        "diagnosed_heldout_rmse": held_out(seen["theta"], (0.0, 0.0)),
+        "seconds": wall,
+        "laws": laws,
+    }
 
 
 def fold_of(segment) -> int:
