@@ -342,7 +342,11 @@ def summary_table(summary: dict) -> str:
             + (f", t_up {co['median_time_to_upright']:.2f} s" if co["median_time_to_upright"] else ""),
         ),
         ("Diagnosis (true: spring on α)", ", ".join(dg["found"]) or "none", ""),
-        ("  held-out trajectory RMSE", f"before {eb['trajectory_rmse']:.3g}", f"after {ea['trajectory_rmse']:.3g}"),
+        (
+            "  held-out trajectory RMSE",
+            f"before {eb['trajectory_rmse']:.3g} rad",
+            f"after {ea['trajectory_rmse']:.3g} rad",
+        ),
     ]
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
