@@ -50,10 +50,9 @@ def centred(ctx: Context, theta, cable=None, min_rest: float = 0.2, flicker: int
     ±F_s/k of it, so the least breakaway the rests allow is half the spread of those forces,
     whatever the rest (a log without input, with few moves, leaves the equation error's rest far
     off, and the largest force held about that rest put the bracket above the breakaway).
-    Unchanged under input (the driven motion sets the equation error's rest), without a rest's
-    column or without a rest."""
+    Unchanged without a rest's column or without a rest."""
     c = _joint_effects(ctx)
-    if ctx.driven or "rest" not in c:
+    if "rest" not in c:
         return np.asarray(theta)
     tolerance = flicker_tolerance(flicker, ctx.fx.resolution.get(ctx.joint, 0.0))
     i, out = ctx.layout.index(c["rest"].key), np.array(theta, dtype=float)
@@ -71,7 +70,7 @@ def centred(ctx: Context, theta, cable=None, min_rest: float = 0.2, flicker: int
     return out
 
 
-def _breakaway_bound(ctx: Context, theta, cable=None, centre: bool = True) -> dict:
+def _breakaway_bound(ctx: Context, theta, cable=None, *, centre: bool) -> dict:
     """{the stiction's key: (its least, its largest ΔF)}: the joint's breakaway at least the
     largest force a rest held (:func:`held_still`) and at most the least force that moved it off
     a rest (:func:`broke_away`), both under the start's cable, less its Coulomb level; the windows

@@ -139,7 +139,9 @@ def _start_breakaway(ctx: Context, theta, held: float):
         i = ctx.layout.index(c[key].key)
         th[i] = max(th[i], 2.0 * scale[i])
     coulomb, s = th[ctx.layout.index(c["sliding"].key)], ctx.layout.index(c["breakaway"].key)
-    bounds = _breakaway_bound(ctx, th)
+    # without input the equation error's rest can be far off (few moves): the bracket is read about
+    # the rest that centres the rests' forces; under input the driven motion sets that rest
+    bounds = _breakaway_bound(ctx, th, centre=not ctx.driven)
     least, most = bounds[c["breakaway"].key]
     deltas = [max(coulomb, held - coulomb)] + [m * coulomb for m in _BREAKAWAY_GRID]
     deltas += [np.sqrt(max(least, coulomb) * most)] if np.isfinite(most) and most > 0 else []
@@ -231,12 +233,8 @@ def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int, d
     out = {}
     th0, effects, bounds = _start_breakaway(ctx, theta, held)
     if diagnosed is None:
-        fits = {
-            LAWS[1]: (
-                effects,
-                (_fit_breakaway(ctx, th0, effects, bounds, max_nfev), (0.0, 0.0)),
-            )
-        }
+        fitted = _fit_breakaway(ctx, th0, effects, bounds, max_nfev)
+        fits = {LAWS[1]: (effects, (fitted, (0.0, 0.0)))}
     else:
         fits, (owned, found) = {}, diagnosed
         th = np.array(theta, dtype=float)

@@ -93,27 +93,34 @@ class Variant:
     finish_dead_band: bool = False
 
 
+@contextlib.contextmanager
+def _spying(module, name: str):
+    """``module.name`` wrapped while inside: yields the list of its calls' positional arguments
+    (one ablation at a time, not thread-safe)."""
+    calls, original = [], getattr(module, name)
+
+    def spy(*args, **kwargs):
+        calls.append(args)
+        return original(*args, **kwargs)
+
+    setattr(module, name, spy)
+    try:
+        yield calls
+    finally:
+        setattr(module, name, original)
+
+
 def diagnose_with_context(data, system: str, **kwargs):
     """``diagnose(data, system, finish="prediction", **kwargs)`` and the finish's fitting context
     (the diagnosis' fitter: segments, layout, fixed parameters), which the diagnosis drops once it
     has finished: (result, context, wall seconds). The finish is wrapped while it runs, so
     whatever the diagnosis does before it is the diagnosis as shipped (wrapped rather than given a
     hook: the diagnosis keeps no option for this; one ablation at a time, not thread-safe)."""
-    captured = {}
-    original = _finish.prediction_finish
-
-    def capture(fx, result):
-        captured.update(fx=fx)
-        return original(fx, result)
-
-    _finish.prediction_finish = capture
-    try:
+    with _spying(_finish, "prediction_finish") as calls:
         t0 = time.perf_counter()
         res = diagnose(data, system, finish="prediction", **kwargs)
         wall = time.perf_counter() - t0
-    finally:
-        _finish.prediction_finish = original
-    return res, captured["fx"], wall
+    return res, calls[-1][0], wall
 
 
 def rotor_laws_held_out(data, system: str, **kwargs) -> dict:
@@ -123,19 +130,10 @@ def rotor_laws_held_out(data, system: str, **kwargs) -> dict:
     measured start states (as the diagnosis scores its own errors): {"verdict", "reason",
     "diagnosed_heldout_rmse", "seconds", "laws": {law: effects, cable, validation gain and t,
     held-out RMSE}}. Wrapped while it runs, as :func:`diagnose_with_context` is."""
-    seen, original = {}, _cable_search._laws.fit_laws
-
-    def capture(ctx, theta, *args, **kw):
-        seen.update(ctx=ctx, theta=np.array(theta))
-        return original(ctx, theta, *args, **kw)
-
-    _cable_search._laws.fit_laws = capture
-    try:
+    with _spying(_cable_search._laws, "fit_laws") as calls:
         res, fx, wall = diagnose_with_context(data, system, cable_laws="always", **kwargs)
-    finally:
-        _cable_search._laws.fit_laws = original
     (law,) = res.rotor_laws
-    ctx = seen["ctx"]
+    ctx, diagnosed = calls[-1][:2]
 
     def held_out(theta, cable) -> float:
         return window_errors(ctx, theta, cable, fx.held_segs)[1]
@@ -153,7 +151,7 @@ def rotor_laws_held_out(data, system: str, **kwargs) -> dict:
     return {
         "verdict": law.verdict,
         "reason": law.reason,
-        "diagnosed_heldout_rmse": held_out(seen["theta"], (0.0, 0.0)),
+        "diagnosed_heldout_rmse": held_out(diagnosed, (0.0, 0.0)),
         "seconds": wall,
         "laws": laws,
     }
