@@ -376,6 +376,37 @@ def test_the_verdict_names_the_law_that_predicts_better_or_says_they_cannot_be_t
     assert verdict({LAWS[0]: weak, LAWS[1]: worse}, rests["moving rest"], measured, under_input)[0] == "neither"
 
 
+def test_a_law_short_of_its_t_is_reported_with_the_windows_its_gain_sits_on():
+    """A sweep stops the rotor rarely: where a law gains the size test short of t 3, the verdict
+    says how many validation windows it changes by more than a count (those that carry its
+    evidence) and what would give it more; the count is each window's RMS change of the joint."""
+    from types import SimpleNamespace
+
+    from furuta_gym.diagnose._rotor_fits import _changed
+    from furuta_gym.diagnose._rotor_laws import LAWS, Rule, verdict
+
+    rule = Rule(0.03, 3.0, 2.0, rests_count=False)
+    weak, measured = _law_fit(LAWS[1], np.exp(np.random.default_rng(7).normal(-0.05, 0.4, 40)))
+    worse, _ = _law_fit(LAWS[0], 2.0 + np.random.default_rng(1).random(40))
+    assert weak.evidence.improvement > 0.03 and 0 < weak.evidence.z < 3
+    said, reason, kept, _ = verdict(
+        {LAWS[0]: worse, LAWS[1]: dataclasses.replace(weak, changed=9)}, _NO_RESTS, measured, rule
+    )
+    assert said == "neither" and kept is None
+    assert "fixed neutral held by friction law's gain sits on the 9 of 40 validation windows" in reason
+    assert "moving rest law's gain" not in reason  # it predicts worse: nothing to give it more of
+    assert "gain sits on" not in verdict({LAWS[0]: worse, LAWS[1]: weak}, _NO_RESTS, measured, rule)[1]
+
+    count = 2 * np.pi / 2048
+    ctx = SimpleNamespace(j=0, joint="alpha", fx=SimpleNamespace(resolution={"alpha": count}))
+    before = np.zeros((3, 100, 2))
+    after = before.copy()
+    after[0, :, 0] = 2 * count  # moved by two counts
+    after[1, :50, 0] = 1.2 * count  # RMS 0.85 count: not
+    after[2, :, 1] = 10 * count  # the other joint only
+    assert _changed(ctx, before, after) == 1
+
+
 def _sweep_log(rig, seed: int) -> list[Trajectory]:
     return measured_like("furuta", rig, excitation="sticky_sweep", seed=seed, n_trajectories=6, duration=10.0)
 

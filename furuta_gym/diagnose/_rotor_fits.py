@@ -223,6 +223,12 @@ def _best_start(ctx: Context, starts, cables, which: str = "fit") -> int:
     return int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
 
 
+def _changed(ctx: Context, before: np.ndarray, after: np.ndarray) -> int:
+    """How many windows' predictions of the joint differ by more than one encoder count (RMS)."""
+    rms = np.sqrt(np.mean((after[..., ctx.j] - before[..., ctx.j]) ** 2, axis=1))
+    return int(np.sum(rms > ctx.fx.resolution.get(ctx.joint, 0.0)))
+
+
 def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int, diagnosed=None) -> dict[str, LawFit]:
     """Both laws fitted on the joint (module docstring) and judged against ``theta``.
     ``diagnosed``: (the joint's effects, the stiction's evidence) where the model as diagnosed is
@@ -246,5 +252,7 @@ def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int, d
         physical = bool(is_physical(ctx.layout, th) and not non_physical(ctx.layout, th, effects))
         physical = physical and bool(cable[0] > 0 if law == LAWS[0] else True)
         ev = _evidence(base, pred, ctx.win_val.q)
-        out[law] = LawFit(law, th, tuple(float(x) for x in cable), effects, pred, ev, physical)
+        out[law] = LawFit(
+            law, th, tuple(float(x) for x in cable), effects, pred, ev, physical, changed=_changed(ctx, base, pred)
+        )
     return {law: out[law] for law in (LAWS[1], LAWS[0])}

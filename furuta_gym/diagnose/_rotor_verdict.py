@@ -30,6 +30,9 @@ class LawFit:
     evidence: Evidence
     physical: bool
     incumbent: bool = False  # the model as diagnosed (the search found this law), not a refit
+    #: validation windows whose prediction of the joint the law moves by more than a count (RMS):
+    #: those that can carry its evidence (None: the model as diagnosed)
+    changed: int | None = None
 
 
 @dataclasses.dataclass
@@ -54,6 +57,8 @@ class RotorLaw:
                 play=f.cable[1] if f.cable[0] else None,
                 validation_gain=float(f.evidence.improvement),
                 z_score=float(f.evidence.z),
+                windows_changed=f.changed,
+                windows_scored=int(f.predictions.shape[0]),
                 physical=bool(f.physical),
             )
 
@@ -147,7 +152,25 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     if len(passing) == 2 or (len(passing) == 1 and (named or beaten or rivalled)):
         better = LAWS[0] if h2h.improvement > 0 else LAWS[1]
         return "cannot be told apart", f"t {h2h.z:.1f} between them ({said}); {rest_words}", better, h2h
-    return "neither", f"neither law predicts the validation windows better ({said}); {rest_words}", None, None
+    return (
+        "neither",
+        f"neither law predicts the validation windows better ({said}); {rest_words}{_short_of_t(ok, rule)}",
+        None,
+        None,
+    )
+
+
+def _short_of_t(ok: dict[str, LawFit], rule: Rule) -> str:
+    """Where a law gains the size test short of the trace's t: on how many windows its gain can
+    sit (only those the law changes carry its evidence, and a sweep stops the rotor rarely), and
+    what would give it more."""
+    weak = [f for f in ok.values() if _holds(f, rule) and f.changed is not None]
+    return "".join(
+        f"; the {f.law} law's gain sits on the {f.changed} of {f.predictions.shape[0]} validation windows "
+        f"whose prediction it moves by more than a count, its t short of {rule.z_threshold:g}: a longer log "
+        "with more stops and starts (or releases at 0 V) would give it more"
+        for f in weak
+    )
 
 
 def _rivals(ok: dict[str, LawFit], passing: str, h2h: Evidence, rule: Rule) -> bool:
