@@ -93,18 +93,40 @@ def _cable_owned(c: Candidate, joint: str) -> bool:
     return c.joint == joint and (c.kind.in_potential or c.kind.is_constant_force or c.kind.is_dry_friction)
 
 
-def _breakaway_diagnosed(accepted, spring: Candidate, evidence, rule) -> tuple | None:
+def _breakaway_diagnosed(accepted, spring: Candidate, evidence, rule, size_test: bool = False) -> tuple | None:
     """(the joint's effects, its stiction's evidence) where ``accepted`` already holds the large
-    breakaway's law on the spring's joint (the spring and a stiction the earlier steps found by
-    the trace's rule), else None: that law's fit is then the model as diagnosed, judged by the
-    stiction's evidence (a stiction set from rests alone is refitted, as without it)."""
+    breakaway's law on the spring's joint (the spring and a stiction the earlier steps found,
+    passing the trace's rule; or, ``size_test``, gaining its share whatever its t, as a stiction
+    added on its rests' evidence does), else None: that law's fit is then the model as diagnosed,
+    judged by the stiction's evidence."""
     owned = [a for a in accepted if _cable_owned(a, spring.joint)]
     stiction = next((a for a in owned if a.kind.breakaway_above), None)
     if spring not in owned or stiction is None or stiction.key not in evidence:
         return None
     ev = evidence[stiction.key]
     found = Evidence(ev.improvement or 0.0, ev.z_score or 0.0, 0)
-    return (owned, found) if found.passes(rule.min_improvement, rule.z_threshold) else None
+    held = (
+        found.improvement >= rule.min_improvement if size_test else found.passes(rule.min_improvement, rule.z_threshold)
+    )
+    return (owned, found) if held else None
+
+
+def _model_if_refit_fails(ctx, theta, fits: dict, accepted, spring: Candidate, evidence, rule) -> dict:
+    """``fits`` with the large breakaway's law the model as diagnosed where, under input, its refit
+    does not pass the trace's rule and the model holds the law with a stiction added on its rests'
+    evidence (:func:`_breakaway_diagnosed` with the size test): the refit is then the output-error
+    fit the search made, re-finds what the model holds and, judged against it, gains nothing
+    ("neither", though the model held the law). A log without input keeps its refit: it is
+    fitted within the rests' bracket, which the search does not read."""
+    refit = fits[_laws.LAWS[1]]
+    if (
+        not ctx.driven
+        or refit.incumbent
+        or (refit.physical and refit.evidence.passes(rule.min_improvement, rule.z_threshold))
+    ):
+        return fits
+    held = _breakaway_diagnosed(accepted, spring, evidence, rule, size_test=True)
+    return fits if held is None else {**fits, _laws.LAWS[1]: _laws.model_as_law(ctx, theta, *held)}
 
 
 def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, forced):
@@ -122,6 +144,7 @@ def _cable_laws(fx: _Fitter, trajs, library, accepted, theta, dyn, evidence, for
         held = _rest_bound(fx, theta, dyn, spring.joint).held
         diagnosed = _breakaway_diagnosed(accepted, spring, evidence, rule)
         fits = _laws.fit_laws(ctx, theta, stiffness, held, s.output_error.oe_max_nfev, diagnosed)
+        fits = _model_if_refit_fails(ctx, theta, fits, accepted, spring, evidence, rule)
         verdict, reason, kept, h2h = _laws.verdict(fits, rests, ctx.win_val.q, rule)
         fx.notes.append(f"{spring.joint}: the cable laws (Method step 11): {verdict}: {reason}")
         reports.append(_laws.RotorLaw(spring.joint, verdict, reason, rests, fits, kept, h2h))

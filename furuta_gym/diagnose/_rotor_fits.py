@@ -229,6 +229,15 @@ def _changed(ctx: Context, before: np.ndarray, after: np.ndarray) -> int:
     return int(np.sum(rms > ctx.fx.resolution.get(ctx.joint, 0.0)))
 
 
+def model_as_law(ctx: Context, theta, owned: list[Candidate], found, base=None) -> LawFit:
+    """The model as diagnosed as the large breakaway's fit (it holds the joint's spring and
+    stiction, ``owned``), with its stiction's evidence ``found``; ``base``: its predictions of the
+    validation windows, if made."""
+    base = ctx.predictions([theta], [(0.0, 0.0)], "val")[0] if base is None else base
+    th = np.array(theta, dtype=float)
+    return LawFit(LAWS[1], th, (0.0, 0.0), owned, base, found, physical=True, incumbent=True)
+
+
 def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int, diagnosed=None) -> dict[str, LawFit]:
     """Both laws fitted on the joint (module docstring) and judged against ``theta``.
     ``diagnosed``: (the joint's effects, the stiction's evidence) where the model as diagnosed is
@@ -242,9 +251,8 @@ def fit_laws(ctx: Context, theta, spring_k: float, held: float, max_nfev: int, d
         fitted = _fit_breakaway(ctx, th0, effects, bounds, max_nfev)
         fits = {LAWS[1]: (effects, (fitted, (0.0, 0.0)))}
     else:
-        fits, (owned, found) = {}, diagnosed
-        th = np.array(theta, dtype=float)
-        out[LAWS[1]] = LawFit(LAWS[1], th, (0.0, 0.0), owned, base, found, physical=True, incumbent=True)
+        owned, found = diagnosed
+        fits, out[LAWS[1]] = {}, model_as_law(ctx, theta, owned, found, base)
     th0, effects, cable0 = _start_moving(ctx, th0, max(spring_k, 2.0 * _typical_spring(ctx)))
     fits[LAWS[0]] = (effects, fit_law(ctx, th0, effects, cable0, max_nfev))
     for law, (effects, (th, cable)) in fits.items():

@@ -39,7 +39,7 @@ from ._rotor_context import (
     residual,
     window_errors,
 )
-from ._rotor_fits import PLAY_GRID, fit_law, fit_laws
+from ._rotor_fits import PLAY_GRID, fit_law, fit_laws, model_as_law
 from ._rotor_neutral import carried_starts, neutral_paths, predict
 from ._rotor_verdict import LAWS, LawFit, RotorLaw, Rule, _evidence, verdict
 
@@ -61,6 +61,7 @@ __all__ = [
     "held_still",
     "holding_forces",
     "memory_law_for",
+    "model_as_law",
     "neutral_paths",
     "predict",
     "residual",

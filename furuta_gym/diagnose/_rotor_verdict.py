@@ -106,9 +106,13 @@ def verdict(fits: dict[str, LawFit], rests: RestDrift, measured, rule: Rule):
     (or do not count), with both laws passing that size test, the one that predicts significantly
     better than the other; else "cannot be told apart" (the better predictor kept) or "neither"."""
     ok = {law: f for law, f in fits.items() if f.physical}
-    passing = [law for law, f in ok.items() if f.evidence.passes(rule.min_improvement, rule.z_threshold)]
+    # the model as diagnosed passed the trace's steps (its stiction by the trace's rule or, under
+    # input, on its rests' evidence): it passes here too
+    passing = [law for law, f in ok.items() if f.incumbent or f.evidence.passes(rule.min_improvement, rule.z_threshold)]
     said = ", ".join(
-        f"{law}: validation gain {f.evidence.improvement:.1%}, t {f.evidence.z:.1f}" for law, f in fits.items()
+        f"{law}{' (the model as diagnosed)' if f.incumbent else ''}: validation gain {f.evidence.improvement:.1%}, "
+        f"t {f.evidence.z:.1f}"
+        for law, f in fits.items()
     )
     named = rests.verdict if rule.rests_count and rests.verdict in LAWS else None
     rest_words = f"rests: {rests.verdict} ({rests.reason})" + ("" if rule.rests_count else ", not counted under input")
