@@ -4,11 +4,12 @@ Each log is simulated on a rig with one law (:func:`furuta_gym.diagnose.moving_r
 whose rest moves; :func:`furuta_gym.diagnose.breakaway_rig`: a fixed cable held by a breakaway
 5–10× its sliding friction; ``none``: neither cable nor friction) in one of two experiments: 0 V
 releases (``excitation="rotor_releases"``, ``--releases`` releases of ``--seconds`` s) or the
-sticky sweeps of issue 43 (six 10 s segments). Each is diagnosed with the default settings, as
+sticky sweeps of issue 43 (``--sweep-segments`` 10 s segments, six by default). Each is diagnosed with the default settings, as
 ``furuta-gym diagnose`` would; the JSON is the diagnosis's (its ``rotor_laws`` entry says which
 law the data support and why) plus the planted effects.
 
     python studies/rotor_laws.py [--seeds 100 101] [--experiments rotor_releases] [--laws moving_rest breakaway none]
+        [--sweep-segments 6] [--out results/rotor_laws]
 
 writes ``results/rotor_laws/<experiment>__<law>__<seed>.json``; a log already written is skipped.
 ``studies/rotor_laws_table.py`` summarises them (found in how many, coefficient errors, held-out
@@ -38,10 +39,10 @@ OUT = ROOT / "results" / "rotor_laws"
 LAWS = {"moving_rest": moving_rest_rig, "breakaway": breakaway_rig, "none": lambda seed: []}
 
 
-def logs(releases: int, seconds: float) -> dict[str, dict]:
+def logs(releases: int, seconds: float, sweep_segments: int = 6) -> dict[str, dict]:
     return {
         "rotor_releases": dict(n_trajectories=releases, duration=seconds),
-        "sticky_sweep": dict(n_trajectories=6, duration=10.0),
+        "sticky_sweep": dict(n_trajectories=sweep_segments, duration=10.0),
     }
 
 
@@ -77,13 +78,16 @@ def main() -> None:
     ap.add_argument("--laws", nargs="+", default=list(LAWS), choices=list(LAWS))
     ap.add_argument("--releases", type=int, default=8)
     ap.add_argument("--seconds", type=float, default=6.0)
+    ap.add_argument("--sweep-segments", type=int, default=6, help="10 s segments per sweep log")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     for seed in args.seeds:
         for excitation in args.experiments:
             for law in args.laws:
-                run_one(excitation, law, seed, logs(args.releases, args.seconds)[excitation], args.out)
+                run_one(
+                    excitation, law, seed, logs(args.releases, args.seconds, args.sweep_segments)[excitation], args.out
+                )
 
 
 if __name__ == "__main__":

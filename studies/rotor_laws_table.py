@@ -17,6 +17,7 @@ or friction; and the same counts on the development seeds (``results/rotor_laws_
 from __future__ import annotations
 
 import json
+import statistics
 import sys
 from pathlib import Path
 
@@ -32,6 +33,7 @@ RESULTS = ROOT / "results" / "rotor_laws"
 DOC = ROOT / "docs" / "diagnose.md"
 BLOCK, DEV_BLOCK = "diagnose-rotor-laws", "diagnose-rotor-laws-dev"
 DEV = ROOT / "results" / "rotor_laws_dev"
+LONG, LONG_BLOCK = ROOT / "results" / "rotor_laws_long", "diagnose-rotor-laws-long"
 TOLERANCE, WIDE = 0.35, 0.50  # coefficients; the play and the breakaway
 LAW_NAMES = {"moving_rest": "moving rest", "breakaway": "fixed neutral held by friction", "none": "none"}
 
@@ -171,9 +173,51 @@ def dev_body(folder: Path = DEV) -> str:
     return "\n".join([f"Development seeds ({spans}):", ""] + summary(docs))
 
 
+def windows(docs: list[dict]) -> list[str]:
+    """Per experiment and law, the median count of validation windows whose prediction the planted
+    law's fit moves by more than a count (those that can carry its evidence), where recorded."""
+    lines = []
+    for (excitation, law), mine in _groups(docs).items():
+        counts = [
+            (f["windows_changed"], f["windows_scored"])
+            for d in mine
+            for r in (d.get("rotor_laws") or [])[:1]
+            for name, f in r["fits"].items()
+            if name == LAW_NAMES[law] and f.get("windows_changed") is not None
+        ]
+        if counts:
+            changed, scored = (statistics.median(c) for c in zip(*counts, strict=True))
+            lines.append(
+                f"{excitation}, {LAW_NAMES[law]}: the law's refit moves the rotor's prediction by more than a "
+                f"count on a median {changed:g} of {scored:g} validation windows (the {len(counts)} logs where step 11 "
+                "refitted it)."
+            )
+    return lines
+
+
+def _groups(docs: list[dict]) -> dict[tuple, list[dict]]:
+    out: dict[tuple, list[dict]] = {}
+    for d in docs:
+        if d["law"] != "none":
+            out.setdefault((d["excitation"], d["law"]), []).append(d)
+    return out
+
+
+def long_body(folder: Path = LONG) -> str:
+    """Sweeps of the development rigs logged longer (``results/rotor_laws_long``): the same counts,
+    and on how many windows the planted law's evidence can sit, beside the dev block's."""
+    docs = load(folder)
+    segments = sorted({d["log"]["n_trajectories"] for d in docs})
+    seeds = sorted({d["seed"] for d in docs})
+    head = f"The development rigs' sweeps (seeds {min(seeds)}–{max(seeds)}) logged with {', '.join(map(str, segments))} segments of 10 s:"
+    dev = windows(load(DEV))
+    return "\n".join([head, ""] + summary(docs) + windows(docs) + (["", "Six segments:", ""] + dev if dev else []))
+
+
 def main(argv=None) -> int:
     status = block_main(__file__, DOC, BLOCK, body, argv)
-    return status | block_main(__file__, DOC, DEV_BLOCK, dev_body, argv)
+    status |= block_main(__file__, DOC, DEV_BLOCK, dev_body, argv)
+    return status | block_main(__file__, DOC, LONG_BLOCK, long_body, argv)
 
 
 if __name__ == "__main__":

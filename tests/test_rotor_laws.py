@@ -508,6 +508,37 @@ def test_the_docs_table_of_the_rotor_laws_grid_is_generated_from_its_results():
         assert len(sweeps) >= 10 and sum(table.ratio(d) < 1.0 for d in sweeps) <= 1
 
 
+def test_the_development_rigs_sweeps_logged_twice_as_long_name_each_law_no_less_often():
+    """More data must not make the diagnosis worse: the dev rigs' sweeps logged with twelve
+    segments (results/rotor_laws_long, made by the committed code) name each law on at least as
+    many logs as the same rigs' six-segment sweeps, select the other law no more often, never
+    raise the held-out error, and give the planted law's refit more windows to carry its evidence."""
+    table = _table()
+    six = [d for d in table.load(table.DEV) if d["excitation"] == "sticky_sweep"]
+    twelve = table.load(table.LONG)
+    assert {d["log"]["n_trajectories"] for d in twelve} == {12} and {d["log"]["n_trajectories"] for d in six} == {6}
+    assert sorted((d["law"], d["seed"]) for d in twelve) == sorted((d["law"], d["seed"]) for d in six)
+    for law, other in (("moving_rest", "fixed"), ("breakaway", "moving")):
+        named = {
+            n: sum(table.verdict(d).startswith(table.LAW_NAMES[law]) for d in docs if d["law"] == law)
+            for n, docs in ((6, six), (12, twelve))
+        }
+        chose_other = {
+            n: sum(table.rotor(table._found(d))["cable"] == other for d in docs if d["law"] == law)
+            for n, docs in ((6, six), (12, twelve))
+        }
+        assert named[12] >= named[6] and chose_other[12] <= chose_other[6], law
+    assert all(table.ratio(d) >= 1.0 for d in twelve)
+    changed = [
+        f["windows_changed"]
+        for d in twelve
+        for r in (d.get("rotor_laws") or [])[:1]
+        for f in r["fits"].values()
+        if f["windows_changed"] is not None
+    ]
+    assert changed and np.median(changed) > 10
+
+
 def test_the_breakaways_upper_bound_reads_releases_and_left_rests_but_not_a_one_count_creep():
     """broke_away's rests (Method step 11): a release (a first run of 10 ms that the rotor then
     leaves), a rest of 0.2 s left by several counts; not a creep of a count or two under a soft
@@ -728,6 +759,82 @@ def test_where_the_earlier_steps_found_the_breakaway_step_11_names_it_and_keeps_
     assert found["coulomb_friction"]["coefficient"] + found["stiction"]["coefficient"] == pytest.approx(
         planted, rel=0.5
     )
+    assert res.error_before.trajectory_rmse / res.error_after.trajectory_rmse >= 1.4
+
+
+def test_under_input_a_refit_that_fails_gives_way_to_the_model_holding_the_breakaway(monkeypatch):
+    """A sweep (under input) where the search added the fixed cable, the Coulomb level and a
+    stiction on its rests' evidence (gain ≥ the size test, t under 3): step 11 refitted the law by
+    the same output-error fit and judged it against the model it already was ("neither": the dev
+    rigs 213 and 215 logged with twelve segments). Where that refit does not pass, the model is now
+    the law's fit, passing, and the moving rest is judged against it; a refit that passes stays
+    (it may add what the model lacks), and a log without input keeps its refit (fitted within the
+    rests' bracket, which the search does not read)."""
+    from types import SimpleNamespace
+
+    from furuta_gym.diagnose import _cable_search
+    from furuta_gym.diagnose._library import layout_for
+    from furuta_gym.diagnose._result import EffectEvidence
+    from furuta_gym.diagnose._rotor_laws import LAWS, Rule, verdict
+    from furuta_gym.diagnose._trace import Evidence
+
+    rule = Rule(0.03, 3.0, 2.0, rests_count=False)
+    library = {c.key: c for c in layout_for("furuta").candidates}
+    spring, coulomb, stiction = (library[f"{k}:alpha"] for k in ("spring", "coulomb_friction", "stiction"))
+
+    def held(gain, t):
+        return {
+            stiction.key: EffectEvidence(
+                "stiction", "alpha", 1e-3, "N m", True, gain, t, "selected", "found from rests"
+            )
+        }
+
+    accepted = [spring, coulomb, stiction]
+    diagnosed = _cable_search._breakaway_diagnosed
+    assert diagnosed(accepted, spring, held(0.73, 2.7), rule) is None  # the trace's rule: refitted
+    owned, found = diagnosed(accepted, spring, held(0.73, 2.7), rule, size_test=True)
+    assert set(owned) == set(accepted) and (found.improvement, found.z) == (0.73, 2.7)
+    assert diagnosed(accepted, spring, held(0.01, 2.7), rule, size_test=True) is None
+    assert diagnosed([spring, coulomb], spring, held(0.73, 3.2), rule) is None
+
+    worse, measured = _law_fit(LAWS[0], 2.0 + np.random.default_rng(3).random(40))
+    model, _ = _law_fit(LAWS[1], np.ones(40))  # the model as diagnosed: its predictions are the base's
+    model = dataclasses.replace(model, evidence=Evidence(0.73, 2.7, 0), incumbent=True)
+    monkeypatch.setattr(_cable_search._laws, "model_as_law", lambda ctx, theta, owned, found: model)
+    failed = dataclasses.replace(worse, law=LAWS[1], evidence=Evidence(-0.25, -2.9, 40))
+    passed = dataclasses.replace(worse, law=LAWS[1], evidence=Evidence(0.6, 3.3, 40))
+    fits = {LAWS[1]: failed, LAWS[0]: worse}
+
+    def swapped(fits, driven, gain=0.73):
+        ctx = SimpleNamespace(driven=driven)
+        return _cable_search._model_if_refit_fails(ctx, None, fits, accepted, spring, held(gain, 2.7), rule)
+
+    assert swapped(fits, driven=True)[LAWS[1]] is model and list(swapped(fits, driven=True)) == list(fits)
+    assert swapped(fits, driven=False)[LAWS[1]] is failed
+    assert swapped(fits, driven=True, gain=0.01)[LAWS[1]] is failed
+    assert swapped({LAWS[1]: passed, LAWS[0]: worse}, driven=True)[LAWS[1]] is passed
+    said, reason, kept, _ = verdict(swapped(fits, driven=True), _NO_RESTS, measured, rule)
+    assert said == kept == LAWS[1] and "(the model as diagnosed): validation gain 73.0%, t 2.7" in reason
+
+
+def test_a_sweep_twice_as_long_whose_search_added_the_stiction_from_rests_names_the_breakaway():
+    """The dev rig 213's sweep logged with twelve segments: the search adds its spring, Coulomb
+    level and a stiction on its rests' evidence (t under 3); step 11 names the large breakaway with
+    that model kept, every coefficient within the grid's tolerance."""
+    from furuta_gym.diagnose import diagnose
+    from furuta_gym.diagnose._rotor_laws import LAWS
+
+    rig = breakaway_rig(213)
+    log = measured_like("furuta", rig, excitation="sticky_sweep", seed=213, n_trajectories=12, duration=10.0)
+    res = diagnose(log, "furuta")
+    (law,) = res.rotor_laws
+    assert law.verdict == law.kept == LAWS[1] and law.fits[LAWS[1]].incumbent
+    assert law.fits[LAWS[1]].evidence.z < 3  # the stiction's own t: added on its rests' evidence
+    found = {e.name: e.coefficient for e in _rotor(res.found, lambda k: True)}
+    assert found["spring"] == pytest.approx(rig[0].coefficient, rel=0.35)
+    assert found["coulomb_friction"] == pytest.approx(rig[1].coefficient, rel=0.35)
+    breakaway = found["coulomb_friction"] + found["stiction"]
+    assert breakaway == pytest.approx(rig[1].coefficient + rig[2].coefficient, rel=0.5)
     assert res.error_before.trajectory_rmse / res.error_after.trajectory_rmse >= 1.4
 
 
