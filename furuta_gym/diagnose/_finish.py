@@ -211,7 +211,7 @@ def drawn(win: _windows.Windows, count: int | None) -> _windows.Windows:
     if count is None or win.x0.shape[0] <= count:
         return win
     keep = np.sort(np.random.default_rng(0).choice(win.x0.shape[0], count, replace=False))
-    return _windows.Windows(win.x0[keep], win.us[keep], win.q[keep], win.segment[keep], win.dt, win.length)
+    return win.take(keep)
 
 
 def refit_windows(fx, segments, dyn) -> _windows.Windows:

@@ -100,8 +100,7 @@ class _Fitter:
         return out
 
     def fit_windows(self, dynamics, idx) -> _windows.Windows:
-        w = _windows.make_windows(self.fit_segs, self.L, dynamics)
-        return _windows.Windows(w.x0[idx], w.us[idx], w.q[idx], w.segment[idx], w.dt, self.L)
+        return _windows.make_windows(self.fit_segs, self.L, dynamics).take(idx)
 
     def window_rmse(self, theta, win) -> float:
         return _windows.window_errors(

@@ -41,8 +41,7 @@ class Context:
         self.layout, self.j = fx.layout, get_spec(fx.layout.system).joint_names.index(self.joint)
         self.win_fit, self.win_val = fx.fit_windows(self.dyn, fx.oe_idx), fx.fit_windows(self.dyn, fx.val_idx)
         moving = _moving(self.win_fit, self.j, flicker_tolerance(1, fx.resolution.get(self.joint, 0.0)))
-        w = self.win_fit
-        self.win_moving = _windows.Windows(w.x0[moving], w.us[moving], w.q[moving], w.segment[moving], w.dt, fx.L)
+        self.win_moving = self.win_fit.take(moving)
         self.moving_idx = fx.oe_idx[moving]
         self._neutrals: dict[tuple, np.ndarray] = {}
 

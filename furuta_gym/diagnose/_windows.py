@@ -47,6 +47,10 @@ class Windows:
     dt: float
     length: int
 
+    def take(self, idx) -> "Windows":
+        """The windows ``idx`` (indices or a mask) of these."""
+        return Windows(self.x0[idx], self.us[idx], self.q[idx], self.segment[idx], self.dt, self.length)
+
 
 def make_windows(
     segments: list[Segment], length: int, dynamics: InputDynamics = NO_INPUT_DYNAMICS, max_windows=None, rng=None
@@ -66,7 +70,7 @@ def make_windows(
     if max_windows is not None and len(w.x0) > max_windows:
         rng = rng or np.random.default_rng(0)
         keep = np.sort(rng.choice(len(w.x0), max_windows, replace=False))
-        w = Windows(w.x0[keep], w.us[keep], w.q[keep], w.segment[keep], w.dt, length)
+        w = w.take(keep)
     return w
 
 
