@@ -166,10 +166,10 @@ def dev_body(folder: Path = DEV) -> str:
     """The development seeds' counts (``results/rotor_laws_dev``: where step 11's choices were
     settled, never the grid's seeds), one line per law and experiment as the grid's."""
     docs = load(folder)
-    seeds = {}
-    for d in docs:
-        seeds.setdefault((d["excitation"], LAW_NAMES[d["law"]]), []).append(d["seed"])
-    spans = "; ".join(f"{e}, {law}: seeds {min(s)}–{max(s)}" for (e, law), s in seeds.items())
+    spans = "; ".join(
+        f"{e}, {LAW_NAMES[law]}: seeds {min(d['seed'] for d in mine)}–{max(d['seed'] for d in mine)}"
+        for (e, law), mine in _groups(docs).items()
+    )
     return "\n".join([f"Development seeds ({spans}):", ""] + summary(docs))
 
 
@@ -178,6 +178,8 @@ def windows(docs: list[dict]) -> list[str]:
     law's fit moves by more than a count (those that can carry its evidence), where recorded."""
     lines = []
     for (excitation, law), mine in _groups(docs).items():
+        if law == "none":
+            continue
         counts = [
             (f["windows_changed"], f["windows_scored"])
             for d in mine
@@ -196,22 +198,30 @@ def windows(docs: list[dict]) -> list[str]:
 
 
 def _groups(docs: list[dict]) -> dict[tuple, list[dict]]:
+    """``docs`` by (experiment, law), in their order."""
     out: dict[tuple, list[dict]] = {}
     for d in docs:
-        if d["law"] != "none":
-            out.setdefault((d["excitation"], d["law"]), []).append(d)
+        out.setdefault((d["excitation"], d["law"]), []).append(d)
     return out
 
 
 def long_body(folder: Path = LONG) -> str:
     """Sweeps of the development rigs logged longer (``results/rotor_laws_long``): the same counts,
     and on how many windows the planted law's evidence can sit, beside the dev block's."""
-    docs = load(folder)
-    segments = sorted({d["log"]["n_trajectories"] for d in docs})
+    docs, dev_sweeps = load(folder), [d for d in load(DEV) if d["excitation"] == "sticky_sweep"]
     seeds = sorted({d["seed"] for d in docs})
-    head = f"The development rigs' sweeps (seeds {min(seeds)}–{max(seeds)}) logged with {', '.join(map(str, segments))} segments of 10 s:"
-    dev = windows(load(DEV))
-    return "\n".join([head, ""] + summary(docs) + windows(docs) + (["", "Six segments:", ""] + dev if dev else []))
+    head = f"The development rigs' sweeps (seeds {min(seeds)}–{max(seeds)}) logged with {_segments(docs)} segments of 10 s:"
+    dev = windows(dev_sweeps)
+    return "\n".join(
+        [head, ""]
+        + summary(docs)
+        + windows(docs)
+        + (["", f"{_segments(dev_sweeps)} segments:", ""] + dev if dev else [])
+    )
+
+
+def _segments(docs: list[dict]) -> str:
+    return ", ".join(str(n) for n in sorted({d["log"]["n_trajectories"] for d in docs}))
 
 
 def main(argv=None) -> int:
