@@ -8,7 +8,8 @@ memoryless spring is vetoed or inconsistent, or its rests name a law (:func:`res
 was added while the joint's friction leaves open what held it, each law is fitted by output
 error on the output-error windows and judged on the fit-set validation windows against the model
 as diagnosed, by the trace's rule (where the search found the breakaway's law, that model is the
-law's fit, replaced only by a law predicting significantly better):
+law's fit, replaced only by a law predicting significantly better; under input also where it
+holds the law with a stiction from rests and the refit does not pass):
 
 * **large breakaway**: the fixed spring (its rest as a constant force), Coulomb friction and a
   stiction fitted free, from the breakaway the rests held (:mod:`._rests`);
